@@ -1,0 +1,5 @@
+import sys
+
+from controlmm.cli.main import main
+
+sys.exit(main())

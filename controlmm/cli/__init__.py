@@ -1,0 +1,1 @@
+"""The ``controlmm`` command line: a thin layer over the library API."""

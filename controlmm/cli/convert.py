@@ -1,0 +1,56 @@
+"""``controlmm convert IN OUT``: convert motions between .npz, HumanML3D .npy and .bvh."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = """Convert a motion between formats (chosen by file suffix):
+  .npz  this project's Motion file (joints, fps, features, text, metadata)
+  .npy  HumanML3D array: (T, 263) features or (T, 22, 3) joints, told apart by shape
+  .bvh  SMPL-22 skeleton animation (metres, Y up), importable in Blender
+
+Writing .npy stores features (computed with the full HumanML3D processing when the input
+has joints only) unless --joints is given. Reading joints from .bvh/.npy keeps them as
+they are unless --process is given (HumanML3D processing: 20 fps, reference skeleton,
+floor, origin, facing +Z; adds features, drops one frame).
+
+examples:
+  controlmm convert new_joint_vecs/012314.npy motion.npz
+  controlmm convert motion.npz motion.bvh
+  controlmm convert mocap.bvh features.npy"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("convert", help="convert motions between .npz, .npy (HumanML3D) and .bvh",
+                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", help="input motion (.npz, .npy, .bvh)")
+    p.add_argument("output", help="output motion (.npz, .npy, .bvh)")
+    p.add_argument("--joints", action="store_true", help="write joints (T, 22, 3) instead of features to .npy")
+    p.add_argument("--process", action="store_true",
+                   help="run the HumanML3D processing on joint input (adds features)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from controlmm.motion import load_motion, save_motion
+    from controlmm.motion.io import check_output_format
+
+    check_output_format(Path(args.output))
+    motion = load_motion(args.input)
+    if args.process:
+        motion = motion.with_features()
+    out = Path(args.output)
+    npy_kind = "joints" if args.joints else "features"
+    if out.suffix.lower() == ".npy" and npy_kind == "features":
+        motion = motion.with_features()
+    save_motion(motion, out, npy_kind=npy_kind)
+    if out.suffix.lower() == ".npy":
+        what = f"HumanML3D {npy_kind}"
+    elif out.suffix.lower() == ".bvh":
+        what = "SMPL-22 BVH"
+    else:
+        what = "Motion npz with " + ("features and joints" if motion.features is not None else "joints")
+    print(f"wrote {out} ({motion.num_frames} frames, {motion.fps:g} fps, {what})")
+    return 0

@@ -1,0 +1,75 @@
+"""Entry point of the ``controlmm`` console script.
+
+Each subcommand lives in its own module under :mod:`controlmm.cli` exposing
+``register(subparsers)``; the module list below is the whole command surface. Errors a
+user can cause print one line on stderr and exit with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from controlmm import __version__
+from controlmm.errors import ControlMMError
+
+SUBCOMMANDS: tuple[str, ...] = ("convert", "plot", "info")
+"""Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
+
+EXIT_USAGE = 2
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argparse parser whose usage errors are one line (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
+        prog="controlmm",
+        description=(
+            "Plan humanoid-robot motion with ControlMM: generate human motion from text and "
+            "spatial constraints, keep it clear of scene obstacles, retarget it to a robot, "
+            "check it in MuJoCo and export joint trajectories."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"controlmm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"controlmm.cli.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_USAGE if args.command is None else 0
+    try:
+        return int(args.func(args) or 0)
+    except ControlMMError as exc:
+        print(f"controlmm: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        target = exc.filename or ""
+        print(f"controlmm: error: {exc.strerror or exc}: '{target}'", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("controlmm: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001
+        if os.environ.get("CONTROLMM_DEBUG"):
+            raise
+        print(f"controlmm: internal error: {type(exc).__name__}: {exc} (set CONTROLMM_DEBUG=1 for a traceback)",
+              file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

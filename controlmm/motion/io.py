@@ -1,0 +1,117 @@
+"""Reading and writing motions: ``.npz`` (Motion), HumanML3D ``.npy``, ``.bvh``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from controlmm.atomic import atomic_path
+from controlmm.errors import InputFileError, ShapeError
+from controlmm.motion.container import Motion
+from controlmm.motion.skeleton import FEATURE_DIM, FPS, NUM_JOINTS
+
+READ_FORMATS = (".npz", ".npy", ".bvh")
+WRITE_FORMATS = (".npz", ".npy", ".bvh")
+_NPZ_KEYS = {"joints", "fps", "features", "text", "metadata"}
+
+
+def _suffix(path: Path, allowed: tuple[str, ...]) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in allowed:
+        raise InputFileError(
+            f"unknown motion format '{path.suffix or path.name}' for '{path}'; allowed: {', '.join(allowed)}"
+        )
+    return suffix
+
+
+def check_output_format(path: str | Path) -> None:
+    """Raise a one-line error unless ``path`` has a writable motion suffix."""
+    _suffix(Path(path), WRITE_FORMATS)
+
+
+def load_motion(path: str | Path) -> Motion:
+    """Load a motion from ``.npz`` (this project's format), ``.npy`` (HumanML3D) or ``.bvh``.
+
+    A HumanML3D ``.npy`` is told apart by shape: (T, 263) features or (T, 22, 3) joints.
+    """
+    path = Path(path)
+    suffix = _suffix(path, READ_FORMATS)
+    if not path.is_file():
+        raise InputFileError(f"motion file '{path}' does not exist")
+    if suffix == ".bvh":
+        from controlmm.motion.bvh import read_bvh
+
+        joints, fps = read_bvh(path)
+        return Motion(joints=joints, fps=fps, metadata={"source": str(path)})
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - corrupt files are user errors
+        raise InputFileError(f"cannot read '{path}': not a valid {suffix} file ({type(exc).__name__})") from exc
+    if suffix == ".npy":
+        return _from_array(np.asarray(data), path)
+    with data:
+        if "joints" not in data.files:
+            raise InputFileError(f"'{path}' has no 'joints' array; found keys: {', '.join(data.files) or 'none'}")
+        metadata = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
+        extras = {k: data[k] for k in data.files if k not in _NPZ_KEYS}
+        return Motion(
+            joints=data["joints"],
+            fps=float(data["fps"]) if "fps" in data.files else float(FPS),
+            features=data["features"] if "features" in data.files else None,
+            text=str(data["text"]) if "text" in data.files else "",
+            metadata=metadata,
+            extras=extras,
+        )
+
+
+def _from_array(arr: np.ndarray, path: Path) -> Motion:
+    if arr.ndim == 2 and arr.shape[1] == FEATURE_DIM:
+        return Motion.from_features(arr, metadata={"source": str(path)})
+    if arr.ndim == 3 and arr.shape[1:] == (NUM_JOINTS, 3):
+        return Motion(joints=arr, fps=float(FPS), metadata={"source": str(path)})
+    if arr.ndim == 2 and arr.shape[1] == NUM_JOINTS * 3:
+        return Motion(joints=arr.reshape(-1, NUM_JOINTS, 3), fps=float(FPS), metadata={"source": str(path)})
+    raise ShapeError(
+        f"'{path}' holds an array of shape {arr.shape}; expected (T, {FEATURE_DIM}) features "
+        f"or (T, {NUM_JOINTS}, 3) joints"
+    )
+
+
+def save_motion(motion: Motion, path: str | Path, npy_kind: str = "features") -> None:
+    """Save a motion atomically; the format follows the suffix.
+
+    ``.npz`` keeps everything; ``.npy`` writes HumanML3D features (``npy_kind="features"``,
+    computed if absent) or joints (``npy_kind="joints"``); ``.bvh`` writes the skeleton
+    animation.
+    """
+    path = Path(path)
+    suffix = _suffix(path, WRITE_FORMATS)
+    if suffix == ".bvh":
+        from controlmm.motion.bvh import write_bvh
+
+        write_bvh(path, motion.joints, motion.fps)
+        return
+    if suffix == ".npy":
+        if npy_kind not in ("features", "joints"):
+            raise InputFileError(f"npy_kind must be 'features' or 'joints'; got '{npy_kind}'")
+        arr = motion.with_features().features if npy_kind == "features" else motion.joints
+        with atomic_path(path) as tmp:
+            np.save(tmp, arr)
+        return
+    arrays: dict[str, np.ndarray] = {
+        "joints": motion.joints,
+        "fps": np.asarray(motion.fps, dtype=np.float32),
+        "text": np.asarray(motion.text),
+        "metadata": np.asarray(json.dumps(motion.metadata)),
+    }
+    if motion.features is not None:
+        arrays["features"] = motion.features
+    for key, value in motion.extras.items():
+        if key in arrays:
+            raise InputFileError(f"extra array name '{key}' clashes with a reserved key")
+        arrays[key] = np.asarray(value)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)

@@ -1,0 +1,1 @@
+"""Simulation checks: replay robot trajectories in MuJoCo scenes and report failures."""

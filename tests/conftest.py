@@ -1,0 +1,33 @@
+"""Shared fixtures: the real HumanML3D sample in ``../shared/data/humanml3d``."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("CONTROLMM_SHARED", REPO_ROOT.parent / "shared"))
+HUMANML3D = SHARED / "data" / "humanml3d"
+SAMPLE_ID = "012314"
+
+
+@pytest.fixture(scope="session")
+def humanml3d_dir() -> Path:
+    if not (HUMANML3D / "new_joint_vecs" / f"{SAMPLE_ID}.npy").is_file():
+        pytest.fail(f"the real HumanML3D sample is missing under {HUMANML3D} (set CONTROLMM_SHARED)")
+    return HUMANML3D
+
+
+@pytest.fixture(scope="session")
+def sample_features(humanml3d_dir: Path) -> np.ndarray:
+    """(170, 263) float32 features of HumanML3D motion 012314."""
+    return np.load(humanml3d_dir / "new_joint_vecs" / f"{SAMPLE_ID}.npy")
+
+
+@pytest.fixture(scope="session")
+def sample_joints(humanml3d_dir: Path) -> np.ndarray:
+    """(170, 22, 3) float32 global joints of HumanML3D motion 012314."""
+    return np.load(humanml3d_dir / "new_joints" / f"{SAMPLE_ID}.npy")
