@@ -1,0 +1,116 @@
+"""Collision-only copies of the model used by the kinematic replay.
+
+The user's model is never modified. Two copies are made (robotics reference §4.2-§4.4):
+
+* the **scene model** collides the robot with the floor and the obstacles only, through a
+  dedicated contype/conaffinity bit (robot geoms: contype; floor and obstacles: conaffinity),
+  whatever masks the scene uses; exclusions that involve a non-robot body are neutralised;
+  floor and obstacle geoms get a ``gap`` so that near misses are reported (``dist > 0``)
+  without ever generating force (gap, not margin);
+* the **self model** collides robot geoms with each other only, with the MJCF's own masks,
+  ``<exclude>`` pairs, explicit ``<pair>`` elements and MuJoCo's parent-child filter; in
+  ``capsules`` mode every robot mesh collider is replaced by a capsule fitted to its hull
+  (MuJoCo collides meshes as convex hulls, which overlap near concave regions).
+
+After editing geom masks of a compiled model the body-level masks must be updated too: the
+broad phase reads ``body_contype``/``body_conaffinity``.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import mujoco
+import numpy as np
+
+from sim.geometry import fit_capsule
+from sim.world import CheckWorld
+
+SCENE_BIT = 1 << 30
+"""Collision bit reserved for robot-vs-scene detection in the scene model."""
+
+
+def _refresh_body_masks(m: mujoco.MjModel) -> None:
+    m.body_contype[:] = 0
+    m.body_conaffinity[:] = 0
+    np.bitwise_or.at(m.body_contype, m.geom_bodyid, m.geom_contype)
+    np.bitwise_or.at(m.body_conaffinity, m.geom_bodyid, m.geom_conaffinity)
+
+
+def _enable_contacts(m: mujoco.MjModel) -> None:
+    m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+
+
+def scene_model(world: CheckWorld, floor_gap: float, obstacle_gap: float) -> mujoco.MjModel:
+    """Copy of the model where only robot-vs-(floor, obstacle) pairs collide."""
+    m = copy.deepcopy(world.model)
+    _enable_contacts(m)
+    robot = world.robot_geoms
+    scene = np.concatenate([world.floor_geoms, world.obstacle_geoms]).astype(np.int64)
+    m.geom_contype[:] = 0
+    m.geom_conaffinity[:] = 0
+    m.geom_contype[robot] = SCENE_BIT
+    m.geom_conaffinity[scene] = SCENE_BIT
+    m.geom_margin[:] = 0.0
+    m.geom_gap[:] = 0.0
+    m.geom_gap[world.floor_geoms] = floor_gap
+    m.geom_gap[world.obstacle_geoms] = obstacle_gap
+    if m.npair:  # explicit <pair>s still collide; their robot-robot contacts are dropped later
+        m.pair_margin[:] = 0.0
+        m.pair_gap[:] = 0.0
+    _neutralise_exclusions(m)
+    _refresh_body_masks(m)
+    return m
+
+
+def self_model(world: CheckWorld, capsules: bool) -> mujoco.MjModel:
+    """Copy of the model where only robot-vs-robot pairs collide (the MJCF's own filters)."""
+    m = copy.deepcopy(world.model)
+    _enable_contacts(m)
+    robot = np.zeros(m.ngeom, dtype=bool)
+    robot[world.robot_geoms] = True
+    m.geom_contype[~robot] = 0
+    m.geom_conaffinity[~robot] = 0
+    m.geom_gap[:] = 0.0
+    m.geom_margin[:] = 0.0
+    if m.npair:
+        m.pair_margin[:] = 0.0
+        m.pair_gap[:] = 0.0
+    if capsules:
+        _meshes_to_capsules(m, world)
+    _refresh_body_masks(m)
+    return m
+
+
+def _neutralise_exclusions(m: mujoco.MjModel) -> None:
+    """Point every <exclude> at world-world (never a candidate pair).
+
+    Only used on the scene model, where robot-robot pairs do not collide anyway, so the
+    exclusions left to matter are those that would hide a robot-vs-scene contact (e.g. a
+    scene excluding world <-> feet to keep the floor out of its own metrics).
+    """
+    if m.nexclude:
+        m.exclude_signature[:] = 0
+
+
+def _meshes_to_capsules(m: mujoco.MjModel, world: CheckWorld) -> None:
+    """Replace robot mesh geoms by capsules fitted to their hulls (in place, compiled model)."""
+    for g, verts in world.hull_vertices.items():
+        centre, axis, radius, half = fit_capsule(verts)
+        # rotation taking the geom frame's z onto the capsule axis (expressed in the geom frame)
+        local = np.zeros(4)
+        mujoco.mju_quatZ2Vec(local, axis)
+        # compose: world <- body (geom_quat) <- capsule frame (local)
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, m.geom_quat[g], local)
+        offset = np.zeros(3)
+        mujoco.mju_rotVecQuat(offset, centre, m.geom_quat[g])
+        m.geom_pos[g] = m.geom_pos[g] + offset
+        m.geom_quat[g] = quat
+        m.geom_type[g] = mujoco.mjtGeom.mjGEOM_CAPSULE
+        m.geom_size[g] = (radius, half, 0.0)
+        m.geom_dataid[g] = -1
+        m.geom_rbound[g] = radius + half
+        m.geom_aabb[g] = (0.0, 0.0, 0.0, radius, radius, radius + half)
+        m.geom_sameframe[g] = 0  # the geom frame no longer coincides with the body frame
