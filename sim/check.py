@@ -59,7 +59,7 @@ def check_trajectory(
     timings: dict[str, float] = {}
     start = time.perf_counter()
     qvel, qacc, half = velocities_and_accelerations(world.model, q, rate)
-    kin = kinematic_check(world, q, rate, qvel, half, config)
+    kin = kinematic_check(world, q, rate, half, config)
     timings["kinematic_s"] = time.perf_counter() - start
     dyn = trk = None
     if config.dynamics:

@@ -12,8 +12,8 @@ The user's model is never modified. Two copies are made (robotics reference §4.
   ``capsules`` mode every robot mesh collider is replaced by a capsule fitted to its hull
   (MuJoCo collides meshes as convex hulls, which overlap near concave regions).
 
-After editing geom masks of a compiled model the body-level masks must be updated too: the
-broad phase reads ``body_contype``/``body_conaffinity``.
+After editing geom fields of a compiled model the body-level copies must be updated too: the
+broad phase reads ``body_contype``/``body_conaffinity`` and the mid phase ``body_margin``.
 """
 
 from __future__ import annotations
@@ -26,15 +26,26 @@ import numpy as np
 from sim.geometry import fit_capsule
 from sim.world import CheckWorld
 
+CAPSULE_BVH_SLACK_M = 0.05
+"""Padding of the robot bodies' bounding-volume trees when capsules replace meshes."""
+
 SCENE_BIT = 1 << 30
 """Collision bit reserved for robot-vs-scene detection in the scene model."""
 
 
-def _refresh_body_masks(m: mujoco.MjModel) -> None:
+def _refresh_body_fields(m: mujoco.MjModel, slack: float = 0.0) -> None:
+    """Recompute the body-level copies of geom fields that the broad and mid phase read.
+
+    ``body_margin`` (the largest margin + gap of a body's geoms) inflates the bounding-volume
+    tree of multi-geom bodies; left at its compiled value, a gap added after compilation is
+    ignored for e.g. the G1 foot with its four sole spheres.
+    """
     m.body_contype[:] = 0
     m.body_conaffinity[:] = 0
     np.bitwise_or.at(m.body_contype, m.geom_bodyid, m.geom_contype)
     np.bitwise_or.at(m.body_conaffinity, m.geom_bodyid, m.geom_conaffinity)
+    m.body_margin[:] = 0.0
+    np.maximum.at(m.body_margin, m.geom_bodyid, m.geom_margin + m.geom_gap + slack)
 
 
 def _enable_contacts(m: mujoco.MjModel) -> None:
@@ -60,7 +71,7 @@ def scene_model(world: CheckWorld, floor_gap: float, obstacle_gap: float) -> muj
         m.pair_margin[:] = 0.0
         m.pair_gap[:] = 0.0
     _neutralise_exclusions(m)
-    _refresh_body_masks(m)
+    _refresh_body_fields(m)
     return m
 
 
@@ -79,7 +90,8 @@ def self_model(world: CheckWorld, capsules: bool) -> mujoco.MjModel:
         m.pair_gap[:] = 0.0
     if capsules:
         _meshes_to_capsules(m, world)
-    _refresh_body_masks(m)
+    # capsules may poke out of the compiled (mesh-based) bounding-volume tree: pad it
+    _refresh_body_fields(m, slack=CAPSULE_BVH_SLACK_M if capsules else 0.0)
     return m
 
 

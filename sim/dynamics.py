@@ -99,7 +99,7 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
         config: thresholds (``max_residual_force_ratio``, ``max_residual_moment_m``,
             ``max_torque_ratio``).
     """
-    m = inverse_model(world)
+    m = world.derived(("inverse",), lambda: inverse_model(world))
     d = mujoco.MjData(m)
     T = qpos.shape[0]
     mg = world.mass * float(np.linalg.norm(m.opt.gravity))

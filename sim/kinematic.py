@@ -81,7 +81,8 @@ class KinematicResult:
         body_obstacle_penetration, body_floor_penetration, body_self_collision: (T, B).
         joint_position: (T, J); joint_limit_violation: (T, J) overshoot past the range (>= 0);
         joint_limit_margin: (T,) smallest distance to a limit over joints (negative = outside).
-        joint_speed: (T, J) |velocity|; joint_velocity_ratio: (T, J) speed / allowed speed.
+        joint_speed: (T, J) the larger |velocity| of the steps into and out of the frame;
+        joint_velocity_ratio: (T, J) speed / allowed speed.
         foot_height: (T, F) lowest point of each foot above the floor plane (NaN without one).
         foot_stance: (T, F) the foot touches a support in frames t-1 and t.
         foot_slide: (T, F) horizontal slide of the stance foot from t-1 to t (m).
@@ -154,9 +155,11 @@ def _replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, c
     T = qpos.shape[0]
     floor_gap = max(config.stance_height_m, config.support_height_m)
     obstacle_gap = max(config.clearance_sense_m, config.support_height_m, config.stance_height_m)
-    ms = scene_model(world, floor_gap, obstacle_gap)
+    ms = world.derived(("scene", floor_gap, obstacle_gap), lambda: scene_model(world, floor_gap, obstacle_gap))
     ds = mujoco.MjData(ms)
-    mself = self_model(world, capsules=config.self_collision == "capsules") if config.self_collision != "off" else None
+    capsules = config.self_collision == "capsules"
+    mself = (world.derived(("self", capsules), lambda: self_model(world, capsules))
+             if config.self_collision != "off" else None)
     dself = mujoco.MjData(mself) if mself is not None else None
 
     dense, owner = interpolate(world.model, qpos, half, fps, int(config.substeps))
@@ -237,7 +240,7 @@ def _ballistic(com_z: np.ndarray, fps: float, g: float, tol: float) -> bool:
     return float(np.sqrt(np.mean((np.polyval(coef, t) - target) ** 2))) <= tol
 
 
-def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, qvel: np.ndarray, half: np.ndarray,
+def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.ndarray,
                     config: CheckConfig) -> KinematicResult:
     """Replay ``qpos`` (T, nq) kinematically and measure every kinematic failure kind.
 
@@ -245,7 +248,7 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, qvel: np.nd
         world: the robot + scene (:func:`sim.world.make_world`).
         qpos: validated (T, nq) trajectory (:func:`sim.trajectory.validate_qpos`).
         fps: frames per second.
-        qvel: (T, nv) finite-difference velocities; half: (T-1, nv) half-step velocities.
+        half: (T-1, nv) velocities between consecutive frames (:mod:`sim.trajectory`).
         config: thresholds.
     """
     m = world.model
@@ -355,7 +358,7 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, qvel: np.nd
     violation = np.maximum(over, 0.0)
     margin = np.min(np.where(J.limited, -over, np.inf), axis=1) if J.names else np.full(T, np.nan)
     margin = np.where(np.isfinite(margin), margin, np.nan)
-    speed = np.abs(qvel[:, J.dof_adr])
+    speed = _joint_speed(half, J.dof_adr, T)
     limits = np.array([config.velocity_limit(n) for n in J.names]) * config.velocity_limit_factor
     ratio = speed / limits if J.names else np.zeros((T, 0))
     for j, name in enumerate(J.names):
@@ -394,8 +397,27 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, qvel: np.nd
     )
 
 
+HEIGHT_CUTOFF_M = 0.25
+"""Mesh geoms are evaluated vertex by vertex only when they may come lower than this."""
+
+
+def _joint_speed(half: np.ndarray, dofs: np.ndarray, T: int) -> np.ndarray:
+    """(T, J) joint speed at each frame: the larger of the two adjacent half-step speeds.
+
+    Central averaging would halve a one-frame jump; the half steps are what the robot must
+    actually move between frames.
+    """
+    speed = np.zeros((T, dofs.size))
+    if T >= 2:
+        step = np.abs(half[:, dofs])
+        speed[:-1] = step
+        speed[1:] = np.maximum(speed[1:], step)
+    return speed
+
+
 def _floor_heights(world: CheckWorld, rep: _Replay) -> np.ndarray:
-    """(T, G) height of each robot geom's lowest point above the floor (min over planes)."""
+    """(T, G) height of each robot geom's lowest point above the floor (min over planes);
+    exact up to :data:`HEIGHT_CUTOFF_M`, a lower bound above it."""
     T, P = rep.plane_xpos.shape[:2]
     if P == 0:
         return np.zeros((T, 0))
@@ -403,7 +425,7 @@ def _floor_heights(world: CheckWorld, rep: _Replay) -> np.ndarray:
     for p in range(P):
         normal = rep.plane_xmat[:, p].reshape(T, 3, 3)[:, :, 2]
         h = support_heights(world.model, world.robot_geoms, rep.geom_xpos, rep.geom_xmat, rep.plane_xpos[:, p],
-                            normal, world.hull_vertices)
+                            normal, world.hull_vertices, cutoff=HEIGHT_CUTOFF_M)
         heights = h if heights is None else np.fmin(heights, h)
     return heights
 

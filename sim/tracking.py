@@ -45,11 +45,16 @@ class TrackingResult:
     failures: list[Failure] = field(default_factory=list)
 
 
+def _tracking_model(world: CheckWorld) -> mujoco.MjModel:
+    m = copy.deepcopy(world.model)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)  # torques come from qfrc_applied
+    return m
+
+
 def tracking_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, half: np.ndarray, fps: float,
                    config: CheckConfig) -> TrackingResult:
     """Replay ``qpos`` (T, nq) at ``fps`` with PD servos in MuJoCo physics (``mj_step``)."""
-    m = copy.deepcopy(world.model)
-    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)
+    m = world.derived(("tracking",), lambda: _tracking_model(world))
     d = mujoco.MjData(m)
     J = world.joints
     limit = np.where(np.isfinite(J.torque_limit), J.torque_limit, np.inf)

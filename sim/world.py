@@ -75,6 +75,9 @@ class CheckWorld:
         mass: total robot mass (kg).
         set_time: moves mocap obstacles for a time (seconds), or None when nothing moves.
         hull_vertices: convex-hull vertices (V, 3) in the geom frame, per robot mesh geom.
+
+    Reuse one world across checks of the same scene: the collision and inverse-dynamics
+    copies of the model are built on first use and kept (:meth:`derived`).
     """
 
     model: mujoco.MjModel
@@ -89,6 +92,13 @@ class CheckWorld:
     mass: float
     set_time: SetTime | None = None
     hull_vertices: dict[int, np.ndarray] = field(default_factory=dict)
+    _derived: dict = field(default_factory=dict, repr=False)
+
+    def derived(self, key: tuple, build: Callable[[], object]) -> object:
+        """A model copy (or other derived object) built once per world and ``key``."""
+        if key not in self._derived:
+            self._derived[key] = build()
+        return self._derived[key]
 
     @property
     def nq(self) -> int:
