@@ -127,3 +127,22 @@ def g1_squat() -> np.ndarray:
     frames = np.concatenate([hold(q0, 10), smooth_blend(q0, sq, 50), hold(sq, 10), smooth_blend(sq, q0, 50),
                              hold(q0, 10)])
     return plant(g1_world(), frames, q0)
+
+
+@lru_cache(maxsize=None)
+def g1_bare() -> CheckWorld:
+    """G1 on an empty floor."""
+    return make_world(robot_world("g1"))
+
+
+def lean_about_toes(world: CheckWorld, q0: np.ndarray, degrees: float, n: int) -> np.ndarray:
+    """n frames rotating the standing robot forward about its toe spheres' axis (toes stay put)."""
+    m = world.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = q0
+    mujoco.mj_kinematics(m, d)
+    geoms = np.concatenate([f.geoms for f in world.feet])
+    toes = geoms[d.geom_xpos[geoms, 0] > d.geom_xpos[geoms, 0].mean()]
+    pivot = np.array([d.geom_xpos[toes, 0].mean(), 0.0, d.geom_xpos[toes, 2].mean()])
+    s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n))
+    return np.stack([rotate_about(q0, pivot, np.deg2rad(degrees) * a, world.root_qpos_adr) for a in s])
