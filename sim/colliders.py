@@ -2,15 +2,16 @@
 
 The user's model is never modified. Two copies are made (robotics reference §4.2-§4.4):
 
-* the **scene model** collides the robot with the floor and the obstacles only, through a
+* the **scene model** collides the robot with the floor and the obstacles through a
   dedicated contype/conaffinity bit (robot geoms: contype; floor and obstacles: conaffinity),
   whatever masks the scene uses; exclusions that involve a non-robot body are neutralised;
   floor and obstacle geoms get a ``gap`` so that near misses are reported (``dist > 0``)
-  without ever generating force (gap, not margin);
-* the **self model** collides robot geoms with each other only, with the MJCF's own masks,
-  ``<exclude>`` pairs, explicit ``<pair>`` elements and MuJoCo's parent-child filter; in
-  ``capsules`` mode every robot mesh collider is replaced by a capsule fitted to its hull
-  (MuJoCo collides meshes as convex hulls, which overlap near concave regions).
+  without ever generating force (gap, not margin). In the default self-collision mode the
+  robot keeps its own bits too, so one pass also finds robot-robot contacts with the MJCF's
+  masks, ``<exclude>`` pairs, explicit ``<pair>`` elements and MuJoCo's parent-child filter;
+* the **self model** (``capsules`` mode only) collides robot geoms with each other, every
+  robot mesh collider replaced by a capsule fitted to its hull (MuJoCo collides meshes as
+  convex hulls, which overlap near concave regions), with the same filters.
 
 After editing geom fields of a compiled model the body-level copies must be updated too: the
 broad phase reads ``body_contype``/``body_conaffinity`` and the mid phase ``body_margin``.
@@ -53,24 +54,31 @@ def _enable_contacts(m: mujoco.MjModel) -> None:
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
 
 
-def scene_model(world: CheckWorld, floor_gap: float, obstacle_gap: float) -> mujoco.MjModel:
-    """Copy of the model where only robot-vs-(floor, obstacle) pairs collide."""
+def scene_model(world: CheckWorld, floor_gap: float, obstacle_gap: float, with_self: bool = False) -> mujoco.MjModel:
+    """Copy of the model where robot-vs-(floor, obstacle) pairs collide through a dedicated bit.
+
+    With ``with_self`` the robot keeps its own contype/conaffinity bits as well, so the same
+    pass also finds the MJCF's robot-robot contacts (exclusions between robot bodies kept).
+    """
     m = copy.deepcopy(world.model)
     _enable_contacts(m)
     robot = world.robot_geoms
     scene = np.concatenate([world.floor_geoms, world.obstacle_geoms]).astype(np.int64)
+    own_type = m.geom_contype[robot].copy() & ~SCENE_BIT
+    own_affinity = m.geom_conaffinity[robot].copy() & ~SCENE_BIT
     m.geom_contype[:] = 0
     m.geom_conaffinity[:] = 0
-    m.geom_contype[robot] = SCENE_BIT
+    m.geom_contype[robot] = SCENE_BIT | (own_type if with_self else 0)
+    m.geom_conaffinity[robot] = own_affinity if with_self else 0
     m.geom_conaffinity[scene] = SCENE_BIT
     m.geom_margin[:] = 0.0
     m.geom_gap[:] = 0.0
     m.geom_gap[world.floor_geoms] = floor_gap
     m.geom_gap[world.obstacle_geoms] = obstacle_gap
-    if m.npair:  # explicit <pair>s still collide; their robot-robot contacts are dropped later
+    if m.npair:  # explicit <pair>s still collide; contacts are sorted out by geom afterwards
         m.pair_margin[:] = 0.0
         m.pair_gap[:] = 0.0
-    _neutralise_exclusions(m)
+    _neutralise_exclusions(m, world)
     _refresh_body_fields(m)
     return m
 
@@ -95,15 +103,19 @@ def self_model(world: CheckWorld, capsules: bool) -> mujoco.MjModel:
     return m
 
 
-def _neutralise_exclusions(m: mujoco.MjModel) -> None:
-    """Point every <exclude> at world-world (never a candidate pair).
+def _neutralise_exclusions(m: mujoco.MjModel, world: CheckWorld) -> None:
+    """Point every <exclude> that involves a non-robot body at world-world (never a pair).
 
-    Only used on the scene model, where robot-robot pairs do not collide anyway, so the
-    exclusions left to matter are those that would hide a robot-vs-scene contact (e.g. a
-    scene excluding world <-> feet to keep the floor out of its own metrics).
+    Such exclusions would hide robot-vs-scene contacts (e.g. a scene excluding world <-> feet
+    to keep the floor out of its own metrics); exclusions between robot bodies are the MJCF's
+    self-collision filter and stay.
     """
-    if m.nexclude:
-        m.exclude_signature[:] = 0
+    robot = set(world.robot_bodies.tolist())
+    for i, sig in enumerate(m.exclude_signature.tolist()):
+        if not ((sig >> 16) in robot and (sig & 0xFFFF) in robot):
+            m.exclude_signature[i] = 0
+    order = np.argsort(m.exclude_signature, kind="stable")  # the collider walks them sorted
+    m.exclude_signature[:] = m.exclude_signature[order]
 
 
 def _meshes_to_capsules(m: mujoco.MjModel, world: CheckWorld) -> None:

@@ -119,6 +119,8 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
     order = np.argsort(support.frame, kind="stable")
     bounds = np.searchsorted(support.frame[order], np.arange(T + 1))
     jacp = np.zeros((3, m.nv))
+    all_edges = _pyramid(support.normal, support.friction) if support.frame.size else np.zeros((0, 4, 3))
+    sqrt_ridge = np.sqrt(RIDGE)
     for t in range(T):
         d.qpos[:] = qpos[t]
         d.qvel[:] = qvel[t]
@@ -136,14 +138,14 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
         idx = order[bounds[t]:bounds[t + 1]]
         generalized = np.zeros(m.nv)
         if idx.size:
-            edges = _pyramid(support.normal[idx], support.friction[idx])  # (K, 4, 3)
+            edges = all_edges[idx]  # (K, 4, 3)
             cols = np.empty((m.nv, idx.size * 4))
             for i, c in enumerate(idx):
                 mujoco.mj_jac(m, d, jacp, None, support.pos[c], int(support.body[c]))
                 cols[:, 4 * i:4 * i + 4] = jacp.T @ edges[i].T
             a = weights[:, None] * (to_com @ cols[root_dofs]) * mg
             b = weights * (to_com @ need[root_dofs])
-            lhs = np.vstack([a, np.sqrt(RIDGE) * np.eye(a.shape[1])])
+            lhs = np.vstack([a, sqrt_ridge * np.eye(a.shape[1])])
             rhs = np.concatenate([b, np.zeros(a.shape[1])])
             lam, _ = nnls(lhs, rhs, maxiter=50 * a.shape[1])
             forces = lam * mg

@@ -78,7 +78,9 @@ class KinematicResult:
         lowest_height: (T,) height of the lowest robot collision point above the floor plane
             (m; NaN without a plane floor).
         self_collision: (T,) deepest robot-robot overlap (m, >= 0).
-        body_obstacle_penetration, body_floor_penetration, body_self_collision: (T, B).
+        body_obstacle_penetration, body_floor_penetration, body_self_collision: (T, B) depths (m).
+        body_clearance: (T, B) smallest signed distance of each robot body to any obstacle (m;
+            NaN beyond ``clearance_sense_m``): where the feedback loop can ask for more margin.
         joint_position: (T, J); joint_limit_violation: (T, J) overshoot past the range (>= 0);
         joint_limit_margin: (T,) smallest distance to a limit over joints (negative = outside).
         joint_speed: (T, J) the larger |velocity| of the steps into and out of the frame;
@@ -103,6 +105,7 @@ class KinematicResult:
     lowest_height: np.ndarray
     self_collision: np.ndarray
     body_obstacle_penetration: np.ndarray
+    body_clearance: np.ndarray
     body_floor_penetration: np.ndarray
     body_self_collision: np.ndarray
     joint_position: np.ndarray
@@ -155,51 +158,68 @@ def _replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, c
     T = qpos.shape[0]
     floor_gap = max(config.stance_height_m, config.support_height_m)
     obstacle_gap = max(config.clearance_sense_m, config.support_height_m, config.stance_height_m)
-    ms = world.derived(("scene", floor_gap, obstacle_gap), lambda: scene_model(world, floor_gap, obstacle_gap))
-    ds = mujoco.MjData(ms)
-    capsules = config.self_collision == "capsules"
-    mself = (world.derived(("self", capsules), lambda: self_model(world, capsules))
-             if config.self_collision != "off" else None)
-    dself = mujoco.MjData(mself) if mself is not None else None
+    merged = config.self_collision == "model"
+    ms = world.derived(("scene", floor_gap, obstacle_gap, merged),
+                       lambda: scene_model(world, floor_gap, obstacle_gap, with_self=merged))
+    passes = [(ms, mujoco.MjData(ms), [])]
+    if config.self_collision == "capsules":
+        mself = world.derived(("self", True), lambda: self_model(world, capsules=True))
+        passes.append((mself, mujoco.MjData(mself), []))
 
-    dense, owner = interpolate(world.model, qpos, half, fps, int(config.substeps))
-    original = np.zeros(dense.shape[0], dtype=bool)
-    original[np.arange(T) * (int(config.substeps) + 1) if T > 1 else [0]] = True
-    mocap = world.mocap_poses(np.arange(dense.shape[0]) / (fps * (int(config.substeps) + 1)))
+    substeps = int(config.substeps)
+    dense, owner = interpolate(world.model, qpos, half, fps, substeps)
+    record = np.zeros(dense.shape[0], dtype=bool)
+    record[::substeps + 1] = True
+    mocap = world.mocap_poses(np.arange(dense.shape[0]) / (fps * (substeps + 1)))
 
+    # Robot geoms are recorded as one contiguous block (a slice copy is cheaper than fancy
+    # indexing inside the loop) and picked out afterwards.
     rg = world.robot_geoms
+    lo, hi = int(rg.min()), int(rg.max()) + 1
     planes = world.floor_geoms[world.model.geom_type[world.floor_geoms] == _PLANE]
     rb = world.robot_bodies
-    out = _Replay(Contacts.empty(), Contacts.empty(), np.empty((T, rg.size, 3)), np.empty((T, rg.size, 9)),
-                  np.empty((T, planes.size, 3)), np.empty((T, planes.size, 9)), np.empty((T, rb.size, 3)))
-    scene_buf: list = []
-    self_buf: list = []
+    block_xpos = np.empty((T, hi - lo, 3))
+    block_xmat = np.empty((T, hi - lo, 9))
+    body_xipos = np.empty((T, world.model.nbody, 3))
+    ds = passes[0][1]
+    views = [(m, d, buf, d.qpos, d.mocap_pos, d.mocap_quat) for m, d, buf in passes]
+    xpos, xmat, xipos = ds.geom_xpos, ds.geom_xmat, ds.xipos
+    kinematics, collision = mujoco.mj_kinematics, mujoco.mj_collision
     t = 0
     for k in range(dense.shape[0]):
         frame = int(owner[k])
-        for m, d, buf in ((ms, ds, scene_buf), (mself, dself, self_buf)):
-            if m is None:
-                continue
-            d.qpos[:] = dense[k]
+        for m, d, buf, qv, mpos, mquat in views:
+            qv[:] = dense[k]
             if mocap is not None:
-                d.mocap_pos[:] = mocap[0][k]
-                d.mocap_quat[:] = mocap[1][k]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_collision(m, d)
+                mpos[:] = mocap[0][k]
+                mquat[:] = mocap[1][k]
+            kinematics(m, d)
+            collision(m, d)
             n = d.ncon
             if n:
                 c = d.contact
                 buf.append((frame, c.geom[:n].copy(), c.dist[:n].copy(), c.pos[:n].copy(), c.frame[:n, :3].copy()))
-        if original[k]:
-            out.geom_xpos[t] = ds.geom_xpos[rg]
-            out.geom_xmat[t] = ds.geom_xmat[rg]
-            out.plane_xpos[t] = ds.geom_xpos[planes]
-            out.plane_xmat[t] = ds.geom_xmat[planes]
-            out.body_xipos[t] = ds.xipos[rb]
+        if record[k]:
+            block_xpos[t] = xpos[lo:hi]
+            block_xmat[t] = xmat[lo:hi]
+            body_xipos[t] = xipos
             t += 1
-    out.scene = _gather(scene_buf)
-    out.self_ = _gather(self_buf)
-    return out
+    plane_xpos = np.empty((T, planes.size, 3))
+    plane_xmat = np.empty((T, planes.size, 9))
+    if planes.size:  # floor planes are static unless they sit on a mocap body
+        moving = bool((world.model.body_mocapid[world.model.geom_bodyid[planes]] >= 0).any()) and mocap is not None
+        data = mujoco.MjData(world.model)
+        for t_ in range(T if moving else 1):
+            if moving:
+                data.mocap_pos[:] = mocap[0][t_ * (substeps + 1)]
+                data.mocap_quat[:] = mocap[1][t_ * (substeps + 1)]
+            mujoco.mj_kinematics(world.model, data)
+            plane_xpos[t_:] = data.geom_xpos[planes]
+            plane_xmat[t_:] = data.geom_xmat[planes]
+    scene = _gather(passes[0][2])
+    self_ = scene if merged else (_gather(passes[1][2]) if len(passes) > 1 else Contacts.empty())
+    return _Replay(scene, self_, block_xpos[:, rg - lo], block_xmat[:, rg - lo], plane_xpos, plane_xmat,
+                   body_xipos[:, rb])
 
 
 # ------------------------------------------------------------------------------- measures
@@ -276,6 +296,10 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
     if obst.any():
         np.minimum.at(clearance, sc.frame[obst], sc.dist[obst])
     clearance[~np.isfinite(clearance)] = np.nan
+    body_clear = np.full((T, nb), np.inf)
+    if obst.any():
+        np.minimum.at(body_clear, (sc.frame[obst], sc_body[obst]), sc.dist[obst])
+    body_clear[~np.isfinite(body_clear)] = np.nan
     pen = np.maximum(-sc.dist, 0.0)
     body_obst = _body_max(T, nb, sc.frame[obst], sc_body[obst], pen[obst])
     body_floor = _body_max(T, nb, sc.frame[floor], sc_body[floor], pen[floor])
@@ -291,6 +315,7 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
 
     # --- self collision
     body_self = np.zeros((T, nb))
+    sf = Contacts.empty()
     if config.self_collision != "off":
         sf = rep.self_
         sf = sf.select((category[sf.robot_geom] == 1) & (category[sf.other_geom] == 1) & (sf.dist < 0))
@@ -376,6 +401,7 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
         lowest_height=lowest,
         self_collision=body_self.max(axis=1) if nb else np.zeros(T),
         body_obstacle_penetration=body_obst,
+        body_clearance=body_clear,
         body_floor_penetration=body_floor,
         body_self_collision=body_self,
         joint_position=jpos,
@@ -392,12 +418,12 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
         floating=floating,
         com=com,
         support=support,
-        contacts=Contacts.concat(sc, _orient(world, rep.self_)),
+        contacts=Contacts.concat(sc, sf),
         failures=failures,
     )
 
 
-HEIGHT_CUTOFF_M = 0.25
+HEIGHT_CUTOFF_M = 0.10
 """Mesh geoms are evaluated vertex by vertex only when they may come lower than this."""
 
 

@@ -80,6 +80,10 @@ def test_arm_pushed_into_shelf():
     assert report.max_penetration_m == pytest.approx(truth.max(), abs=1e-3)
     assert 0.02 < report.max_penetration_m < 0.12
     assert np.nanmin(report.frames["clearance_m"]) == pytest.approx(-truth.max(), abs=1e-3)
+    bodies = [w.body_name(b) for b in w.robot_bodies]
+    clearance = report.kinematic.body_clearance
+    assert np.nanmin(clearance[:, bodies.index("left_wrist_yaw_link")]) < -0.005
+    assert np.isnan(clearance[:, bodies.index("right_knee_link")]).all()  # never within 10 cm
     assert kinds(report) == {"obstacle_penetration"}
 
 
