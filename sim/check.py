@@ -57,20 +57,23 @@ def check_trajectory(
         set_time=set_time, foot_bodies=foot_bodies)
     q, rate = validate_qpos(world, qpos, fps)
     timings: dict[str, float] = {}
-    start = time.perf_counter()
-    qvel, qacc, half = velocities_and_accelerations(world.model, q, rate)
-    kin = kinematic_check(world, q, rate, half, config)
-    timings["kinematic_s"] = time.perf_counter() - start
-    dyn = trk = None
-    if config.dynamics:
-        start = time.perf_counter()
-        dyn = dynamics_check(world, q, qvel, qacc, kin.support, config)
-        timings["dynamics_s"] = time.perf_counter() - start
-    if config.tracking:
-        start = time.perf_counter()
-        trk = tracking_check(world, q, qvel, half, rate, config)
-        timings["tracking_s"] = time.perf_counter() - start
+    cpu: dict[str, float] = {}
+
+    def timed(name: str, fn):
+        wall, proc = time.perf_counter(), time.process_time()
+        out = fn()
+        timings[name] = time.perf_counter() - wall
+        cpu[name] = time.process_time() - proc
+        return out
+
+    qvel, qacc, half = timed("differences_s", lambda: velocities_and_accelerations(world.model, q, rate))
+    kin = timed("kinematic_s", lambda: kinematic_check(world, q, rate, half, config))
+    dyn = timed("dynamics_s", lambda: dynamics_check(world, q, qvel, qacc, kin.support, config)) \
+        if config.dynamics else None
+    trk = timed("tracking_s", lambda: tracking_check(world, q, qvel, half, rate, config)) \
+        if config.tracking else None
     extra = {"timings_s": {k: round(v, 4) for k, v in timings.items()},
+             "cpu_s": {k: round(v, 4) for k, v in cpu.items()},
              "robot_mass_kg": round(world.mass, 4), "nq": world.nq,
              "obstacles": [world.geom_label(g) for g in world.obstacle_geoms],
              "floor": [world.geom_label(g) for g in world.floor_geoms]}

@@ -166,7 +166,8 @@ class Report:
         rf, rm = s.get("residual_force"), s.get("residual_moment")
         if rf is not None and rm is not None:
             lines.append(
-                f"  dynamics: residual force mean {rf['mean_ratio'] * 100:.1f}% / max {rf['max_ratio'] * 100:.1f}% of m g "
+                f"  dynamics: residual force mean {rf['mean_ratio'] * 100:.1f}% / max "
+                f"{rf['max_ratio'] * 100:.1f}% of m g "
                 f"(tol {c.max_residual_force_ratio * 100:.0f}%), residual moment max {rm['max_m'] * 1000:.0f} mm "
                 f"(tol {c.max_residual_moment_m * 1000:.0f}), torque peak {s['max_torque_ratio'] * 100:.0f}% of limit")
         tr = s.get("tracking")
@@ -187,7 +188,9 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
                  extra: dict[str, Any] | None = None) -> Report:
     """Assemble a :class:`Report` from the kinematic, dynamics and tracking results."""
     T = kin.num_frames
-    failures = list(kin.failures) + (dyn.failures if dyn is not None else []) + (trk.failures if trk is not None else [])
+    failures = list(kin.failures)
+    for part in (dyn, trk):
+        failures += part.failures if part is not None else []
     failures = sort_failures(failures)
     tol = config
     violated = kin.joint_limit_violation > tol.joint_limit_tol_rad

@@ -5,8 +5,19 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from sim_motions import (FPS, adr, g1_bare, g1_squat_pose, h1_stand, h1_world, hold, lean_about_toes, plant,
-                         smooth_blend, with_joints)
+from sim_motions import (
+    FPS,
+    adr,
+    g1_bare,
+    g1_squat_pose,
+    h1_stand,
+    h1_world,
+    hold,
+    lean_about_toes,
+    plant,
+    smooth_blend,
+    with_joints,
+)
 
 from sim import CheckConfig, check_trajectory
 from sim.tracking import _tracking_model

@@ -8,8 +8,18 @@ import copy
 import mujoco
 import numpy as np
 import pytest
-from sim_motions import (FPS, adr, g1_squat, g1_stand, g1_world, h1_stand, h1_world, hold, plant, smooth_blend,
-                         with_joints)
+from sim_motions import (
+    FPS,
+    adr,
+    g1_squat,
+    g1_stand,
+    g1_world,
+    h1_stand,
+    h1_world,
+    hold,
+    smooth_blend,
+    with_joints,
+)
 
 from sim import CheckConfig, check_trajectory, make_world
 from sim.worlds import Obstacle, robot_world

@@ -166,7 +166,7 @@ def test_failure_merging():
     keys = [("a", 1)] * 4 + [("b", 2)] * 2
     depths = np.array([0.1, 0.3, 0.2, 0.5, 0.05, 0.06])
     out = from_events("obstacle_penetration", frames, keys, depths, lambda k: k)
-    assert out == [Failure("obstacle_penetration", 3, 5, "a", 1, 0.3), Failure("obstacle_penetration", 9, 9, "a", 1, 0.5),
-                   Failure("obstacle_penetration", 4, 5, "b", 2, 0.06)]
+    kind = "obstacle_penetration"
+    assert out == [Failure(kind, 3, 5, "a", 1, 0.3), Failure(kind, 9, 9, "a", 1, 0.5),
+                   Failure(kind, 4, 5, "b", 2, 0.06)]
     assert "frames 3-5 (0.06-0.10 s)" in out[0].describe(fps=50.0)
-    assert os.path.basename(__file__)  # the module is importable on its own
