@@ -89,7 +89,7 @@ class CheckConfig:
     max_foot_slide_speed: float = 0.2
     support_height_m: float = 0.02
     max_flight_s: float = 0.5
-    ballistic_tol_m: float = 0.03
+    ballistic_tol_m: float = 0.02
     clearance_sense_m: float = 0.1
     dynamics: bool = True
     max_residual_force_ratio: float = 0.1

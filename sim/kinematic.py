@@ -356,7 +356,15 @@ def _lowest_body(world: CheckWorld, heights: np.ndarray) -> list[str]:
 
 
 def _support_contacts(world: CheckWorld, sc: Contacts, config: CheckConfig) -> SupportContacts:
-    near = sc.dist < config.support_height_m
+    """Contacts that may carry load: within ``support_height_m`` of the floor or an obstacle.
+
+    A robot geom sunk into the floor still stands on it, but one that has gone into an
+    obstacle further than ``obstacle_penetration_m`` is not leaning on it: that contact is a
+    penetration failure, its normal is arbitrary, and counting it as support would let the
+    obstacle hold the robot up (or twist its wrist) in the dynamics check.
+    """
+    inside = np.isin(sc.other_geom, world.obstacle_geoms) & (sc.dist < -config.obstacle_penetration_m)
+    near = (sc.dist < config.support_height_m) & ~inside
     c = sc.select(near)
     if config.friction is not None:
         mu = np.full(c.frame.size, float(config.friction))

@@ -194,3 +194,18 @@ def test_pd_tracking_replay_stays_up_or_falls():
     falls = report.failures_of("tracking_fall")
     assert report.stats["tracking"]["fell"] and len(falls) == 1 and falls[0].frame_end == 49
     assert report.stats["tracking"]["time_up_s"] < 1.0
+
+
+def test_an_arm_inside_an_obstacle_does_not_hold_the_robot():
+    from sim_motions import g1_stand, g1_world
+
+    w = g1_world()  # has a shelf at shoulder height in front of the left arm
+    q0 = g1_stand()
+    reach = with_joints(w.model, q0, left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0,
+                        left_elbow_joint=1.5708)
+    q = np.concatenate([hold(q0, 5), smooth_blend(q0, reach, 20), hold(reach, 15), smooth_blend(reach, q0, 20)])
+    report = check_trajectory(w, q, FPS)
+    assert {f.kind for f in report.failures} == {"obstacle_penetration"}
+    assert report.stats["max_torque_ratio"] < 1.0  # the wrist (5 N m) is not loaded by the shelf
+    bare = check_trajectory(g1_bare(), q, FPS)  # the same motion with no shelf: same dynamics
+    assert report.residual_force["max_ratio"] == pytest.approx(bare.residual_force["max_ratio"], abs=1e-6)
