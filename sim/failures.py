@@ -23,7 +23,7 @@ Frame ranges are inclusive: ``frame_start <= t <= frame_end``.
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -99,31 +99,38 @@ def from_mask(kind: str, mask: np.ndarray, values: np.ndarray, *, robot_body: st
     return out
 
 
-def from_events(kind: str, frames: np.ndarray, keys: list[Hashable], depths: np.ndarray,
-                label: callable) -> list[Failure]:
+def from_events(kind: str, frames: np.ndarray, keys: np.ndarray, depths: np.ndarray,
+                label: Callable[[int], tuple[str | None, str | None]]) -> list[Failure]:
     """Merge sparse (frame, key, depth) events into failures per key.
 
     Args:
         frames: (E,) frame index of each event.
-        keys: E hashable keys (e.g. (robot body id, geom id)); consecutive frames of the
-            same key merge into one failure.
-        depths: (E,) depth of each event.
+        keys: (E,) integer key of each event (e.g. robot body * ngeom + geom); consecutive
+            frames of the same key merge into one failure.
+        depths: (E,) depth of each event; a failure's depth is the max over its frames.
         label: ``label(key) -> (robot_body, obstacle_geom)`` names for a key.
     """
-    out: list[Failure] = []
-    if len(keys) == 0:
-        return out
-    groups: dict[Hashable, dict[int, float]] = {}
-    for f, k, d in zip(np.asarray(frames).tolist(), keys, np.asarray(depths).tolist()):
-        per = groups.setdefault(k, {})
-        per[f] = max(per.get(f, -np.inf), d)
-    for key, per in groups.items():
-        idx = np.array(sorted(per))
-        vals = np.array([per[i] for i in idx])
-        breaks = np.flatnonzero(np.diff(idx) > 1)
-        body, geom = label(key)
-        for seg_frames, seg_vals in zip(np.split(idx, breaks + 1), np.split(vals, breaks + 1)):
-            out.append(Failure(kind, int(seg_frames[0]), int(seg_frames[-1]), body, geom, float(seg_vals.max())))
+    frames = np.asarray(frames, dtype=np.int64)
+    keys = np.asarray(keys, dtype=np.int64)
+    depths = np.asarray(depths, dtype=np.float64)
+    if frames.size == 0:
+        return []
+    order = np.lexsort((frames, keys))
+    frames, keys, depths = frames[order], keys[order], depths[order]
+    # one entry per (key, frame): the deepest event
+    first = np.concatenate([[True], (keys[1:] != keys[:-1]) | (frames[1:] != frames[:-1])])
+    starts = np.flatnonzero(first)
+    depth = np.maximum.reduceat(depths, starts)
+    frames, keys = frames[starts], keys[starts]
+    # runs: a new failure where the key changes or a frame is skipped
+    new = np.concatenate([[True], (keys[1:] != keys[:-1]) | (frames[1:] != frames[:-1] + 1)])
+    run_starts = np.flatnonzero(new)
+    run_ends = np.concatenate([run_starts[1:], [frames.size]]) - 1
+    worst = np.maximum.reduceat(depth, run_starts)
+    out = []
+    for a, b, d in zip(run_starts.tolist(), run_ends.tolist(), worst.tolist()):
+        body, geom = label(int(keys[a]))
+        out.append(Failure(kind, int(frames[a]), int(frames[b]), body, geom, float(d)))
     return out
 
 

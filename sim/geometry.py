@@ -20,7 +20,7 @@ def support_heights(
     plane_point: np.ndarray,
     plane_normal: np.ndarray,
     hulls: dict[int, np.ndarray],
-    cutoff: float | None = None,
+    cutoff: float | np.ndarray | None = None,
 ) -> np.ndarray:
     """Signed height of each geom's lowest point above a plane (negative = below it).
 
@@ -31,9 +31,10 @@ def support_heights(
         xmat: geom orientations, (T, G, 9) row-major.
         plane_point, plane_normal: a point on the plane and its unit normal, (T, 3) or (1, 3).
         hulls: convex-hull vertices (V, 3) in the geom frame for the mesh geoms.
-        cutoff: when given, mesh geoms whose bounding sphere stays above ``cutoff`` are not
-            evaluated vertex by vertex: their entry is the bounding-sphere bound (a lower
-            bound on the true height, itself above ``cutoff``). Exact below the cutoff.
+        cutoff: when given (a number or one per frame, (T,)), mesh geoms whose bounding
+            sphere stays above ``cutoff`` are not evaluated vertex by vertex: their entry is
+            the bounding-sphere bound (a lower bound on the true height, itself above
+            ``cutoff``). Exact below the cutoff.
 
     Returns:
         (T, G) heights in metres; NaN for geom types without a support function (plane,
@@ -61,7 +62,7 @@ def support_heights(
             reach = np.sqrt(((ln * size) ** 2).sum(axis=1))
         elif kind == _T.mjGEOM_MESH and int(geoms[i]) in hulls:
             reach = np.full(ln.shape[0], float(model.geom_rbound[geoms[i]]))
-            near = slice(None) if cutoff is None else centre[:, i] - reach < cutoff
+            near = slice(None) if cutoff is None else centre[:, i] - reach < np.broadcast_to(cutoff, reach.shape)
             reach[near] = np.max(-(ln[near] @ hulls[int(geoms[i])].T), axis=1)
         else:
             continue

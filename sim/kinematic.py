@@ -205,15 +205,14 @@ def _scene_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: 
         "body_floor_penetration": _body_max(T, nb, sc.frame[floor], body[floor], pen[floor]),
     }
 
-    def label(key: tuple[int, int]) -> tuple[str, str]:
-        return world.body_name(world.robot_bodies[key[0]]), world.geom_label(key[1])
+    def label(key: int) -> tuple[str, str]:
+        return world.body_name(world.robot_bodies[key // m.ngeom]), world.geom_label(key % m.ngeom)
 
     failures: list[Failure] = []
     for kind, mask, tol in (("obstacle_penetration", obst, config.obstacle_penetration_m),
                             ("floor_penetration", floor, config.floor_penetration_m)):
         hit = mask & (pen > tol)
-        failures += from_events(kind, sc.frame[hit], list(zip(body[hit].tolist(), sc.other_geom[hit].tolist())),
-                                pen[hit], label)
+        failures += from_events(kind, sc.frame[hit], body[hit] * m.ngeom + sc.other_geom[hit], pen[hit], label)
     return sc, fields, failures
 
 
@@ -233,8 +232,8 @@ def _self_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: C
     hit = depth > config.self_collision_m
     lo, hi = np.minimum(b1, b2)[hit], np.maximum(b1, b2)[hit]
     failures = from_events(
-        "self_collision", sf.frame[hit], list(zip(lo.tolist(), hi.tolist())), depth[hit],
-        lambda key: (world.body_name(world.robot_bodies[key[0]]), world.body_name(world.robot_bodies[key[1]])))
+        "self_collision", sf.frame[hit], lo * nb + hi, depth[hit],
+        lambda key: (world.body_name(world.robot_bodies[key // nb]), world.body_name(world.robot_bodies[key % nb])))
     return sf, body_self, failures
 
 
@@ -333,18 +332,40 @@ def _joint_speed(half: np.ndarray, dofs: np.ndarray, T: int) -> np.ndarray:
 
 
 def _floor_heights(world: CheckWorld, rep: Replay) -> np.ndarray:
-    """(T, G) height of each robot geom's lowest point above the floor (min over planes);
-    exact up to :data:`HEIGHT_CUTOFF_M`, a lower bound above it."""
+    """(T, G) height of each robot geom's lowest point above the floor (min over planes).
+
+    Exact for the feet and primitive geoms up to :data:`HEIGHT_CUTOFF_M`; a mesh geom is
+    evaluated vertex by vertex only in frames where it may be the robot's lowest point (its
+    bounding sphere reaches below both the cutoff and the lowest primitive/foot point),
+    elsewhere its entry is a lower bound that cannot be the minimum. Hull vertices are many
+    (hundreds to thousands per G1 link), so this pruning is most of the cost saved.
+    """
     T, P = rep.plane_xpos.shape[:2]
+    G = world.robot_geoms.size
     if P == 0:
         return np.zeros((T, 0))
-    heights = None
+    m = world.model
+    foot_geoms = np.concatenate([f.geoms for f in world.feet]) if world.feet else np.zeros(0, np.int64)
+    feet = np.isin(world.robot_geoms, foot_geoms)
+    first = np.flatnonzero(feet | (m.geom_type[world.robot_geoms] != int(mujoco.mjtGeom.mjGEOM_MESH)))
+    rest = np.setdiff1d(np.arange(G), first)
+    heights = np.full((T, G), np.inf)
     for p in range(P):
         normal = rep.plane_xmat[:, p].reshape(T, 3, 3)[:, :, 2]
-        h = support_heights(world.model, world.robot_geoms, rep.geom_xpos, rep.geom_xmat, rep.plane_xpos[:, p],
-                            normal, world.hull_vertices, cutoff=HEIGHT_CUTOFF_M)
-        heights = h if heights is None else np.fmin(heights, h)
+        point = rep.plane_xpos[:, p]
+        h = np.empty((T, G))
+        h[:, first] = _plane_heights(world, rep, first, point, normal, HEIGHT_CUTOFF_M)
+        running = np.nanmin(h[:, first], axis=1) if first.size else np.full(T, np.inf)
+        if rest.size:
+            h[:, rest] = _plane_heights(world, rep, rest, point, normal, np.fmin(HEIGHT_CUTOFF_M, running))
+        heights = np.fmin(heights, h)
     return heights
+
+
+def _plane_heights(world: CheckWorld, rep: Replay, cols: np.ndarray, point: np.ndarray, normal: np.ndarray,
+                   cutoff: float | np.ndarray) -> np.ndarray:
+    return support_heights(world.model, world.robot_geoms[cols], rep.geom_xpos[:, cols], rep.geom_xmat[:, cols],
+                           point, normal, world.hull_vertices, cutoff=cutoff)
 
 
 def _lowest_body(world: CheckWorld, heights: np.ndarray) -> list[str]:

@@ -163,10 +163,11 @@ def test_scene_like_objects_and_trajectory_objects():
 def test_failure_merging():
     assert runs(np.array([0, 1, 1, 0, 1, 0, 0, 1, 1], dtype=bool)) == [(1, 2), (4, 4), (7, 8)]
     frames = np.array([3, 4, 5, 9, 4, 5])
-    keys = [("a", 1)] * 4 + [("b", 2)] * 2
+    keys = np.array([7] * 4 + [2] * 2)
     depths = np.array([0.1, 0.3, 0.2, 0.5, 0.05, 0.06])
-    out = from_events("obstacle_penetration", frames, keys, depths, lambda k: k)
+    names = {7: ("a", 1), 2: ("b", 2)}
+    out = from_events("obstacle_penetration", frames, keys, depths, names.__getitem__)
     kind = "obstacle_penetration"
-    assert out == [Failure(kind, 3, 5, "a", 1, 0.3), Failure(kind, 9, 9, "a", 1, 0.5),
-                   Failure(kind, 4, 5, "b", 2, 0.06)]
-    assert "frames 3-5 (0.06-0.10 s)" in out[0].describe(fps=50.0)
+    assert out == [Failure(kind, 4, 5, "b", 2, 0.06), Failure(kind, 3, 5, "a", 1, 0.3),
+                   Failure(kind, 9, 9, "a", 1, 0.5)]
+    assert "frames 3-5 (0.06-0.10 s)" in out[1].describe(fps=50.0)
