@@ -123,8 +123,13 @@ class CheckConfig:
             raise ControlMMError(f"CheckConfig.fall_height_ratio must be in (0, 1); got {self.fall_height_ratio!r}")
 
     def velocity_limit(self, joint_name: str) -> float:
-        """Velocity limit (rad/s) of a joint: configured, else published, else the default."""
-        limit = self.velocity_limits.get(joint_name, PUBLISHED_VELOCITY_LIMITS.get(joint_name))
+        """Velocity limit (rad/s) of a joint: configured, else published, else the default.
+
+        A namespace prefix from MJCF attachment (``robot/left_knee_joint``) is ignored when
+        looking up the published table.
+        """
+        bare = joint_name.rsplit("/", 1)[-1]
+        limit = self.velocity_limits.get(joint_name, PUBLISHED_VELOCITY_LIMITS.get(bare))
         return float(self.default_velocity_limit if limit is None else limit)
 
     def to_dict(self) -> dict[str, Any]:

@@ -132,6 +132,10 @@ def test_bad_input_one_line_errors():
     for fps in (0, -5, 5000, float("nan"), "fast", None):
         with pytest.raises(ControlMMError, match=r"fps must be a number in \[1, 1000\]"):
             check_trajectory(w, q, fps)
+    config = CheckConfig(velocity_limits={"left_knee_joint": 5.0})
+    assert config.velocity_limit("left_knee_joint") == 5.0 and config.velocity_limit("right_knee_joint") == 20.0
+    assert config.velocity_limit("robot/left_ankle") == 9.0  # H1, attached with a prefix
+    assert config.velocity_limit("tail") == pytest.approx(3 * np.pi)
     with pytest.raises(ControlMMError, match="CheckConfig.floor_penetration_m"):
         CheckConfig(floor_penetration_m=-1)
     with pytest.raises(ControlMMError, match="self_collision"):
