@@ -37,7 +37,9 @@ SUMMARY_FAILURES = 8
 
 
 def _num(x: Any, digits: int = 6) -> Any:
-    """JSON-safe number: rounded float, None for NaN/inf."""
+    """JSON-safe number: rounded float, None for None/NaN/inf."""
+    if x is None:
+        return None
     if isinstance(x, (bool, np.bool_)):
         return bool(x)
     if isinstance(x, (int, np.integer)):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import mujoco
 import numpy as np
 import pytest
@@ -188,6 +190,9 @@ def test_pd_tracking_replay_stays_up_or_falls():
     tracking = report.stats["tracking"]
     assert report.passed and not tracking["fell"] and tracking["mean_joint_error_rad"] < 0.05
     assert report.frames["tracking_root_height_m"].min() > 0.7
+    data = json.loads(report.to_json())
+    assert data["tracking"]["fell"] is False and data["tracking"]["fall_frame"] is None
+    assert len(data["frames"]["tracking_joint_error_rad"]) == 40
     # starting 25 degrees past the toes, joint servos cannot save it: the root is unactuated
     q = hold(lean_about_toes(w, q0, 25.0, 2)[-1], 50)
     report = check_trajectory(w, q, FPS, config)
