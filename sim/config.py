@@ -1,0 +1,137 @@
+"""Thresholds and options of the simulation checks (:class:`CheckConfig`).
+
+Every default is justified in ``docs/simulation-checks.md``. Units: metres, radians,
+seconds, newtons; ratios are dimensionless.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Literal
+
+from controlmm.errors import ControlMMError
+
+SelfCollisionMode = Literal["model", "capsules", "off"]
+
+PUBLISHED_VELOCITY_LIMITS: dict[str, float] = {
+    # Unitree G1 (29 DoF), rad/s: whole_body_tracking robots/g1.py `velocity_limit_sim`
+    # (= Unitree's G1 URDF `velocity` attributes); Menagerie's MJCF has none.
+    **{f"{s}_{j}": v for s in ("left", "right") for j, v in (
+        ("hip_pitch_joint", 32.0), ("hip_roll_joint", 20.0), ("hip_yaw_joint", 32.0),
+        ("knee_joint", 20.0), ("ankle_pitch_joint", 37.0), ("ankle_roll_joint", 37.0),
+        ("shoulder_pitch_joint", 37.0), ("shoulder_roll_joint", 37.0), ("shoulder_yaw_joint", 37.0),
+        ("elbow_joint", 37.0), ("wrist_roll_joint", 37.0), ("wrist_pitch_joint", 22.0),
+        ("wrist_yaw_joint", 22.0))},
+    "waist_yaw_joint": 32.0, "waist_roll_joint": 37.0, "waist_pitch_joint": 37.0,
+    # Unitree H1 (19 DoF), rad/s: unitree_ros robots/h1_description/urdf/h1.urdf `velocity`
+    # attributes; Menagerie names the joints without the `_joint` suffix.
+    **{f"{s}_{j}": v for s in ("left", "right") for j, v in (
+        ("hip_yaw", 23.0), ("hip_roll", 23.0), ("hip_pitch", 23.0), ("knee", 14.0), ("ankle", 9.0),
+        ("shoulder_pitch", 9.0), ("shoulder_roll", 9.0), ("shoulder_yaw", 20.0), ("elbow", 20.0))},
+    "torso": 23.0,
+}
+"""Published joint velocity limits (rad/s) by MJCF joint name (G1 and H1 of Menagerie)."""
+
+DEFAULT_VELOCITY_LIMIT = 3.0 * math.pi
+"""rad/s for joints without a published limit: GMR's IK velocity limit (3 pi)."""
+
+
+@dataclass(frozen=True)
+class CheckConfig:
+    """Options and thresholds of :func:`sim.check_trajectory`.
+
+    A frame fails a check when its measured value exceeds the threshold (strictly). See
+    ``docs/simulation-checks.md`` for the reasoning behind each default.
+
+    Attributes:
+        obstacle_penetration_m: allowed depth of a robot geom inside a scene obstacle.
+        floor_penetration_m: allowed depth of the lowest robot collision point below the floor.
+        self_collision_m: allowed depth of robot-robot contacts.
+        self_collision: ``"model"`` (the MJCF's own collision geometry, exclusions and
+            MuJoCo's parent-child filter), ``"capsules"`` (every robot mesh collider replaced by
+            a capsule fitted to it, same filters) or ``"off"``.
+        joint_limit_tol_rad: allowed overshoot past a joint's range (rad or m for slides).
+        velocity_limits: per-joint velocity limits (rad/s) overriding the published table.
+        default_velocity_limit: limit for joints with no published or configured value.
+        velocity_limit_factor: fraction of the limit that is allowed (1.0 = the limit itself).
+        stance_height_m: a foot is in stance when one of its collision geoms is closer than
+            this to a support surface (floor or obstacle) in two consecutive frames.
+        max_foot_slide_speed: allowed horizontal speed (m/s) of a stance foot.
+        support_height_m: the robot is supported in a frame when any of its collision geoms
+            is closer than this to the floor or an obstacle.
+        max_flight_s: longest unsupported phase that may count as a flight (jump, run).
+        ballistic_tol_m: a flight must follow a ballistic centre-of-mass height within this RMS.
+        clearance_sense_m: obstacle distances are measured up to this far (MuJoCo ``gap``).
+        dynamics: run the inverse-dynamics feasibility check.
+        max_residual_force_ratio: allowed non-physical root force, as a fraction of m g.
+        max_residual_moment_m: allowed non-physical moment about the centre of mass divided by
+            m g (an equivalent centre-of-pressure error in metres).
+        max_torque_ratio: allowed |joint torque| / torque limit.
+        friction: contact friction coefficient for the support (None: from the model's geoms).
+        substeps: extra linearly interpolated poses checked between consecutive frames
+            (0 = only the given frames).
+        tracking: also run the PD-tracking replay in physics (slower; reports falls).
+        tracking_kp, tracking_kd: PD gains of that replay (N m/rad, N m s/rad).
+        fall_height_ratio: the robot has fallen when its root height drops below this fraction
+            of the reference root height.
+    """
+
+    obstacle_penetration_m: float = 0.005
+    floor_penetration_m: float = 0.005
+    self_collision_m: float = 0.005
+    self_collision: SelfCollisionMode = "model"
+    joint_limit_tol_rad: float = 1e-4
+    velocity_limits: dict[str, float] = field(default_factory=dict)
+    default_velocity_limit: float = DEFAULT_VELOCITY_LIMIT
+    velocity_limit_factor: float = 1.0
+    stance_height_m: float = 0.01
+    max_foot_slide_speed: float = 0.2
+    support_height_m: float = 0.02
+    max_flight_s: float = 0.5
+    ballistic_tol_m: float = 0.02
+    clearance_sense_m: float = 0.1
+    dynamics: bool = True
+    max_residual_force_ratio: float = 0.1
+    max_residual_moment_m: float = 0.03
+    max_torque_ratio: float = 1.0
+    friction: float | None = None
+    substeps: int = 0
+    tracking: bool = False
+    tracking_kp: float = 500.0
+    tracking_kd: float = 10.0
+    fall_height_ratio: float = 0.6
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or f.name in ("self_collision", "velocity_limits", "friction"):
+                continue
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ControlMMError(f"CheckConfig.{f.name} must be a finite number >= 0; got {value!r}")
+        if self.self_collision not in ("model", "capsules", "off"):
+            raise ControlMMError(
+                f"CheckConfig.self_collision must be 'model', 'capsules' or 'off'; got {self.self_collision!r}")
+        if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
+            raise ControlMMError(f"CheckConfig.friction must be > 0 or None; got {self.friction!r}")
+        for name, limit in self.velocity_limits.items():
+            if not (math.isfinite(limit) and limit > 0):
+                raise ControlMMError(f"velocity limit of joint '{name}' must be > 0; got {limit!r}")
+        if int(self.substeps) != self.substeps:
+            raise ControlMMError(f"CheckConfig.substeps must be an integer >= 0; got {self.substeps!r}")
+        if not 0 < self.fall_height_ratio < 1:
+            raise ControlMMError(f"CheckConfig.fall_height_ratio must be in (0, 1); got {self.fall_height_ratio!r}")
+
+    def velocity_limit(self, joint_name: str) -> float:
+        """Velocity limit (rad/s) of a joint: configured, else published, else the default.
+
+        A namespace prefix from MJCF attachment (``robot/left_knee_joint``) is ignored when
+        looking up the published table.
+        """
+        bare = joint_name.rsplit("/", 1)[-1]
+        limit = self.velocity_limits.get(joint_name, PUBLISHED_VELOCITY_LIMITS.get(bare))
+        return float(self.default_velocity_limit if limit is None else limit)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON view of every option."""
+        return asdict(self)
