@@ -18,7 +18,14 @@ PROBE_BODY = "controlmm_probe"
 
 
 def add_probe(spec: mujoco.MjSpec) -> None:
-    """Add the probe (a mocap body holding a tiny non-colliding sphere) to ``spec`` in place."""
+    """Add the probe (a mocap body holding a tiny non-colliding sphere) to ``spec`` in place.
+
+    Also tightens MuJoCo's convex collision tolerances (``ccd_iterations`` 200,
+    ``ccd_tolerance`` 1e-10): with the defaults (35, 1e-6) penetration depths inside ellipsoids
+    and meshes (EPA) are off by up to 0.5 mm.
+    """
+    spec.option.ccd_iterations = max(spec.option.ccd_iterations, 200)
+    spec.option.ccd_tolerance = min(spec.option.ccd_tolerance, 1e-10)
     body = spec.worldbody.add_body(name=PROBE_BODY, mocap=True)
     body.add_geom(name=PROBE_BODY, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[PROBE_RADIUS, 0, 0],
                   contype=0, conaffinity=0, group=5)

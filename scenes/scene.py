@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -133,8 +134,12 @@ class Scene:
         return self._sdf
 
 
-def load_scene(name_or_path: str | Path, robot: str | None = "g1") -> Scene:
+def load_scene(name_or_path: str | Path, robot: str | None = "g1",
+               edit_spec: Callable[[mujoco.MjSpec], None] | None = None) -> Scene:
     """Load a packaged scene by name, or any scene MJCF file, and attach ``robot`` by name.
+
+    ``edit_spec`` may change the ``mujoco.MjSpec`` just before it is compiled (for example
+    :func:`scenes.probe.add_probe`); geoms it adds after the scene's keep the scene's geom ids.
 
     Raises:
         ControlMMError: unknown name (lists the known ones), missing or malformed file (MuJoCo's
@@ -149,6 +154,8 @@ def load_scene(name_or_path: str | Path, robot: str | None = "g1") -> Scene:
     meta = _metadata(spec, path)
     tracks = _tracks(spec, path)
     robot_root = _attach_robot(spec, robot) if robot is not None else None
+    if edit_spec is not None:
+        edit_spec(spec)
     model = _compile(spec, path)
     robot_ids, floor_ids, obstacle_ids = _classify_geoms(model, robot_root)
     return Scene(name=path.stem, path=path, model=model, robot=robot, tracks=tracks, robot_geom_ids=robot_ids,

@@ -17,7 +17,7 @@
   SDF gradient (p - q is normal to the surface at q).
 * **beyond the grid** (farther than ``pad`` from the bounding box): sdf(c) + ||p - c|| with c
   the point clamped onto the grid box, an upper bound that is exact along the box's face
-  normals. ``pad`` (default 0.4 m) is larger than the safe distances the losses use.
+  normals. ``pad`` (default 0.3 m) is larger than the safe distances the losses use.
 
 A mesh that is not closed (not watertight or inconsistently wound) has no inside; such a mesh
 is replaced by its convex hull, which is what MuJoCo collides with anyway
@@ -41,7 +41,7 @@ from scenes.sdf.triangles import closest_point_on_triangle
 
 Tensor = torch.Tensor
 
-DEFAULT_PAD = 0.4
+DEFAULT_PAD = 0.3
 """Metres around the mesh bounds covered by the node grid (see module docstring)."""
 
 DEFAULT_PITCH = 0.02
@@ -247,8 +247,9 @@ def _build_grid(mesh: trimesh.Trimesh, triangles: np.ndarray, pad: float, pitch:
     seed_tri[cell[:, 0], cell[:, 1], cell[:, 2]] = owner
     seed_dist, seed_idx = distance_transform_edt(seed_tri < 0, return_indices=True)
     nearest = seed_tri[seed_idx[0], seed_idx[1], seed_idx[2]].reshape(-1)
-    tris = torch.as_tensor(triangles)
-    nodes_t = torch.as_tensor(nodes)
+    # float32 is enough to pick the nearest triangle (near-ties give near-equal distances).
+    tris = torch.as_tensor(triangles, dtype=torch.float32)
+    nodes_t = torch.as_tensor(nodes, dtype=torch.float32)
     nearest_t = torch.as_tensor(nearest.astype(np.int64))
     # Walk every node's triangle to an edge neighbour while that is nearer (a local descent
     # over the surface; far from it the distance varies smoothly), then, near the surface,
