@@ -6,18 +6,19 @@
   regular grid of nodes (``pitch`` apart) covers the mesh's bounding box grown by ``pad``;
   every node stores its nearest triangle (found once, at build time, from a k-d tree of dense
   surface samples and an exact test of the sampled triangle's neighbours). A query tests the
-  nearest triangles of the 8 nodes around it. This is exact whenever the point's nearest
-  triangle is one of those 8 (nearly always); otherwise the candidate found is a neighbour
-  of it and the error is small (the benchmark in ``docs/BENCHMARKS.md`` measures it against
+  nearest triangles of the 8 nodes around it, then the triangles across the edges of the best
+  one. This is exact whenever the point's nearest triangle is among those (nearly always);
+  otherwise the triangle found is near it and the error is small (the benchmark in ``docs/BENCHMARKS.md`` measures it against
   trimesh's exact distance).
 * **sign**: negative inside, from the angle-weighted pseudonormal of the feature (face, edge or
   vertex) that holds the closest point (Baerentzen & Aanaes 2005); exact for a closed,
   consistently oriented mesh.
 * **gradient**: autograd of ||p - q|| with the closest point q held fixed, which is the exact
   SDF gradient (p - q is normal to the surface at q).
-* **beyond the grid** (farther than ``pad`` from the bounding box): sdf(c) + ||p - c|| with c
-  the point clamped onto the grid box, an upper bound that is exact along the box's face
-  normals. ``pad`` (default 0.3 m) is larger than the safe distances the losses use.
+* **beyond the grid** (farther than ``pad`` from the bounding box) the candidates are those of
+  the nearest boundary cell: still an exact distance to a real triangle (an upper bound), whose
+  error grows slowly with the distance. ``pad`` (default 0.3 m) is larger than the safe
+  distances the losses use, so losses never depend on it.
 
 A mesh that is not closed (not watertight or inconsistently wound) has no inside; such a mesh
 is replaced by its convex hull, which is what MuJoCo collides with anyway
@@ -93,6 +94,7 @@ class MeshSDF:
         self.faces = np.asarray(mesh.faces, dtype=np.int64)
         self.triangles = self.vertices[self.faces]  # (F, 3, 3)
         self.normals = _pseudonormals(mesh)  # (F, 7, 3)
+        self.edge_ring = _edge_neighbour_table(mesh)  # (F, 4)
         self.grid = _build_grid(mesh, self.triangles, pad=pad, pitch=pitch)
         self.is_hull = False
         self._cache: dict[tuple[torch.dtype, torch.device], dict[str, Tensor]] = {}
@@ -117,6 +119,7 @@ class MeshSDF:
                 "hi": torch.as_tensor(g.lo + g.pitch * (np.asarray(g.shape) - 1), **to),
                 "shape": torch.as_tensor(g.shape, device=like.device),
                 "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=like.device).reshape(-1),
+                "edge_ring": torch.as_tensor(self.edge_ring, device=like.device),
             }
         return self._cache[key]
 
@@ -125,17 +128,13 @@ class MeshSDF:
         shape = points.shape[:-1]
         flat = points.reshape(-1, 3)
         t = self._tensors(flat)
-        in_box = torch.maximum(torch.minimum(flat, t["hi"]), t["lo"])
-        q, sign = self._closest(in_box.detach(), t)
-        # Inside the grid box in_box = p and this is sign * ||p - q||; beyond it sdf(c) + ||p - c||.
-        dist = sign * torch.linalg.vector_norm(in_box - q, dim=-1)
-        if bool(((flat - in_box).detach() != 0).any()):
-            dist = dist + torch.linalg.vector_norm(flat - in_box, dim=-1)
-        return dist.reshape(shape)
+        q, sign = self._closest(flat.detach(), t)
+        return (sign * torch.linalg.vector_norm(flat - q, dim=-1)).reshape(shape)
 
     @torch.no_grad()
     def _closest(self, p: Tensor, t: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
-        """Closest mesh point (M, 3) and inside/outside sign (M,) of points inside the grid box."""
+        """Closest mesh point (M, 3) and inside/outside sign (M,); points beyond the grid box
+        take the candidates of the nearest cell."""
         n = t["shape"]
         cell = ((p - t["lo"]) / self.grid.pitch).floor().long()
         cell = torch.minimum(cell.clamp_min(0), n - 2)
@@ -143,15 +142,22 @@ class MeshSDF:
         node = cell[:, None, :] + corners  # (M, 8, 3)
         flat_node = (node[..., 0] * n[1] + node[..., 1]) * n[2] + node[..., 2]
         cand = t["nearest"][flat_node]  # (M, 8)
-        tri = t["tri"][cand]  # (M, 8, 3, 3)
-        q, feature = closest_point_on_triangle(p[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
-        best = ((p[:, None, :] - q) ** 2).sum(-1).argmin(dim=1, keepdim=True)  # (M, 1)
-        q_best = q.gather(1, best[..., None].expand(-1, 1, 3))[:, 0]
-        tri_best = cand.gather(1, best)[:, 0]
-        feat_best = feature.gather(1, best)[:, 0]
+        q_best, tri_best, feat_best = _nearest_of(p, cand, t["tri"])
+        # A triangle nearest to none of the 8 nodes can still be nearest to p; it is then next to
+        # the best one found: test the triangles across its edges too.
+        q_best, tri_best, feat_best = _nearest_of(p, t["edge_ring"][tri_best], t["tri"])
         normal = t["normals"][tri_best, feat_best]
         side = ((p - q_best) * normal).sum(-1)
         return q_best, torch.where(side < 0, -torch.ones_like(side), torch.ones_like(side))
+
+
+def _nearest_of(p: Tensor, cand: Tensor, tris: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Among candidate triangles cand (M, K) of points p (M, 3): closest point, triangle, feature."""
+    tri = tris[cand]  # (M, K, 3, 3)
+    q, feature = closest_point_on_triangle(p[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+    best = ((p[:, None, :] - q) ** 2).sum(-1).argmin(dim=1, keepdim=True)  # (M, 1)
+    q_best = q.gather(1, best[..., None].expand(-1, 1, 3))[:, 0]
+    return q_best, cand.gather(1, best)[:, 0], feature.gather(1, best)[:, 0]
 
 
 def _pseudonormals(mesh: trimesh.Trimesh) -> np.ndarray:
