@@ -17,7 +17,7 @@
   SDF gradient (p - q is normal to the surface at q).
 * **beyond the grid** (farther than ``pad`` from the bounding box) the candidates are those of
   the nearest boundary cell: still an exact distance to a real triangle (an upper bound), whose
-  error grows slowly with the distance. ``pad`` (default 0.3 m) is larger than the safe
+  error grows slowly with the distance. ``pad`` (default 0.6 m) is larger than the safe
   distances the losses use, so losses never depend on it.
 
 A mesh that is not closed (not watertight or inconsistently wound) has no inside; such a mesh
@@ -42,10 +42,10 @@ from scenes.sdf.triangles import closest_point_on_triangle
 
 Tensor = torch.Tensor
 
-DEFAULT_PAD = 0.3
+DEFAULT_PAD = 0.6
 """Metres around the mesh bounds covered by the node grid (see module docstring)."""
 
-DEFAULT_PITCH = 0.02
+DEFAULT_PITCH = 0.03
 """Node spacing of the candidate grid (m)."""
 
 MAX_NODES = 4_000_000
