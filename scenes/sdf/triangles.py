@@ -1,0 +1,65 @@
+"""Closest points on triangles (the building block of exact mesh distances).
+
+``closest_point_on_triangle`` follows the Voronoi-region case analysis of a triangle
+(three vertex regions, three edge regions, the face) and also returns which feature holds
+the closest point, so the caller can pick the matching angle-weighted pseudonormal for the
+inside/outside sign (Baerentzen & Aanaes, "Signed distance computation using the angle
+weighted pseudonormal", IEEE TVCG 2005).
+"""
+
+from __future__ import annotations
+
+import torch
+
+Tensor = torch.Tensor
+
+VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA, FACE = range(7)
+"""Feature codes returned by :func:`closest_point_on_triangle`."""
+
+
+def _safe_div(num: Tensor, den: Tensor) -> Tensor:
+    return num / torch.where(den.abs() > torch.finfo(den.dtype).tiny, den, torch.ones_like(den))
+
+
+def closest_point_on_triangle(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+    """Closest point to ``p`` on triangle ``(a, b, c)``; all (..., 3), broadcast together.
+
+    Returns:
+        q: (..., 3) the closest point.
+        feature: (...,) int64 code of the feature holding q (``VERTEX_A`` ... ``FACE``).
+    """
+    ab, ac = b - a, c - a
+    ap, bp, cp = p - a, p - b, p - c
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+
+    # Barycentric weights (v on ab, w on ac) of the face case, then overwrite region by region
+    # in reverse priority order so that the first matching region of the case analysis wins.
+    den = va + vb + vc
+    v, w = _safe_div(vb, den), _safe_div(vc, den)
+    feature = torch.full(v.shape, FACE, dtype=torch.int64, device=v.device)
+    zero, one = torch.zeros_like(v), torch.ones_like(v)
+
+    def region(mask: Tensor, v_new: Tensor, w_new: Tensor, code: int) -> None:
+        nonlocal v, w, feature
+        v, w = torch.where(mask, v_new, v), torch.where(mask, w_new, w)
+        feature = torch.where(mask, torch.full_like(feature, code), feature)
+
+    e43, e56 = d4 - d3, d5 - d6
+    t_bc = _safe_div(e43, e43 + e56)
+    region((va <= 0) & (e43 >= 0) & (e56 >= 0), 1 - t_bc, t_bc, EDGE_BC)
+    region((vb <= 0) & (d2 >= 0) & (d6 <= 0), zero, _safe_div(d2, d2 - d6), EDGE_CA)
+    region((d6 >= 0) & (d5 <= d6), zero, one, VERTEX_C)
+    region((vc <= 0) & (d1 >= 0) & (d3 <= 0), _safe_div(d1, d1 - d3), zero, EDGE_AB)
+    region((d3 >= 0) & (d4 <= d3), one, zero, VERTEX_B)
+    region((d1 <= 0) & (d2 <= 0), zero, zero, VERTEX_A)
+    q = a + v[..., None] * ab + w[..., None] * ac
+    return q, feature
+
+
+def point_triangle_sq_distance(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> Tensor:
+    """Squared distance (...,) from ``p`` to triangle ``(a, b, c)`` (broadcast, (..., 3) each)."""
+    q, _ = closest_point_on_triangle(p, a, b, c)
+    return ((p - q) ** 2).sum(-1)
