@@ -33,7 +33,7 @@ def _descend(term: LossTerm, joints: torch.Tensor, steps: int = 5, lr: float = 0
         (grad,) = torch.autograd.grad(loss, x)
         with torch.no_grad():
             x -= lr * grad / grad.norm().clamp_min(1e-12)
-    values.append(float(term(x).sum()))
+    values.append(float(term(x).sum().detach()))
     return values
 
 
