@@ -182,13 +182,18 @@ class KinematicTree:
         for i in range(1, n):
             depth[i] = depth[self.node_parent[i]] + 1
         self.levels = [np.flatnonzero(depth == d) for d in range(1, depth.max() + 1)]
-        self._k = skew(self.jnt_axis)
-        self._eye = np.eye(3)
-        self._lvl_jidx = [np.maximum(self.node_joint[idx], 0) for idx in self.levels]
-        self._lvl_has = [(self.node_joint[idx] >= 0).astype(float) for idx in self.levels]
-        self._lvl_jpos = [bool(np.any(self.jnt_pos[idx] != 0)) for idx in self.levels]
-        self._lvl_slide = [bool(np.any(self.is_slide[idx])) for idx in self.levels]
-        self._k2 = self._k @ self._k
+        k = skew(self.jnt_axis)
+        self._fixed_k0 = self.fixed_rot.copy()
+        self._fixed_k1 = self.fixed_rot @ k
+        self._fixed_k2 = self.fixed_rot @ (k @ k)
+        self._fixed_axis = (self.fixed_rot @ self.jnt_axis[..., None])[..., 0]
+        self._fixed_jpos = self.fixed_pos + (self.fixed_rot @ self.jnt_pos[..., None])[..., 0]
+        self._node_jidx = np.maximum(self.node_joint, 0)
+        self._node_has = (self.node_joint >= 0).astype(float)
+        self._any_jpos = bool(np.any(self.jnt_pos != 0))
+        self._any_slide = bool(np.any(self.is_slide))
+        self._level_pairs = [(idx, self.node_parent[idx]) for idx in self.levels]
+        self._joint_node = np.array([int(np.flatnonzero(self.node_joint == j)[0]) for j in range(self.nj)], dtype=int)
         # ancestor[node, joint]: the joint moves the node.
         anc = np.zeros((n, self.nj), dtype=bool)
         for i in range(1, n):
@@ -208,38 +213,29 @@ class KinematicTree:
         """FK for T frames: root_pos (T, 3), root_rot (T, 3, 3), q (T, nj) -> :class:`Poses`."""
         t = q.shape[0]
         n = self.num_nodes
+        # Local transforms of every node at once: fixed offset, then the joint's motion.
+        val = (q - self.qpos0)[:, self._node_jidx] * self._node_has  # (T, N)
+        ang = val * self.is_hinge
+        s, c = np.sin(ang)[..., None, None], (1 - np.cos(ang))[..., None, None]
+        local_rot = self._fixed_k0 + s * self._fixed_k1 + c * self._fixed_k2  # fixed_rot @ Rot(axis, ang)
+        if self._any_jpos:  # rotate about the anchor: p = anchor - R @ jnt_pos
+            local_pos = self._fixed_jpos - (local_rot @ self.jnt_pos[..., None])[..., 0]
+        else:
+            local_pos = np.broadcast_to(self.fixed_pos, (t, n, 3))
+        if self._any_slide:
+            local_pos = local_pos + self._fixed_axis * (val * self.is_slide)[..., None]
         rot = np.empty((t, n, 3, 3))
         pos = np.empty((t, n, 3))
         rot[:, 0] = root_rot
         pos[:, 0] = root_pos
-        axis = np.zeros((t, self.nj, 3))
-        anchor = np.zeros((t, self.nj, 3))
-        qd = q - self.qpos0
-        for lv, idx in enumerate(self.levels):
-            par = self.node_parent[idx]
-            rp, pp = rot[:, par], pos[:, par]
-            r0 = rp @ self.fixed_rot[idx]
-            p0 = pp + (rp @ self.fixed_pos[idx][..., None])[..., 0]
-            jn = self.node_joint[idx]
-            val = qd[:, self._lvl_jidx[lv]] * self._lvl_has[lv]  # (T, n)
-            ang = val * self.is_hinge[idx]
-            s, c = np.sin(ang)[..., None, None], (1 - np.cos(ang))[..., None, None]
-            rj = self._eye + s * self._k[idx] + c * self._k2[idx]
-            ax = (r0 @ self.jnt_axis[idx][..., None])[..., 0]
-            r = r0 @ rj
-            if self._lvl_jpos[lv]:
-                anc = p0 + (r0 @ self.jnt_pos[idx][..., None])[..., 0]
-                p = anc - (r @ self.jnt_pos[idx][..., None])[..., 0]
-            else:
-                anc, p = p0, p0
-            if self._lvl_slide[lv]:
-                p = p + ax * (val * self.is_slide[idx])[..., None]
-            rot[:, idx] = r
-            pos[:, idx] = p
-            has = jn >= 0
-            if np.any(has):
-                axis[:, jn[has]] = ax[:, has]
-                anchor[:, jn[has]] = anc[:, has]
+        for idx, par in self._level_pairs:
+            rp = rot[:, par]
+            rot[:, idx] = rp @ local_rot[:, idx]
+            pos[:, idx] = pos[:, par] + (rp @ local_pos[:, idx, :, None])[..., 0]
+        jn, jp = self._joint_node, self.node_parent[self._joint_node]
+        rp = rot[:, jp]
+        axis = (rp @ self._fixed_axis[jn, :, None])[..., 0]
+        anchor = pos[:, jp] + (rp @ self._fixed_jpos[jn, :, None])[..., 0]
         return Poses(rot=rot, pos=pos, axis=axis, anchor=anchor, root_pos=np.asarray(root_pos))
 
     def points(self, poses: Poses, nodes: np.ndarray, offsets: np.ndarray) -> np.ndarray:

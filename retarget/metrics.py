@@ -101,15 +101,15 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndarray | None = None,
-                       human_fps: float | None = None) -> dict:
+                       human_fps: float | None = None, rep: Replay | None = None) -> dict:
     """Quality figures of ``qpos`` (T, nq) at ``fps`` for a :class:`retarget.robot_model.RobotModel`.
 
     ``human_world``: the scaled human (T_h, 22, 3) in the world at ``human_fps``; keypoint
     errors compare the robot's mapped points with it (linearly interpolated to ``fps``).
-    Lengths in mm, angles in rad.
+    Lengths in mm, angles in rad. ``rep``: a :func:`replay` of ``qpos`` already computed.
     """
     model = robot.model
-    rep = replay(model, qpos)
+    rep = rep if rep is not None else replay(model, qpos)
     out: dict = {"frames": int(len(qpos)), "fps": float(fps)}
     # Keypoints: body position + body rotation @ offset (node frames are body frames here).
     bodies = np.array([robot.tree.node_body[n] for n in robot.nodes])

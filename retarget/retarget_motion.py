@@ -9,6 +9,7 @@ the result with MuJoCo (:mod:`retarget.metrics`).
 
 from __future__ import annotations
 
+import functools
 import time
 from pathlib import Path
 from typing import Any
@@ -16,13 +17,14 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.spatial.transform import Rotation
+from threadpoolctl import ThreadpoolController
 
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
 from retarget.mapping import Mapping
-from retarget.metrics import geom_lowest_z, replay, trajectory_metrics
+from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
 from retarget.solver import SolverConfig, solve
@@ -86,24 +88,28 @@ def check_fps(fps: float) -> float:
     return value
 
 
-def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, float]:
+def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
     """Raise the root where a foot's lowest collision point is below z = 0.
 
     The needed lift is max-filtered then smoothed over ~0.1 s (a smoothed max-filter never
-    falls below the need), so the correction is smooth. Returns (qpos, largest lift in m).
+    falls below the need), so the correction is smooth. Returns (qpos, its MuJoCo replay,
+    largest lift in m).
     """
     rep = replay(robot.model, qpos)
     geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
     need = np.maximum(-geom_lowest_z(robot.model, rep, geoms).min(axis=1), 0.0)
     if not np.any(need > 0):
-        return qpos, 0.0
+        return qpos, rep, 0.0
     r = max(1, int(round(0.05 * fps)))
     lift = maximum_filter1d(need, size=4 * r + 1, mode="nearest")
     lift = gaussian_filter1d(lift, sigma=r / 2.0, mode="nearest", truncate=4.0)
     lift = np.maximum(lift, need)
     out = qpos.copy()
     out[:, 2] += lift
-    return out, float(lift.max())
+    # A root translation moves every body and geom by the same amount.
+    rep.xpos[..., 2] += lift[:, None]
+    rep.geom_xpos[..., 2] += lift[:, None]
+    return out, rep, float(lift.max())
 
 
 def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec = "g1", fps: float = 50.0,
@@ -123,6 +129,18 @@ def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec =
     Returns:
         A :class:`RobotTrajectory` (qpos in MuJoCo order at ``fps``).
     """
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        return _retarget(motion, robot, fps, transform, config, metrics)
+
+
+@functools.lru_cache(maxsize=1)
+def _blas_controller() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def _retarget(motion, robot, fps, transform, config, metrics) -> RobotTrajectory:
+    # Small dense/banded linear algebra: BLAS threads only add synchronisation (and on a
+    # busy machine their spinning slows the solve many times), so one thread is used.
     start = time.perf_counter()
     fps = check_fps(fps)
     rm = load_robot(robot)
@@ -133,7 +151,7 @@ def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec =
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
-    qpos, lift = lift_above_floor(rm, qpos, fps)
+    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
@@ -145,6 +163,6 @@ def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec =
                            fps=fps, qpos=qpos, joint_names=list(rm.tree.joint_names), scale=transform.scale,
                            transform=transform, stance=stance, source=info, solver=solver_info, model=rm)
     if metrics:
-        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, src_fps)
+        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, src_fps, rep=rep)
     traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)
     return traj

@@ -35,7 +35,10 @@ L_ROT = 0.2
 """Metres per radian of orientation error (an error of 1 rad costs like 0.2 m)."""
 L_POSTURE = 0.1
 W_FLOOR = 100.0
+DEBUG = False
 PIN = 1e9
+CROSS_TOLERANCE = 0.01
+"""Joint-limit overshoot (rad) of a step above which the step is re-solved with those joints pinned."""
 """Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
 
 
@@ -56,10 +59,8 @@ class SolverConfig:
     w_acc_root: float = 2.0
     w_acc_joint: float = 0.5
     exact_acceleration: bool = False
-    coarse_step: int = 4
-    """Solve every coarse_step-th frame first (1: off)."""
-    coarse_iterations: int = 12
-    fine_iterations: int = 6
+    levels: tuple[tuple[int, int], ...] = ((2, 6), (1, 2))
+    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
 
 
@@ -80,6 +81,7 @@ class Solution:
     cost: float
     seconds: float
     history: list[float] = field(default_factory=list)
+    damping: np.ndarray | float = 0.0
 
 
 @dataclass
@@ -92,9 +94,13 @@ class _State:
     poses: Poses
     pts: np.ndarray
     active: np.ndarray
-    r: np.ndarray
+    kp_res: np.ndarray
+    seg_res: np.ndarray
+    ori_res: np.ndarray
+    floor_res: np.ndarray
     x: np.ndarray
     cost: float
+    frame_cost: np.ndarray
 
 
 class _Problem:
@@ -127,58 +133,70 @@ class _Problem:
         self.w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
         self.w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
         self._banded_indices()
+        # Segment s pulls keypoints child(+) and parent(-): incidence (K, S) and sum_s w_s d d^T.
+        inc = np.zeros((self.k_len, len(targets.seg_child)))
+        inc[targets.seg_child, np.arange(inc.shape[1])] = 1.0
+        inc[targets.seg_parent, np.arange(inc.shape[1])] = -1.0
+        self._incidence = inc
+        self._seg_matrix = (inc * targets.seg_weight) @ inc.T
 
     # -- cost and linearisation ---------------------------------------------------------------
     def evaluate(self, root_pos, root_rot, q) -> "_State":
-        """Forward kinematics and the per-frame residuals (T, m) at one configuration."""
+        """Forward kinematics, residuals and cost at one configuration of all frames."""
         tree, tg = self.tree, self.targets
         poses: Poses = tree.forward(root_pos, root_rot, q)
         pts = tree.points(poses, self.point_nodes, self.point_offsets)
         kp = pts[:, : self.k_len]
         foot = pts[:, self.k_len:]
-        t = self.t_len
-        seg = kp[:, tg.seg_child] - kp[:, tg.seg_parent]
-        err = so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
+        kp_res = kp - tg.kp_pos
+        seg_res = kp[:, tg.seg_child] - kp[:, tg.seg_parent] - tg.seg_vec
+        ori_res = self.sqrt_ori[..., None] * so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
         low = foot[..., 2] - self.foot_radius - self.foot_clearance
         active = low < 0
-        r = np.concatenate([
-            (self.sqrt_kp[..., None] * (kp - tg.kp_pos)).reshape(t, -1),
-            (self.sqrt_seg[None, :, None] * (seg - tg.seg_vec)).reshape(t, -1),
-            (self.sqrt_ori[..., None] * err).reshape(t, -1),
-            np.sqrt(W_FLOOR) * np.where(active, low, 0.0),
-        ], axis=1)
+        floor_res = np.sqrt(W_FLOOR) * np.where(active, low, 0.0)
+        frame_cost = (np.sum(tg.kp_weight * np.sum(kp_res ** 2, axis=-1), axis=1)
+                      + np.sum(tg.seg_weight * np.sum(seg_res ** 2, axis=-1), axis=1)
+                      + np.sum(ori_res ** 2, axis=(1, 2)) + np.sum(floor_res ** 2, axis=1)
+                      + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1))
         x = self.temporal_values(root_pos, root_rot, q)
-        return _State(root_pos, root_rot, q, poses, pts, active, r, x, self.cost(r, x, q))
+        d1, d2 = np.diff(x, axis=0), np.diff(x, n=2, axis=0)
+        cost = float(frame_cost.sum() + np.sum(self.w_vel * d1 * d1) + np.sum(self.w_acc * d2 * d2))
+        return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, x, cost,
+                      frame_cost)
 
-    def jacobian(self, st: "_State") -> np.ndarray:
-        """Jacobian (T, m, n) of the per-frame residuals at a state."""
+    def normal_equations(self, st: "_State") -> tuple[np.ndarray, np.ndarray]:
+        """Gauss-Newton blocks H (T, n, n) and gradient g (T, n) of the per-frame terms.
+
+        Keypoint and segment terms share one Jacobian: with W(t) = diag(w_k(t)) + sum_s w_s
+        (e_child - e_parent)(e_child - e_parent)^T, their Hessian is J^T (W (x) I3) J.
+        """
         tree, tg = self.tree, self.targets
         t, n, k = self.t_len, self.n, self.k_len
         jk = tree.point_jacobian(st.poses, self.robot.nodes, st.pts[:, :k])  # (T, K, 3, n)
-        jf = tree.point_jacobian(st.poses, self.foot_nodes, st.pts[:, k:], rows=(2,))[:, :, 0]
-        jr = tree.rotation_jacobian(st.poses, self.ori_nodes)
-        ns, no = len(tg.seg_child), len(self.ori_nodes)
-        jac = np.empty((t, 3 * (k + ns + no) + jf.shape[1], n))
-        a, b = 0, 3 * k
-        jac[:, a:b] = (self.sqrt_kp[..., None, None] * jk).reshape(t, -1, n)
-        a, b = b, b + 3 * ns
-        jac[:, a:b] = (self.sqrt_seg[None, :, None, None] * (jk[:, tg.seg_child] - jk[:, tg.seg_parent])).reshape(t, -1, n)
-        a, b = b, b + 3 * no
-        jac[:, a:b] = (self.sqrt_ori[..., None, None] * jr).reshape(t, -1, n)
-        jac[:, b:] = jf * (np.sqrt(W_FLOOR) * st.active)[..., None]
-        return jac
+        flat = jk.reshape(t, 3 * k, n)
+        wk = self._seg_matrix + tg.kp_weight[:, :, None] * np.eye(k)  # (T, K, K)
+        b = (wk @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
+        jt = np.swapaxes(flat, 1, 2)
+        h = jt @ b
+        u = tg.kp_weight[..., None] * st.kp_res + self._incidence @ (tg.seg_weight[:, None] * st.seg_res)
+        g = (jt @ u.reshape(t, 3 * k, 1))[..., 0]
+        jr = (self.sqrt_ori[..., None, None] * tree.rotation_jacobian(st.poses, self.ori_nodes)).reshape(t, -1, n)
+        jrt = np.swapaxes(jr, 1, 2)
+        h += jrt @ jr
+        g += (jrt @ st.ori_res.reshape(t, -1, 1))[..., 0]
+        if st.active.any():
+            jf = tree.point_jacobian(st.poses, self.foot_nodes, st.pts[:, k:], rows=(2,))[:, :, 0]
+            jf *= (np.sqrt(W_FLOOR) * st.active)[..., None]
+            jft = np.swapaxes(jf, 1, 2)
+            h += jft @ jf
+            g += (jft @ st.floor_res[..., None])[..., 0]
+        return h, g
 
     def temporal_values(self, root_pos, root_rot, q) -> np.ndarray:
         """(T, n) sequences the temporal terms act on (root rotation unwrapped as a rotation vector)."""
         steps = so3_log(root_rot[1:] @ np.swapaxes(root_rot[:-1], -1, -2))
         phi = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
         return np.concatenate([root_pos, phi, q], axis=1)
-
-    def cost(self, r: np.ndarray, x: np.ndarray, q: np.ndarray) -> float:
-        d1 = np.diff(x, axis=0)
-        d2 = np.diff(x, n=2, axis=0)
-        post = self.posture * (q - self.robot.rest_q) ** 2
-        return float(np.sum(r * r) + np.sum(self.w_vel * d1 * d1) + np.sum(self.w_acc * d2 * d2) + np.sum(post))
 
     def gradient_temporal(self, x: np.ndarray) -> np.ndarray:
         d1 = np.diff(x, axis=0) * self.w_vel
@@ -219,29 +237,34 @@ class _Problem:
                 d0[2:] += self.w_acc
         self._d0, self._d1, self._d2 = d0, d1, d2
 
-    def solve_step(self, h: np.ndarray, g: np.ndarray, lam: float, fixed: np.ndarray,
-                   fixed_step: np.ndarray | None = None) -> np.ndarray:
-        """Solve (H + temporal + lam I) dx = -g for all frames at once; returns dx (T, n).
-
-        Coordinates where ``fixed`` is True take the step ``fixed_step`` (0 when None) and
-        the others are solved with those steps substituted (a large diagonal pins them).
-        """
+    def normal_matrix(self, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """Upper banded storage (kd + 1, T * n) of H + temporal + diag(lam_t) (H: (T, n, n) blocks, lam: (T,))."""
         t, n, kd = self.t_len, self.n, self.kd
         ab = np.zeros((kd + 1, t * n))
         a, b = self._tri
         ab[self._rows, self._cols] = h[:, a, b]
-        diag = self._d0 + lam
+        diag = self._d0 + np.asarray(lam, dtype=float).reshape(-1, 1)
         diag[:, 6:] += self.posture
-        diag = diag + fixed * PIN
         ab[kd] += diag.reshape(-1)
         if t > 1:
             ab[kd - n, n:] += self._d1.reshape(-1)
         if t > 2 and kd >= 2 * n:
             ab[kd - 2 * n, 2 * n:] += self._d2.reshape(-1)
+        return ab
+
+    def solve_step(self, ab: np.ndarray, g: np.ndarray, fixed: np.ndarray,
+                   fixed_step: np.ndarray | None = None) -> np.ndarray:
+        """Solve the banded system ``ab`` dx = -g for all frames at once; returns dx (T, n).
+
+        Coordinates where ``fixed`` is True take the step ``fixed_step`` (0 when None) and
+        the others are solved with those steps substituted (a large diagonal pins them).
+        """
+        ab = ab.copy()
+        ab[self.kd] += (fixed * PIN).reshape(-1)
         target = np.zeros_like(g) if fixed_step is None else fixed_step
         rhs = np.where(fixed, PIN * target, -g).reshape(-1)
         sol = scipy.linalg.solveh_banded(ab, rhs, lower=False, check_finite=False, overwrite_ab=True)
-        return sol.reshape(t, n)
+        return sol.reshape(self.t_len, self.n)
 
 
 def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -271,11 +294,10 @@ def _subsample(targets: Targets, step: int) -> Targets:
     ), idx
 
 
-def _upsample(sol_pos, sol_rot, sol_q, idx, n):
-    """Interpolate a coarse solution at frames ``idx`` to frames 0..n-1 (linear / geodesic)."""
-    frames = np.arange(n)
-    seg = np.clip(np.searchsorted(idx, frames, side="right") - 1, 0, len(idx) - 2)
-    w = ((frames - idx[seg]) / (idx[seg + 1] - idx[seg]))[:, None]
+def _upsample(sol_pos, sol_rot, sol_q, idx, dst):
+    """Interpolate a solution known at frames ``idx`` to frames ``dst`` (linear / geodesic)."""
+    seg = np.clip(np.searchsorted(idx, dst, side="right") - 1, 0, len(idx) - 2)
+    w = np.clip((dst - idx[seg]) / (idx[seg + 1] - idx[seg]), 0.0, 1.0)[:, None]
     pos = sol_pos[seg] * (1 - w) + sol_pos[seg + 1] * w
     q = sol_q[seg] * (1 - w) + sol_q[seg + 1] * w
     delta = so3_log(sol_rot[seg + 1] @ np.swapaxes(sol_rot[seg], -1, -2))
@@ -287,20 +309,26 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Solution:
     """Run the solver on ``targets``; see the module docstring.
 
-    With ``config.coarse_step > 1`` (and no ``init``) a solve on every ``coarse_step``-th
-    frame runs first and its interpolation starts the full-rate solve.
+    Coarse to fine (``config.levels``, without ``init``): each level solves every k-th frame
+    for a few iterations and its interpolation starts the next level; the last level is
+    every frame.
     """
     start = time.perf_counter()
     n = len(targets.kp_pos)
-    coarse_iterations = 0
-    if init is None and config.coarse_step > 1 and n >= 4 * config.coarse_step:
-        small, idx = _subsample(targets, config.coarse_step)
-        coarse = _solve(robot, small, replace(config, max_iterations=config.coarse_iterations), None)
-        init = _upsample(coarse.root_pos, coarse.root_rot, coarse.q, idx, n)
-        coarse_iterations = coarse.iterations
-        config = replace(config, max_iterations=config.fine_iterations)
-    sol = _solve(robot, targets, config, init)
-    sol.iterations += coarse_iterations
+    levels = [(k, it) for k, it in config.levels if k == 1 or n >= 4 * k] if init is None else []
+    if not levels or levels[-1][0] != 1:
+        levels.append((1, config.max_iterations))
+    total, damping, prev = 0, config.damping, None
+    for k, iters in levels:
+        small, idx = _subsample(targets, k) if k > 1 else (targets, np.arange(n))
+        if prev is not None:
+            init = _upsample(*prev, idx)
+        cfg = replace(config, max_iterations=iters, damping=damping)
+        sol = _solve(robot, small, cfg, init)
+        total += sol.iterations
+        damping = max(config.damping, float(np.median(sol.damping)))
+        prev = (sol.root_pos, sol.root_rot, sol.q, idx)
+    sol.iterations = total
     sol.seconds = time.perf_counter() - start
     return sol
 
@@ -314,50 +342,62 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
     lower, upper = tree.lower, tree.upper
     st = prob.evaluate(root_pos, root_rot, np.clip(q, lower, upper))
     history = [st.cost]
-    lam = config.damping
+    # Levenberg-Marquardt with one damping per frame: frames are nearly independent, so
+    # each keeps the step only if its own cost drops, and its damping adapts on its own.
+    lam = np.full(prob.t_len, config.damping)
     iterations = 0
     need_linearise = True
     for iterations in range(1, config.max_iterations + 1):
         if need_linearise:
-            jac = prob.jacobian(st)
-            jt = np.swapaxes(jac, 1, 2)
-            h = jt @ jac
-            g = (jt @ st.r[..., None])[..., 0] + prob.gradient_temporal(st.x)
+            h, g = prob.normal_equations(st)
+            g += prob.gradient_temporal(st.x)
             g[:, 6:] += prob.posture * (st.q - robot.rest_q)
             frozen = np.zeros_like(g, dtype=bool)
             frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | ((st.q >= upper - 1e-12) & (g[:, 6:] < 0))
         try:
-            step = prob.solve_step(h, g, lam, frozen)
-            # Joints whose step crosses a limit stop at the limit; solve again for the rest.
+            ab = prob.normal_matrix(h, lam)
+            step = prob.solve_step(ab, g, frozen)
+            # Joints whose step crosses a limit stop at the limit; the others are solved
+            # again with those steps fixed (skipped when the overshoot is tiny: plain clip).
             qs = st.q + step[:, 6:]
-            cross = np.zeros_like(frozen)
-            cross[:, 6:] = (qs < lower) | (qs > upper)
-            if cross.any():
+            over = np.maximum(qs - upper, lower - qs)
+            if over.max() > CROSS_TOLERANCE:
+                cross = np.zeros_like(frozen)
+                cross[:, 6:] = over > 0
                 fixed_step = np.zeros_like(step)
                 fixed_step[:, 6:] = np.clip(qs, lower, upper) - st.q
-                step = prob.solve_step(h, g, lam, frozen | cross, np.where(cross, fixed_step, 0.0))
+                step = prob.solve_step(ab, g, frozen | cross, fixed_step)
         except np.linalg.LinAlgError:
             lam *= 10
             need_linearise = False
             continue
         trial = prob.evaluate(st.root_pos + step[:, 0:3], so3_exp(step[:, 3:6]) @ st.root_rot,
                               np.clip(st.q + step[:, 6:], lower, upper))
+        better = trial.frame_cost < st.frame_cost
+        if trial.cost >= st.cost and better.any() and not better.all():
+            b3 = better[:, None]
+            trial = prob.evaluate(np.where(b3, trial.root_pos, st.root_pos),
+                                  np.where(better[:, None, None], trial.root_rot, st.root_rot),
+                                  np.where(b3, trial.q, st.q))
+        if DEBUG:
+            print(f"  it{iterations} T={prob.t_len} lam={np.median(lam):.1e} cost={st.cost:.3f} "
+                  f"trial={trial.cost:.3f} better={better.mean():.2f}")
         if trial.cost < st.cost:
             done = (st.cost - trial.cost) < config.tolerance * st.cost
             st = trial
             history.append(st.cost)
-            lam = max(lam / 3, 1e-9)
+            lam = np.where(better, np.maximum(lam / 3, 1e-9), lam * 10)
             need_linearise = True
             if done:
                 break
         else:
             lam *= 10
             need_linearise = False
-            if lam > 1e6:
+            if lam.min() > 1e6:
                 break
     root_pos, root_rot, q, cost = st.root_pos, st.root_rot, st.q, st.cost
     # re-orthonormalise the root rotations
     u, _, vt = np.linalg.svd(root_rot)
     root_rot = u @ vt
     return Solution(root_pos=root_pos, root_rot=root_rot, q=q, iterations=iterations, cost=cost,
-                    seconds=time.perf_counter() - start, history=history)
+                    seconds=time.perf_counter() - start, history=history, damping=lam)
