@@ -31,6 +31,7 @@ from retarget.solver import SolverConfig, solve
 from retarget.targets import build_targets
 from retarget.trajectory import RobotTrajectory
 
+SOLVERS = ("batched", "mink")
 FPS_RANGE = (1.0, 1000.0)
 """Allowed output frame rates (Hz)."""
 
@@ -114,7 +115,7 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
 
 def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec = "g1", fps: float = 50.0,
                     transform: HumanToWorld | None = None, config: SolverConfig | None = None,
-                    metrics: bool = True) -> RobotTrajectory:
+                    metrics: bool = True, solver: str = "batched") -> RobotTrajectory:
     """Retarget a human motion to a robot.
 
     Args:
@@ -125,12 +126,14 @@ def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec =
             ``HumanToWorld(scale=robot_scale(robot))`` (start at the origin facing +X).
         config: solver settings.
         metrics: measure the result with MuJoCo (see :mod:`retarget.metrics`).
+        solver: ``"batched"`` (default: all frames at once, :mod:`retarget.solver`) or
+            ``"mink"`` (per-frame differential IK, :mod:`retarget.mink_ik`; optional packages).
 
     Returns:
         A :class:`RobotTrajectory` (qpos in MuJoCo order at ``fps``).
     """
     with _blas_controller().limit(limits=1, user_api="blas"):
-        return _retarget(motion, robot, fps, transform, config, metrics)
+        return _retarget(motion, robot, fps, transform, config, metrics, solver)
 
 
 @functools.lru_cache(maxsize=1)
@@ -138,16 +141,23 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
-def _retarget(motion, robot, fps, transform, config, metrics) -> RobotTrajectory:
+def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTrajectory:
     # Small dense/banded linear algebra: BLAS threads only add synchronisation (and on a
     # busy machine their spinning slows the solve many times), so one thread is used.
     start = time.perf_counter()
     fps = check_fps(fps)
+    if solver not in SOLVERS:
+        raise ControlMMError(f"unknown solver '{solver}'; allowed: {', '.join(SOLVERS)}")
     rm = load_robot(robot)
     joints, src_fps, info = _motion_arrays(motion)
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
     targets = build_targets(rm, joints, src_fps, transform)
-    sol = solve(rm, targets, config or SolverConfig())
+    if solver == "mink":
+        from retarget.mink_ik import solve_mink
+
+        sol = solve_mink(rm, targets)
+    else:
+        sol = solve(rm, targets, config or SolverConfig())
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
@@ -155,8 +165,10 @@ def _retarget(motion, robot, fps, transform, config, metrics) -> RobotTrajectory
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
-    solver_info = {"method": "whole-sequence Levenberg-Marquardt (banded)", "iterations": sol.iterations,
-                   "cost": round(sol.cost, 6), "solve_seconds": round(sol.seconds, 4),
+    method = {"batched": "whole-sequence Levenberg-Marquardt (banded)", "mink": "mink per-frame differential IK"}
+    solver_info = {"method": method[solver], "iterations": sol.iterations,
+                   "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
+                   "solve_seconds": round(sol.seconds, 4),
                    "floor_lift_max_mm": round(lift * 1000, 3)}
     traj = RobotTrajectory(robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:")
                                      else rm.mapping.source),

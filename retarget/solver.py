@@ -125,7 +125,8 @@ class _Problem:
         self.ori_nodes = robot.nodes[targets.ori_kp]
         self.sqrt_kp = np.sqrt(targets.kp_weight)
         self.sqrt_seg = np.sqrt(targets.seg_weight)
-        self.sqrt_ori = np.sqrt(targets.ori_weight) * L_ROT
+        self.sqrt_ori = (np.sqrt(targets.ori_weight)[..., None] * L_ROT
+                         * np.sqrt(targets.ori_axis_weight)[None])  # (T, O, 3)
         self.posture = robot.posture_weights * L_POSTURE ** 2
         # Temporal weights per velocity coordinate, rescaled to the frame rate.
         r = targets.fps / 20.0
@@ -150,7 +151,7 @@ class _Problem:
         foot = pts[:, self.k_len:]
         kp_res = kp - tg.kp_pos
         seg_res = kp[:, tg.seg_child] - kp[:, tg.seg_parent] - tg.seg_vec
-        ori_res = self.sqrt_ori[..., None] * so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
+        ori_res = self.sqrt_ori * so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
         low = foot[..., 2] - self.foot_radius - self.foot_clearance
         active = low < 0
         floor_res = np.sqrt(W_FLOOR) * np.where(active, low, 0.0)
@@ -180,7 +181,7 @@ class _Problem:
         h = jt @ b
         u = tg.kp_weight[..., None] * st.kp_res + self._incidence @ (tg.seg_weight[:, None] * st.seg_res)
         g = (jt @ u.reshape(t, 3 * k, 1))[..., 0]
-        jr = (self.sqrt_ori[..., None, None] * tree.rotation_jacobian(st.poses, self.ori_nodes)).reshape(t, -1, n)
+        jr = (self.sqrt_ori[..., None] * tree.rotation_jacobian(st.poses, self.ori_nodes)).reshape(t, -1, n)
         jrt = np.swapaxes(jr, 1, 2)
         h += jrt @ jr
         g += (jrt @ st.ori_res.reshape(t, -1, 1))[..., 0]
@@ -289,6 +290,7 @@ def _subsample(targets: Targets, step: int) -> Targets:
         kp_pos=pick(targets.kp_pos), kp_weight=pick(targets.kp_weight), seg_parent=targets.seg_parent,
         seg_child=targets.seg_child, seg_vec=pick(targets.seg_vec), seg_weight=targets.seg_weight,
         ori_kp=targets.ori_kp, ori_rot=pick(targets.ori_rot), ori_weight=pick(targets.ori_weight),
+        ori_axis_weight=targets.ori_axis_weight,
         stance={k: pick(v) for k, v in targets.stance.items()}, lock={k: pick(v) for k, v in targets.lock.items()},
         clearance={k: pick(v) for k, v in targets.clearance.items()},
     ), idx

@@ -48,6 +48,9 @@ RAMP_SECONDS = 0.1
 STANCE_CLEARANCE = 0.001
 """Locked feet stand this high (m) above the floor (the solver's floor margin)."""
 LOCK_GAIN = 30.0
+TRUNK_TILT = 0.3
+"""Weight factor of the pelvis/torso tilt (roll, pitch) against their heading: the human's
+neutral trunk tilt is not well defined from joints, the heading is."""
 """Weight multiplier of the foot targets during stance (locked feet)."""
 
 
@@ -80,6 +83,7 @@ class Targets:
     ori_kp: np.ndarray
     ori_rot: np.ndarray
     ori_weight: np.ndarray
+    ori_axis_weight: np.ndarray
     stance: dict[str, np.ndarray]
     lock: dict[str, np.ndarray]
     clearance: dict[str, np.ndarray]
@@ -104,11 +108,14 @@ def frame_from_axes(left: np.ndarray, up: np.ndarray) -> np.ndarray:
 def human_frames(world: np.ndarray) -> dict[str, np.ndarray]:
     """Pelvis and torso frames (T, 3, 3) of a scaled human in world axes (T, 22, 3).
 
-    Both are the identity for an upright human facing world +X.
+    Pelvis: y along the hip axis, z toward the pelvis joint from the hips' midpoint (on the
+    HumanML3D skeleton spine1 leans ~17 deg back of that line when standing). Torso: y along
+    the collar axis, z from spine3 toward the neck. Both are about the identity for an
+    upright human facing world +X.
     """
     j = JOINT_INDEX
-    pelvis = frame_from_axes(world[:, j["left_hip"]] - world[:, j["right_hip"]],
-                             world[:, j["spine1"]] - world[:, j["pelvis"]])
+    hips = (world[:, j["left_hip"]] + world[:, j["right_hip"]]) / 2
+    pelvis = frame_from_axes(world[:, j["left_hip"]] - world[:, j["right_hip"]], world[:, j["pelvis"]] - hips)
     torso = frame_from_axes(world[:, j["left_collar"]] - world[:, j["right_collar"]],
                             world[:, j["neck"]] - world[:, j["spine3"]])
     return {"pelvis": pelvis, "spine3": torso}
@@ -225,7 +232,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
     seg_vec = kp_pos[:, seg_child] - kp_pos[:, seg_parent] if seg_child else np.zeros((t_len, 0, 3))
 
     # Orientation targets: R_target = R_human_frame @ R_rest(node).
-    ori_kp, ori_rot, ori_w = [], [], []
+    ori_kp, ori_rot, ori_w, ori_axes = [], [], [], []
     for k, kp in enumerate(mapping.keypoints):
         if kp.orientation_weight <= 0:
             continue
@@ -235,6 +242,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         else:  # feet: heading and pitch relative to the stance pitch (filled in below)
             rot = np.tile(node_rest, (t_len, 1, 1))
         ori_kp.append(k)
+        ori_axes.append((TRUNK_TILT, TRUNK_TILT, 1.0) if kp.joint in frames else (1.0, 1.0, 1.0))
         ori_rot.append(rot)
         ori_w.append(np.full(t_len, kp.orientation_weight))
     ori_rot_a = np.stack(ori_rot, axis=1) if ori_rot else np.zeros((t_len, 0, 3, 3))
@@ -252,7 +260,8 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         seg_parent=np.array(seg_parent, dtype=int), seg_child=np.array(seg_child, dtype=int),
         seg_vec=seg_vec,
         seg_weight=np.array(seg_weight, dtype=float), ori_kp=np.array(ori_kp, dtype=int),
-        ori_rot=ori_rot_a, ori_weight=ori_w_a, stance=stance, lock=lock,
+        ori_rot=ori_rot_a, ori_weight=ori_w_a, ori_axis_weight=np.array(ori_axes, dtype=float).reshape(-1, 3),
+        stance=stance, lock=lock,
         clearance={side: STANCE_CLEARANCE + SWING_CLEARANCE * ~stance[side] for side in stance})
 
 
