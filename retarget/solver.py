@@ -37,9 +37,9 @@ L_POSTURE = 0.1
 W_FLOOR = 100.0
 DEBUG = False
 PIN = 1e9
+"""Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
 CROSS_TOLERANCE = 0.01
 """Joint-limit overshoot (rad) of a step above which the step is re-solved with those joints pinned."""
-"""Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
 
 
 @dataclass(frozen=True)

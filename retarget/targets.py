@@ -184,15 +184,15 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     return ok
 
 
-def _ramp(stance: np.ndarray, fps: float) -> np.ndarray:
-    """1 in stance, falling linearly to 0 over RAMP_SECONDS on both sides."""
+def _ramp(stance: np.ndarray, fps: float, hold: int = 0) -> np.ndarray:
+    """1 in stance (and ``hold`` frames around it), then falling linearly to 0 over RAMP_SECONDS."""
     r = max(1, int(round(RAMP_SECONDS * fps)))
     dist = np.full(len(stance), np.inf)
     idx = np.flatnonzero(stance)
     if len(idx):
         frames = np.arange(len(stance))
         dist = np.abs(frames[:, None] - idx[None, :]).min(axis=1)
-    return np.clip(1.0 - dist / (r + 1), 0.0, 1.0)
+    return np.clip(1.0 - np.maximum(dist - hold, 0) / (r + 1), 0.0, 1.0)
 
 
 def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: HumanToWorld) -> Targets:
@@ -253,7 +253,10 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         st = detect_stance(joints, fps, side)
         alpha = _ramp(st, fps)
         stance[side], lock[side] = st, alpha
-        _feet_targets(robot, side, world, st, alpha, kp_pos, kp_weight, ori_kp, ori_rot_a, ori_w_a)
+        # Horizontally the foot holds its stance place a little longer (RAMP_SECONDS more):
+        # it lands and takes off vertically instead of sliding in or out.
+        alpha_xy = _ramp(st, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
+        _feet_targets(robot, side, world, st, alpha, alpha_xy, kp_pos, kp_weight, ori_kp, ori_rot_a, ori_w_a)
 
     return Targets(
         fps=float(fps), transform=transform, human_world=world, kp_pos=kp_pos, kp_weight=kp_weight,
@@ -266,7 +269,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
 
 
 def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, stance: np.ndarray, alpha: np.ndarray,
-                  kp_pos: np.ndarray, kp_weight: np.ndarray, ori_kp: list[int], ori_rot: np.ndarray,
+                  alpha_xy: np.ndarray, kp_pos: np.ndarray, kp_weight: np.ndarray, ori_kp: list[int], ori_rot: np.ndarray,
                   ori_w: np.ndarray) -> None:
     """Lift swing-foot targets to the robot's stance height; lock stance feet flat in place."""
     ka = robot.keypoint_index(f"{side}_ankle")
@@ -299,11 +302,11 @@ def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, stance: np.nd
             psi = np.angle(np.mean(np.exp(1j * heading[s:e])))
             r_lock = rot_z(np.array(psi)) @ rest_rot
             origin = kp_pos[s:e, ka] - r_lock @ robot.offsets[ka]
-            sel = (owner == i) & (alpha > 0)
+            sel = (owner == i) & (alpha_xy > 0)
             lock_rot[sel] = r_lock
             lock_origin[sel, :2] = origin[:, :2].mean(axis=0)
             lock_origin[sel, 2] = rest_pos[2] - robot.floor_z + STANCE_CLEARANCE
-    a = alpha[:, None]
+    a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
     for k in same_node:
         locked = lock_origin + np.einsum("tij,j->ti", lock_rot, robot.offsets[k])
         kp_pos[:, k] = a * locked + (1 - a) * kp_pos[:, k]
@@ -311,5 +314,5 @@ def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, stance: np.nd
     if ka in ori_kp:
         o = ori_kp.index(ka)
         delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
-        ori_rot[:, o] = swing_rot @ so3_exp(delta * a)
+        ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
         ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
