@@ -60,6 +60,8 @@ class SolverConfig:
     w_acc_joint: float = 0.5
     exact_acceleration: bool = False
     levels: tuple[tuple[int, int], ...] = ((2, 6), (1, 2))
+    pin_iterations: int = 2
+    """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
     """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
 
@@ -331,6 +333,10 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
         damping = max(config.damping, float(np.median(sol.damping)))
         prev = (sol.root_pos, sol.root_rot, sol.q, idx)
     sol.iterations = total
+    if config.pin_iterations > 0:
+        from retarget.feet import pin_stance_feet
+
+        sol.q = pin_stance_feet(robot, targets, sol.root_pos, sol.root_rot, sol.q, config.pin_iterations)
     sol.seconds = time.perf_counter() - start
     return sol
 

@@ -42,7 +42,7 @@ STANCE_MIN_SECONDS = 0.15
 MERGE_GAP_SECONDS = 0.4
 MERGE_DISTANCE = 0.05
 """Two stances of a foot closer than this in time (s) and place (m), with the foot kept low, are one."""
-SWING_CLEARANCE = 0.01
+SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
 RAMP_SECONDS = 0.1
 STANCE_CLEARANCE = 0.001
