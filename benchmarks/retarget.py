@@ -4,8 +4,8 @@
     python benchmarks/retarget.py --robots g1 --repeats 10 --json out/retarget_bench.json
 
 Motions: the real HumanML3D clip 012314 (``../shared/data/humanml3d``) and variants built
-from it: mirrored (left/right swapped), cropped (frames 40-120), time-reversed and 1.5x
-faster; plus every ``*.npz``/``*.npy`` motion under ``--corpus`` when given. For each motion
+from it: mirrored (left/right swapped), cropped (frames 40-120), time-reversed, 1.5x faster,
+0.5x slower and with 1 cm Gaussian noise on every joint; plus every ``*.npz``/``*.npy`` motion under ``--corpus`` when given. For each motion
 and robot: keypoint error after scaling (mm; mean/max per group), joint-limit violations,
 floor penetration (max, mm), stance-foot sliding (mm per stance; mean/max), joint jerk RMS,
 and speed in input frames per second (best of ``--repeats`` wall-clock runs of
@@ -46,6 +46,7 @@ def _find_clip() -> Path:
 def motions(corpus: Path | None) -> dict[str, Motion]:
     real = load_motion(_find_clip())
     j = real.joints
+    rng = np.random.default_rng(0)
     mirrored = j[:, list(LEFT_RIGHT_MIRROR)] * np.array([-1.0, 1.0, 1.0], dtype=np.float32)
     out = {
         "real 012314": real,
@@ -53,6 +54,8 @@ def motions(corpus: Path | None) -> dict[str, Motion]:
         "cropped 40-120": Motion(joints=j[40:120], fps=20.0),
         "reversed": Motion(joints=j[::-1].copy(), fps=20.0),
         "1.5x faster": Motion(joints=resample(j, 30.0, 20.0).astype(np.float32), fps=20.0),
+        "0.5x slower": Motion(joints=resample(j, 10.0, 20.0).astype(np.float32), fps=20.0),
+        "noisy 1 cm": Motion(joints=j + rng.normal(0, 0.01, j.shape).astype(np.float32), fps=20.0),
     }
     if corpus is not None:
         for path in sorted(corpus.rglob("*.np[yz]"))[:20]:

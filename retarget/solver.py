@@ -59,8 +59,8 @@ class SolverConfig:
     w_acc_root: float = 2.0
     w_acc_joint: float = 0.5
     exact_acceleration: bool = False
-    levels: tuple[tuple[int, int], ...] = ((2, 6), (1, 2))
-    pin_iterations: int = 2
+    levels: tuple[tuple[int, int], ...] = ((2, 5), (1, 2))
+    pin_iterations: int = 1
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
     """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
