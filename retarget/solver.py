@@ -3,20 +3,28 @@
 Unknowns: for every frame t the floating base (position p_t, rotation R_t) and the joint
 angles q_t. The cost is a sum of squares (metres unless noted)::
 
-    sum_t  sum_k w_k(t) |p_k(t) - target_k(t)|^2                     keypoint positions
-         + sum_s w_s |(p_child - p_parent)(t) - seg_s(t)|^2           segment vectors
-         + sum_o w_o(t) (L_ROT |log(R_o(t) R*_o(t)^T)|)^2             orientations
-         + W_FLOOR sum_feet points min(0, z - radius)^2                 no floor penetration
-         + sum_j w_j (L_POSTURE (q_j - q_rest_j))^2                     posture prior
-         + sum_c W_VEL_c |D1 x_c|^2 + W_ACC_c |D2 x_c|^2                velocity / acceleration
+    sum_t  sum_k w_k(t) |p_k(t) - target_k(t)|^2                      keypoint positions
+         + sum_s w_s |(p_child - p_parent)(t) - seg_s(t)|^2            segment vectors
+         + sum_o w_o(t) L_ROT^2 |a_o * log(R_o(t) R*_o(t)^T)|^2        orientations (a_o: tilt/heading)
+         + W_FLOOR sum_feet points min(0, z - radius - clearance(t))^2   floor (1 mm in stance, 16 mm in swing)
+         + sum_j w_j (L_POSTURE (q_j - q_rest_j))^2                      posture prior
+         + sum_c W_VEL_c |D1 x_c|^2 + W_ACC_c |D2 x_c|^2                 velocity / acceleration
 
 Each iteration linearises every frame with analytic Jacobians (:mod:`retarget.kinematics`),
-adds the temporal terms (which couple frame t with t +- 1 and t +- 2) and solves the whole
-banded normal-equation system at once with a banded Cholesky factorisation
-(``scipy.linalg.solveh_banded``, bandwidth 2 * (6 + nj)). Joint limits are exact: joints on
-a bound whose gradient pushes outward are frozen for the step (projected Newton), and every
-step is projected onto the box. A step that does not lower the cost is rejected and the
-damping raised (Levenberg-Marquardt).
+adds the temporal terms (which couple frame t with t +- 1 and t +- 2) and solves the normal
+equations of all frames at once with a banded Cholesky factorisation
+(``scipy.linalg.solveh_banded``). By default the lag-2 acceleration couplings are moved onto
+the diagonal (an upper bound of the Hessian; the gradient stays exact), which halves the
+bandwidth to 6 + nj and quarters the factorisation time.
+
+* Joint limits are exact: joints on a bound whose gradient pushes outward are frozen; joints
+  whose step would cross a bound are held at the bound and the step is solved again for
+  the rest; every step is projected onto the box.
+* Damping is per frame: frames are nearly independent, so each frame keeps the step only
+  if its own cost drops, and its damping falls or rises on its own.
+* Coarse to fine (``SolverConfig.levels``): every 2nd frame first, then all frames.
+* Stance feet are finally moved onto their locks with the legs' own joints
+  (:mod:`retarget.feet`).
 """
 
 from __future__ import annotations
@@ -34,8 +42,9 @@ from retarget.targets import Targets
 L_ROT = 0.2
 """Metres per radian of orientation error (an error of 1 rad costs like 0.2 m)."""
 L_POSTURE = 0.1
+"""Metres per radian of posture error."""
 W_FLOOR = 100.0
-DEBUG = False
+"""Weight of the floor/clearance term (per foot collision point)."""
 PIN = 1e9
 """Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
 CROSS_TOLERANCE = 0.01
@@ -51,19 +60,21 @@ class SolverConfig:
     """
 
     max_iterations: int = 25
+    """Iterations when ``levels`` is empty (one level, all frames)."""
     tolerance: float = 1e-4
-    """Stop when the relative cost decrease falls below this."""
+    """Stop a level when the relative cost decrease falls below this."""
     damping: float = 1e-4
+    """Initial Levenberg-Marquardt damping (per frame)."""
     w_vel_root: float = 0.5
     w_vel_joint: float = 0.02
     w_acc_root: float = 2.0
     w_acc_joint: float = 0.5
     exact_acceleration: bool = False
+    """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
     levels: tuple[tuple[int, int], ...] = ((2, 5), (1, 2))
+    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
     pin_iterations: int = 1
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
-    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
-    """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
 
 
 @dataclass
@@ -387,9 +398,6 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             trial = prob.evaluate(np.where(b3, trial.root_pos, st.root_pos),
                                   np.where(better[:, None, None], trial.root_rot, st.root_rot),
                                   np.where(b3, trial.q, st.q))
-        if DEBUG:
-            print(f"  it{iterations} T={prob.t_len} lam={np.median(lam):.1e} cost={st.cost:.3f} "
-                  f"trial={trial.cost:.3f} better={better.mean():.2f}")
         if trial.cost < st.cost:
             done = (st.cost - trial.cost) < config.tolerance * st.cost
             st = trial

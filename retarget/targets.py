@@ -8,12 +8,14 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    rigid trunk links (pelvis -> hips/spine1, spine3 -> neck/collars/shoulders/head) rotate
    the robot offset with the human pelvis or torso frame; limb bones keep the human bone
    direction with the robot's length. The refined targets have the robot's proportions.
-3. **Orientations** from bone directions: pelvis frame (hip axis + spine), torso frame
-   (collar axis + spine3 -> neck), foot frames (ankle -> toe heading and pitch).
+3. **Orientations** from bone directions: pelvis frame (hip axis + hips -> pelvis), torso
+   frame (collar axis + spine3 -> neck), foot frames (ankle -> toe heading and pitch). The
+   trunk's heading counts fully, its tilt at ``TRUNK_TILT``.
 4. **Feet**: stance frames (foot low, flat and slow) are detected on the human; in each
    stance the foot is locked flat on the floor at one place and heading (targets ramp in
-   over a few frames); in swing the foot targets are lifted so that the human's stance
-   height maps to the robot's.
+   over a few frames, and the place is held horizontally a little longer so that feet land
+   and lift vertically); in swing the foot targets are lifted so that the human's stance
+   height maps to the robot's, and the solver keeps swing feet ``SWING_CLEARANCE`` high.
 """
 
 from __future__ import annotations
@@ -45,13 +47,14 @@ MERGE_DISTANCE = 0.05
 SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
 RAMP_SECONDS = 0.1
+"""Foot locks ramp in and out over this time (s); horizontally they hold this much longer."""
 STANCE_CLEARANCE = 0.001
 """Locked feet stand this high (m) above the floor (the solver's floor margin)."""
 LOCK_GAIN = 30.0
+"""Weight multiplier of the foot targets during stance (locked feet)."""
 TRUNK_TILT = 0.3
 """Weight factor of the pelvis/torso tilt (roll, pitch) against their heading: the human's
 neutral trunk tilt is not well defined from joints, the heading is."""
-"""Weight multiplier of the foot targets during stance (locked feet)."""
 
 
 @dataclass
