@@ -66,9 +66,9 @@ class SolverConfig:
     damping: float = 1e-4
     """Initial Levenberg-Marquardt damping (per frame)."""
     w_vel_root: float = 0.5
-    w_vel_joint: float = 0.02
+    w_vel_joint: float = 0.1
     w_acc_root: float = 2.0
-    w_acc_joint: float = 0.5
+    w_acc_joint: float = 1.0
     exact_acceleration: bool = False
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
     levels: tuple[tuple[int, int], ...] = ((2, 5), (1, 2))

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
@@ -41,6 +42,7 @@ STANCE_SPEED = 0.35
 """Human stance test (HumanML3D metres, m/s): ankle and toe low and both slower than this."""
 
 STANCE_MIN_SECONDS = 0.15
+STANCE_SMOOTH_SECONDS = 0.075
 MERGE_GAP_SECONDS = 0.4
 MERGE_DISTANCE = 0.05
 """Two stances of a foot closer than this in time (s) and place (m), with the foot kept low, are one."""
@@ -155,10 +157,15 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     """Human stance frames (T,) bool of one foot from HumanML3D joints (metres, Y up).
 
     A stance frame has the ankle below 8.5 cm, the toe below 5 cm and both moving slower than
-    0.35 m/s horizontally; gaps of one frame are filled and runs shorter than 0.15 s dropped.
+    0.35 m/s horizontally (positions smoothed over ~0.075 s first, so that jittery input
+    still plants its feet); gaps of one frame are filled and runs shorter than 0.15 s dropped.
     """
     a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
     n = len(joints)
+    if n >= 4:
+        sigma = STANCE_SMOOTH_SECONDS * fps
+        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
+        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
     if n < 2:
         return np.array([a[0, 1] < STANCE_ANKLE_HEIGHT and t[0, 1] < STANCE_TOE_HEIGHT])
 
