@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from controlmm.motion import Motion, load_motion, resample  # noqa: E402
 from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR  # noqa: E402
-from retarget import retarget_motion  # noqa: E402
+from retarget import SolverConfig, retarget_motion  # noqa: E402
 
 SHARED = Path(os.environ.get("CONTROLMM_SHARED", ROOT.parent / "shared"))
 CLIP = "012314"
@@ -104,6 +104,34 @@ def print_table(rows: list[dict]) -> None:
               f"{r['slide_mean']:>5.1f}/{r['slide_max']:<5.1f} {r['jerk']:>7.0f}")
 
 
+ABLATION = {
+    "default (mapping's schedule)": None,
+    "levels (2,5),(1,2)": {"levels": ((2, 5), (1, 2))},
+    "levels (2,5),(1,4)": {"levels": ((2, 5), (1, 4))},
+    "exact acceleration band": {"exact_acceleration": True},
+    "one level, 25 iterations": {"levels": (), "tolerance": 1e-4},
+    "converged (60 it, tol 1e-8)": {"levels": (), "max_iterations": 60, "tolerance": 1e-8},
+    "no stance pinning": {"pin_iterations": 0},
+}
+
+
+def ablation(motion: Motion, robot: str, repeats: int) -> None:
+    """Solver design choices on one motion: speed, final cost and quality."""
+    print(f"\nsolver settings, {robot}, real clip ({motion.num_frames} frames):")
+    print(f"{'setting':<28} {'fps cpu':>8} {'cost':>8} {'all mm':>7} {'slide mm':>11} {'jerk':>6}")
+    from retarget import load_robot
+
+    base = load_robot(robot).mapping.solver
+    for name, change in ABLATION.items():
+        cfg = SolverConfig(**{**base, **(change or {})})
+        _, cpu = timed(lambda: retarget_motion(motion, robot, config=cfg, metrics=False), repeats)
+        traj = retarget_motion(motion, robot, config=cfg)
+        m = traj.metrics
+        print(f"{name:<28} {motion.num_frames / cpu:>8.0f} {traj.solver['cost']:>8.3f} "
+              f"{m['keypoint_error_mm']['all']['mean']:>7.1f} {m['foot_sliding_mm_per_stance']['mean']:>5.1f}/"
+              f"{m['foot_sliding_mm_per_stance']['max']:<5.1f} {m['joint_jerk_rms_rad_s3']:>6.0f}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", nargs="+", default=["g1", "h1"])
@@ -111,6 +139,7 @@ def main() -> int:
     ap.add_argument("--no-mink", action="store_true", help="skip the mink per-frame IK baseline")
     ap.add_argument("--corpus", type=Path, help="folder of extra motions (.npz/.npy)")
     ap.add_argument("--json", type=Path, help="also write the rows as JSON")
+    ap.add_argument("--no-ablation", action="store_true", help="skip the solver-settings table")
     args = ap.parse_args()
     try:
         import mink  # noqa: F401
@@ -123,7 +152,8 @@ def main() -> int:
     print("keypoint errors: mean/max mm against the uniformly scaled human; speed: input frames (20 fps) "
           "per second, best of the timed runs, output 50 Hz, metrics excluded\n")
     rows = []
-    for name, motion in motions(args.corpus).items():
+    all_motions = motions(args.corpus)
+    for name, motion in all_motions.items():
         for robot in args.robots:
             retarget_motion(motion, robot, metrics=False)  # warm caches (model loading)
             wall, cpu = timed(lambda: retarget_motion(motion, robot, metrics=False), args.repeats)
@@ -144,6 +174,9 @@ def main() -> int:
             ratio = np.mean([x["fps_wall"] / y["fps_wall"] for x, y in zip(b, k)])
             line += f"; mink {np.mean([r['fps_wall'] for r in k]):.0f} frames/s -> batched is {ratio:.1f}x faster"
         print(line)
+    if not args.no_ablation:
+        for robot in args.robots:
+            ablation(all_motions["real 012314"], robot, args.repeats)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1))

@@ -60,7 +60,7 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float, float]] = {
 """Weights used when a keypoint entry leaves them out (unlisted joints: 0.5, 1.0, 0.0)."""
 
 _KEYPOINT_FIELDS = {"body", "site", "offset", "position_weight", "segment_weight", "orientation_weight"}
-_TOP_FIELDS = {"format", "description", "robot", "scale", "keypoints", "posture_weights", "body_joints"}
+_TOP_FIELDS = {"format", "description", "robot", "scale", "keypoints", "posture_weights", "body_joints", "solver"}
 
 
 @dataclass(frozen=True)
@@ -94,6 +94,7 @@ class Mapping:
         scale: fixed human -> robot scale, or None for automatic (leg height ratio).
         posture_weights: joint name -> weight pulling that joint toward 0 (``default`` for others).
         body_joints: robot body -> human joints it follows (as written in the file).
+        solver: :class:`retarget.solver.SolverConfig` fields this robot changes (e.g. ``levels``).
         source: where the mapping came from (file path or ``packaged:g1``).
         name: short name used in reports (the packaged robot name or the file stem).
     """
@@ -103,6 +104,7 @@ class Mapping:
     scale: float | None = None
     posture_weights: dict[str, float] = field(default_factory=dict)
     body_joints: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    solver: dict = field(default_factory=dict)
     source: str = ""
     name: str = ""
 
@@ -205,9 +207,40 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
                 raise ControlMMError(f"{source}: body_joints['{body}'] names unknown human joint '{j}'; "
                                      f"valid joints: {', '.join(JOINT_NAMES)}")
         body_joints[str(body)] = tuple(joints)
+    solver = _parse_solver(data.get("solver", {}), source)
     name = robot if not robot.endswith(".xml") else Path(robot).stem
     return Mapping(robot=robot, keypoints=tuple(keypoints), scale=scale, posture_weights=posture,
-                   body_joints=body_joints, source=source, name=name)
+                   body_joints=body_joints, solver=solver, source=source, name=name)
+
+
+def _parse_solver(spec, source: str) -> dict:
+    """Validated SolverConfig overrides from the mapping's ``solver`` object."""
+    from dataclasses import fields
+
+    from retarget.solver import SolverConfig
+
+    if not isinstance(spec, dict):
+        raise ControlMMError(f"{source}: 'solver' must be an object of solver settings")
+    allowed = {f.name: f for f in fields(SolverConfig)}
+    out: dict = {}
+    for key, value in spec.items():
+        if key not in allowed:
+            raise ControlMMError(f"{source}: unknown solver setting '{key}'; allowed: {', '.join(sorted(allowed))}")
+        if key == "levels":
+            try:
+                levels = tuple((int(k), int(n)) for k, n in value)
+            except (TypeError, ValueError):
+                raise ControlMMError(f"{source}: solver levels must be [[every_kth_frame, iterations], ...]") from None
+            if not levels or any(k < 1 or n < 1 for k, n in levels) or levels[-1][0] != 1:
+                raise ControlMMError(f"{source}: solver levels must be positive and end with every frame ([1, n])")
+            out[key] = levels
+        elif key == "exact_acceleration":
+            out[key] = bool(value)
+        elif allowed[key].type in ("int", int):
+            out[key] = int(_number(value, f"{source}: solver {key}"))
+        else:
+            out[key] = _number(value, f"{source}: solver {key}")
+    return out
 
 
 def load_mapping(name_or_path: str | Path) -> Mapping:

@@ -124,7 +124,7 @@ def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec =
         fps: output frame rate (Hz), 1 to 1000.
         transform: where the human is placed in the world; default
             ``HumanToWorld(scale=robot_scale(robot))`` (start at the origin facing +X).
-        config: solver settings.
+        config: solver settings (default: ``SolverConfig`` with the mapping's ``solver`` overrides).
         metrics: measure the result with MuJoCo (see :mod:`retarget.metrics`).
         solver: ``"batched"`` (default: all frames at once, :mod:`retarget.solver`) or
             ``"mink"`` (per-frame differential IK, :mod:`retarget.mink_ik`; optional packages).
@@ -157,7 +157,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
 
         sol = solve_mink(rm, targets)
     else:
-        sol = solve(rm, targets, config or SolverConfig())
+        sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)

@@ -61,8 +61,8 @@ class SolverConfig:
 
     max_iterations: int = 25
     """Iterations when ``levels`` is empty (one level, all frames)."""
-    tolerance: float = 1e-4
-    """Stop a level when the relative cost decrease falls below this."""
+    tolerance: float = 0.01
+    """Stop a level when an iteration lowers the cost by less than this fraction."""
     damping: float = 1e-4
     """Initial Levenberg-Marquardt damping (per frame)."""
     w_vel_root: float = 0.5
