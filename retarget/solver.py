@@ -213,10 +213,12 @@ class _Problem:
         return np.concatenate([root_pos, phi, q], axis=1)
 
     def gradient_temporal(self, x: np.ndarray) -> np.ndarray:
-        d1 = np.diff(x, axis=0) * self.w_vel
-        d2 = np.diff(x, n=2, axis=0) * self.w_acc
-        g = -np.diff(np.pad(d1, ((1, 1), (0, 0))), axis=0)
-        g += np.diff(np.pad(d2, ((2, 2), (0, 0))), n=2, axis=0)
+        """Gradient (T, n) of the velocity and acceleration terms."""
+        g = np.zeros_like(x)
+        if len(x) > 1:
+            g -= np.diff(np.pad(np.diff(x, axis=0) * self.w_vel, ((1, 1), (0, 0))), axis=0)
+        if len(x) > 2:
+            g += np.diff(np.pad(np.diff(x, n=2, axis=0) * self.w_acc, ((2, 2), (0, 0))), n=2, axis=0)
         return g
 
     # -- banded normal equations -------------------------------------------------------------

@@ -110,11 +110,21 @@ def test_bad_inputs_raise_one_line_errors(tmp_path, short_motion):
     nan[3, 4, 1] = np.nan
     with pytest.raises(ControlMMError, match="NaN"):
         retarget_motion(nan)
+    one = retarget_motion(short_motion.joints[:1], metrics=False)  # a single frame is a pose
+    assert one.qpos.shape == (1, 36)
     for fps in (0, -5, 5000, float("nan")):
         with pytest.raises(ControlMMError, match="fps .* out of range"):
             retarget_motion(short_motion, fps=fps)
+    with pytest.raises(ControlMMError, match="unknown solver setting 'iterations'"):
+        load_robot(_mapping_file(tmp_path, solver={"iterations": 3}))
     with pytest.raises(ControlMMError, match="orientation"):
         load_robot(_mapping_with(tmp_path, left_knee={"body": "Shank_Left", "orientation_weight": 1.0}))
+
+
+def _mapping_file(tmp_path, **fields):
+    path = tmp_path / "fields.json"
+    path.write_text(json.dumps(dict(T1_MAPPING, **fields)))
+    return str(path)
 
 
 def _mapping_with(tmp_path, **keypoints):
