@@ -107,7 +107,8 @@ def print_table(rows: list[dict]) -> None:
 ABLATION = {
     "default (mapping's schedule)": None,
     "levels (2,5),(1,2)": {"levels": ((2, 5), (1, 2))},
-    "levels (2,5),(1,4)": {"levels": ((2, 5), (1, 4))},
+    "levels (3,5),(1,2)": {"levels": ((3, 5), (1, 2))},
+    "levels (3,5),(1,4)": {"levels": ((3, 5), (1, 4))},
     "exact acceleration band": {"exact_acceleration": True},
     "one level, 25 iterations": {"levels": (), "tolerance": 1e-4},
     "converged (60 it, tol 1e-8)": {"levels": (), "max_iterations": 60, "tolerance": 1e-8},

@@ -22,7 +22,7 @@ bandwidth to 6 + nj and quarters the factorisation time.
   the rest; every step is projected onto the box.
 * Damping is per frame: frames are nearly independent, so each frame keeps the step only
   if its own cost drops, and its damping falls or rises on its own.
-* Coarse to fine (``SolverConfig.levels``): every 2nd frame first, then all frames.
+* Coarse to fine (``SolverConfig.levels``): every 3rd frame first, then all frames.
 * Stance feet are finally moved onto their locks with the legs' own joints
   (:mod:`retarget.feet`).
 """
@@ -71,7 +71,7 @@ class SolverConfig:
     w_acc_joint: float = 1.0
     exact_acceleration: bool = False
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
-    levels: tuple[tuple[int, int], ...] = ((2, 5), (1, 2))
+    levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
     """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
     pin_iterations: int = 1
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
