@@ -55,7 +55,7 @@ def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) 
     renderer = mujoco.Renderer(model, height=height, width=width)
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-    cam.distance, cam.azimuth, cam.elevation = 3.2, 135.0, -15.0
+    cam.distance, cam.azimuth, cam.elevation = 3.2 * float(traj.qpos[0, 2]), 135.0, -12.0
     idx = _frame_indices(traj, fps)
     root = traj.qpos[idx, 0:3]
     # A smoothed look-at point so that the camera does not shake with the pelvis.
