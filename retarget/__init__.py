@@ -1,5 +1,31 @@
-"""Retargeting: human joints (HumanML3D, Y up) -> humanoid robot qpos (MuJoCo, Z up)."""
+"""Retargeting: human joints (HumanML3D, Y up) -> humanoid robot qpos (MuJoCo, Z up).
 
+Public API::
+
+    from retarget import retarget_motion, robot_scale, RobotTrajectory
+    traj = retarget_motion(motion, robot="g1", fps=50)   # or a mapping .json for any MJCF
+    traj.save("out/walk")                                 # walk.csv, walk.npz, walk.json
+"""
+
+from retarget.mapping import Mapping, load_mapping, packaged_mappings
+from retarget.retarget_motion import retarget_motion, robot_scale
+from retarget.robot_model import RobotModel, load_robot
 from retarget.robots import DEFAULT_ROBOT, available_robots, robot_mjcf, robot_scene
+from retarget.solver import SolverConfig
+from retarget.trajectory import RobotTrajectory
 
-__all__ = ["DEFAULT_ROBOT", "available_robots", "robot_mjcf", "robot_scene"]
+__all__ = [
+    "DEFAULT_ROBOT",
+    "Mapping",
+    "RobotModel",
+    "RobotTrajectory",
+    "SolverConfig",
+    "available_robots",
+    "load_mapping",
+    "load_robot",
+    "packaged_mappings",
+    "retarget_motion",
+    "robot_mjcf",
+    "robot_scale",
+    "robot_scene",
+]

@@ -1,0 +1,134 @@
+"""``controlmm retarget MOTION --robot g1 --fps 50 --out OUT [--render OUT.mp4]``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
+
+Writes OUT.csv (Unitree LAFAN1-G1 / BeyondMimic rows: root x y z, root quaternion
+qx qy qz qw, joint angles in MJCF order; no header), OUT.npz (fps, qpos with wxyz
+quaternion, qvel, joint_names, body_names, body_pos_w, body_quat_w) and OUT.json (robot,
+source, scale, fps, metrics), then prints the metrics.
+
+--robot takes a packaged robot (g1 = Unitree G1 29-DoF, h1 = Unitree H1) or a mapping .json
+that names any MJCF (see docs/retargeting.md). --render draws a video with MuJoCo's
+offscreen renderer (MUJOCO_GL=egl unless set: Debian packages libegl1, libegl-mesa0,
+libgl1-mesa-dri) and falls back to a matplotlib stick figure when no GL backend loads.
+
+examples:
+  controlmm retarget ../shared/data/humanml3d/new_joint_vecs/012314.npy --out out/g1_012314
+  controlmm retarget motion.npz --robot h1 --fps 30 --out out/h1 --render out/h1.mp4
+  controlmm retarget motion.npz --robot my_robot_mapping.json --out out/mine"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("retarget", help="retarget a human motion to a robot (CSV/NPZ/JSON, optional MP4)",
+                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("motion", help="human motion (.npz, .npy, .bvh)")
+    p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
+    p.add_argument("--fps", type=float, default=50.0, help="output frame rate in Hz (default 50)")
+    p.add_argument("--out", required=True, help="output prefix: writes OUT.csv, OUT.npz, OUT.json")
+    p.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees about world Z (default 0: +X)")
+    p.add_argument("--x", type=float, default=0.0, help="start position x in metres (default 0)")
+    p.add_argument("--y", type=float, default=0.0, help="start position y in metres (default 0)")
+    p.add_argument("--solver", choices=("batched", "mink"), default="batched",
+                   help="batched (all frames at once, default) or mink (per-frame IK; needs mink, daqp)")
+    p.add_argument("--render", metavar="VIDEO", help="also write a video (.mp4 or .gif)")
+    p.add_argument("--render-width", type=int, default=480, help="video width in pixels (default 480)")
+    p.add_argument("--render-height", type=int, default=360, help="video height in pixels (default 360)")
+    p.add_argument("--render-fps", type=float, default=25.0, help="video frame rate (default 25)")
+    p.add_argument("--render-backend", choices=("auto", "mujoco", "stick"), default="auto",
+                   help="auto: MuJoCo, else the stick figure (default); mujoco; stick")
+    p.set_defaults(func=run)
+
+
+def _import_mujoco(default_backend: str) -> str | None:
+    """Import MuJoCo with an offscreen GL backend; return why GL is unavailable, or None.
+
+    MuJoCo reads MUJOCO_GL once, at import; a backend whose libraries are missing (e.g.
+    MUJOCO_GL=osmesa without libosmesa6) makes the import itself fail. Then MuJoCo is
+    imported again with rendering disabled, and the video falls back to the stick figure.
+    """
+    if "mujoco" in sys.modules:
+        return None
+    os.environ.setdefault("MUJOCO_GL", default_backend)
+    try:
+        import mujoco  # noqa: F401
+        return None
+    except Exception as exc:  # noqa: BLE001 - AttributeError/ImportError/OSError from the GL layer
+        note = f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {' '.join(str(exc).split()) or type(exc).__name__}"
+        for name in list(sys.modules):
+            if name == "mujoco" or name.startswith(("mujoco.", "OpenGL")):
+                del sys.modules[name]
+        os.environ["MUJOCO_GL"] = "disable"
+        import mujoco  # noqa: F401
+        return note
+
+
+def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
+    rows = [("scale (human -> robot)", f"{scale:.4f}")]
+    for group, v in metrics.get("keypoint_error_mm", {}).items():
+        rows.append((f"keypoint error {group} (mm)", f"mean {v['mean']:.1f}  max {v['max']:.1f}"))
+    rows.append(("joint-limit violations", str(metrics.get("joint_limit_violations"))))
+    rows.append(("floor penetration max (mm)", f"{metrics.get('floor_penetration_max_mm', 0):.2f}"))
+    sl = metrics.get("foot_sliding_mm_per_stance", {})
+    rows.append(("foot sliding per stance (mm)", f"mean {sl.get('mean', 0):.1f}  max {sl.get('max', 0):.1f}"
+                 f"  ({metrics.get('stances', 0)} stances)"))
+    if "joint_jerk_rms_rad_s3" in metrics:
+        rows.append(("joint jerk RMS (rad/s^3)", f"{metrics['joint_jerk_rms_rad_s3']:.1f}"))
+        rows.append(("joint velocity max (rad/s)", f"{metrics['joint_velocity_max_rad_s']:.2f}"))
+    rows.append(("frames @ fps", f"{metrics.get('frames')} @ {metrics.get('fps'):g}"))
+    rows.append(("solver", f"{solver.get('method')}: {solver.get('iterations')} iterations, "
+                           f"{solver.get('total_seconds', 0) * 1000:.0f} ms"))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"  {k:<{width}}  {v}" for k, v in rows)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from controlmm.errors import ControlMMError
+
+    gl_note = _import_mujoco("egl") if args.render else None
+    from controlmm.frames import HumanToWorld
+    from controlmm.motion.io import load_motion
+    from retarget import retarget_motion, robot_scale
+    from retarget.retarget_motion import check_fps
+
+    check_fps(args.fps)
+    out = Path(args.out)
+    if out.suffix.lower() in (".csv", ".npz", ".json"):
+        out = out.with_suffix("")
+    if not out.parent.exists():
+        raise ControlMMError(f"cannot write '{out}': directory '{out.parent}' does not exist")
+    if args.render and Path(args.render).suffix.lower() not in (".mp4", ".gif"):
+        raise ControlMMError(f"unknown video format '{Path(args.render).suffix or args.render}'; allowed: .mp4, .gif")
+    import math
+
+    motion = load_motion(args.motion)
+    scale = robot_scale(args.robot)
+    transform = HumanToWorld(scale=scale, yaw=math.radians(args.yaw), translation=(args.x, args.y, 0.0))
+    traj = retarget_motion(motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver)
+    traj.source["path"] = str(args.motion)
+    paths = traj.save(out)
+    print(f"retargeted {motion.num_frames} frames @ {motion.fps:g} fps -> {traj.robot_model().name}, "
+          f"{traj.num_frames} frames @ {traj.fps:g} Hz")
+    print(_format_metrics(traj.metrics, traj.solver, traj.scale))
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    if args.render:
+        from retarget.render import render_trajectory
+
+        backend = args.render_backend
+        if gl_note and backend != "stick":
+            if backend == "mujoco":
+                raise ControlMMError(f"MuJoCo rendering unavailable ({gl_note[:200]})")
+            print(f"controlmm: MuJoCo rendering unavailable ({gl_note[:160]}); drawing a matplotlib stick "
+                  "figure instead", file=sys.stderr)
+            backend = "stick"
+        used = render_trajectory(traj, args.render, width=args.render_width, height=args.render_height,
+                                 fps=args.render_fps, backend=backend)
+        print(f"wrote {args.render} ({used})")
+    return 0

@@ -1,0 +1,170 @@
+"""Quality figures of a robot trajectory, measured with MuJoCo itself (``mj_kinematics``).
+
+Everything here re-reads the qpos through MuJoCo, independently of the solver's own
+kinematics: keypoint errors against the scaled human, joint-limit violations, floor
+penetration of the feet's collision geometry (exact lowest point per geom type), stance-foot
+sliding and smoothness (joint velocity and jerk).
+
+Foot contact: a foot touches the floor when the lowest point of its collision geoms is at
+most ``CONTACT_HEIGHT`` (5 mm) above it in two consecutive frames; a stance is a run of
+such frame pairs. Per stance: *sliding* = largest horizontal distance of the foot body from
+where the stance began (mm), *path* = horizontal path length (mm, includes sub-mm jitter);
+*skate* = mean horizontal foot displacement per contact frame (PhysDiff's skate, mm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+
+KEYPOINT_GROUPS: dict[str, tuple[str, ...]] = {
+    "feet": ("left_ankle", "right_ankle", "left_foot", "right_foot"),
+    "hands": ("left_wrist", "right_wrist"),
+    "pelvis": ("pelvis",),
+    "head": ("head",),
+}
+"""Keypoint groups reported separately (only mapped joints count)."""
+
+CONTACT_HEIGHT = 0.005
+"""A foot is in contact when its lowest collision point is at most this high (m)."""
+
+
+@dataclass
+class Replay:
+    """MuJoCo kinematics of a qpos trajectory.
+
+    Attributes:
+        xpos: (T, nbody, 3) body positions; xquat: (T, nbody, 4) wxyz; xmat: (T, nbody, 3, 3).
+        geom_xpos: (T, ngeom, 3); geom_xmat: (T, ngeom, 3, 3).
+    """
+
+    xpos: np.ndarray
+    xquat: np.ndarray
+    xmat: np.ndarray
+    geom_xpos: np.ndarray
+    geom_xmat: np.ndarray
+
+
+def replay(model: mujoco.MjModel, qpos: np.ndarray) -> Replay:
+    """Run ``mj_kinematics`` on every frame of ``qpos`` (T, nq)."""
+    data = mujoco.MjData(model)
+    t = len(qpos)
+    xpos = np.empty((t, model.nbody, 3))
+    xquat = np.empty((t, model.nbody, 4))
+    xmat = np.empty((t, model.nbody, 9))
+    gpos = np.empty((t, model.ngeom, 3))
+    gmat = np.empty((t, model.ngeom, 9))
+    for i in range(t):
+        data.qpos[:] = qpos[i]
+        mujoco.mj_kinematics(model, data)
+        xpos[i], xquat[i], xmat[i] = data.xpos, data.xquat, data.xmat
+        gpos[i], gmat[i] = data.geom_xpos, data.geom_xmat
+    return Replay(xpos, xquat, xmat.reshape(t, -1, 3, 3), gpos, gmat.reshape(t, -1, 3, 3))
+
+
+def geom_lowest_z(model: mujoco.MjModel, rep: Replay, geoms: list[int] | tuple[int, ...]) -> np.ndarray:
+    """Exact lowest world z (T, G) of collision geoms (sphere, capsule, cylinder, box, ellipsoid, mesh)."""
+    t = mujoco.mjtGeom
+    out = np.empty((rep.geom_xpos.shape[0], len(geoms)))
+    for i, g in enumerate(geoms):
+        z = rep.geom_xpos[:, g, 2]
+        r2 = rep.geom_xmat[:, g, 2, :]  # world z component of the geom's axes
+        size = model.geom_size[g]
+        kind = int(model.geom_type[g])
+        if kind == int(t.mjGEOM_SPHERE):
+            low = z - size[0]
+        elif kind == int(t.mjGEOM_CAPSULE):
+            low = z - np.abs(r2[:, 2]) * size[1] - size[0]
+        elif kind == int(t.mjGEOM_CYLINDER):
+            low = z - np.abs(r2[:, 2]) * size[1] - size[0] * np.sqrt(np.clip(1 - r2[:, 2] ** 2, 0, None))
+        elif kind == int(t.mjGEOM_BOX):
+            low = z - np.abs(r2) @ size[:3]
+        elif kind == int(t.mjGEOM_ELLIPSOID):
+            low = z - np.sqrt(((r2 * size[:3]) ** 2).sum(axis=1))
+        elif kind == int(t.mjGEOM_MESH):
+            mid = model.geom_dataid[g]
+            verts = model.mesh_vert[model.mesh_vertadr[mid]: model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
+            low = z + (r2 @ verts.T).min(axis=1)
+        else:
+            low = np.full(len(z), np.inf)
+        out[:, i] = low
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    padded = np.concatenate([[False], mask, [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(int)))
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndarray | None = None,
+                       human_fps: float | None = None, rep: Replay | None = None) -> dict:
+    """Quality figures of ``qpos`` (T, nq) at ``fps`` for a :class:`retarget.robot_model.RobotModel`.
+
+    ``human_world``: the scaled human (T_h, 22, 3) in the world at ``human_fps``; keypoint
+    errors compare the robot's mapped points with it (linearly interpolated to ``fps``).
+    Lengths in mm, angles in rad. ``rep``: a :func:`replay` of ``qpos`` already computed.
+    """
+    model = robot.model
+    rep = rep if rep is not None else replay(model, qpos)
+    out: dict = {"frames": int(len(qpos)), "fps": float(fps)}
+    # Keypoints: body position + body rotation @ offset (node frames are body frames here).
+    bodies = np.array([robot.tree.node_body[n] for n in robot.nodes])
+    kp = rep.xpos[:, bodies] + np.einsum("tkij,kj->tki", rep.xmat[:, bodies], robot.offsets)
+    if human_world is not None:
+        times = np.arange(len(qpos)) / fps
+        src = np.arange(len(human_world)) / (human_fps or fps)
+        flat = human_world.reshape(len(human_world), -1)
+        ref = np.stack([np.interp(times, src, flat[:, c]) for c in range(flat.shape[1])], -1)
+        ref = ref.reshape(len(times), 22, 3)[:, robot.joints]
+        err = np.linalg.norm(kp - ref, axis=-1) * 1000.0
+        groups = {**KEYPOINT_GROUPS, "all": tuple(robot.keypoint_names)}
+        out["keypoint_error_mm"] = {}
+        for name, joints in groups.items():
+            idx = [robot.keypoint_names.index(j) for j in joints if j in robot.keypoint_names]
+            if idx:
+                e = err[:, idx]
+                out["keypoint_error_mm"][name] = {"mean": round(float(e.mean()), 1), "max": round(float(e.max()), 1)}
+    # Joint limits (exact comparison with the model's ranges).
+    tree = robot.tree
+    q = qpos[:, 7:]
+    over = np.maximum(q - tree.upper, 0) + np.maximum(tree.lower - q, 0)
+    out["joint_limit_violations"] = int(np.count_nonzero(over > 0))
+    out["joint_limit_max_overshoot_rad"] = float(over.max()) if over.size else 0.0
+    # Floor and feet.
+    lowest = {}
+    for side in ("left", "right"):
+        f = robot.feet[side]
+        lowest[side] = geom_lowest_z(model, rep, f.geoms).min(axis=1)
+    low_all = np.minimum(lowest["left"], lowest["right"])
+    out["floor_penetration_max_mm"] = round(float(max(0.0, -low_all.min()) * 1000.0), 3)
+    drift, path, steps = [], [], []
+    for side in ("left", "right"):
+        body = robot.tree.node_body[robot.feet[side].node]
+        contact = (lowest[side][:-1] <= CONTACT_HEIGHT) & (lowest[side][1:] <= CONTACT_HEIGHT)
+        xy = rep.xpos[:, body, :2]
+        step = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 1000.0
+        for s, e in _runs(contact):  # contact pairs s..e-1 cover frames s..e
+            drift.append(float(np.linalg.norm(xy[s:e + 1] - xy[s], axis=1).max() * 1000.0))
+            path.append(float(step[s:e].sum()))
+            steps.append(step[s:e])
+    out["stances"] = len(drift)
+
+    def stat(v: list[float]) -> dict:
+        return {"mean": round(float(np.mean(v)), 2) if v else 0.0, "max": round(float(np.max(v)), 2) if v else 0.0}
+
+    out["foot_sliding_mm_per_stance"] = stat(drift)
+    out["foot_path_mm_per_stance"] = stat(path)
+    out["foot_skate_mm_per_frame"] = round(float(np.concatenate(steps).mean()), 3) if steps else 0.0
+    # Smoothness.
+    if len(q) > 3:
+        vel = np.diff(q, axis=0) * fps
+        jerk = np.diff(q, n=3, axis=0) * fps ** 3
+        root_jerk = np.diff(qpos[:, :3], n=3, axis=0) * fps ** 3
+        out["joint_velocity_max_rad_s"] = round(float(np.abs(vel).max()), 3)
+        out["joint_jerk_rms_rad_s3"] = round(float(np.sqrt(np.mean(jerk ** 2))), 2)
+        out["root_jerk_rms_m_s3"] = round(float(np.sqrt(np.mean(root_jerk ** 2))), 3)
+    return out

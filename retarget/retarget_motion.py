@@ -1,0 +1,180 @@
+"""``retarget_motion``: a human motion (HumanML3D joints, Y up) -> a robot qpos trajectory.
+
+Pipeline: place the human in the world with :class:`controlmm.frames.HumanToWorld` (uniform
+scale :func:`robot_scale`), build targets (:mod:`retarget.targets`), solve all frames at the
+motion's rate (:mod:`retarget.solver`), resample to the requested rate
+(:mod:`retarget.resample`), lift frames whose feet would touch below the floor, and measure
+the result with MuJoCo (:mod:`retarget.metrics`).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.spatial.transform import Rotation
+from threadpoolctl import ThreadpoolController
+
+from controlmm.errors import ControlMMError, ShapeError
+from controlmm.frames import HumanToWorld
+from controlmm.motion.container import Motion
+from controlmm.motion.skeleton import FPS, NUM_JOINTS
+from retarget.mapping import Mapping
+from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
+from retarget.resample import resample_qpos
+from retarget.robot_model import RobotModel, load_robot
+from retarget.solver import SolverConfig, solve
+from retarget.targets import build_targets
+from retarget.trajectory import RobotTrajectory
+
+SOLVERS = ("batched", "mink")
+FPS_RANGE = (1.0, 1000.0)
+"""Allowed output frame rates (Hz)."""
+
+RobotSpec = str | Path | Mapping | RobotModel
+
+
+def robot_scale(robot: RobotSpec = "g1") -> float:
+    """The uniform human -> robot scale used to place the human in the world.
+
+    Use it as ``HumanToWorld(scale=robot_scale(robot), yaw=..., translation=(x, y, 0))``.
+    It is the robot's rest hip height above its soles divided by the HumanML3D skeleton's
+    standing hip height (0.876 m), unless the mapping file fixes ``scale``.
+    """
+    return float(load_robot(robot).scale)
+
+
+def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray, float, dict[str, Any]]:
+    """(joints (T, 22, 3) float64, fps, source info) from a Motion, an array or a file."""
+    if isinstance(motion, (str, Path)):
+        from controlmm.motion import load_motion
+
+        path = str(motion)
+        motion = load_motion(motion)
+        info: dict[str, Any] = {"path": path}
+    else:
+        info = {}
+    if isinstance(motion, Motion):
+        joints, fps = motion.joints, motion.fps
+        if motion.text:
+            info["text"] = motion.text
+    else:
+        joints, fps = np.asarray(motion), float(FPS)
+    joints = np.asarray(joints)
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
+        raise ShapeError(f"motion joints must have shape (T, {NUM_JOINTS}, 3); got {joints.shape}")
+    if joints.shape[0] < 1:
+        raise ShapeError("the motion has no frames")
+    if not np.all(np.isfinite(joints)):
+        raise ShapeError("motion joints contain NaN/inf values")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ShapeError(f"motion fps must be a positive number; got {fps}")
+    info.update({"fps": float(fps), "frames": int(joints.shape[0])})
+    return joints.astype(np.float64), float(fps), info
+
+
+def check_fps(fps: float) -> float:
+    """The output rate as float, or a one-line error naming the allowed range."""
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise ControlMMError(f"fps must be a number; got {fps!r}") from None
+    lo, hi = FPS_RANGE
+    if not (np.isfinite(value) and lo <= value <= hi):
+        raise ControlMMError(f"fps {fps} is out of range; allowed {lo:g} to {hi:g} frames per second")
+    return value
+
+
+def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
+    """Raise the root where a foot's lowest collision point is below z = 0.
+
+    The needed lift is max-filtered then smoothed over ~0.1 s (a smoothed max-filter never
+    falls below the need), so the correction is smooth. Returns (qpos, its MuJoCo replay,
+    largest lift in m).
+    """
+    rep = replay(robot.model, qpos)
+    geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
+    need = np.maximum(-geom_lowest_z(robot.model, rep, geoms).min(axis=1), 0.0)
+    if not np.any(need > 0):
+        return qpos, rep, 0.0
+    r = max(1, int(round(0.05 * fps)))
+    lift = maximum_filter1d(need, size=4 * r + 1, mode="nearest")
+    lift = gaussian_filter1d(lift, sigma=r / 2.0, mode="nearest", truncate=4.0)
+    lift = np.maximum(lift, need)
+    out = qpos.copy()
+    out[:, 2] += lift
+    # A root translation moves every body and geom by the same amount.
+    rep.xpos[..., 2] += lift[:, None]
+    rep.geom_xpos[..., 2] += lift[:, None]
+    return out, rep, float(lift.max())
+
+
+def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec = "g1", fps: float = 50.0,
+                    transform: HumanToWorld | None = None, config: SolverConfig | None = None,
+                    metrics: bool = True, solver: str = "batched") -> RobotTrajectory:
+    """Retarget a human motion to a robot.
+
+    Args:
+        motion: a :class:`Motion`, joints (T, 22, 3) (metres, Y up, 20 fps) or a motion file.
+        robot: packaged robot name (``g1``, ``h1``), a mapping ``.json`` path or a Mapping.
+        fps: output frame rate (Hz), 1 to 1000.
+        transform: where the human is placed in the world; default
+            ``HumanToWorld(scale=robot_scale(robot))`` (start at the origin facing +X).
+        config: solver settings (default: ``SolverConfig`` with the mapping's ``solver`` overrides).
+        metrics: measure the result with MuJoCo (see :mod:`retarget.metrics`).
+        solver: ``"batched"`` (default: all frames at once, :mod:`retarget.solver`) or
+            ``"mink"`` (per-frame differential IK, :mod:`retarget.mink_ik`; optional packages).
+
+    Returns:
+        A :class:`RobotTrajectory` (qpos in MuJoCo order at ``fps``).
+    """
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        return _retarget(motion, robot, fps, transform, config, metrics, solver)
+
+
+@functools.lru_cache(maxsize=1)
+def _blas_controller() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTrajectory:
+    # Small dense/banded linear algebra: BLAS threads only add synchronisation (and on a
+    # busy machine their spinning slows the solve many times), so one thread is used.
+    start = time.perf_counter()
+    fps = check_fps(fps)
+    if solver not in SOLVERS:
+        raise ControlMMError(f"unknown solver '{solver}'; allowed: {', '.join(SOLVERS)}")
+    rm = load_robot(robot)
+    joints, src_fps, info = _motion_arrays(motion)
+    transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
+    targets = build_targets(rm, joints, src_fps, transform)
+    if solver == "mink":
+        from retarget.mink_ik import solve_mink
+
+        sol = solve_mink(rm, targets)
+    else:
+        sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))
+    quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
+    qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
+    qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
+    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
+    times = np.arange(len(qpos)) / fps
+    near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
+    stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
+    method = {"batched": "whole-sequence Levenberg-Marquardt (banded)", "mink": "mink per-frame differential IK"}
+    solver_info = {"method": method[solver], "iterations": sol.iterations,
+                   "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
+                   "solve_seconds": round(sol.seconds, 4),
+                   "floor_lift_max_mm": round(lift * 1000, 3)}
+    traj = RobotTrajectory(robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:")
+                                     else rm.mapping.source),
+                           fps=fps, qpos=qpos, joint_names=list(rm.tree.joint_names), scale=transform.scale,
+                           transform=transform, stance=stance, source=info, solver=solver_info, model=rm)
+    if metrics:
+        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, src_fps, rep=rep)
+    traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)
+    return traj

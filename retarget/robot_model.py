@@ -1,0 +1,285 @@
+"""A robot ready for retargeting: MJCF + mapping, checked against each other.
+
+``load_robot("g1")`` (a packaged name, a mapping ``.json`` path or a :class:`Mapping`) loads
+the MuJoCo model, resolves every keypoint to a node of the kinematic tree, collects the
+feet's collision geometry (the points that touch the floor), evaluates the rest pose
+(``qpos0`` with the soles on the floor) and the human -> robot scale.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from controlmm.errors import ControlMMError, InputFileError
+from controlmm.motion.skeleton import BONE_LENGTHS, JOINT_INDEX, JOINT_NAMES, PARENTS
+from retarget.kinematics import KinematicTree, Poses, quat_to_mat
+from retarget.mapping import Mapping, load_mapping
+from retarget.robots import robot_mjcf
+
+HUMAN_ANKLE_HEIGHT = 0.055
+"""Height (m) of the HumanML3D ankle joint above the floor in stance (median of the real clip 012314)."""
+
+HUMAN_HIP_HEIGHT = float((BONE_LENGTHS[4] + BONE_LENGTHS[7] + BONE_LENGTHS[5] + BONE_LENGTHS[8]) / 2
+                         + HUMAN_ANKLE_HEIGHT)
+"""Hip-joint height (m) of the HumanML3D reference skeleton standing straight (thigh + shank + ankle)."""
+
+HUMAN_PELVIS_HEIGHT = HUMAN_HIP_HEIGHT + 0.084
+"""Pelvis height (m) standing straight (hips sit 0.084 m below the pelvis joint on the reference skeleton)."""
+
+
+@dataclass(frozen=True)
+class FloorPoints:
+    """Points of a foot's collision geometry, fixed in the foot node's frame.
+
+    ``lowest = z(point) - radius``; spheres and capsule end caps give a point with a radius,
+    boxes/cylinders/meshes their corners, rims or hull vertices with radius 0.
+    """
+
+    node: int
+    points: np.ndarray  # (P, 3)
+    radius: np.ndarray  # (P,)
+    geoms: tuple[int, ...]
+
+
+def _geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """Support points (in the body frame) and radii of one collision geom."""
+    gtype = int(model.geom_type[g])
+    size = model.geom_size[g]
+    rot = quat_to_mat(model.geom_quat[g])
+    pos = model.geom_pos[g]
+    t = mujoco.mjtGeom
+    if gtype == int(t.mjGEOM_SPHERE):
+        local, rad = np.zeros((1, 3)), np.full(1, size[0])
+    elif gtype == int(t.mjGEOM_CAPSULE):
+        local, rad = np.array([[0, 0, size[1]], [0, 0, -size[1]]]), np.full(2, size[0])
+    elif gtype == int(t.mjGEOM_BOX):
+        sgn = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
+        local, rad = sgn * size[:3], np.zeros(8)
+    elif gtype == int(t.mjGEOM_CYLINDER):
+        ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+        ring = np.stack([size[0] * np.cos(ang), size[0] * np.sin(ang), np.zeros_like(ang)], -1)
+        local = np.concatenate([ring + [0, 0, size[1]], ring - [0, 0, size[1]]])
+        rad = np.zeros(len(local))
+    elif gtype == int(t.mjGEOM_ELLIPSOID):
+        local = np.concatenate([np.diag(size[:3]), -np.diag(size[:3])])
+        rad = np.zeros(6)
+    elif gtype == int(t.mjGEOM_MESH):
+        mid = model.geom_dataid[g]
+        verts = model.mesh_vert[model.mesh_vertadr[mid]: model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
+        try:
+            from scipy.spatial import ConvexHull
+
+            verts = verts[ConvexHull(verts).vertices]
+        except Exception:  # noqa: BLE001 - degenerate meshes keep all vertices
+            pass
+        local, rad = np.asarray(verts, dtype=float), np.zeros(len(verts))
+    else:
+        return np.zeros((0, 3)), np.zeros(0)
+    return pos + local @ rot.T, rad
+
+
+def collision_geoms(model: mujoco.MjModel, body: int) -> list[int]:
+    """Collision geoms (contype or conaffinity set) of a body."""
+    return [g for g in range(model.ngeom)
+            if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])]
+
+
+class RobotModel:
+    """An MJCF robot plus a mapping, resolved for the solver.
+
+    Attributes:
+        mapping: the :class:`Mapping`.
+        model: the compiled ``mujoco.MjModel`` (the robot MJCF, unchanged).
+        mjcf: path of the MJCF.
+        tree: :class:`KinematicTree`.
+        joints: mapped human joint indices (K,), HumanML3D order.
+        nodes: (K,) tree node of each keypoint; offsets: (K, 3) in the node frame.
+        feet: {"left": FloorPoints, "right": FloorPoints} (the ankles' bodies).
+        rest_q: (nj,) rest joint angles (qpos0 clipped to the limits).
+        rest: Poses of the rest pose with the root at the world origin, identity rotation.
+        floor_z: lowest foot point (m) of the rest pose (subtract it to stand on the floor).
+        scale: the human -> robot uniform scale.
+        body_joints: every robot body name -> human joint names it follows.
+    """
+
+    def __init__(self, mapping: Mapping) -> None:
+        self.mapping = mapping
+        path = Path(mapping.robot) if mapping.robot.endswith(".xml") else robot_mjcf(mapping.robot)
+        if not path.is_file():
+            raise InputFileError(f"robot MJCF '{path}' does not exist")
+        try:
+            self.model = mujoco.MjModel.from_xml_path(str(path))
+        except ValueError as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else "invalid MJCF"
+            raise InputFileError(f"cannot load robot MJCF '{path}': {first}") from None
+        self.mjcf = path
+        m = self.model
+        self.tree = tree = KinematicTree(m)
+        body_names = {m.body(b).name: b for b in range(m.nbody)}
+        site_names = {m.site(s).name: s for s in range(m.nsite)}
+        where = f"mapping {mapping.source}"
+        joints, nodes, offsets = [], [], []
+        for kp in mapping.keypoints:
+            if kp.body is not None:
+                if kp.body not in body_names:
+                    raise ControlMMError(f"{where}: body '{kp.body}' (for '{kp.joint}') is not in {path.name}; "
+                                         f"bodies: {', '.join(n for n in body_names if n and n != 'world')}")
+                node = tree.node_of_body(body_names[kp.body])
+                off = np.asarray(kp.offset, dtype=float)
+            else:
+                if kp.site not in site_names:
+                    raise ControlMMError(f"{where}: site '{kp.site}' (for '{kp.joint}') is not in {path.name}; "
+                                         f"sites: {', '.join(site_names) or 'none'}")
+                s = site_names[kp.site]
+                node = tree.node_of_body(int(m.site_bodyid[s]))
+                off = m.site_pos[s] + quat_to_mat(m.site_quat[s]) @ np.asarray(kp.offset, dtype=float)
+            joints.append(JOINT_INDEX[kp.joint])
+            nodes.append(node)
+            offsets.append(off)
+        self.joints = np.array(joints)
+        self.nodes = np.array(nodes)
+        self.offsets = np.array(offsets)
+        self.keypoint_names = [JOINT_NAMES[j] for j in joints]
+        for name in mapping.posture_weights:
+            if name != "default" and name not in tree.joint_names:
+                raise ControlMMError(f"{where}: posture weight for unknown joint '{name}'; joints: "
+                                     f"{', '.join(tree.joint_names)}")
+        default = mapping.posture_weights.get("default", 0.02)
+        self.posture_weights = np.array([mapping.posture_weights.get(n, default) for n in tree.joint_names])
+        # Feet: the bodies of the ankle keypoints and their collision geometry.
+        self.feet: dict[str, FloorPoints] = {}
+        for side in ("left", "right"):
+            k = self.keypoint_index(f"{side}_ankle")
+            node = int(self.nodes[k])
+            body = int(tree.node_body[node])
+            geoms = collision_geoms(m, body)
+            pts, rad = [], []
+            for g in geoms:
+                p, r = _geom_points(m, g)
+                pts.append(p)
+                rad.append(r)
+            if not geoms or sum(len(p) for p in pts) == 0:
+                raise ControlMMError(f"{where}: the {side} foot body '{m.body(body).name}' (body of "
+                                     f"'{side}_ankle') has no collision geometry to stand on")
+            self.feet[side] = FloorPoints(node, np.concatenate(pts), np.concatenate(rad), tuple(geoms))
+        # Rest pose: qpos0, root at the origin; the floor is its lowest foot point.
+        self.rest_q = np.clip(tree.qpos0, tree.lower, tree.upper)
+        self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
+        self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
+        self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)
+        self.scale = mapping.scale if mapping.scale is not None else self._auto_scale()
+        self.body_joints = self._body_joints()
+
+    # -- lookups -------------------------------------------------------------------------
+    def keypoint_index(self, joint: str) -> int:
+        """Index into the keypoint arrays of a mapped human joint."""
+        try:
+            return self.keypoint_names.index(joint)
+        except ValueError:
+            raise ControlMMError(f"human joint '{joint}' is not mapped for robot '{self.name}'") from None
+
+    def has_keypoint(self, joint: str) -> bool:
+        return joint in self.keypoint_names
+
+    @property
+    def name(self) -> str:
+        return self.mapping.name
+
+    @property
+    def body_names(self) -> list[str]:
+        """Robot body names in MuJoCo order, without the world body."""
+        return [self.model.body(b).name for b in range(1, self.model.nbody)]
+
+    def foot_lowest(self, poses: Poses, side: str) -> np.ndarray:
+        """Lowest z (m) of a foot's collision points per frame, (T,)."""
+        f = self.feet[side]
+        pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
+        return (pts[..., 2] - f.radius).min(axis=1)
+
+    # -- derived quantities ----------------------------------------------------------------
+    def _auto_scale(self) -> float:
+        """Rest hip height above the soles divided by the human's (or the pelvis ratio without hips)."""
+        hips = [j for j in ("left_hip", "right_hip") if self.has_keypoint(j)]
+        if hips:
+            z = np.mean([self.rest_keypoints[self.keypoint_index(j), 2] for j in hips]) - self.floor_z
+            return float(z / HUMAN_HIP_HEIGHT)
+        z = self.rest_keypoints[self.keypoint_index("pelvis"), 2] - self.floor_z
+        return float(z / HUMAN_PELVIS_HEIGHT)
+
+    def _body_joints(self) -> dict[str, tuple[str, ...]]:
+        """Every body -> human joints: as listed in the mapping, else nearest mapped descendant/ancestor."""
+        m = self.model
+        names = {m.body(b).name: b for b in range(1, m.nbody)}
+        for body in self.mapping.body_joints:
+            if body not in names:
+                raise ControlMMError(f"mapping {self.mapping.source}: body_joints names body '{body}', "
+                                     f"which is not in {self.mjcf.name}")
+        own: dict[int, list[str]] = {}
+        for kp, node in zip(self.keypoint_names, self.nodes):
+            own.setdefault(int(self.tree.node_body[node]), []).append(kp)
+        children: dict[int, list[int]] = {}
+        for b in range(1, m.nbody):
+            children.setdefault(int(m.body_parentid[b]), []).append(b)
+        out: dict[str, tuple[str, ...]] = {}
+        for name, b in names.items():
+            if name in self.mapping.body_joints:
+                out[name] = self.mapping.body_joints[name]
+                continue
+            found: list[str] = []
+            frontier = [b]
+            while frontier and not found:  # breadth-first over descendants
+                for x in frontier:
+                    found += own.get(x, [])
+                frontier = [c for x in frontier for c in children.get(x, [])]
+            a = b
+            while not found and a > 0:
+                found = list(own.get(a, []))
+                a = int(m.body_parentid[a])
+            out[name] = tuple(dict.fromkeys(found)) or ("pelvis",)
+        return out
+
+    def human_parent_keypoint(self, k: int) -> int | None:
+        """Index of the nearest mapped human ancestor of keypoint k (position-weighted), or None."""
+        j = int(PARENTS[self.joints[k]])
+        while j >= 0:
+            if JOINT_NAMES[j] in self.keypoint_names:
+                kk = self.keypoint_names.index(JOINT_NAMES[j])
+                kp = self.mapping.keypoints[kk]
+                if kp.position_weight > 0 or kp.segment_weight > 0:
+                    return kk
+            j = int(PARENTS[j])
+        return None
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(key: str) -> RobotModel:
+    return RobotModel(load_mapping(key))
+
+
+def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:
+    """A :class:`RobotModel` from a packaged robot name, a mapping file path or a :class:`Mapping`."""
+    if isinstance(robot, RobotModel):
+        return robot
+    if isinstance(robot, Mapping):
+        return RobotModel(robot)
+    text = str(robot).strip()
+    if text.lower().endswith(".json"):
+        path = Path(text).expanduser()
+        if path.is_file():
+            stat = path.stat()
+            return _load_cached_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        return _load_cached(text)  # raises the one-line error
+    if text.lower().endswith(".xml"):
+        raise ControlMMError(f"'{text}' is an MJCF file; pass a mapping .json that names it "
+                             "(see docs/retargeting.md)")
+    return _load_cached(text.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached_file(path: str, mtime: int, size: int) -> RobotModel:
+    return RobotModel(load_mapping(path))

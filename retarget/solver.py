@@ -1,0 +1,421 @@
+"""Whole-sequence retargeting solver: box-constrained Levenberg-Marquardt over all frames.
+
+Unknowns: for every frame t the floating base (position p_t, rotation R_t) and the joint
+angles q_t. The cost is a sum of squares (metres unless noted)::
+
+    sum_t  sum_k w_k(t) |p_k(t) - target_k(t)|^2                      keypoint positions
+         + sum_s w_s |(p_child - p_parent)(t) - seg_s(t)|^2            segment vectors
+         + sum_o w_o(t) L_ROT^2 |a_o * log(R_o(t) R*_o(t)^T)|^2        orientations (a_o: tilt/heading)
+         + W_FLOOR sum_feet points min(0, z - radius - clearance(t))^2   floor (1 mm in stance, 16 mm in swing)
+         + sum_j w_j (L_POSTURE (q_j - q_rest_j))^2                      posture prior
+         + sum_c W_VEL_c |D1 x_c|^2 + W_ACC_c |D2 x_c|^2                 velocity / acceleration
+
+Each iteration linearises every frame with analytic Jacobians (:mod:`retarget.kinematics`),
+adds the temporal terms (which couple frame t with t +- 1 and t +- 2) and solves the normal
+equations of all frames at once with a banded Cholesky factorisation
+(``scipy.linalg.solveh_banded``). By default the lag-2 acceleration couplings are moved onto
+the diagonal (an upper bound of the Hessian; the gradient stays exact), which halves the
+bandwidth to 6 + nj and quarters the factorisation time.
+
+* Joint limits are exact: joints on a bound whose gradient pushes outward are frozen; joints
+  whose step would cross a bound are held at the bound and the step is solved again for
+  the rest; every step is projected onto the box.
+* Damping is per frame: frames are nearly independent, so each frame keeps the step only
+  if its own cost drops, and its damping falls or rises on its own.
+* Coarse to fine (``SolverConfig.levels``): every 3rd frame first, then all frames.
+* Stance feet are finally moved onto their locks with the legs' own joints
+  (:mod:`retarget.feet`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.linalg
+
+from retarget.kinematics import Poses, so3_exp, so3_log
+from retarget.robot_model import RobotModel
+from retarget.targets import Targets
+
+L_ROT = 0.2
+"""Metres per radian of orientation error (an error of 1 rad costs like 0.2 m)."""
+L_POSTURE = 0.1
+"""Metres per radian of posture error."""
+W_FLOOR = 100.0
+"""Weight of the floor/clearance term (per foot collision point)."""
+PIN = 1e9
+"""Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
+CROSS_TOLERANCE = 0.01
+"""Joint-limit overshoot (rad) of a step above which the step is re-solved with those joints pinned."""
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Solver settings; the weights multiply the per-keypoint weights of the mapping.
+
+    Temporal weights apply to differences at 20 fps and are rescaled for other rates so that
+    the same physical velocity/acceleration costs the same.
+    """
+
+    max_iterations: int = 25
+    """Iterations when ``levels`` is empty (one level, all frames)."""
+    tolerance: float = 0.01
+    """Stop a level when an iteration lowers the cost by less than this fraction."""
+    damping: float = 1e-4
+    """Initial Levenberg-Marquardt damping (per frame)."""
+    w_vel_root: float = 0.5
+    w_vel_joint: float = 0.1
+    w_acc_root: float = 2.0
+    w_acc_joint: float = 1.0
+    exact_acceleration: bool = False
+    """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
+    levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
+    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
+    pin_iterations: int = 1
+    """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
+
+
+@dataclass
+class Solution:
+    """Solver output at the targets' frame rate.
+
+    Attributes:
+        root_pos: (T, 3); root_rot: (T, 3, 3); q: (T, nj) joint angles (within limits).
+        iterations: LM iterations run; cost: final cost; seconds: wall time.
+        history: cost per accepted iteration.
+    """
+
+    root_pos: np.ndarray
+    root_rot: np.ndarray
+    q: np.ndarray
+    iterations: int
+    cost: float
+    seconds: float
+    history: list[float] = field(default_factory=list)
+    damping: np.ndarray | float = 0.0
+
+
+@dataclass
+class _State:
+    """One configuration of all frames with its kinematics, residuals and cost."""
+
+    root_pos: np.ndarray
+    root_rot: np.ndarray
+    q: np.ndarray
+    poses: Poses
+    pts: np.ndarray
+    active: np.ndarray
+    kp_res: np.ndarray
+    seg_res: np.ndarray
+    ori_res: np.ndarray
+    floor_res: np.ndarray
+    x: np.ndarray
+    cost: float
+    frame_cost: np.ndarray
+
+
+class _Problem:
+    """Residuals, Jacobians and the banded normal equations of one retargeting problem."""
+
+    def __init__(self, robot: RobotModel, targets: Targets, config: SolverConfig) -> None:
+        self.robot, self.targets, self.config = robot, targets, config
+        tree = robot.tree
+        self.tree = tree
+        self.t_len = targets.kp_pos.shape[0]
+        self.n = tree.nv
+        feet = [robot.feet["left"], robot.feet["right"]]
+        self.foot_nodes = np.concatenate([np.full(len(f.points), f.node) for f in feet])
+        self.foot_points = np.concatenate([f.points for f in feet])
+        self.foot_radius = np.concatenate([f.radius for f in feet])
+        self.foot_clearance = np.concatenate(
+            [np.repeat(targets.clearance[side][:, None], len(f.points), axis=1)
+             for side, f in zip(("left", "right"), feet)], axis=1)  # (T, P)
+        self.k_len = len(robot.nodes)
+        self.point_nodes = np.concatenate([robot.nodes, self.foot_nodes])
+        self.point_offsets = np.concatenate([robot.offsets, self.foot_points])
+        self.ori_nodes = robot.nodes[targets.ori_kp]
+        self.sqrt_kp = np.sqrt(targets.kp_weight)
+        self.sqrt_seg = np.sqrt(targets.seg_weight)
+        self.sqrt_ori = (np.sqrt(targets.ori_weight)[..., None] * L_ROT
+                         * np.sqrt(targets.ori_axis_weight)[None])  # (T, O, 3)
+        self.posture = robot.posture_weights * L_POSTURE ** 2
+        # Temporal weights per velocity coordinate, rescaled to the frame rate.
+        r = targets.fps / 20.0
+        c = config
+        self.w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
+        self.w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
+        self._banded_indices()
+        # Segment s pulls keypoints child(+) and parent(-): incidence (K, S) and sum_s w_s d d^T.
+        inc = np.zeros((self.k_len, len(targets.seg_child)))
+        inc[targets.seg_child, np.arange(inc.shape[1])] = 1.0
+        inc[targets.seg_parent, np.arange(inc.shape[1])] = -1.0
+        self._incidence = inc
+        self._seg_matrix = (inc * targets.seg_weight) @ inc.T
+
+    # -- cost and linearisation ---------------------------------------------------------------
+    def evaluate(self, root_pos, root_rot, q) -> "_State":
+        """Forward kinematics, residuals and cost at one configuration of all frames."""
+        tree, tg = self.tree, self.targets
+        poses: Poses = tree.forward(root_pos, root_rot, q)
+        pts = tree.points(poses, self.point_nodes, self.point_offsets)
+        kp = pts[:, : self.k_len]
+        foot = pts[:, self.k_len:]
+        kp_res = kp - tg.kp_pos
+        seg_res = kp[:, tg.seg_child] - kp[:, tg.seg_parent] - tg.seg_vec
+        ori_res = self.sqrt_ori * so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
+        low = foot[..., 2] - self.foot_radius - self.foot_clearance
+        active = low < 0
+        floor_res = np.sqrt(W_FLOOR) * np.where(active, low, 0.0)
+        frame_cost = (np.sum(tg.kp_weight * np.sum(kp_res ** 2, axis=-1), axis=1)
+                      + np.sum(tg.seg_weight * np.sum(seg_res ** 2, axis=-1), axis=1)
+                      + np.sum(ori_res ** 2, axis=(1, 2)) + np.sum(floor_res ** 2, axis=1)
+                      + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1))
+        x = self.temporal_values(root_pos, root_rot, q)
+        d1, d2 = np.diff(x, axis=0), np.diff(x, n=2, axis=0)
+        cost = float(frame_cost.sum() + np.sum(self.w_vel * d1 * d1) + np.sum(self.w_acc * d2 * d2))
+        return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, x, cost,
+                      frame_cost)
+
+    def normal_equations(self, st: "_State") -> tuple[np.ndarray, np.ndarray]:
+        """Gauss-Newton blocks H (T, n, n) and gradient g (T, n) of the per-frame terms.
+
+        Keypoint and segment terms share one Jacobian: with W(t) = diag(w_k(t)) + sum_s w_s
+        (e_child - e_parent)(e_child - e_parent)^T, their Hessian is J^T (W (x) I3) J.
+        """
+        tree, tg = self.tree, self.targets
+        t, n, k = self.t_len, self.n, self.k_len
+        jk = tree.point_jacobian(st.poses, self.robot.nodes, st.pts[:, :k])  # (T, K, 3, n)
+        flat = jk.reshape(t, 3 * k, n)
+        wk = self._seg_matrix + tg.kp_weight[:, :, None] * np.eye(k)  # (T, K, K)
+        b = (wk @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
+        jt = np.swapaxes(flat, 1, 2)
+        h = jt @ b
+        u = tg.kp_weight[..., None] * st.kp_res + self._incidence @ (tg.seg_weight[:, None] * st.seg_res)
+        g = (jt @ u.reshape(t, 3 * k, 1))[..., 0]
+        jr = (self.sqrt_ori[..., None] * tree.rotation_jacobian(st.poses, self.ori_nodes)).reshape(t, -1, n)
+        jrt = np.swapaxes(jr, 1, 2)
+        h += jrt @ jr
+        g += (jrt @ st.ori_res.reshape(t, -1, 1))[..., 0]
+        if st.active.any():
+            jf = tree.point_jacobian(st.poses, self.foot_nodes, st.pts[:, k:], rows=(2,))[:, :, 0]
+            jf *= (np.sqrt(W_FLOOR) * st.active)[..., None]
+            jft = np.swapaxes(jf, 1, 2)
+            h += jft @ jf
+            g += (jft @ st.floor_res[..., None])[..., 0]
+        return h, g
+
+    def temporal_values(self, root_pos, root_rot, q) -> np.ndarray:
+        """(T, n) sequences the temporal terms act on (root rotation unwrapped as a rotation vector)."""
+        steps = so3_log(root_rot[1:] @ np.swapaxes(root_rot[:-1], -1, -2))
+        phi = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+        return np.concatenate([root_pos, phi, q], axis=1)
+
+    def gradient_temporal(self, x: np.ndarray) -> np.ndarray:
+        """Gradient (T, n) of the velocity and acceleration terms."""
+        g = np.zeros_like(x)
+        if len(x) > 1:
+            g -= np.diff(np.pad(np.diff(x, axis=0) * self.w_vel, ((1, 1), (0, 0))), axis=0)
+        if len(x) > 2:
+            g += np.diff(np.pad(np.diff(x, n=2, axis=0) * self.w_acc, ((2, 2), (0, 0))), n=2, axis=0)
+        return g
+
+    # -- banded normal equations -------------------------------------------------------------
+    def _banded_indices(self) -> None:
+        t, n = self.t_len, self.n
+        self.kd = 2 * n if (t > 2 and self.config.exact_acceleration) else n
+        a, b = np.triu_indices(n)
+        self._tri = (a, b)
+        self._rows = np.broadcast_to(self.kd + a - b, (t, len(a)))
+        self._cols = np.arange(t)[:, None] * n + b[None, :]
+        # Temporal diagonals (same coordinate, lags 0, 1, 2), per frame and coordinate.
+        d0 = np.zeros((t, n))
+        d1 = np.zeros((max(t - 1, 0), n))
+        d2 = np.zeros((max(t - 2, 0), n))
+        if t > 1:
+            d0[:-1] += self.w_vel
+            d0[1:] += self.w_vel
+            d1 -= self.w_vel
+        if t > 2:
+            d0[:-2] += self.w_acc
+            d0[1:-1] += 4 * self.w_acc
+            d0[2:] += self.w_acc
+            d1[:-1] -= 2 * self.w_acc
+            d1[1:] -= 2 * self.w_acc
+            d2 += self.w_acc
+            if not self.config.exact_acceleration:
+                # Drop the lag-2 couplings from the matrix (bandwidth n instead of 2n) and
+                # add their absolute value to the diagonal: the matrix stays an upper bound of
+                # the true Hessian, the gradient stays exact, so LM still converges to the
+                # same optimum.
+                d0[:-2] += self.w_acc
+                d0[2:] += self.w_acc
+        self._d0, self._d1, self._d2 = d0, d1, d2
+
+    def normal_matrix(self, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """Upper banded storage (kd + 1, T * n) of H + temporal + diag(lam_t) (H: (T, n, n) blocks, lam: (T,))."""
+        t, n, kd = self.t_len, self.n, self.kd
+        ab = np.zeros((kd + 1, t * n))
+        a, b = self._tri
+        ab[self._rows, self._cols] = h[:, a, b]
+        diag = self._d0 + np.asarray(lam, dtype=float).reshape(-1, 1)
+        diag[:, 6:] += self.posture
+        ab[kd] += diag.reshape(-1)
+        if t > 1:
+            ab[kd - n, n:] += self._d1.reshape(-1)
+        if t > 2 and kd >= 2 * n:
+            ab[kd - 2 * n, 2 * n:] += self._d2.reshape(-1)
+        return ab
+
+    def solve_step(self, ab: np.ndarray, g: np.ndarray, fixed: np.ndarray,
+                   fixed_step: np.ndarray | None = None) -> np.ndarray:
+        """Solve the banded system ``ab`` dx = -g for all frames at once; returns dx (T, n).
+
+        Coordinates where ``fixed`` is True take the step ``fixed_step`` (0 when None) and
+        the others are solved with those steps substituted (a large diagonal pins them).
+        """
+        ab = ab.copy()
+        ab[self.kd] += (fixed * PIN).reshape(-1)
+        target = np.zeros_like(g) if fixed_step is None else fixed_step
+        rhs = np.where(fixed, PIN * target, -g).reshape(-1)
+        sol = scipy.linalg.solveh_banded(ab, rhs, lower=False, check_finite=False, overwrite_ab=True)
+        return sol.reshape(self.t_len, self.n)
+
+
+def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Root from the pelvis target (position + pelvis frame), joints at the rest pose."""
+    from retarget.targets import human_frames
+
+    k = robot.keypoint_index("pelvis")
+    node = robot.nodes[k]
+    frame = human_frames(targets.human_world)["pelvis"]
+    rot = frame @ robot.rest.rot[0, node] @ robot.rest.rot[0, 0].T
+    pos = targets.kp_pos[:, k] - rot @ robot.rest_keypoints[k]
+    q = np.tile(robot.rest_q, (len(pos), 1))
+    return pos, rot, q
+
+
+def _subsample(targets: Targets, step: int) -> Targets:
+    """Every ``step``-th frame of the targets (the last frame always kept)."""
+    idx = np.unique(np.r_[np.arange(0, len(targets.kp_pos), step), len(targets.kp_pos) - 1])
+    pick = lambda a: a[idx]  # noqa: E731
+    return Targets(
+        fps=targets.fps / step, transform=targets.transform, human_world=pick(targets.human_world),
+        kp_pos=pick(targets.kp_pos), kp_weight=pick(targets.kp_weight), seg_parent=targets.seg_parent,
+        seg_child=targets.seg_child, seg_vec=pick(targets.seg_vec), seg_weight=targets.seg_weight,
+        ori_kp=targets.ori_kp, ori_rot=pick(targets.ori_rot), ori_weight=pick(targets.ori_weight),
+        ori_axis_weight=targets.ori_axis_weight,
+        stance={k: pick(v) for k, v in targets.stance.items()}, lock={k: pick(v) for k, v in targets.lock.items()},
+        clearance={k: pick(v) for k, v in targets.clearance.items()},
+    ), idx
+
+
+def _upsample(sol_pos, sol_rot, sol_q, idx, dst):
+    """Interpolate a solution known at frames ``idx`` to frames ``dst`` (linear / geodesic)."""
+    seg = np.clip(np.searchsorted(idx, dst, side="right") - 1, 0, len(idx) - 2)
+    w = np.clip((dst - idx[seg]) / (idx[seg + 1] - idx[seg]), 0.0, 1.0)[:, None]
+    pos = sol_pos[seg] * (1 - w) + sol_pos[seg + 1] * w
+    q = sol_q[seg] * (1 - w) + sol_q[seg + 1] * w
+    delta = so3_log(sol_rot[seg + 1] @ np.swapaxes(sol_rot[seg], -1, -2))
+    rot = so3_exp(delta * w) @ sol_rot[seg]
+    return pos, rot, q
+
+
+def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConfig(),
+          init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Solution:
+    """Run the solver on ``targets``; see the module docstring.
+
+    Coarse to fine (``config.levels``, without ``init``): each level solves every k-th frame
+    for a few iterations and its interpolation starts the next level; the last level is
+    every frame.
+    """
+    start = time.perf_counter()
+    n = len(targets.kp_pos)
+    levels = [(k, it) for k, it in config.levels if k == 1 or n >= 4 * k] if init is None else []
+    if not levels or levels[-1][0] != 1:
+        levels.append((1, config.max_iterations))
+    total, damping, prev = 0, config.damping, None
+    for k, iters in levels:
+        small, idx = _subsample(targets, k) if k > 1 else (targets, np.arange(n))
+        if prev is not None:
+            init = _upsample(*prev, idx)
+        cfg = replace(config, max_iterations=iters, damping=damping)
+        sol = _solve(robot, small, cfg, init)
+        total += sol.iterations
+        damping = max(config.damping, float(np.median(sol.damping)))
+        prev = (sol.root_pos, sol.root_rot, sol.q, idx)
+    sol.iterations = total
+    if config.pin_iterations > 0:
+        from retarget.feet import pin_stance_feet
+
+        sol.q = pin_stance_feet(robot, targets, sol.root_pos, sol.root_rot, sol.q, config.pin_iterations)
+    sol.seconds = time.perf_counter() - start
+    return sol
+
+
+def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
+           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> Solution:
+    start = time.perf_counter()
+    prob = _Problem(robot, targets, config)
+    tree = robot.tree
+    root_pos, root_rot, q = init if init is not None else initial_guess(robot, targets)
+    lower, upper = tree.lower, tree.upper
+    st = prob.evaluate(root_pos, root_rot, np.clip(q, lower, upper))
+    history = [st.cost]
+    # Levenberg-Marquardt with one damping per frame: frames are nearly independent, so
+    # each keeps the step only if its own cost drops, and its damping adapts on its own.
+    lam = np.full(prob.t_len, config.damping)
+    iterations = 0
+    need_linearise = True
+    for iterations in range(1, config.max_iterations + 1):
+        if need_linearise:
+            h, g = prob.normal_equations(st)
+            g += prob.gradient_temporal(st.x)
+            g[:, 6:] += prob.posture * (st.q - robot.rest_q)
+            frozen = np.zeros_like(g, dtype=bool)
+            frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | ((st.q >= upper - 1e-12) & (g[:, 6:] < 0))
+        try:
+            ab = prob.normal_matrix(h, lam)
+            step = prob.solve_step(ab, g, frozen)
+            # Joints whose step crosses a limit stop at the limit; the others are solved
+            # again with those steps fixed (skipped when the overshoot is tiny: plain clip).
+            qs = st.q + step[:, 6:]
+            over = np.maximum(qs - upper, lower - qs)
+            if over.max() > CROSS_TOLERANCE:
+                cross = np.zeros_like(frozen)
+                cross[:, 6:] = over > 0
+                fixed_step = np.zeros_like(step)
+                fixed_step[:, 6:] = np.clip(qs, lower, upper) - st.q
+                step = prob.solve_step(ab, g, frozen | cross, fixed_step)
+        except np.linalg.LinAlgError:
+            lam *= 10
+            need_linearise = False
+            continue
+        trial = prob.evaluate(st.root_pos + step[:, 0:3], so3_exp(step[:, 3:6]) @ st.root_rot,
+                              np.clip(st.q + step[:, 6:], lower, upper))
+        better = trial.frame_cost < st.frame_cost
+        if trial.cost >= st.cost and better.any() and not better.all():
+            b3 = better[:, None]
+            trial = prob.evaluate(np.where(b3, trial.root_pos, st.root_pos),
+                                  np.where(better[:, None, None], trial.root_rot, st.root_rot),
+                                  np.where(b3, trial.q, st.q))
+        if trial.cost < st.cost:
+            done = (st.cost - trial.cost) < config.tolerance * st.cost
+            st = trial
+            history.append(st.cost)
+            lam = np.where(better, np.maximum(lam / 3, 1e-9), lam * 10)
+            need_linearise = True
+            if done:
+                break
+        else:
+            lam *= 10
+            need_linearise = False
+            if lam.min() > 1e6:
+                break
+    root_pos, root_rot, q, cost = st.root_pos, st.root_rot, st.q, st.cost
+    # re-orthonormalise the root rotations
+    u, _, vt = np.linalg.svd(root_rot)
+    root_rot = u @ vt
+    return Solution(root_pos=root_pos, root_rot=root_rot, q=q, iterations=iterations, cost=cost,
+                    seconds=time.perf_counter() - start, history=history, damping=lam)
