@@ -1,0 +1,1 @@
+"""Procedural motion corpus in HumanML3D format."""
