@@ -115,24 +115,24 @@ def foot_skating_ratio(joints: np.ndarray, fps: float = 20.0) -> float:
 
 
 def oscillations(signal: np.ndarray, min_amplitude: float) -> int:
-    """Count alternating extrema of a 1-D signal whose successive swings exceed ``min_amplitude``
-    (hysteresis): a back-and-forth wave of n cycles gives about 2n."""
+    """Number of monotone swings of a 1-D signal between turning points that each span at
+    least ``min_amplitude`` (hysteresis): n back-and-forth cycles give about 2n swings."""
     x = np.asarray(signal, dtype=np.float64)
-    if len(x) < 3:
+    if len(x) < 2:
         return 0
-    count, direction, anchor = 0, 0, x[0]
-    extreme = x[0]
+    count, direction, anchor, extreme = 0, 0.0, x[0], x[0]
     for value in x[1:]:
-        if direction >= 0 and value > extreme:
+        if direction == 0.0:
+            if abs(value - anchor) >= min_amplitude:
+                direction, extreme = float(np.sign(value - anchor)), value
+            continue
+        if direction * (value - extreme) > 0:
             extreme = value
-        if direction <= 0 and value < extreme:
-            extreme = value
-        if direction >= 0 and extreme - value > min_amplitude and extreme - anchor > min_amplitude * 0.5:
-            count += 1 if direction > 0 else 0
-            direction, anchor, extreme = -1, extreme, value
-        elif direction <= 0 and value - extreme > min_amplitude and anchor - extreme > min_amplitude * 0.5:
-            count += 1 if direction < 0 else 0
-            direction, anchor, extreme = 1, extreme, value
+        elif direction * (extreme - value) >= min_amplitude:
+            count += 1
+            anchor, extreme, direction = extreme, value, -direction
+    if direction != 0.0 and abs(extreme - anchor) >= min_amplitude:
+        count += 1
     return count
 
 

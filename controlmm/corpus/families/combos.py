@@ -65,7 +65,7 @@ register(Family(
         Template("waving {poss} {hand} overhead, {subj} strolls {forward}", held=True),
     ),
     slots=lambda p: {"walk": WALK, "forward": FORWARD, "hand": hand_slot(p["hand"])},
-    core=lambda p: {"hand": p["hand"], "direction": "forward"},
+    core=lambda p: {"hand": p["hand"], "travel": "forward"},
 ))
 
 
@@ -160,5 +160,5 @@ register(Family(
     ),
     slots=lambda p: {"walk": WALK, "forward": FORWARD,
                      "times": times_slot(p["count"]), "squats": counted_slot(p["count"], "squat", "squats")},
-    core=lambda p: {"direction": "forward", "count": p["count"]},
+    core=lambda p: {"travel": "forward", "count": p["count"]},
 ))

@@ -190,5 +190,5 @@ register(Family(
         Template("{subj} hops {forward} on both feet {times}", held=True),
     ),
     slots=_forward_slots,
-    core=lambda p: {"count": p["count"], "direction": "forward"},
+    core=lambda p: {"count": p["count"], "travel": "forward"},
 ))

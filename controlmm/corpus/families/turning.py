@@ -24,8 +24,8 @@ def _r(x: float) -> float:
 
 ANGLE_DEG = {90: ("90 degrees", "ninety degrees"), 180: ("180 degrees",), 270: ("270 degrees",),
              360: ("360 degrees",)}
-ANGLE_NOUN = {90: (("a quarter turn", "a ninety degree turn"), ("a right-angle turn",)),
-              180: (("a half turn", "a u-turn", "a 180 degree turn"), ("an about-face",)),
+ANGLE_NOUN = {90: (("a quarter turn", "a ninety degree turn"), ("a right angle turn",)),
+              180: (("a half turn", "a u-turn", "a 180 degree turn"), ("a turnaround",)),
               270: (("a three quarter turn",), ("a 270 degree turn",)),
               360: (("a full turn", "a complete turn", "a full circle"), ("a 360 degree spin",))}
 
@@ -124,7 +124,7 @@ def _circle_builder(rotation: str):
 
 
 ROTATION = {
-    "clockwise": Slot(("clockwise", "in a clockwise direction"), ("the way a clock's hands go",),
+    "clockwise": Slot(("clockwise", "in a clockwise direction"), ("in the same direction as a clock",),
                       ("rotation", "clockwise")),
     "counterclockwise": Slot(("counterclockwise", "counter-clockwise", "anticlockwise"),
                              ("against the clock", "in an anticlockwise direction"), ("rotation", "counterclockwise")),

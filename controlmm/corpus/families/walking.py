@@ -93,7 +93,7 @@ register(Family(
         Template("{subj} goes for a walk {forward} {speed}", held=True),
     ),
     slots=lambda p: {"walk": WALK, "forward": FORWARD, "speed": speed_slot(p["speed_class"])},
-    core=lambda p: {"direction": "forward"},
+    core=lambda p: {"travel": "forward"},
 ))
 
 
@@ -118,7 +118,7 @@ register(Family(
         Template("{subj} {jog} {forward} at an easy pace", held=True),
     ),
     slots=lambda p: {"jog": JOG, "forward": FORWARD},
-    core=lambda p: {"direction": "forward"},
+    core=lambda p: {"travel": "forward"},
 ))
 
 
@@ -141,7 +141,7 @@ register(Family(
         Template("at full speed {subj} {run} {forward}", held=True),
     ),
     slots=lambda p: {"run": RUN, "forward": FORWARD},
-    core=lambda p: {"direction": "forward"},
+    core=lambda p: {"travel": "forward"},
 ))
 
 
@@ -167,7 +167,7 @@ register(Family(
         Template("{subj} retreats by stepping {backward}", held=True),
     ),
     slots=lambda p: {"walk": WALK, "backward": BACKWARD},
-    core=lambda p: {"direction": "backward"},
+    core=lambda p: {"travel": "backward"},
 ))
 
 
@@ -231,7 +231,7 @@ register(Family(
         Template("{subj} {walk} {forward} in a squatting position", held=True),
     ),
     slots=lambda p: {"walk": WALK, "forward": FORWARD},
-    core=lambda p: {"direction": "forward", "crouched": True},
+    core=lambda p: {"travel": "forward", "crouched": True},
 ))
 
 
@@ -265,11 +265,11 @@ register(Family(
         Template("{subj} {walk} {forward}, pauses, and continues walking"),
         Template("{subj} walks, comes to a stop, and then walks on"),
         Template("{subj} {walk} {forward} and briefly stops before walking again"),
-        Template("{subj} halts mid-walk and then resumes walking {forward}", held=True),
+        Template("{subj} halts in the middle of the walk and then resumes walking {forward}", held=True),
         Template("after a short pause in the walk, {subj} carries on {forward}", held=True),
     ),
     slots=lambda p: {"walk": WALK, "forward": FORWARD},
-    core=lambda p: {"direction": "forward", "stops": 1},
+    core=lambda p: {"travel": "forward", "stops": 1},
 ))
 
 

@@ -110,7 +110,11 @@ def _fill(family: str, index: int, tp: Template, slots: dict[str, Slot], rng: np
         values[name] = pool[k]
         used_held = used_held or k >= len(slot.options)
         if slot.claim is not None:
-            claims[slot.claim[0]] = slot.claim[1]
+            key, value = slot.claim
+            if claims.get(key, value) != value:
+                raise ValueError(f"template {family}/{index}: slot '{name}' claims {key}={value!r}, "
+                                 f"another part claims {claims[key]!r}")
+            claims[key] = value
     if held_out and not used_held:
         # Force one held-out phrasing: the subject, or a slot that has held-out options.
         candidates = [f for f in dict.fromkeys(fields) if slots[f].held]

@@ -30,9 +30,9 @@ JOG = Slot(("jogs", "is jogging", "runs slowly", "jogs along"), ("trots", "does 
 RUN = Slot(("runs", "is running", "sprints"), ("dashes", "races"))
 
 FORWARD = Slot(("forward", "forwards", "straight ahead", "ahead", "straight forward"),
-               ("onward", "straight on"), ("direction", "forward"))
+               ("onward", "straight on"), ("travel", "forward"))
 BACKWARD = Slot(("backward", "backwards", "in reverse"), ("in a backward direction", "rearward"),
-                ("direction", "backward"))
+                ("travel", "backward"))
 
 
 def speed_slot(cls: str) -> Slot:
