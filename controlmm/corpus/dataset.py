@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -193,8 +194,12 @@ def _check_out(out: Path) -> None:
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' does not exist")
-    if not os.access(parent, os.W_OK):
-        raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' is not writable")
+    try:  # the only reliable writability test is to write
+        probe = tempfile.mkdtemp(prefix=f".{out.name}.probe.", dir=parent)
+        os.rmdir(probe)
+    except OSError as exc:
+        raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' is not writable "
+                             f"({exc.strerror or exc})") from None
 
 
 def write_corpus(out: str | Path, config: CorpusConfig, workers: int = 0, progress: bool = True) -> dict[str, Any]:

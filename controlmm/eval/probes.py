@@ -348,7 +348,7 @@ def _kneel(m, c):
 
 
 def _wave(m, c):
-    return _wave_checks(m, c["hand"])
+    return _wave_checks(m, c.get("hand", "left"))
 
 
 def _raise_arm(m, c):
@@ -500,3 +500,90 @@ def list_cases(data_dir: str | Path, split: str = "test") -> list[ProbeCase]:
         except (ValueError, KeyError, TypeError) as exc:
             raise InputFileError(f"malformed metadata {path}: {type(exc).__name__}: {exc}") from None
     return cases
+
+
+@dataclass
+class ProbeReport:
+    """Pass counts per family and the failed cases of a probe run."""
+
+    split: str
+    counts: dict[str, list[int]] = field(default_factory=dict)  # family -> [passed, total]
+    failures: list[tuple[ProbeCase, ProbeResult]] = field(default_factory=list)
+
+    def add(self, case: ProbeCase, result: ProbeResult) -> None:
+        entry = self.counts.setdefault(case.family, [0, 0])
+        entry[0] += int(result.passed)
+        entry[1] += 1
+        if not result.passed:
+            self.failures.append((case, result))
+
+    @property
+    def passed(self) -> int:
+        return sum(p for p, _ in self.counts.values())
+
+    @property
+    def total(self) -> int:
+        return sum(t for _, t in self.counts.values())
+
+    @property
+    def rate(self) -> float:
+        return self.passed / self.total if self.total else float("nan")
+
+    def table(self) -> str:
+        """A plain-text table: family, captions, passed, pass rate."""
+        lines = [f"{'family':<18} {'captions':>8} {'passed':>7} {'rate':>7}"]
+        for family in sorted(self.counts, key=lambda f: list(PROBES).index(f) if f in PROBES else 99):
+            p, t = self.counts[family]
+            lines.append(f"{family:<18} {t:>8d} {p:>7d} {100.0 * p / t:>6.1f}%")
+        lines.append(f"{'all':<18} {self.total:>8d} {self.passed:>7d} {100.0 * self.rate:>6.1f}%")
+        return "\n".join(lines)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "split": self.split, "passed": self.passed, "total": self.total, "rate": self.rate,
+            "families": {f: {"passed": p, "total": t} for f, (p, t) in self.counts.items()},
+            "failures": [{"clip": c.clip_id, "caption": c.caption, "family": c.family, "claims": c.claims,
+                          "checks": [vars(k) for k in r.failures()]} for c, r in self.failures],
+        }
+
+
+def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
+    """Motion source for :func:`evaluate`: the corpus' own features (``new_joint_vecs``)."""
+    from controlmm.motion import Motion
+
+    root = Path(data_dir)
+
+    def load(case: ProbeCase):
+        path = root / "new_joint_vecs" / f"{case.clip_id}.npy"
+        if not path.is_file():
+            raise InputFileError(f"clip '{case.clip_id}' has no features file {path}")
+        try:
+            features = np.load(path, allow_pickle=False)
+        except Exception as exc:  # noqa: BLE001 - a corrupt file is a user error
+            raise InputFileError(f"cannot read {path}: {type(exc).__name__}") from None
+        return Motion.from_features(features)
+
+    return load
+
+
+def evaluate(cases: list[ProbeCase], motion_for: Callable[[ProbeCase], Any], split: str = "test",
+             per_clip: bool = False, progress: bool = False) -> ProbeReport:
+    """Probe every case with the motion ``motion_for(case)`` returns.
+
+    Args:
+        cases: from :func:`list_cases`.
+        motion_for: case -> Motion or joints: the ground truth (:func:`ground_truth`), or a
+            model's generation from ``case.caption`` with ``case.frames`` frames.
+        split: recorded in the report.
+        per_clip: call ``motion_for`` once per clip (ground truth) instead of per caption.
+        progress: tqdm progress bar.
+    """
+    from tqdm import tqdm
+
+    report = ProbeReport(split=split)
+    last_id, motion = None, None
+    for case in tqdm(cases, desc="probes", unit="caption", disable=not progress):
+        if not per_clip or case.clip_id != last_id:
+            motion, last_id = motion_for(case), case.clip_id
+        report.add(case, check(case, motion))
+    return report
