@@ -117,7 +117,8 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     """Generate one clip: features (T, 263), joints (T, 22, 3), captions and metadata.
 
     The motion is retried with a new seed (attempt 1, 2, ...) when a sanity check fails
-    (floor penetration by a non-foot joint, foot skating above 0.1, wrong length).
+    (floor penetration by a non-foot joint, foot skating above 0.1, wrong length, a caption
+    that its probe finds untrue); ``meta["seed"][2]`` records the attempt used.
     """
     from controlmm.corpus.registry import get_family
     from controlmm.motion import features_to_joints_np, joints_to_features
@@ -129,19 +130,31 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
         raw = family.build(params, rng)
         features, _ = joints_to_features(raw)
         joints = features_to_joints_np(features)
-        problem = check_clip(raw, joints)
+        text_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt, 7]))
+        caps = family.captions(params, text_rng, held_out=spec.split == "test", count=captions)
+        problem = check_clip(raw, joints) or check_captions(spec.family, joints, caps)
         if problem is None:
             break
     else:
         raise RuntimeError(f"clip {spec.clip_id} ({spec.family}) failed {MAX_ATTEMPTS} attempts: {problem}")
-    text_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt, 7]))
-    caps = family.captions(params, text_rng, held_out=spec.split == "test", count=captions)
     meta = {
         "version": FORMAT_VERSION, "id": spec.clip_id, "family": spec.family, "group": family.group,
         "split": spec.split, "frames": int(len(features)), "fps": FPS, "seed": [spec.seed, spec.index, attempt],
         "held_out": spec.split == "test", "params": params, "captions": [c.to_json() for c in caps],
     }
     return features, joints.astype(np.float32), caps, meta
+
+
+def check_captions(family: str, joints: np.ndarray, captions: list) -> str | None:
+    """A caption the motion does not satisfy (by its probe), or None: a last guard so that no
+    untrue caption is ever written."""
+    from controlmm.eval.probes import probe
+
+    for cap in captions:
+        result = probe(joints, family, cap.claims)
+        if not result.passed:
+            return f"caption '{cap.text}' fails its probe: {result.describe()}"
+    return None
 
 
 def check_clip(raw: np.ndarray, joints: np.ndarray) -> str | None:

@@ -31,7 +31,7 @@ def cadence(kind: str, v: float) -> float:
 
 def travel(rng: np.random.Generator, p: dict, kind: str, move_dir: float, style: Style, *,
            duty: float, curve: float = 0.04, width: float | None = None, clearance: float = 0.075,
-           ref_frac: float = 0.4, speed: np.ndarray | None = None) -> np.ndarray:
+           ref_frac: float = 0.4, speed: np.ndarray | None = None, cad: float | None = None) -> np.ndarray:
     """Shared builder: a ramped speed along ``move_dir`` (rad from the heading)."""
     n = frames_for(p["seconds"])
     t = times(n)
@@ -42,7 +42,7 @@ def travel(rng: np.random.Generator, p: dict, kind: str, move_dir: float, style:
         speed = v * window(t, p["idle"], t_stop, p["ease"], p["ease"])
     yaw = person.yaw0 + gentle_noise(rng, t, curve, (0.05, 0.2)) * (speed / max(v, 1e-6))
     path = RootPath.from_velocity(t, speed, move_dir, yaw, FPS)
-    cad = cadence(kind, v)
+    cad = cadence(kind, v) if cad is None else cad
     gait = Gait(cadence=cad, duty=duty, width=person.width if width is None else width,
                 step_ref=max(v / cad, 0.2), toe_out=person.toe_out, first=p["first"],
                 start=max(p["idle"] - 0.05, 0.0), clearance=clearance, ref_frac=ref_frac,
@@ -55,23 +55,22 @@ def travel(rng: np.random.Generator, p: dict, kind: str, move_dir: float, style:
     return finish(plan)
 
 
-def _sample_travel(rng: np.random.Generator, v: float, seconds: tuple[float, float]) -> dict:
-    return {
-        "speed": _r(v),
-        "seconds": _r(rng.uniform(*seconds)),
-        "idle": _r(rng.uniform(0.0, 0.7)),
-        "ease": _r(rng.uniform(0.5, 1.0)),
-        "tail": _r(rng.uniform(0.9, 1.4)),
-        "stops": bool(rng.random() < 0.6),
-        "first": str(rng.choice(["left", "right"])),
-    }
+def _sample_travel(rng: np.random.Generator, v: float, cruise: tuple[float, float], stops: float = 0.6) -> dict:
+    """Timing of a travel clip: idle, ease in, ``cruise`` seconds at speed ``v``, then either
+    ease out and stand (``stops`` probability) or end while still moving; <= 9.8 s."""
+    idle, ease, tail = rng.uniform(0.0, 0.7), rng.uniform(0.5, 1.0), rng.uniform(0.9, 1.4)
+    stop = bool(rng.random() < stops)
+    fixed = idle + ease + (ease + tail if stop else 0.0)
+    run = min(rng.uniform(*cruise), 9.7 - fixed)
+    return {"speed": _r(v), "seconds": _r(fixed + run), "idle": _r(idle), "ease": _r(ease), "tail": _r(tail),
+            "stops": stop, "first": str(rng.choice(["left", "right"]))}
 
 
 # walk -------------------------------------------------------------------------------------
 
 def _walk_sample(rng):
     cls = str(rng.choice(list(SPEEDS), p=[0.3, 0.4, 0.3]))
-    p = _sample_travel(rng, rng.uniform(*SPEEDS[cls]), (3.5, 9.5))
+    p = _sample_travel(rng, rng.uniform(*SPEEDS[cls]), (1.8, 7.5))
     p["speed_class"] = cls
     return p
 
@@ -100,7 +99,7 @@ register(Family(
 # jog and run ------------------------------------------------------------------------------
 
 def _jog_sample(rng):
-    return _sample_travel(rng, rng.uniform(2.0, 2.7), (3.0, 8.0))
+    return _sample_travel(rng, rng.uniform(2.0, 2.7), (1.4, 6.0))
 
 
 def _jog_build(p, rng):
@@ -123,7 +122,7 @@ register(Family(
 
 
 def _run_sample(rng):
-    return _sample_travel(rng, rng.uniform(3.1, 4.0), (2.5, 6.5))
+    return _sample_travel(rng, rng.uniform(3.1, 4.0), (1.2, 4.5))
 
 
 def _run_build(p, rng):
@@ -148,7 +147,7 @@ register(Family(
 # walk backwards ---------------------------------------------------------------------------
 
 def _back_sample(rng):
-    return _sample_travel(rng, rng.uniform(0.5, 1.0), (3.0, 9.0))
+    return _sample_travel(rng, rng.uniform(0.5, 1.0), (1.8, 7.0))
 
 
 def _back_build(p, rng):
@@ -174,20 +173,19 @@ register(Family(
 # sidestep ---------------------------------------------------------------------------------
 
 def _side_sample(rng):
-    p = _sample_travel(rng, rng.uniform(0.35, 0.7), (3.0, 8.0))
-    p["stops"] = True
-    return p
+    return _sample_travel(rng, rng.uniform(0.35, 0.6), (1.8, 6.0), stops=1.0)
 
 
 def _side_builder(side: str):
     def build(p, rng):
         v = p["speed"]
-        cad = cadence("walk", v) + 0.3
+        cad = 2.2 + 0.5 * v
         style = Style(kind="walk", bob=0.012, drop=0.02, lean=0.02, arm_swing=0.3)
+        # The feet alternate between open (width + v/cad) and closed (width - v/cad) stances.
         width = max(0.2, v / cad + 0.14)
         p_ = dict(p, first=side)
         return travel(rng, p_, "walk", (np.pi / 2) * (1 if side == "left" else -1), style, duty=0.7,
-                      width=width, clearance=0.05, ref_frac=0.3, curve=0.02)
+                      width=width, clearance=0.05, ref_frac=0.3, curve=0.02, cad=cad)
     return build
 
 
@@ -211,7 +209,7 @@ for _side in ("left", "right"):
 # crouch-walk ------------------------------------------------------------------------------
 
 def _crouch_sample(rng):
-    return _sample_travel(rng, rng.uniform(0.4, 0.8), (3.5, 9.0))
+    return _sample_travel(rng, rng.uniform(0.4, 0.8), (2.0, 7.0))
 
 
 def _crouch_build(p, rng):
