@@ -78,6 +78,9 @@ class Stance:
             "run" (the heel kicks up behind early, the foot travels on a high arc).
         pitch_keys: extra (time, pitch) keyframes added inside the stance (e.g. toes tucked
             while kneeling), eased with minimum jerk.
+        pivot: optional (times, yaw offsets): the planted foot turns on the ball of the foot
+            (about its toe joint, which stays put) by these offsets, e.g. to follow the body
+            through a sharp turn. Zero while the heel is down after a heel strike.
     """
 
     t_on: float
@@ -91,6 +94,7 @@ class Stance:
     clearance: float = 0.08
     swing_shape: str = "walk"
     pitch_keys: list[tuple[float, float]] = field(default_factory=list)
+    pivot: tuple[np.ndarray, np.ndarray] | None = None
 
     def pitch(self, t: np.ndarray) -> np.ndarray:
         """Foot pitch (rad) at times ``t`` inside the stance."""
@@ -111,11 +115,24 @@ class Stance:
             p += extra
         return p
 
+    def yaw_at(self, t: np.ndarray) -> np.ndarray:
+        """Foot heading (rad) at times ``t`` inside the stance."""
+        t = np.asarray(t, dtype=np.float64)
+        if self.pivot is None:
+            return np.full(t.shape, self.yaw)
+        return self.yaw + np.interp(t, self.pivot[0], self.pivot[1])
+
     def ankle(self, side: str, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ankle positions (T, 3) and pitch (T,) at times ``t`` inside the stance."""
         pitch = self.pitch(t)
         flat = np.array([self.xz[0], ANKLE_HEIGHT, self.xz[1]])
-        return ankle_from_pivot(side, flat, np.full(len(pitch), self.yaw), pitch), pitch
+        ankle = ankle_from_pivot(side, flat, np.full(len(pitch), self.yaw), pitch)
+        if self.pivot is not None:
+            yaw = self.yaw_at(t)
+            toe = flat + apply(foot_frame(np.array(self.yaw), np.array(0.0)), toe_local(side))
+            turned = toe - apply(foot_frame(yaw, np.minimum(pitch, 0.0)), toe_local(side))
+            ankle = np.where((yaw != self.yaw)[:, None], turned, ankle)
+        return ankle, pitch
 
 
 @dataclass
@@ -141,7 +158,7 @@ def foot_track(side: str, stances: list[Stance], t: np.ndarray) -> FootTrack:
         m = (t >= st.t_on) & (t <= st.t_off)
         if m.any():
             a, p = st.ankle(side, t[m])
-            ankle[m], pitch[m], yaw[m], planted[m] = a, p, st.yaw, True
+            ankle[m], pitch[m], yaw[m], planted[m] = a, p, st.yaw_at(t[m]), True
         if k + 1 < len(stances):
             nxt = stances[k + 1]
             m = (t > st.t_off) & (t < nxt.t_on)
@@ -170,7 +187,8 @@ def _swing(side: str, a: Stance, b: Stance, t: np.ndarray) -> tuple[np.ndarray, 
         lift = np.sin(np.pi * np.clip(s, 0.0, 1.0)) ** 0.6
     ankle = a0 + w * (a1 - a0)
     ankle[:, 1] = a0[1] + smoothstep(s) * (a1[1] - a0[1]) + b.clearance * lift
-    yaw = a.yaw + wrap_angle(b.yaw - a.yaw) * minjerk(s)
+    y0 = float(a.yaw_at(np.array([t0]))[0])
+    yaw = y0 + wrap_angle(b.yaw - y0) * minjerk(s)
     pitch = p0 + (p1 - p0) * smoothstep((s - 0.15) / 0.8)
     # Never below the floor: raise the ankle until toe and heel clear it.
     toe = toe_position(side, ankle, yaw, pitch)

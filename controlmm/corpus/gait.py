@@ -73,6 +73,8 @@ class Gait:
         min_move: swings moving a foot less than this (m) and turning it less than
             ``min_turn`` (rad) are skipped.
         min_width: the feet never get closer sideways than this (m).
+        free_twist: a planted foot pivots on its ball when the heading turns further than
+            this (rad) away from it.
     """
 
     cadence: float | np.ndarray = 1.9
@@ -91,6 +93,7 @@ class Gait:
     min_move: float = 0.035
     min_turn: float = 0.12
     min_width: float = 0.12
+    free_twist: float = 0.45
 
 
 def plan_footholds(path: RootPath, gait: Gait, fps: float,
@@ -146,7 +149,29 @@ def plan_footholds(path: RootPath, gait: Gait, fps: float,
         nxt.land_time = min(0.12, 0.3 * stance_time)
         nxt.swing_shape = "run" if gait.strike == "fore" else "walk"
         stances[side].append(nxt)
+    for side in ("left", "right"):
+        for st in stances[side]:
+            _add_pivot(st, path, side, gait)
     return stances
+
+
+def _add_pivot(st: Stance, path: RootPath, side: str, gait: Gait) -> None:
+    """Let a planted foot turn on its ball when the body turns more than ``gait.free_twist``
+    away from it (sharp turns, turning on the spot), instead of twisting the leg."""
+    t = path.t
+    start = max(st.t_on + st.land_time if np.isfinite(st.t_on) else t[0], t[0])
+    end = min(st.t_off, t[-1])
+    if end <= start:
+        return
+    want = wrap_angle(path.yaw + SIDE_SIGN[side] * gait.toe_out - st.yaw)
+    excess = np.sign(want) * np.maximum(np.abs(want) - gait.free_twist, 0.0)
+    excess = np.where((t >= start) & (t <= end), excess, 0.0)
+    if np.abs(excess).max() < 1e-3:
+        return
+    # Hold the pivot reached at lift-off so the swing starts from it.
+    after = t > end
+    excess[after] = float(np.interp(end, t, excess))
+    st.pivot = (t.copy(), excess)
 
 
 def _swing_windows(path: RootPath, gait: Gait, fps: float) -> list[tuple[str, float, float]]:

@@ -204,7 +204,7 @@ for _side in ("left", "right"):
 
 def _zigzag_sample(rng):
     legs = int(rng.choice([3, 4, 5]))
-    leg_time = rng.uniform(1.1, 1.7)
+    leg_time = rng.uniform(1.3, 1.9)
     idle = rng.uniform(0.0, 0.4)
     while idle + legs * leg_time + 1.0 > 9.6:
         legs -= 1
@@ -224,7 +224,7 @@ def _zigzag_build(p, rng):
     keys_t, keys_v = [a], [phi]
     for k in range(1, p["legs"]):
         mid = a + k * p["leg_time"]
-        keys_t += [mid - 0.35, mid + 0.35]
+        keys_t += [mid - 0.5, mid + 0.5]
         keys_v += [keys_v[-1], -keys_v[-1]]
     yaw = person.yaw0 + keyframes(t, keys_t, keys_v)
     # Start facing straight ahead, turning into the first leg as walking begins.
