@@ -122,8 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nclips {m['clips']}, frames {lengths.sum()} ({lengths.sum() / FPS / 3600:.2f} h), "
           f"families {len(m['families'])}")
     print("\n| family | clips |\n|---|---|")
-    for name, count in m["families"].items():
-        print(f"| {name} | {count} |")
+    from controlmm.corpus import family_names
+
+    for name in sorted(m["families"], key=lambda f: family_names().index(f)):
+        print(f"| {name} | {m['families'][name]} |")
     hist, _ = np.histogram(lengths, bins=LENGTH_BINS)
     print("\n| length (frames) | " + " | ".join(f"{a}-{b - 1}" for a, b in zip(LENGTH_BINS[:-1], LENGTH_BINS[1:])) + " |")
     print("|---" * (len(hist) + 1) + "|")

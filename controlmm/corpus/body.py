@@ -118,7 +118,6 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     n = plan.n
     yaw = plan.get("yaw")
     fwd, left = heading_vectors(yaw)
-    heading = rot_y(yaw)
     joints = np.zeros((n, 22, 3))
 
     # 1. Pelvis position (xz) and orientation.
@@ -155,7 +154,6 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     joints[:, 15] = joints[:, 12] + apply(head_rot, REST[15]) * L[15]
 
     # 3. Shoulder girdle and arms.
-    up = np.array([0.0, 1.0, 0.0])
     for side in SIDES:
         arm = plan.arms[side]
         sign = SIDE_SIGN[side]
@@ -163,7 +161,7 @@ def assemble(plan: BodyPlan) -> np.ndarray:
         c, s = COLLAR_INDEX[side], SHOULDER_INDEX[side]
         joints[:, c] = joints[:, 9] + apply(chest @ elev, REST[c]) * L[c]
         joints[:, s] = joints[:, c] + apply(chest @ elev, REST[s]) * L[s]
-        joints[:, ELBOW_INDEX[side]], joints[:, WRIST_INDEX[side]] = _arm(plan, side, chest, joints[:, s], stride, up)
+        joints[:, ELBOW_INDEX[side]], joints[:, WRIST_INDEX[side]] = _arm(plan, side, chest, joints[:, s], stride)
 
     # 4. Legs.
     for side in SIDES:
@@ -210,8 +208,8 @@ def _pelvis_height(plan: BodyPlan, pelvis: np.ndarray, r_pelvis: np.ndarray) -> 
     return y
 
 
-def _arm(plan: BodyPlan, side: str, chest: np.ndarray, shoulder: np.ndarray, stride: np.ndarray,
-         up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _arm(plan: BodyPlan, side: str, chest: np.ndarray, shoulder: np.ndarray,
+         stride: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     arm = plan.arms[side]
     sign = SIDE_SIGN[side]
     flex = arm.flex - sign * arm.swing * stride  # arm swings opposite to the same-side leg

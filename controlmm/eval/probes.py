@@ -16,18 +16,19 @@ clockwise, forward vs backward, two vs three jumps) fails.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from functools import cached_property
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
-from controlmm.errors import ControlMMError, InputFileError
+from controlmm.errors import ControlMMError
 from controlmm.eval import geometry as geo
+from controlmm.eval.cases import ProbeCase, ProbeReport, evaluate, ground_truth, list_cases
+from controlmm.eval.measures import Measures
+
+__all__ = ["PROBES", "Check", "ProbeCase", "ProbeReport", "ProbeResult", "check", "evaluate", "ground_truth",
+           "list_cases", "probe"]
 
 HANDS = {"left": (20, 16), "right": (21, 17)}  # wrist, shoulder
 KNEES = {"left": 4, "right": 5}
@@ -64,98 +65,6 @@ class ProbeResult:
 
     def describe(self) -> str:
         return "; ".join(f"{c.name}={c.value:.3g} ({'ok' if c.passed else 'FAIL'}: {c.rule})" for c in self.checks)
-
-
-@dataclass(frozen=True)
-class ProbeCase:
-    """A caption of a clip with what it claims: the input of a probe."""
-
-    clip_id: str
-    caption: str
-    family: str
-    claims: dict[str, Any]
-    frames: int
-    split: str
-    template: str = ""
-    held_out: bool = False
-    params: dict[str, Any] = field(default_factory=dict, compare=False)
-
-
-class Measures:
-    """Geometric measures of one motion (joints (T, 22, 3), metres, Y up, 20 fps)."""
-
-    def __init__(self, joints: np.ndarray, fps: float = 20.0) -> None:
-        j = np.asarray(joints, dtype=np.float64)
-        if j.ndim != 3 or j.shape[1:] != (22, 3) or len(j) < 10:
-            raise ControlMMError(f"probes need joints of shape (T >= 10, 22, 3); got {j.shape}")
-        self.j = j - np.array([0.0, j[..., 1].min(), 0.0])  # floor at y = 0
-        self.fps = fps
-
-    @cached_property
-    def frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per-frame forward and left unit vectors (smoothed over 5 frames)."""
-        f, _ = geo.facing(self.j)
-        f = uniform_filter1d(f, 5, axis=0, mode="nearest")
-        f[:, 1] = 0.0
-        f /= np.linalg.norm(f, axis=-1, keepdims=True)
-        return f, np.cross(geo.UP, f)
-
-    @cached_property
-    def heading(self) -> np.ndarray:
-        """Unwrapped heading (degrees), + to the left."""
-        f, _ = self.frame
-        return np.degrees(np.unwrap(np.arctan2(f[:, 0], f[:, 2])))
-
-    @property
-    def turn(self) -> float:
-        """Heading change start -> end (degrees), + to the left."""
-        return float(self.heading[-3:].mean() - self.heading[:3].mean())
-
-    @cached_property
-    def speed(self) -> np.ndarray:
-        """Pelvis ground speed (T-1,), m/s, smoothed over 5 frames."""
-        return geo.ground_speed(self.j, 0, self.fps, smooth=5)
-
-    @property
-    def cruise(self) -> float:
-        """Typical travelling speed: median speed over frames above 60% of the top speed."""
-        v = self.speed
-        top = v.max()
-        return float(np.median(v[v >= 0.6 * top])) if top > 0.05 else 0.0
-
-    @cached_property
-    def travel(self) -> tuple[float, float, float]:
-        """Distance travelled along the current facing, to the current left, and path length (m)."""
-        step = np.diff(self.j[:, 0], axis=0)
-        step[:, 1] = 0.0
-        f, l = self.frame
-        fm, lm = 0.5 * (f[1:] + f[:-1]), 0.5 * (l[1:] + l[:-1])
-        return float((step * fm).sum()), float((step * lm).sum()), float(np.linalg.norm(step, axis=-1).sum())
-
-    def displacement(self, start: int = 0, end: int = -1) -> tuple[float, float]:
-        """Pelvis displacement (forward, left) between two frames in the start frame's facing."""
-        f, l = self.frame
-        d = self.j[end, 0] - self.j[start, 0]
-        return float(d @ f[start]), float(d @ l[start])
-
-    def body(self, joint: int, origin: int = PELVIS) -> np.ndarray:
-        """A joint relative to ``origin`` in the person's frame: (T, 3) as (left, up, forward)."""
-        f, l = self.frame
-        d = self.j[:, joint] - self.j[:, origin]
-        return np.stack([(d * l).sum(-1), d[:, 1], (d * f).sum(-1)], -1)
-
-    def above(self, joint: int, other: int) -> np.ndarray:
-        """Height of ``joint`` above ``other`` per frame (m)."""
-        return self.j[:, joint, 1] - self.j[:, other, 1]
-
-    @cached_property
-    def flights(self) -> list[tuple[int, int]]:
-        """Frame ranges with both feet off the ground (at least 2 frames)."""
-        return geo.segments(geo.flight_mask(self.j, 0.06), min_len=2)
-
-    @property
-    def pelvis_height(self) -> np.ndarray:
-        return self.j[:, 0, 1]
 
 
 def _c(name: str, value: float, ok: bool, rule: str) -> Check:
@@ -468,122 +377,3 @@ def check(case: ProbeCase | dict, motion) -> ProbeResult:
     if claims is None:
         claims = case["captions"][0]["claims"] if case.get("captions") else {}
     return probe(motion, case["family"], claims)
-
-
-def list_cases(data_dir: str | Path, split: str = "test") -> list[ProbeCase]:
-    """Every (caption, metadata) pair of a corpus split, in clip-id order.
-
-    Raises a one-line error when the directory is not a corpus with per-clip metadata.
-    """
-    root = Path(data_dir)
-    if not root.is_dir():
-        raise InputFileError(f"--data '{root}' is not a directory")
-    split_file = root / f"{split}.txt"
-    if split not in ("train", "val", "test", "all"):
-        raise ControlMMError(f"unknown split '{split}'; allowed: train, val, test, all")
-    if not split_file.is_file():
-        raise InputFileError(f"'{root}' has no {split}.txt; not a HumanML3D-format corpus")
-    if not (root / "meta").is_dir():
-        raise InputFileError(f"'{root}' has no meta/ directory; probes need the corpus' per-clip metadata")
-    cases = []
-    for clip_id in split_file.read_text(encoding="utf-8").split():
-        path = root / "meta" / f"{clip_id}.json"
-        try:
-            meta = json.loads(path.read_text(encoding="utf-8"))
-            for cap in meta["captions"]:
-                cases.append(ProbeCase(clip_id=clip_id, caption=cap["text"], family=meta["family"],
-                                       claims=dict(cap["claims"]), frames=int(meta["frames"]), split=meta["split"],
-                                       template=cap.get("template", ""), held_out=bool(cap.get("held_out")),
-                                       params=meta.get("params", {})))
-        except FileNotFoundError:
-            raise InputFileError(f"clip '{clip_id}' has no metadata file {path}") from None
-        except (ValueError, KeyError, TypeError) as exc:
-            raise InputFileError(f"malformed metadata {path}: {type(exc).__name__}: {exc}") from None
-    return cases
-
-
-@dataclass
-class ProbeReport:
-    """Pass counts per family and the failed cases of a probe run."""
-
-    split: str
-    counts: dict[str, list[int]] = field(default_factory=dict)  # family -> [passed, total]
-    failures: list[tuple[ProbeCase, ProbeResult]] = field(default_factory=list)
-
-    def add(self, case: ProbeCase, result: ProbeResult) -> None:
-        entry = self.counts.setdefault(case.family, [0, 0])
-        entry[0] += int(result.passed)
-        entry[1] += 1
-        if not result.passed:
-            self.failures.append((case, result))
-
-    @property
-    def passed(self) -> int:
-        return sum(p for p, _ in self.counts.values())
-
-    @property
-    def total(self) -> int:
-        return sum(t for _, t in self.counts.values())
-
-    @property
-    def rate(self) -> float:
-        return self.passed / self.total if self.total else float("nan")
-
-    def table(self) -> str:
-        """A plain-text table: family, captions, passed, pass rate."""
-        lines = [f"{'family':<18} {'captions':>8} {'passed':>7} {'rate':>7}"]
-        for family in sorted(self.counts, key=lambda f: list(PROBES).index(f) if f in PROBES else 99):
-            p, t = self.counts[family]
-            lines.append(f"{family:<18} {t:>8d} {p:>7d} {100.0 * p / t:>6.1f}%")
-        lines.append(f"{'all':<18} {self.total:>8d} {self.passed:>7d} {100.0 * self.rate:>6.1f}%")
-        return "\n".join(lines)
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "split": self.split, "passed": self.passed, "total": self.total, "rate": self.rate,
-            "families": {f: {"passed": p, "total": t} for f, (p, t) in self.counts.items()},
-            "failures": [{"clip": c.clip_id, "caption": c.caption, "family": c.family, "claims": c.claims,
-                          "checks": [vars(k) for k in r.failures()]} for c, r in self.failures],
-        }
-
-
-def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
-    """Motion source for :func:`evaluate`: the corpus' own features (``new_joint_vecs``)."""
-    from controlmm.motion import Motion
-
-    root = Path(data_dir)
-
-    def load(case: ProbeCase):
-        path = root / "new_joint_vecs" / f"{case.clip_id}.npy"
-        if not path.is_file():
-            raise InputFileError(f"clip '{case.clip_id}' has no features file {path}")
-        try:
-            features = np.load(path, allow_pickle=False)
-        except Exception as exc:  # noqa: BLE001 - a corrupt file is a user error
-            raise InputFileError(f"cannot read {path}: {type(exc).__name__}") from None
-        return Motion.from_features(features)
-
-    return load
-
-
-def evaluate(cases: list[ProbeCase], motion_for: Callable[[ProbeCase], Any], split: str = "test",
-             per_clip: bool = False, progress: bool = False) -> ProbeReport:
-    """Probe every case with the motion ``motion_for(case)`` returns.
-
-    Args:
-        cases: from :func:`list_cases`.
-        motion_for: case -> Motion or joints: the ground truth (:func:`ground_truth`), or a
-            model's generation from ``case.caption`` with ``case.frames`` frames.
-        split: recorded in the report.
-        per_clip: call ``motion_for`` once per clip (ground truth) instead of per caption.
-        progress: tqdm progress bar.
-    """
-    from tqdm import tqdm
-
-    report = ProbeReport(split=split)
-    last_id, motion = None, None
-    for case in tqdm(cases, desc="probes", unit="caption", disable=not progress):
-        if not per_clip or case.clip_id != last_id:
-            motion, last_id = motion_for(case), case.clip_id
-        report.add(case, check(case, motion))
-    return report

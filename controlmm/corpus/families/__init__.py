@@ -8,4 +8,5 @@ from controlmm.corpus.families import turning  # noqa: F401
 from controlmm.corpus.families import jumping  # noqa: F401
 from controlmm.corpus.families import lowering  # noqa: F401
 from controlmm.corpus.families import gestures  # noqa: F401
+from controlmm.corpus.families import reaching  # noqa: F401
 from controlmm.corpus.families import combos  # noqa: F401

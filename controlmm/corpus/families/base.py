@@ -126,7 +126,6 @@ class Style:
 def locomotion_plan(rng: np.random.Generator, person: Person, t: np.ndarray, path: RootPath, gait: Gait,
                     style: Style, stances: dict[str, list[Stance]] | None = None) -> BodyPlan:
     """A person travelling along ``path`` with ``gait``; returns the plan (not yet assembled)."""
-    n = len(t)
     if stances is None:
         stances = plan_footholds(path, gait, float(FPS), initial=person.initial_feet(path.xz[0], float(path.yaw[0])))
     feet = {s: foot_track(s, stances[s], t) for s in SIDES}

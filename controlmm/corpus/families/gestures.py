@@ -1,5 +1,4 @@
-"""Arm gestures while standing: wave, raise one or both arms, reach (forward, up, sideways),
-punch, clap.
+"""Arm gestures while standing: wave, raise one or both arms, clap.
 
 Wrist targets are given relative to the shoulder in the chest frame (x = the person's left,
 y up, z forward); ``out`` below means away from the body's midline on the arm's side.
@@ -9,9 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from controlmm.corpus.curves import keyframes, window
+from controlmm.corpus.curves import window
 from controlmm.corpus.families.base import Person, finish, frames_for, set_ik, standing_plan, times
-from controlmm.corpus.feet import Stance, foot_track
 from controlmm.corpus.rig import SIDE_SIGN
 from controlmm.corpus.registry import Family, register
 from controlmm.corpus.text.templates import Slot, Template
@@ -34,7 +32,8 @@ def pole(side: str, out: float, up: float, fwd: float, n: int) -> np.ndarray:
     return target(side, out, up, fwd, n)
 
 
-def _timing(rng, action: float) -> dict:
+def gesture_timing(rng: np.random.Generator, action: float) -> dict:
+    """Random idle, raise, ``action`` and lower durations of a standing gesture (s)."""
     idle = rng.uniform(0.3, 1.0)
     rise, fall = rng.uniform(0.45, 0.8), rng.uniform(0.5, 0.9)
     tail = rng.uniform(0.3, 1.0)
@@ -42,7 +41,8 @@ def _timing(rng, action: float) -> dict:
             "seconds": _r(max(min(idle + rise + action + fall + tail, 9.8), 2.2))}
 
 
-def _window(p: dict, t: np.ndarray) -> tuple[np.ndarray, float, float]:
+def gesture_window(p: dict, t: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Weight (T,) of a gesture (0 -> 1 -> 0) and the times its full action starts and ends."""
     t_on = p["idle"]
     t_off = t_on + p["rise"] + p["action"] + p["fall"]
     return window(t, t_on, t_off, p["rise"], p["fall"]), t_on + p["rise"], t_off - p["fall"]
@@ -53,7 +53,7 @@ def _window(p: dict, t: np.ndarray) -> tuple[np.ndarray, float, float]:
 def _wave_sample(rng):
     freq = rng.uniform(1.4, 2.4)
     cycles = int(rng.integers(3, 7))
-    p = _timing(rng, cycles / freq)
+    p = gesture_timing(rng, cycles / freq)
     p.update({"freq": _r(freq), "cycles": cycles, "amplitude": _r(rng.uniform(0.08, 0.14)),
               "height": _r(rng.uniform(0.36, 0.46))})
     return p
@@ -63,7 +63,7 @@ def add_wave(plan, p: dict, side: str, t: np.ndarray, t_shift: float = 0.0) -> N
     """Raise the ``side`` hand above the head and wave it side to side."""
     n = len(t)
     q = dict(p, idle=p["idle"] + t_shift)
-    w, a, b = _window(q, t)
+    w, a, b = gesture_window(q, t)
     osc = p["amplitude"] * np.sin(2 * np.pi * p["freq"] * (t - a)) * window(t, a - 0.2, b + 0.2, 0.3)
     tgt = target(side, 0.17, p["height"], 0.1, n)
     tgt[:, 0] += SIDE_SIGN[side] * osc
@@ -101,7 +101,7 @@ for _side in ("left", "right"):
 # raise arms -------------------------------------------------------------------------------
 
 def _raise_sample(rng):
-    p = _timing(rng, rng.uniform(0.6, 2.5))
+    p = gesture_timing(rng, rng.uniform(0.6, 2.5))
     p["hand"] = str(rng.choice(["left", "right"]))
     return p
 
@@ -110,7 +110,7 @@ def _raise_build(p, rng):
     t = times(frames_for(p["seconds"]))
     plan = standing_plan(rng, Person.sample(rng), t)
     hands = ("left", "right") if p.get("hand", "both") == "both" else (p["hand"],)
-    w, _, _ = _window(p, t)
+    w, _, _ = gesture_window(p, t)
     for side in hands:
         n = len(t)
         set_ik(plan.arms[side], w, target(side, 0.1, 0.5, 0.05, n), pole(side, 1.0, 0.0, -0.5, n),
@@ -135,7 +135,7 @@ register(Family(
 ))
 
 register(Family(
-    name="raise_both_arms", group="gestures", sample=lambda rng: dict(_timing(rng, rng.uniform(0.6, 2.5)), hand="both"),
+    name="raise_both_arms", group="gestures", sample=lambda rng: dict(gesture_timing(rng, rng.uniform(0.6, 2.5)), hand="both"),
     build=_raise_build,
     templates=(
         Template("{subj} {raise} both arms"),
@@ -151,162 +151,12 @@ register(Family(
 ))
 
 
-# reach ------------------------------------------------------------------------------------
-
-def _reach_sample(rng, both: bool = False):
-    p = _timing(rng, rng.uniform(0.4, 1.6))
-    p["hand"] = str(rng.choice(["left", "right", "both"] if both else ["left", "right"]))
-    return p
-
-
-def _reach_builder(kind: str):
-    def build(p, rng):
-        t = times(frames_for(p["seconds"]))
-        n = len(t)
-        person = Person.sample(rng)
-        w, a, b = _window(p, t)
-        stances = None
-        if kind == "up":
-            feet0 = person.initial_feet(np.zeros(2), person.yaw0)
-            rise = [(p["idle"], 0.0), (a, -0.35), (b, -0.35), (b + p["fall"], 0.0)]
-            stances = {s: [Stance(-np.inf, np.inf, feet0[s][0], feet0[s][1], pitch_keys=rise)] for s in feet0}
-        plan = standing_plan(rng, person, t, stances=stances)
-        if stances is not None:
-            plan.feet = {s: foot_track(s, stances[s], t) for s in stances}
-            plan.pelvis_height = plan.pelvis_height + 0.07 * w
-            plan.head_pitch = plan.get("head_pitch") - 0.3 * w
-        hands = ("left", "right") if p["hand"] == "both" else (p["hand"],)
-        for side in hands:
-            s = SIDE_SIGN[side]
-            if kind == "forward":
-                set_ik(plan.arms[side], w, target(side, -0.06, -0.02, 0.51, n), pole(side, 0.7, -1.0, 0.0, n))
-                plan.spine_pitch = plan.get("spine_pitch") + 0.2 * w / len(hands)
-                plan.pelvis_pitch = plan.get("pelvis_pitch") + 0.1 * w / len(hands)
-            elif kind == "up":
-                set_ik(plan.arms[side], w, target(side, 0.05, 0.51, 0.1, n), pole(side, 1.0, 0.0, -0.4, n),
-                       elevation=np.full(n, 0.35), arc=(0, 0, 0.3))
-            else:
-                set_ik(plan.arms[side], w, target(side, 0.51, 0.02, 0.06, n), pole(side, 0.0, -0.3, -1.0, n),
-                       elevation=np.full(n, 0.15))
-                plan.spine_roll = plan.get("spine_roll") + s * 0.22 * w
-                plan.pelvis_roll = plan.get("pelvis_roll") + s * 0.05 * w
-        return finish(plan)
-    return build
-
-
-REACH = Slot(("reaches", "stretches", "extends"), ("stretches out",))
-
-
-def _reach_slots(p):
-    hand = Slot(("both arms", "both hands"), (), ("hand", "both")) if p["hand"] == "both" else hand_slot(p["hand"])
-    return {"reach": REACH, "hand": hand}
-
-
-register(Family(
-    name="reach_forward", group="gestures", sample=_reach_sample, build=_reach_builder("forward"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} forward"),
-        Template("{subj} reaches forward with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} out in front to grab something"),
-        Template("{subj} leans forward and reaches out with {poss} {hand}"),
-        Template("{subj} extends {poss} {hand} straight ahead"),
-        Template("{subj} tries to touch something in front using {poss} {hand}", held=True),
-        Template("{subj} stretches out {poss} {hand} toward an object ahead", held=True),
-    ),
-    slots=_reach_slots,
-    core=lambda p: {"hand": p["hand"], "reach": "forward"},
-))
-
-register(Family(
-    name="reach_up", group="gestures", sample=lambda rng: _reach_sample(rng, both=True), build=_reach_builder("up"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} up high"),
-        Template("{subj} reaches up with {poss} {hand}"),
-        Template("{subj} stands on tiptoes and reaches up with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} upward to get something from a shelf"),
-        Template("{subj} reaches for something above {poss} head with {poss} {hand}"),
-        Template("on {poss} toes, {subj} stretches {poss} {hand} toward the ceiling", held=True),
-        Template("{subj} grabs at something overhead using {poss} {hand}", held=True),
-    ),
-    slots=_reach_slots,
-    core=lambda p: {"hand": p["hand"], "reach": "up"},
-))
-
-register(Family(
-    name="reach_sideways", group="gestures", sample=_reach_sample, build=_reach_builder("side"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} out to the side"),
-        Template("{subj} reaches sideways with {poss} {hand}"),
-        Template("{subj} leans to the {side} and reaches out with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} out to the {side}"),
-        Template("{subj} extends {poss} {hand} sideways"),
-        Template("{subj} bends to the {side} stretching {poss} {hand} away from the body", held=True),
-        Template("{subj} reaches for something at {poss} {side} side with {poss} {hand}", held=True),
-    ),
-    slots=lambda p: dict(_reach_slots(p), side=Slot((p["hand"],), (), ("side", p["hand"]))),
-    core=lambda p: {"hand": p["hand"], "reach": "side"},
-))
-
-
-# punch ------------------------------------------------------------------------------------
-
-def _punch_sample(rng):
-    count = int(rng.integers(1, 5))
-    gaps = [rng.uniform(0.25, 0.6) for _ in range(count)]
-    p = _timing(rng, sum(gaps) + 0.3 * count + 0.2)
-    p.update({"hand": str(rng.choice(["left", "right"])), "count": count, "gaps": [_r(g) for g in gaps]})
-    return p
-
-
-def _punch_build(p, rng):
-    t = times(frames_for(p["seconds"]))
-    n = len(t)
-    person = Person.sample(rng)
-    person.stagger = SIDE_SIGN[p["hand"]] * rng.uniform(0.15, 0.25)
-    plan = standing_plan(rng, person, t)
-    w, a, b = _window(p, t)
-    side, other = p["hand"], OTHER[p["hand"]]
-    # Guard: both fists in front of the chin; the punching fist shoots out and comes back.
-    ext_t, ext_v = [a], [0.0]
-    cursor = a + 0.1
-    for g in p["gaps"]:
-        ext_t += [cursor + 0.13, cursor + 0.2, cursor + 0.42]
-        ext_v += [1.0, 1.0, 0.0]
-        cursor += 0.42 + g
-    ext = keyframes(t, ext_t, ext_v)
-    guard = target(side, -0.1, 0.05, 0.22, n)
-    strike = target(side, -0.12, 0.04, 0.5, n)
-    set_ik(plan.arms[side], w, guard + ext[:, None] * (strike - guard), pole(side, 0.6, -1.0, -0.2, n))
-    set_ik(plan.arms[other], w, target(other, -0.1, 0.07, 0.2, n), pole(other, 0.6, -1.0, -0.2, n))
-    plan.spine_twist = plan.get("spine_twist") - SIDE_SIGN[side] * 0.3 * ext
-    plan.pelvis_twist = plan.get("pelvis_twist") - SIDE_SIGN[side] * 0.1 * ext
-    plan.spine_pitch = plan.get("spine_pitch") + 0.08 * w
-    return finish(plan)
-
-
-register(Family(
-    name="punch", group="gestures", sample=_punch_sample, build=_punch_build,
-    templates=(
-        Template("{subj} punches {times} with {poss} {hand}"),
-        Template("{subj} throws {punches} with {poss} {hand}"),
-        Template("{subj} raises {poss} fists and punches {times} with the {hand}"),
-        Template("{subj} boxes, hitting forward {times} with {poss} {hand}"),
-        Template("{subj} jabs {times} using {poss} {hand}"),
-        Template("in a fighting stance, {subj} strikes {times} with {poss} {hand}", held=True),
-        Template("{subj} lands {punches} with {poss} {hand} fist", held=True),
-    ),
-    slots=lambda p: {"times": times_slot(p["count"]), "punches": counted_slot(p["count"], "punch", "punches"),
-                     "hand": hand_slot(p["hand"])},
-    core=lambda p: {"hand": p["hand"], "count": p["count"]},
-))
-
-
 # clap -------------------------------------------------------------------------------------
 
 def _clap_sample(rng):
     count = int(rng.integers(2, 7))
     freq = rng.uniform(1.5, 2.6)
-    p = _timing(rng, count / freq + 0.2)
+    p = gesture_timing(rng, count / freq + 0.2)
     p.update({"count": count, "freq": _r(freq), "open": _r(rng.uniform(0.28, 0.4))})
     return p
 
@@ -315,7 +165,7 @@ def _clap_build(p, rng):
     t = times(frames_for(p["seconds"]))
     n = len(t)
     plan = standing_plan(rng, Person.sample(rng), t)
-    w, a, b = _window(p, t)
+    w, a, b = gesture_window(p, t)
     # Hands meet in front of the chest `count` times: the gap closes sharply at each clap.
     clap_t = a + 0.1 + (np.arange(p["count"]) + 0.5) / p["freq"]
     gap = np.full(n, p["open"])

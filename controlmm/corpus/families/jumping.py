@@ -44,7 +44,7 @@ def build_jumps(p: dict, rng: np.random.Generator) -> np.ndarray:
     n_raw = frames_for(p["seconds"])
     t = times(n_raw)
     person = Person.sample(rng)
-    fwd, left = heading_vectors(np.array(person.yaw0))
+    fwd, _ = heading_vectors(np.array(person.yaw0))
     fwd2 = fwd[[0, 2]]
     stand = person.stand_height
     h_to = stand + 0.05
