@@ -189,3 +189,20 @@ def test_held_out_phrasings_only_in_the_test_split(corpus):
                     slots = family.slots(meta["params"])
                     held_words = {h for slot in slots.values() for h in slot.held}
                     assert not any(h and h.replace("{poss}", "") in cap["text"] for h in held_words if len(h) > 6)
+
+
+def test_features_reproduce_the_joints_through_full_turns():
+    from controlmm.corpus.processing import process
+    from controlmm.motion import joints_to_features
+
+    family = get_family("circle_ccw")
+    rng = np.random.default_rng(5)
+    raw = family.build(family.sample(rng), rng)
+    features, joints, positions = process(raw)
+    assert np.abs(joints - positions[:-1]).max() < 1e-4
+    np.testing.assert_array_equal(features_to_joints_np(features), joints)
+    # HumanML3D's processing as published flips the sign of the root rotation velocity of a
+    # frame when the facing passes 180 degrees (HumanML3D issue #156); the corpus repairs it.
+    plain, _ = joints_to_features(raw)
+    assert np.abs(features_to_joints_np(plain) - positions[:-1]).max() > 0.05
+    np.testing.assert_array_equal(plain[:, 1:], features[:, 1:])

@@ -120,19 +120,18 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     (floor penetration by a non-foot joint, foot skating above 0.1, wrong length, a caption
     that its probe finds untrue); ``meta["seed"][2]`` records the attempt used.
     """
+    from controlmm.corpus.processing import process
     from controlmm.corpus.registry import get_family
-    from controlmm.motion import features_to_joints_np, joints_to_features
 
     family = get_family(spec.family)
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt]))
         params = family.sample(rng)
         raw = family.build(params, rng)
-        features, _ = joints_to_features(raw)
-        joints = features_to_joints_np(features)
+        features, joints, positions = process(raw)
         text_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt, 7]))
         caps = family.captions(params, text_rng, held_out=spec.split == "test", count=captions)
-        problem = check_clip(raw, joints) or check_captions(spec.family, joints, caps)
+        problem = check_clip(raw, joints, positions) or check_captions(spec.family, joints, caps)
         if problem is None:
             break
     else:
@@ -142,7 +141,7 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
         "split": spec.split, "frames": int(len(features)), "fps": FPS, "seed": [spec.seed, spec.index, attempt],
         "held_out": spec.split == "test", "params": params, "captions": [c.to_json() for c in caps],
     }
-    return features, joints.astype(np.float32), caps, meta
+    return features, joints, caps, meta
 
 
 def check_captions(family: str, joints: np.ndarray, captions: list) -> str | None:
@@ -157,15 +156,19 @@ def check_captions(family: str, joints: np.ndarray, captions: list) -> str | Non
     return None
 
 
-def check_clip(raw: np.ndarray, joints: np.ndarray) -> str | None:
+def check_clip(raw: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> str | None:
     """Why a generated clip is unusable, or None. ``raw`` are the generator's joints (metres,
-    floor at y = 0), ``joints`` the processed ones."""
+    floor at y = 0), ``joints`` those recovered from the features, ``positions`` the
+    canonical positions the features were computed from."""
     from controlmm.eval.geometry import foot_skating_ratio
 
     if not np.all(np.isfinite(joints)):
         return "non-finite joints"
     if not MIN_FRAMES <= len(joints) <= MAX_FRAMES:
         return f"{len(joints)} frames"
+    drift = float(np.abs(joints - positions[:-1]).max())
+    if drift > 1e-3:
+        return f"features do not reproduce the joints ({drift:.4f} m)"
     bones = np.linalg.norm(raw[:, 1:] - raw[:, list(PARENTS[1:])], axis=-1)
     if np.abs(bones - BONE_LENGTHS[1:]).max() > 1e-5:
         return "bone length changed"
