@@ -185,7 +185,8 @@ def knee_pole(foot_yaw: np.ndarray, r_pelvis: np.ndarray, side: str, knee_out: f
 
 
 def _pelvis_height(plan: BodyPlan, pelvis: np.ndarray, r_pelvis: np.ndarray) -> np.ndarray:
-    """Nominal height lowered so that every planted foot stays within reach, then smoothed."""
+    """Nominal height lowered so that every planted foot stays within reach (hard limit) and
+    a swinging foot can reach its path (soft: at most 8 cm lower), then smoothed."""
     height = plan.get("pelvis_height")
     limit = np.full(plan.n, np.inf)
     for side in SIDES:
@@ -197,7 +198,9 @@ def _pelvis_height(plan: BodyPlan, pelvis: np.ndarray, r_pelvis: np.ndarray) -> 
         lim = track.ankle[:, 1] + vert - hip_rel[:, 1]
         # Planted frames and one frame around them are hard limits.
         hard = track.planted | np.roll(track.planted, 1) | np.roll(track.planted, -1)
-        limit = np.where(hard, np.minimum(limit, lim), limit)
+        swing_ok = ~hard & (horiz < 0.9 * reach)
+        soft = np.maximum(lim, height - 0.08)
+        limit = np.where(hard, np.minimum(limit, lim), np.where(swing_ok, np.minimum(limit, soft), limit))
     # Lower the nominal curve by a widened, blurred copy of its excess over the limits: the
     # pelvis dips smoothly where the legs are spread instead of following the limits' cusps.
     excess = np.maximum(height - limit, 0.0)

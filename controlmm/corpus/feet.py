@@ -76,6 +76,8 @@ class Stance:
         clearance: height (m) the ankle is lifted by in the swing that lands here.
         swing_shape: "walk" (lift, travel, set down: a boxy path close to the floor) or
             "run" (the heel kicks up behind early, the foot travels on a high arc).
+        lift_skew: for "walk" swings, +1 lifts the foot most early in the swing (the heel
+            kicks up behind after a forward step), -1 late (a backward step), 0 evenly.
         pitch_keys: extra (time, pitch) keyframes added inside the stance (e.g. toes tucked
             while kneeling), eased with minimum jerk.
         pivot: optional (times, yaw offsets): the planted foot turns on the ball of the foot
@@ -93,6 +95,7 @@ class Stance:
     lift_time: float = 0.15
     clearance: float = 0.08
     swing_shape: str = "walk"
+    lift_skew: float = 0.0
     pitch_keys: list[tuple[float, float]] = field(default_factory=list)
     pivot: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -183,8 +186,9 @@ def _swing(side: str, a: Stance, b: Stance, t: np.ndarray) -> tuple[np.ndarray, 
     else:
         # Lift first, travel, then set down: the horizontal travel waits for the foot to
         # rise and ends before it lands, so a foot near the floor hardly moves sideways.
-        w = minjerk((s - 0.12) / 0.76)[:, None]
-        lift = np.sin(np.pi * np.clip(s, 0.0, 1.0)) ** 0.6
+        w = minjerk((s - 0.04) / 0.92)[:, None]
+        # The heel kicks up early in the swing (knee flexion), the foot skims lower later.
+        lift = np.sin(np.pi * np.clip(s, 0.0, 1.0)) ** 0.6 * (1.0 + 0.5 * b.lift_skew * (1.0 - 2.0 * s))
     ankle = a0 + w * (a1 - a0)
     ankle[:, 1] = a0[1] + smoothstep(s) * (a1[1] - a0[1]) + b.clearance * lift
     y0 = float(a.yaw_at(np.array([t0]))[0])

@@ -84,7 +84,7 @@ class Gait:
     step_ref: float = 0.7
     strike: str = "heel"
     heel_pitch: float = 0.3
-    push_pitch: float = 0.6
+    push_pitch: float = 0.85
     fore_pitch: float = 0.3
     ref_frac: float = 0.4
     toe_out: float = 0.08
@@ -148,6 +148,7 @@ def plan_footholds(path: RootPath, gait: Gait, fps: float,
             nxt.land_pitch = -gait.fore_pitch * max(ratio, 0.3 if gait.strike == "fore" else 0.0)
         nxt.land_time = min(0.12, 0.3 * stance_time)
         nxt.swing_shape = "run" if gait.strike == "fore" else "walk"
+        nxt.lift_skew = float(np.clip(fwd / gait.step_ref, -1.0, 1.0))
         stances[side].append(nxt)
     for side in ("left", "right"):
         for st in stances[side]:

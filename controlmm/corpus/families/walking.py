@@ -13,7 +13,7 @@ from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import BACKWARD, FORWARD, JOG, RUN, WALK, side_slot, speed_slot
 from controlmm.motion.skeleton import FPS
 
-SPEEDS = {"slow": (0.6, 0.9), "normal": (1.1, 1.4), "fast": (1.65, 1.9)}
+SPEEDS = {"slow": (0.6, 0.9), "normal": (1.1, 1.4), "fast": (1.55, 1.8)}
 
 
 def _r(x: float) -> float:
@@ -26,7 +26,7 @@ def cadence(kind: str, v: float) -> float:
         return 2.75 + 0.08 * v
     if kind == "jog":
         return 2.45 + 0.1 * v
-    return 1.35 + 0.42 * v
+    return 1.4 + 0.42 * v
 
 
 def travel(rng: np.random.Generator, p: dict, kind: str, move_dir: float, style: Style, *,
