@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("corpus", help="generate the procedural motion corpus (HumanML3D format)",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", help="output dataset directory")
-    p.add_argument("--clips", type=int, default=5000, help="number of clips (default 5000)")
+    p.add_argument("--clips", type=int, default=6400, help="number of clips (default 6400, the default corpus)")
     p.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
     p.add_argument("--workers", type=int, default=0, help="worker processes (default: all CPU cores)")
     p.add_argument("--families", default=None, help="comma-separated family names (default: all)")
