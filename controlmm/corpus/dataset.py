@@ -84,6 +84,7 @@ class ClipResult:
     split: str
     frames: int
     attempt: int
+    retry_reasons: list[str]
     feature_sum: np.ndarray = field(repr=False)
     feature_sq: np.ndarray = field(repr=False)
 
@@ -124,6 +125,7 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     from controlmm.corpus.registry import get_family
 
     family = get_family(spec.family)
+    reasons: list[str] = []
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt]))
         params = family.sample(rng)
@@ -134,12 +136,14 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
         problem = check_clip(raw, joints, positions) or check_captions(spec.family, joints, caps)
         if problem is None:
             break
+        reasons.append(problem)
     else:
         raise RuntimeError(f"clip {spec.clip_id} ({spec.family}) failed {MAX_ATTEMPTS} attempts: {problem}")
     meta = {
         "version": FORMAT_VERSION, "id": spec.clip_id, "family": spec.family, "group": family.group,
         "split": spec.split, "frames": int(len(features)), "fps": FPS, "seed": [spec.seed, spec.index, attempt],
         "held_out": spec.split == "test", "params": params, "captions": [c.to_json() for c in caps],
+        "retry_reasons": reasons,
     }
     return features, joints, caps, meta
 
@@ -193,7 +197,7 @@ def _work(args: tuple[ClipSpec, str, int]) -> ClipResult:
     (out / "meta" / f"{spec.clip_id}.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
     f64 = features.astype(np.float64)
     return ClipResult(spec.clip_id, spec.family, spec.split, len(features), meta["seed"][2],
-                      f64.sum(0), (f64 * f64).sum(0))
+                      meta["retry_reasons"], f64.sum(0), (f64 * f64).sum(0))
 
 
 def _init_worker() -> None:
@@ -279,15 +283,16 @@ def _finish(root: Path, config: CorpusConfig, results: list[ClipResult], seconds
         std[sl] = std[sl].mean()
     np.save(root / "Mean.npy", mean.astype(np.float32))
     np.save(root / "Std.npy", np.maximum(std, 1e-8).astype(np.float32))
-    families: dict[str, int] = {}
-    for r in results:
-        families[r.family] = families.get(r.family, 0) + 1
+    from controlmm.corpus.registry import family_names
+
+    families = {name: n for name in family_names() if (n := sum(r.family == name for r in results))}
     summary = {
         "format": "humanml3d", "version": FORMAT_VERSION, "generator": "controlmm.corpus",
         "config": {**asdict(config), "families": list(config.families) if config.families else None},
         "clips": len(results), "frames": int(sum(r.frames for r in results)),
         "splits": {s: sum(r.split == s for r in results) for s in SPLITS},
         "families": families, "retries": int(sum(r.attempt for r in results)),
+        "retried": {r.clip_id: r.retry_reasons for r in results if r.retry_reasons},
     }
     # corpus.json is part of the deterministic output: no timings in it.
     (root / "corpus.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
