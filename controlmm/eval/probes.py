@@ -222,7 +222,7 @@ def _zigzag(m, c):
     swings = geo.oscillations(h - np.linspace(h[0], h[-1], len(h)), 30.0)
     fwd, _ = m.displacement()
     return [_c("heading_swings", swings, swings >= 2, ">= 2 heading swings of 30 deg"),
-            _c("net_turn_deg", m.turn, abs(m.turn) <= 60.0, "|net turn| <= 60"),
+            _c("net_turn_deg", m.turn, abs(m.turn) <= 75.0, "|net turn| <= 75"),
             _c("progress_m", fwd, fwd >= 1.5, ">= 1.5 m forward of the start")]
 
 
