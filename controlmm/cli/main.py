@@ -15,7 +15,7 @@ import sys
 from controlmm import __version__
 from controlmm.errors import ControlMMError
 
-SUBCOMMANDS: tuple[str, ...] = ("convert", "plot", "retarget", "scene", "info")
+SUBCOMMANDS: tuple[str, ...] = ("corpus", "convert", "plot", "retarget", "scene", "eval", "info")
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 
 EXIT_USAGE = 2

@@ -1,0 +1,1 @@
+"""Captions: templates with synonym slots and held-out phrasings, and a small POS tagger."""

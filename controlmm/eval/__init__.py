@@ -1,0 +1,1 @@
+"""Evaluation: geometric measures of motion and the text-adherence probes."""

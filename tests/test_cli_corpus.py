@@ -1,0 +1,47 @@
+"""``controlmm corpus`` and ``controlmm eval probes``: outputs and exit codes."""
+
+from __future__ import annotations
+
+import json
+
+from controlmm.cli.main import main
+
+
+def test_corpus_then_probes_end_to_end(tmp_path, capsys):
+    out = tmp_path / "c"
+    assert main(["corpus", "--out", str(out), "--clips", "6", "--seed", "3", "--workers", "1", "--quiet"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert len((out / "all.txt").read_text().split()) == 6
+    report = tmp_path / "probes.json"
+    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--quiet", "--json", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "100.0%" in text.splitlines()[-2] or "100.0%" in text
+    assert json.loads(report.read_text())["rate"] == 1.0
+    # A corpus directory may be regenerated in place; anything else is never replaced.
+    assert main(["corpus", "--out", str(out), "--clips", "2", "--workers", "1", "--quiet",
+                 "--families", "clap,squat"]) == 0
+    assert sorted(json.loads((out / "corpus.json").read_text())["families"]) == ["clap", "squat"]
+
+
+def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "thesis.tex").write_text("precious")
+    bad = [
+        ["corpus", "--out", str(tmp_path / "o"), "--clips", "0"],
+        ["corpus", "--out", str(blocker / "o"), "--clips", "2"],
+        ["corpus", "--out", str(tmp_path / "o"), "--clips", "2", "--families", "walk,moonwalk"],
+        ["corpus", "--out", str(other), "--clips", "2", "--workers", "1"],
+        ["corpus", "--clips", "2"],
+        ["eval", "probes", "--data", str(tmp_path / "missing")],
+        ["eval", "probes", "--data", str(tmp_path)],
+    ]
+    for argv in bad:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "error" in err, (argv, err)
+    assert (other / "thesis.tex").read_text() == "precious"
+    assert not (tmp_path / "o").exists()
+    assert main(["eval"]) == 2
