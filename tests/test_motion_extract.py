@@ -60,3 +60,16 @@ def test_bad_joints_rejected():
     bad[3, 4, 1] = np.nan
     with pytest.raises(ShapeError, match="NaN"):
         joints_to_features(bad)
+
+
+def test_full_turn_round_trips_with_the_turn_sign_repair(sample_joints):
+    # Spin the real clip about its pelvis through 360 degrees over time (HumanML3D issue #156).
+    t = len(sample_joints)
+    angles = np.linspace(0.0, 2.0 * np.pi, t)
+    quats = np.stack([_yaw(a) for a in angles])[:, None].repeat(22, axis=1)
+    centre = sample_joints[:, :1] * np.array([1.0, 0.0, 1.0])
+    spun = qrot(quats, sample_joints.astype(np.float64) - centre) + centre
+    feats, positions = joints_to_features(spun)
+    assert np.abs(features_to_joints_np(feats.astype(np.float64)) - positions[:-1]).max() < 1e-4
+    plain, _ = joints_to_features(spun, regulate_turn_sign=False)
+    assert np.abs(features_to_joints_np(plain.astype(np.float64)) - positions[:-1]).max() > 0.05

@@ -123,12 +123,20 @@ def foot_contacts(positions: np.ndarray, threshold: float = FOOT_CONTACT_THRESHO
     return (disp < threshold).astype(np.float64)
 
 
-def joints_to_features(joints: np.ndarray, uniform: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def joints_to_features(
+    joints: np.ndarray, uniform: bool = True, regulate_turn_sign: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """HumanML3D ``process_file``: joints (T, 22, 3) -> features (T-1, 263).
 
     Args:
         joints: global joint positions in metres, Y up, any placement and heading.
         uniform: re-target onto the reference skeleton first (HumanML3D does).
+        regulate_turn_sign: repair HumanML3D issue #156. The root rotation velocity is
+            ``arcsin(q_delta.y)`` of ``q_delta = r_{t+1} r_t^-1``; once the facing passes 180
+            degrees from frame 0 the root quaternions change hemisphere, ``q_delta`` gets
+            w < 0 and that frame's velocity the wrong sign, so recovered joints jump. With
+            the flag, ``q_delta`` is taken with w >= 0 (the same rotation); every other
+            channel is unchanged. ``False`` reproduces the published code bit for bit.
 
     Returns:
         features: (T-1, 263) float32 feature vectors.
@@ -144,6 +152,8 @@ def joints_to_features(joints: np.ndarray, uniform: bool = True) -> tuple[np.nda
 
     velocity = qrot(r_rot[1:], positions[1:, 0] - positions[:-1, 0])
     r_velocity = qmul(r_rot[1:], qinv(r_rot[:-1]))
+    if regulate_turn_sign:
+        r_velocity = np.where(r_velocity[:, :1] < 0.0, -r_velocity, r_velocity)
     rot_vel = np.arcsin(np.clip(r_velocity[:, 2:3], -1.0, 1.0))
 
     local = positions.copy()
