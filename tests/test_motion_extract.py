@@ -63,9 +63,9 @@ def test_bad_joints_rejected():
 
 
 def test_full_turn_round_trips_with_the_turn_sign_repair(sample_joints):
-    # Spin the real clip about its pelvis through 360 degrees over time (HumanML3D issue #156).
+    # Spin the real clip about its pelvis through two full turns (HumanML3D issue #156).
     t = len(sample_joints)
-    angles = np.linspace(0.0, 2.0 * np.pi, t)
+    angles = np.linspace(0.0, 4.0 * np.pi, t)
     quats = np.stack([_yaw(a) for a in angles])[:, None].repeat(22, axis=1)
     centre = sample_joints[:, :1] * np.array([1.0, 0.0, 1.0])
     spun = qrot(quats, sample_joints.astype(np.float64) - centre) + centre
