@@ -129,7 +129,7 @@ def test_heightfield_sdf(tmp_path):
         top = centre + rot @ (p - [0, 0, hit])  # the surface point under p
         assert abs(float(sdf(torch.as_tensor(top[None]))[0])) < 1e-9
     # Distances: against trimesh's exact distance to the same closed solid.
-    mesh = sdf._blocks[0].mesh
+    mesh = sdf.mesh(g)
     solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
     pts = rng.uniform([-1.2, -0.8, -0.2], [1.2, 0.8, 0.7], (600, 3))
     ref = -trimesh.proximity.signed_distance(solid, pts)

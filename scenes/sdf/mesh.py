@@ -123,13 +123,25 @@ class MeshSDF:
             }
         return self._cache[key]
 
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """Centre (3,) and radius of a sphere holding the mesh (local frame, metres)."""
+        centre = self.bounds().mean(0)
+        return centre, float(np.linalg.norm(self.vertices - centre, axis=1).max())
+
     def __call__(self, points: Tensor) -> Tensor:
         """Signed distances (...,) of local points (..., 3); differentiable in ``points``."""
         shape = points.shape[:-1]
         flat = points.reshape(-1, 3)
-        t = self._tensors(flat)
-        q, sign = self._closest(flat.detach(), t)
+        q, sign = self.closest(flat)
         return (sign * torch.linalg.vector_norm(flat - q, dim=-1)).reshape(shape)
+
+    @torch.no_grad()
+    def closest(self, points: Tensor) -> tuple[Tensor, Tensor]:
+        """Closest mesh point (M, 3) and side (M,) (-1 inside, +1 outside) of local points (M, 3),
+        without gradient: the signed distance is ``side * ||p - q||`` and its gradient that of
+        ``||p - q||`` with q held fixed."""
+        p = points.detach()
+        return self._closest(p, self._tensors(p))
 
     @torch.no_grad()
     def _closest(self, p: Tensor, t: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
