@@ -44,7 +44,7 @@ from torch.autograd.function import once_differentiable
 
 from controlmm.errors import ControlMMError, ShapeError
 from scenes.sdf import kernels, primitives
-from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, MeshSDF, cached_mesh_sdf, heightfield_mesh
+from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, DEFAULT_REACH, MeshSDF, cached_mesh_sdf, heightfield_mesh
 from scenes.tracks import MocapTrack, quat_to_mat
 
 Tensor = torch.Tensor
@@ -115,6 +115,8 @@ class SceneSDF:
             mocap = model.body(body).mocapid[0]
             data.mocap_pos[mocap], data.mocap_quat[mocap] = track.pose_numpy(float(track.times[0]))
         mujoco.mj_kinematics(model, data)
+        start = None if isinstance(scene, mujoco.MjModel) else (scene.start.x, scene.start.y)
+        self._extent = _scene_extent(model, data, self.geom_ids, tracks, start)
         track_of_body = {model.body(name).id: name for name in tracks}
         moving = sorted({track_of_body[int(model.geom_bodyid[g])] for g in self.geom_ids
                          if int(model.geom_bodyid[g]) in track_of_body})
@@ -143,10 +145,18 @@ class SceneSDF:
             rot, pos, track = _quat_mat(m.geom_quat[g]), m.geom_pos[g].copy(), body_track[body]
         else:
             rot, pos, track = data.geom_xmat[g].reshape(3, 3).copy(), data.geom_xpos[g].copy(), -1
-        mesh = self._mesh(g, mesh_pad, mesh_pitch) if _KIND[type_name] == MESH else None
+        mesh = None
+        if _KIND[type_name] == MESH:  # its grids reach every corner of the scene's extent
+            centres = [data.geom_xpos[g]] if track < 0 else [
+                t_pos + np.linalg.norm(pos) * np.array([sx, sy, sz]) for t_pos in self._tracks[track].pos
+                for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+            corners = np.array([[x, y, z] for x in self._extent[:, 0] for y in self._extent[:, 1]
+                                for z in self._extent[:, 2]])
+            reach = max(DEFAULT_REACH, max(float(np.linalg.norm(corners - c, axis=1).max()) for c in centres))
+            mesh = self._mesh(g, mesh_pad, mesh_pitch, reach)
         return _Geom(col, g, type_name, m.geom_size[g].copy(), rot, pos, track, mesh)
 
-    def _mesh(self, g: int, pad: float, pitch: float) -> MeshSDF:
+    def _mesh(self, g: int, pad: float, pitch: float, reach: float) -> MeshSDF:
         m = self.model
         name = m.geom(g).name or f"geom{g}"
         if int(m.geom_type[g]) == int(G.mjGEOM_MESH):
@@ -159,7 +169,8 @@ class SceneSDF:
             nrow, ncol = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
             adr = int(m.hfield_adr[hid])
             vertices, faces = heightfield_mesh(m.hfield_size[hid], nrow, ncol, m.hfield_data[adr:adr + nrow * ncol])
-        return cached_mesh_sdf(vertices, faces, convex_hull=self.convex_hull_meshes, pad=pad, pitch=pitch, name=name)
+        return cached_mesh_sdf(vertices, faces, convex_hull=self.convex_hull_meshes, pad=pad, pitch=pitch, name=name,
+                               reach=round(reach, 1))
 
     def _tensors(self, like: Tensor) -> dict[str, Tensor]:
         """Stacked geom constants for a dtype and device (built once per pair)."""
@@ -386,6 +397,34 @@ class _WithGradient(torch.autograd.Function):
     def backward(ctx, grad_out: Tensor):
         (gradient,) = ctx.saved_tensors
         return grad_out[..., None] * gradient, None, None
+
+
+EXTENT_MARGIN = 1.0
+"""Metres added around the obstacles (and start pose) to get the region where meshes' SDFs are
+accurate (their grids reach it; see :mod:`scenes.sdf.mesh`)."""
+
+
+def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence[int],
+                  tracks: Mapping[str, MocapTrack], start: tuple[float, float] | None) -> np.ndarray:
+    """(2, 3) world box holding the obstacles (every key pose of moving ones), the start pose
+    (0 to 2 m high) and ``EXTENT_MARGIN`` around them."""
+    points = [] if start is None else [np.array([start[0], start[1], 0.0]), np.array([start[0], start[1], 2.0])]
+    for g in geom_ids:
+        if model.geom_type[g] == G.mjGEOM_PLANE:
+            continue
+        rot = data.geom_xmat[g].reshape(3, 3)
+        centre = data.geom_xpos[g] + rot @ model.geom_aabb[g, :3]
+        half = np.abs(rot) @ model.geom_aabb[g, 3:]
+        points += [centre - half, centre + half]
+    for name, track in tracks.items():
+        body = model.body(name).id
+        radius = max([float(model.geom_rbound[g]) + float(np.linalg.norm(model.geom_pos[g]))
+                      for g in geom_ids if model.geom_bodyid[g] == body] or [0.0])
+        points += [track.pos.min(0) - radius, track.pos.max(0) + radius]
+    if not points:
+        return np.zeros((2, 3))
+    pts = np.stack(points)
+    return np.stack([pts.min(0) - EXTENT_MARGIN, pts.max(0) + EXTENT_MARGIN])
 
 
 def _stack_frames(rot_t: Tensor, pos: Tensor) -> tuple[Tensor, Tensor]:
