@@ -34,7 +34,6 @@ from __future__ import annotations
 import hashlib
 import math
 import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,7 +72,7 @@ distance); much faster far from the mesh, and the refinement over vertex rings r
 
 _PAIRS = 8_192
 """Point-triangle pairs per chunk at build time: small enough to stay in cache and below torch's
-parallel grain (a busy machine makes multi-threaded small ops wait)."""
+parallel grain (multi-threaded small ops lose much of their time waiting on a busy machine)."""
 
 
 @dataclass(frozen=True)
@@ -300,26 +299,9 @@ def _best_of(nodes: Tensor, cand: Tensor, data: Tensor) -> Tensor:
     return out
 
 
-@contextmanager
-def _one_thread():
-    """Run torch single-threaded for a while: the build's many small ops gain little from a
-    second thread and lose a lot when the other core is busy (they wait for it)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
-
-
 @torch.no_grad()
 def _build_grid(mesh: trimesh.Trimesh, triangles: np.ndarray, pad: float, pitch: float, reach: float) -> _Grid:
     """Nested grids and the nearest triangle of their nodes (see the module docstring)."""
-    with _one_thread():
-        return _build_grid_1(mesh, triangles, pad, pitch, reach)
-
-
-def _build_grid_1(mesh: trimesh.Trimesh, triangles: np.ndarray, pad: float, pitch: float, reach: float) -> _Grid:
     lo, hi = triangles.reshape(-1, 3).min(0), triangles.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
     half = (hi - lo) / 2 + pad
