@@ -198,6 +198,9 @@ class SceneSDF:
             # kind-sorted position of each geom_ids column
             "order": torch.as_tensor(np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device),
         }
+        sb, sc = self._slices[BOX], self._slices[CYLINDER]
+        c["box_half"], c["box_ball"] = c["box"][sb, :, None].contiguous(), c["ball"][sb, None].contiguous()
+        c["cyl_half"], c["cyl_radius"] = c["box"][sc, 2:].contiguous(), c["disk"][sc, None].contiguous()
         c["closest_column"] = (torch.arange(len(geoms), device=like.device) - self._num_round).clamp_min(0)
         rot_t = c["rot"].transpose(-1, -2)
         c["table"] = torch.cat([rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1).T.contiguous()
@@ -323,10 +326,10 @@ class SceneSDF:
 
         s = self._slices[BOX]
         if s.stop > s.start:
-            merge(kernels.box_distance(x[:, s], y[:, s], z[:, s], c["box"][s, :, None], c["ball"][s, None]), s.start)
+            merge(kernels.box_distance(x[:, s], y[:, s], z[:, s], c["box_half"], c["box_ball"]), s.start)
         s = self._slices[CYLINDER]
         if s.stop > s.start:
-            merge(kernels.cylinder_distance(x[:, s], y[:, s], z[:, s], c["box"][s, 2:], c["disk"][s, None]), s.start)
+            merge(kernels.cylinder_distance(x[:, s], y[:, s], z[:, s], c["cyl_half"], c["cyl_radius"]), s.start)
         s = self._slices[PLANE]
         if s.stop > s.start:
             if need_winner:
@@ -337,28 +340,32 @@ class SceneSDF:
         if s.stop > s.start:
             xe, ye, ze = x[:, s], y[:, s], z[:, s]
             d = (xe * xe).addcmul_(ye, ye).addcmul_(ze, ze).sqrt_().sub_(c["axes_max"][:, None])  # lower bound
-            hit = (d <= best[:, None]).nonzero(as_tuple=True) if best is not None else (slice(None),) * 3
-            pts = local[:, :, s].permute(0, 2, 3, 1)[hit].reshape(-1, 3)  # (K, 3)
+            pts = local[:, :, s].permute(0, 2, 3, 1)  # (L, Ge, N', 3)
+            cp = slice(s.start - first_cp, s.stop - first_cp)
+            if best is None:  # nothing to cull against: every pair
+                hit, pts, axes = None, pts.reshape(-1, 3), c["axes"][None, :, None].expand_as(pts).reshape(-1, 3)
+            else:
+                hit = (d <= best[:, None]).nonzero(as_tuple=True)
+                pts, axes = pts[hit], c["axes"].index_select(0, hit[1])
             if len(pts):
-                axes = c["axes"][None, :, None].expand(num_l, -1, num_n, -1)[hit].reshape(-1, 3)
                 q = primitives._ellipsoid_closest(pts, axes, primitives.ELLIPSOID_NEWTON_STEPS)
                 inside = (pts / axes).square_().sum(dim=-1).sub_(1.0)  # < 0 inside
-                d[hit] = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside).reshape(d[hit].shape)
+                exact = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside)
+                _put(d, hit, exact)
                 if need_winner:
-                    cp = slice(s.start - first_cp, s.stop - first_cp)
-                    closest_v[:, cp][hit] = q.reshape(closest_v[:, cp][hit].shape)
+                    _put(closest_v[:, cp], hit, q)
             merge(d, s.start)
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
-            pts_all = local[:, :, j].transpose(1, 2)  # (L, N', 3)
+            pts = local[:, :, j].transpose(1, 2)  # (L, N', 3)
             k = j - self._slices[MESH].start
-            d = torch.linalg.vector_norm(pts_all - c["mesh_centre"][k], dim=-1) - c["mesh_radius"][k]  # lower bound
-            hit = (d <= best).nonzero(as_tuple=True) if best is not None else (slice(None),) * 2
-            pts = pts_all[hit].reshape(-1, 3)
+            d = torch.linalg.vector_norm(pts - c["mesh_centre"][k], dim=-1) - c["mesh_radius"][k]  # lower bound
+            hit = None if best is None else (d <= best).nonzero(as_tuple=True)
+            pts = pts.reshape(-1, 3) if hit is None else pts[hit]
             if len(pts):
                 q, sgn = self._geoms[j].mesh.closest(pts.contiguous())
-                d[hit] = (sgn * torch.linalg.vector_norm(pts - q, dim=-1)).reshape(d[hit].shape)
+                _put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
                 if need_winner:
-                    closest_v[:, j - first_cp][hit] = q.reshape(closest_v[:, j - first_cp][hit].shape)
+                    _put(closest_v[:, j - first_cp], hit, q)
             merge(d[:, None], j)
         return best, winner, closest
 
@@ -425,6 +432,14 @@ def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence
         return np.zeros((2, 3))
     pts = np.stack(points)
     return np.stack([pts.min(0) - EXTENT_MARGIN, pts.max(0) + EXTENT_MARGIN])
+
+
+def _put(target: Tensor, hit: tuple[Tensor, ...] | None, values: Tensor) -> None:
+    """target[hit] = values in place; every entry (in order) when hit is None."""
+    if hit is None:
+        target.copy_(values.view(target.shape))
+    else:
+        target.index_put_(hit, values)
 
 
 def _stack_frames(rot_t: Tensor, pos: Tensor) -> tuple[Tensor, Tensor]:
