@@ -235,11 +235,14 @@ class SceneSDF:
         c = self._tensors(points)
         grad = points.requires_grad and torch.is_grad_enabled()
         with torch.no_grad():
-            p, table, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
+            p, rot_t, pos, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
             local = _to_local(p, frames)  # (L, 3, G, N')
             value, winner, closest = self._nearest(local, c, need_winner=grad)
             if not grad:
                 return value.reshape(*lead, n)
+            table = c["table"] if rot_t is None else torch.cat(  # (16, L * G), see _TABLE
+                [rot_t.reshape(-1, 9), pos.reshape(-1, 3), c["box"].repeat(rot_t.shape[0], 1),
+                 c["disk"].repeat(rot_t.shape[0])[:, None]], dim=1).T.contiguous()
             gradient = self._winner_gradient(local, value, winner, table, closest)  # (L, N', 3)
         return _WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
 
@@ -252,7 +255,7 @@ class SceneSDF:
         if not self._geoms:
             return points.new_zeros((*lead, n, 0))
         c = self._tensors(points)
-        p, _, frames = self._posed(points, times, c)
+        p, _, _, frames = self._posed(points, times, c)
         local = _to_local(p, frames)  # (L, 3, G, N')
         r = self._num_round
         cols = [primitives.sdf_round(local[:, :, :r].permute(0, 2, 3, 1), c["box"][:r, None],
@@ -270,10 +273,12 @@ class SceneSDF:
 
     def _posed(self, points: Tensor, times: Tensor | None, c: dict[str, Tensor]):
         """Points as (L, N', 3) and the geom poses they meet: L = 1 (all points share the poses)
-        or one per leading index (per-frame mocap poses). Returns the points, the per-geom table
-        (16, L * G) (see ``_TABLE``) and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for ``_to_local``."""
+        or one per leading index (per-frame mocap poses). Returns the points, the geom-from-world
+        rotations (L, G, 3, 3) and world origins (L, G, 3) of the geoms (None, None when static:
+        the precomputed table is used), and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for
+        ``_to_local``."""
         if not self._tracks:
-            return points.reshape(1, -1, 3), c["table"], c["frames"]
+            return points.reshape(1, -1, 3), None, None, c["frames"]
         if times is None:
             times_k = points.new_tensor([float(tr.times[0]) for tr in self._tracks])[:, None]  # (K, 1)
             p = points.reshape(1, -1, 3)
@@ -285,16 +290,19 @@ class SceneSDF:
             pos_k, quat_k = track.pose(times_k[k])
             body_rot.append(quat_to_mat(quat_k))
             body_pos.append(pos_k)
+        mv = c["moving"]
         body_rot = torch.stack(body_rot, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
         body_pos = torch.stack(body_pos, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
-        mv = c["moving"]
-        num_l = body_rot.shape[0]
-        table = c["table"][:, None].expand(-1, num_l, -1).clone()  # (16, L, G)
-        rot_t = (body_rot @ c["rot"][mv]).transpose(-1, -2)  # (L, Gm, 3, 3)
-        table[:9, :, mv] = rot_t.reshape(num_l, -1, 9).permute(2, 0, 1)
-        table[9:12, :, mv] = (body_pos + (body_rot @ c["pos"][mv][..., None])[..., 0]).permute(2, 0, 1)
-        rot_all = table[:9].permute(1, 2, 0).reshape(num_l, -1, 3, 3)
-        return p, table.reshape(_TABLE, -1), _stack_frames(rot_all, table[9:12].permute(1, 2, 0))
+        rot_m = (body_rot @ c["rot"][mv]).transpose(-1, -2)  # geom-from-world
+        pos_m = body_pos + (body_rot @ c["pos"][mv][..., None])[..., 0]
+        if len(mv) == len(self._geoms):
+            rot_t, pos = rot_m, pos_m
+        else:
+            num_l = body_rot.shape[0]
+            rot_t = c["rot"].transpose(-1, -2).expand(num_l, -1, -1, -1).clone()
+            pos = c["pos"].expand(num_l, -1, -1).clone()
+            rot_t[:, mv], pos[:, mv] = rot_m, pos_m
+        return p, rot_t, pos, _stack_frames(rot_t, pos)
 
     def _nearest(self, local: Tensor, c: dict[str, Tensor], need_winner: bool):
         """The minimum (L, N') over geoms of points in every geom frame ``local`` (L, 3, G, N');
