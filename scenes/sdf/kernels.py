@@ -9,12 +9,15 @@ tests use), rearranged for speed:
 * :func:`box_distance`: a box grown by a ball (exactly a box, a sphere or a capsule);
 * :func:`cylinder_distance`: a solid cylinder;
 * :func:`round_gradient`: the unit gradient of :func:`scenes.sdf.primitives.sdf_round`, which
-  covers all four, at one point per (pose set, point).
+  covers all four, at one point per (pose set, point);
+* :func:`stack_frames` / :func:`to_local`: every point into every geom frame in one batched
+  matmul; :class:`WithGradient`: a value with a precomputed gradient, for autograd.
 """
 
 from __future__ import annotations
 
 import torch
+from torch.autograd.function import once_differentiable
 
 Tensor = torch.Tensor
 
@@ -69,3 +72,42 @@ def round_gradient(p: Tensor, box: Tensor, disk: Tensor) -> Tensor:
     gs = torch.where(out, os / h.clamp_min(tiny), (s >= qz).to(p.dtype))
     gz = torch.where(out, oz / h.clamp_min(tiny), (s < qz).to(p.dtype))
     return torch.stack((gs * gx, gs.mul_(gy), gz), dim=1).copysign_(p)  # back from |p| to p
+
+
+def put(target: Tensor, hit: tuple[Tensor, ...] | None, values: Tensor) -> None:
+    """target[hit] = values in place; every entry (in order) when hit is None."""
+    if hit is None:
+        target.copy_(values.view(target.shape))
+    else:
+        target.index_put_(hit, values)
+
+
+def stack_frames(rot_t: Tensor, pos: Tensor) -> tuple[Tensor, Tensor]:
+    """Geom frames (L, G, 3, 3) geom-from-world, origins (L, G, 3) -> W (L, 3G, 3), bias (L, 3G, 1)
+    with rows ordered axis-major (row k * G + g is local axis k of geom g)."""
+    num_l, num_g = rot_t.shape[:2]
+    weight = rot_t.transpose(1, 2).reshape(num_l, 3 * num_g, 3)
+    bias = -(rot_t @ pos[..., None])[..., 0].transpose(1, 2).reshape(num_l, 3 * num_g, 1)
+    return weight, bias
+
+
+def to_local(p: Tensor, frames: tuple[Tensor, Tensor]) -> Tensor:
+    """Points (L, N, 3) in every geom frame: (L, 3, G, N), one batched matmul."""
+    weight, bias = frames
+    local = torch.baddbmm(bias, weight, p.transpose(1, 2))  # (L, 3G, N)
+    return local.view(p.shape[0], 3, -1, p.shape[1])
+
+
+class WithGradient(torch.autograd.Function):
+    """``value`` as a function of ``points`` with the given ``gradient`` (..., N, 3) (first order)."""
+
+    @staticmethod
+    def forward(ctx, points: Tensor, value: Tensor, gradient: Tensor) -> Tensor:
+        ctx.save_for_backward(gradient)
+        return value.clone()
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad_out: Tensor):
+        (gradient,) = ctx.saved_tensors
+        return grad_out[..., None] * gradient, None, None

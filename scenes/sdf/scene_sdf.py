@@ -40,7 +40,6 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 import torch
-from torch.autograd.function import once_differentiable
 
 from controlmm.errors import ControlMMError, ShapeError
 from scenes.sdf import kernels, primitives
@@ -92,7 +91,8 @@ class SceneSDF:
         geom_ids: override the obstacle geoms.
         tracks: mocap tracks by body name (taken from the scene when it is a Scene).
         convex_hull_meshes: use meshes' convex hulls (what MuJoCo collides) instead of the meshes.
-        mesh_pad, mesh_pitch: extent and node spacing of the meshes' candidate grids (m).
+        mesh_pad, mesh_pitch: extent and node spacing of the finest level of the meshes' candidate
+            grids (m); the coarser levels reach the scene's extent (see :mod:`scenes.sdf.mesh`).
     """
 
     def __init__(self, scene, geom_ids: Sequence[int] | None = None,
@@ -204,7 +204,7 @@ class SceneSDF:
         c["closest_column"] = (torch.arange(len(geoms), device=like.device) - self._num_round).clamp_min(0)
         rot_t = c["rot"].transpose(-1, -2)
         c["table"] = torch.cat([rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1).T.contiguous()
-        c["frames"] = _stack_frames(rot_t[None], c["pos"][None])
+        c["frames"] = kernels.stack_frames(rot_t[None], c["pos"][None])
         self._consts[key] = c
         return c
 
@@ -236,15 +236,15 @@ class SceneSDF:
         grad = points.requires_grad and torch.is_grad_enabled()
         with torch.no_grad():
             p, rot_t, pos, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
-            local = _to_local(p, frames)  # (L, 3, G, N')
+            local = kernels.to_local(p, frames)  # (L, 3, G, N')
             value, winner, closest = self._nearest(local, c, need_winner=grad)
             if not grad:
                 return value.reshape(*lead, n)
             table = c["table"] if rot_t is None else torch.cat(  # (16, L * G), see _TABLE
                 [rot_t.reshape(-1, 9), pos.reshape(-1, 3), c["box"].repeat(rot_t.shape[0], 1),
                  c["disk"].repeat(rot_t.shape[0])[:, None]], dim=1).T.contiguous()
-            gradient = self._winner_gradient(local, value, winner, table, closest)  # (L, N', 3)
-        return _WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
+            gradient = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
+        return kernels.WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
 
     def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every
@@ -256,7 +256,7 @@ class SceneSDF:
             return points.new_zeros((*lead, n, 0))
         c = self._tensors(points)
         p, _, _, frames = self._posed(points, times, c)
-        local = _to_local(p, frames)  # (L, 3, G, N')
+        local = kernels.to_local(p, frames)  # (L, 3, G, N')
         r = self._num_round
         cols = [primitives.sdf_round(local[:, :, :r].permute(0, 2, 3, 1), c["box"][:r, None],
                                      c["disk"][:r, None], c["ball"][:r, None]),
@@ -276,7 +276,7 @@ class SceneSDF:
         or one per leading index (per-frame mocap poses). Returns the points, the geom-from-world
         rotations (L, G, 3, 3) and world origins (L, G, 3) of the geoms (None, None when static:
         the precomputed table is used), and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for
-        ``_to_local``."""
+        ``kernels.to_local``."""
         if not self._tracks:
             return points.reshape(1, -1, 3), None, None, c["frames"]
         if times is None:
@@ -302,7 +302,7 @@ class SceneSDF:
             rot_t = c["rot"].transpose(-1, -2).expand(num_l, -1, -1, -1).clone()
             pos = c["pos"].expand(num_l, -1, -1).clone()
             rot_t[:, mv], pos[:, mv] = rot_m, pos_m
-        return p, rot_t, pos, _stack_frames(rot_t, pos)
+        return p, rot_t, pos, kernels.stack_frames(rot_t, pos)
 
     def _nearest(self, local: Tensor, c: dict[str, Tensor], need_winner: bool):
         """The minimum (L, N') over geoms of points in every geom frame ``local`` (L, 3, G, N');
@@ -359,9 +359,9 @@ class SceneSDF:
                 q = primitives._ellipsoid_closest(pts, axes, primitives.ELLIPSOID_NEWTON_STEPS)
                 inside = (pts / axes).square_().sum(dim=-1).sub_(1.0)  # < 0 inside
                 exact = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside)
-                _put(d, hit, exact)
+                kernels.put(d, hit, exact)
                 if need_winner:
-                    _put(closest_v[:, cp], hit, q)
+                    kernels.put(closest_v[:, cp], hit, q)
             merge(d, s.start)
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
             pts = local[:, :, j].transpose(1, 2)  # (L, N', 3)
@@ -371,14 +371,14 @@ class SceneSDF:
             pts = pts.reshape(-1, 3) if hit is None else pts[hit]
             if len(pts):
                 q, sgn = self._geoms[j].mesh.closest(pts.contiguous())
-                _put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
+                kernels.put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
                 if need_winner:
-                    _put(closest_v[:, j - first_cp], hit, q)
+                    kernels.put(closest_v[:, j - first_cp], hit, q)
             merge(d[:, None], j)
         return best, winner, closest
 
     def _winner_gradient(self, local: Tensor, value: Tensor, winner: Tensor, table: Tensor,
-                         closest: Tensor | None) -> Tensor:
+                         closest: Tensor | None, c: dict[str, Tensor]) -> Tensor:
         """World gradient (L, N', 3) of the SDF ``value`` (L, N') from the points in every geom frame
         ``local`` (L, 3, G, N') and the winning geom (L, N'). No autograd."""
         num_l, _, num_g, num_n = local.shape
@@ -387,8 +387,8 @@ class SceneSDF:
         row = table.index_select(1, flat.reshape(-1)).view(_TABLE, num_l, num_n).transpose(0, 1)  # (L, 16, N')
         first_cp = self._num_round
         g = kernels.round_gradient(lw, row[:, 12:15], row[:, 15]) if first_cp > 0 else None
-        if closest is not None:  # planes, ellipsoids, meshes: side * (p - q) / ||p - q|| = (p - q) value / ||p - q||^2
-            k = self._tensors(local)["closest_column"][winner]
+        if closest is not None:  # planes, ellipsoids, meshes: side (p - q) / ||p - q|| = (p - q) value / ||p - q||^2
+            k = c["closest_column"][winner]
             diff = lw - closest.gather(2, k[:, None, None, :].expand(-1, 3, 1, -1))[:, :, 0]
             x, y, z = diff.unbind(1)
             norm2 = (x * x).addcmul_(y, y).addcmul_(z, z).clamp_min_(torch.finfo(diff.dtype).tiny)
@@ -397,21 +397,6 @@ class SceneSDF:
         world = row[:, 0:3] * g[:, 0:1]  # R g = sum_k g_k (row k of R^T)
         world.addcmul_(row[:, 3:6], g[:, 1:2]).addcmul_(row[:, 6:9], g[:, 2:3])
         return world.transpose(1, 2)
-
-
-class _WithGradient(torch.autograd.Function):
-    """``value`` as a function of ``points`` with the given ``gradient`` (..., N, 3) (first order)."""
-
-    @staticmethod
-    def forward(ctx, points: Tensor, value: Tensor, gradient: Tensor) -> Tensor:
-        ctx.save_for_backward(gradient)
-        return value.clone()
-
-    @staticmethod
-    @once_differentiable
-    def backward(ctx, grad_out: Tensor):
-        (gradient,) = ctx.saved_tensors
-        return grad_out[..., None] * gradient, None, None
 
 
 EXTENT_MARGIN = 1.0
@@ -440,30 +425,6 @@ def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence
         return np.zeros((2, 3))
     pts = np.stack(points)
     return np.stack([pts.min(0) - EXTENT_MARGIN, pts.max(0) + EXTENT_MARGIN])
-
-
-def _put(target: Tensor, hit: tuple[Tensor, ...] | None, values: Tensor) -> None:
-    """target[hit] = values in place; every entry (in order) when hit is None."""
-    if hit is None:
-        target.copy_(values.view(target.shape))
-    else:
-        target.index_put_(hit, values)
-
-
-def _stack_frames(rot_t: Tensor, pos: Tensor) -> tuple[Tensor, Tensor]:
-    """Geom frames (L, G, 3, 3) geom-from-world, origins (L, G, 3) -> W (L, 3G, 3), bias (L, 3G, 1)
-    with rows ordered axis-major (row k * G + g is local axis k of geom g)."""
-    num_l, num_g = rot_t.shape[:2]
-    weight = rot_t.transpose(1, 2).reshape(num_l, 3 * num_g, 3)
-    bias = -(rot_t @ pos[..., None])[..., 0].transpose(1, 2).reshape(num_l, 3 * num_g, 1)
-    return weight, bias
-
-
-def _to_local(p: Tensor, frames: tuple[Tensor, Tensor]) -> Tensor:
-    """Points (L, N, 3) in every geom frame: (L, 3, G, N), one batched matmul."""
-    weight, bias = frames
-    local = torch.baddbmm(bias, weight, p.transpose(1, 2))  # (L, 3G, N)
-    return local.view(p.shape[0], 3, -1, p.shape[1])
 
 
 def _quat_mat(quat: np.ndarray) -> np.ndarray:
