@@ -14,7 +14,7 @@ interpolation; before the first key and after the last the pose holds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -40,6 +40,7 @@ class MocapTrack:
     times: np.ndarray
     pos: np.ndarray
     quat: np.ndarray
+    _tensors: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @classmethod
     def from_flat(cls, body: str, data: np.ndarray) -> MocapTrack:
@@ -70,9 +71,11 @@ class MocapTrack:
 
     def pose(self, t: Tensor) -> tuple[Tensor, Tensor]:
         """Interpolated pose at times ``t`` (any shape, seconds) -> pos (..., 3), quat (..., 4)."""
-        times = torch.as_tensor(self.times, dtype=t.dtype, device=t.device)
-        pos = torch.as_tensor(self.pos, dtype=t.dtype, device=t.device)
-        quat = torch.as_tensor(self.quat, dtype=t.dtype, device=t.device)
+        key = (t.dtype, t.device)
+        if key not in self._tensors:  # the keys as tensors, once per dtype and device
+            self._tensors[key] = tuple(torch.as_tensor(v, dtype=t.dtype, device=t.device)
+                                       for v in (self.times, self.pos, self.quat))
+        times, pos, quat = self._tensors[key]
         if len(times) == 1:
             return pos[0].expand(*t.shape, 3), quat[0].expand(*t.shape, 4)
         tc = t.clamp(times[0], times[-1])

@@ -13,8 +13,23 @@ of the geom's signed distance, evaluated in the geom's frame:
 Shapes: points (..., N, 3) world metres; ``t`` None (obstacles at their first track pose) or
 frame times in seconds broadcastable to ``points.shape[:-2]``, e.g. (T,) for (B, T, N, 3); mocap
 obstacles then take their track pose at each frame's time. Output (..., N) metres, negative
-inside an obstacle, +inf when the scene has no obstacles. Differentiable in ``points``; any
-float dtype and device.
+inside an obstacle, +inf when the scene has no obstacles. Differentiable in ``points`` (first
+order); any float dtype and device.
+
+How a call runs (vectorised by geom kind; no Python loop over primitive geoms):
+
+1. every point goes into every geom frame with one batched matmul (``baddbmm``; the geoms'
+   poses are stacked once, or per frame for mocap obstacles);
+2. without autograd, one pass per kind over all geoms of that kind (:mod:`scenes.sdf.kernels`):
+   boxes, spheres and capsules (a box grown by a ball), cylinders, planes; ellipsoids and
+   meshes, the costly kinds, only where a bounding-sphere lower bound of their distance is not
+   above the minimum found so far (elsewhere they cannot be the minimum, so it stays exact);
+3. the minimum over geoms; when ``points`` needs a gradient, the winning geom's gradient is
+   computed in closed form (the SDF's exact gradient: the analytic one of
+   :func:`scenes.sdf.primitives.sdf_round`, or side * (p - q) / ||p - q|| with the closest
+   point q of a plane, ellipsoid or mesh) and attached by a small autograd function.
+
+:meth:`SceneSDF.per_geom` evaluates every geom with plain autograd (the reference path).
 """
 
 from __future__ import annotations
@@ -27,40 +42,44 @@ import numpy as np
 import torch
 
 from controlmm.errors import ControlMMError, ShapeError
-from scenes.sdf import primitives
-from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, MeshSDF, cached_mesh_sdf, heightfield_mesh
+from scenes.sdf import kernels, primitives
+from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, DEFAULT_REACH, MeshSDF, cached_mesh_sdf, heightfield_mesh
 from scenes.tracks import MocapTrack, quat_to_mat
 
 Tensor = torch.Tensor
 G = mujoco.mjtGeom
 
-PRIMITIVES = {
-    int(G.mjGEOM_PLANE): primitives.sdf_plane,
-    int(G.mjGEOM_SPHERE): primitives.sdf_sphere,
-    int(G.mjGEOM_CAPSULE): primitives.sdf_capsule,
-    int(G.mjGEOM_CYLINDER): primitives.sdf_cylinder,
-    int(G.mjGEOM_BOX): primitives.sdf_box,
-    int(G.mjGEOM_ELLIPSOID): primitives.sdf_ellipsoid,
-}
-TRIANGULATED = (int(G.mjGEOM_MESH), int(G.mjGEOM_HFIELD))
 SUPPORTED = ("plane", "sphere", "capsule", "cylinder", "box", "ellipsoid", "mesh", "hfield")
+BOX, CYLINDER, PLANE, ELLIPSOID, MESH = range(5)
+"""Geom kinds, in evaluation order (cheap first, so that the costly ones can be culled). BOX is
+a box grown by a ball: boxes, spheres and capsules."""
+_KIND = {"box": BOX, "sphere": BOX, "capsule": BOX, "cylinder": CYLINDER, "plane": PLANE,
+         "ellipsoid": ELLIPSOID, "mesh": MESH, "hfield": MESH}
+_TABLE = 16
+"""Columns of the per-geom table: geom-from-world rotation (9), world origin (3), sdf_round's box
+half-extents (3) and disk radius (1)."""
 
 
 def geom_type_name(geom_type: int) -> str:
     return mujoco.mjtGeom(int(geom_type)).name.removeprefix("mjGEOM_").lower()
 
 
-@dataclass
-class _Block:
-    """Geoms evaluated together: one primitive type (static or moving), or one mesh."""
+@dataclass(frozen=True)
+class _Geom:
+    """One obstacle geom, as the SDF sees it."""
 
-    columns: list[int]  # positions in the output's last axis
-    geom_type: int
-    sizes: np.ndarray  # (G, 3)
-    rot: np.ndarray  # (G, 3, 3) world-from-geom (static) or body-from-geom (moving)
-    pos: np.ndarray  # (G, 3)
-    track: list[MocapTrack] | None = None  # per geom, for moving blocks
+    column: int  # position in geom_ids (the per_geom output's last axis)
+    geom_id: int
+    type_name: str
+    size: np.ndarray  # (3,) geom_size
+    rot: np.ndarray  # (3, 3) world-from-geom (static) or body-from-geom (moving)
+    pos: np.ndarray  # (3,)
+    track: int  # index into SceneSDF._tracks, -1 when static
     mesh: MeshSDF | None = None
+
+    @property
+    def kind(self) -> int:
+        return _KIND[self.type_name]
 
 
 class SceneSDF:
@@ -72,7 +91,8 @@ class SceneSDF:
         geom_ids: override the obstacle geoms.
         tracks: mocap tracks by body name (taken from the scene when it is a Scene).
         convex_hull_meshes: use meshes' convex hulls (what MuJoCo collides) instead of the meshes.
-        mesh_pad, mesh_pitch: extent and node spacing of the meshes' candidate grids (m).
+        mesh_pad, mesh_pitch: extent and node spacing of the finest level of the meshes' candidate
+            grids (m); the coarser levels reach the scene's extent (see :mod:`scenes.sdf.mesh`).
     """
 
     def __init__(self, scene, geom_ids: Sequence[int] | None = None,
@@ -95,54 +115,48 @@ class SceneSDF:
             mocap = model.body(body).mocapid[0]
             data.mocap_pos[mocap], data.mocap_quat[mocap] = track.pose_numpy(float(track.times[0]))
         mujoco.mj_kinematics(model, data)
-        track_of_body = {model.body(name).id: track for name, track in tracks.items()}
-        self._blocks = self._make_blocks(data, track_of_body, mesh_pad, mesh_pitch)
-        self._consts: dict[tuple[torch.dtype, torch.device], list[dict[str, Tensor]]] = {}
+        start = None if isinstance(scene, mujoco.MjModel) else (scene.start.x, scene.start.y)
+        self._extent = _scene_extent(model, data, self.geom_ids, tracks, start)
+        track_of_body = {model.body(name).id: name for name in tracks}
+        moving = sorted({track_of_body[int(model.geom_bodyid[g])] for g in self.geom_ids
+                         if int(model.geom_bodyid[g]) in track_of_body})
+        self._tracks = [tracks[name] for name in moving]  # the tracks that move obstacle geoms
+        body_track = {model.body(name).id: k for k, name in enumerate(moving)}
+        geoms = [self._make_geom(col, g, data, body_track, mesh_pad, mesh_pitch) for col, g in enumerate(self.geom_ids)]
+        self._geoms = sorted(geoms, key=lambda geom: geom.kind)  # stable: geom_ids order within a kind
+        kinds = np.array([geom.kind for geom in self._geoms], dtype=np.int64)
+        self._slices = {k: slice(int(np.searchsorted(kinds, k, "left")), int(np.searchsorted(kinds, k, "right")))
+                        for k in (BOX, CYLINDER, PLANE, ELLIPSOID, MESH)}
+        self._num_round = self._slices[CYLINDER].stop  # BOX and CYLINDER columns come first
+        self._consts: dict[tuple[torch.dtype, torch.device], dict[str, Tensor]] = {}
 
-    @property
-    def num_geoms(self) -> int:
-        return len(self.geom_ids)
+    # -- construction ---------------------------------------------------------------------------
 
-    @property
-    def is_moving(self) -> bool:
-        return any(b.track is not None for b in self._blocks)
-
-    def _make_blocks(self, data: mujoco.MjData, track_of_body: dict[int, MocapTrack],
-                     mesh_pad: float, mesh_pitch: float) -> list[_Block]:
+    def _make_geom(self, col: int, g: int, data: mujoco.MjData, body_track: dict[int, int],
+                   mesh_pad: float, mesh_pitch: float) -> _Geom:
         m = self.model
-        groups: dict[tuple[int, bool], list[int]] = {}
-        blocks: list[_Block] = []
-        for col, g in enumerate(self.geom_ids):
-            gtype = int(m.geom_type[g])
-            if gtype not in PRIMITIVES and gtype not in TRIANGULATED:
-                name = m.geom(g).name or f"geom{g}"
-                raise ControlMMError(f"geom '{name}' has type '{geom_type_name(gtype)}', which the SDF does not "
-                                     f"support (supported: {', '.join(SUPPORTED)})")
-            moving = int(m.geom_bodyid[g]) in track_of_body
-            if gtype in TRIANGULATED:
-                blocks.append(self._geom_block([col], gtype, data, track_of_body, moving,
-                                               mesh=self._mesh(g, mesh_pad, mesh_pitch)))
-            else:
-                groups.setdefault((gtype, moving), []).append(col)
-        for (gtype, moving), cols in groups.items():
-            blocks.append(self._geom_block(cols, gtype, data, track_of_body, moving))
-        return blocks
-
-    def _geom_block(self, cols: list[int], gtype: int, data: mujoco.MjData,
-                    track_of_body: dict[int, MocapTrack], moving: bool, mesh: MeshSDF | None = None) -> _Block:
-        m = self.model
-        ids = [self.geom_ids[c] for c in cols]
-        if moving:  # pose relative to the mocap body, composed with the track at call time
-            rot = np.stack([_quat_mat(m.geom_quat[g]) for g in ids])
-            pos = np.stack([m.geom_pos[g] for g in ids])
-            track = [track_of_body[int(m.geom_bodyid[g])] for g in ids]
+        type_name = geom_type_name(m.geom_type[g])
+        if type_name not in _KIND:
+            name = m.geom(g).name or f"geom{g}"
+            raise ControlMMError(f"geom '{name}' has type '{type_name}', which the SDF does not support "
+                                 f"(supported: {', '.join(SUPPORTED)})")
+        body = int(m.geom_bodyid[g])
+        if body in body_track:  # pose relative to the mocap body, composed with the track at call time
+            rot, pos, track = _quat_mat(m.geom_quat[g]), m.geom_pos[g].copy(), body_track[body]
         else:
-            rot = np.stack([data.geom_xmat[g].reshape(3, 3) for g in ids])
-            pos = np.stack([data.geom_xpos[g] for g in ids])
-            track = None
-        return _Block(cols, gtype, np.stack([m.geom_size[g] for g in ids]), rot, pos, track, mesh)
+            rot, pos, track = data.geom_xmat[g].reshape(3, 3).copy(), data.geom_xpos[g].copy(), -1
+        mesh = None
+        if _KIND[type_name] == MESH:  # its grids reach every corner of the scene's extent
+            centres = [data.geom_xpos[g]] if track < 0 else [
+                t_pos + np.linalg.norm(pos) * np.array([sx, sy, sz]) for t_pos in self._tracks[track].pos
+                for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+            corners = np.array([[x, y, z] for x in self._extent[:, 0] for y in self._extent[:, 1]
+                                for z in self._extent[:, 2]])
+            reach = max(DEFAULT_REACH, max(float(np.linalg.norm(corners - c, axis=1).max()) for c in centres))
+            mesh = self._mesh(g, mesh_pad, mesh_pitch, reach)
+        return _Geom(col, g, type_name, m.geom_size[g].copy(), rot, pos, track, mesh)
 
-    def _mesh(self, g: int, pad: float, pitch: float) -> MeshSDF:
+    def _mesh(self, g: int, pad: float, pitch: float, reach: float) -> MeshSDF:
         m = self.model
         name = m.geom(g).name or f"geom{g}"
         if int(m.geom_type[g]) == int(G.mjGEOM_MESH):
@@ -155,66 +169,262 @@ class SceneSDF:
             nrow, ncol = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
             adr = int(m.hfield_adr[hid])
             vertices, faces = heightfield_mesh(m.hfield_size[hid], nrow, ncol, m.hfield_data[adr:adr + nrow * ncol])
-        return cached_mesh_sdf(vertices, faces, convex_hull=self.convex_hull_meshes, pad=pad, pitch=pitch, name=name)
+        return cached_mesh_sdf(vertices, faces, convex_hull=self.convex_hull_meshes, pad=pad, pitch=pitch, name=name,
+                               reach=round(reach, 1))
 
-    def _tensors(self, like: Tensor) -> list[dict[str, Tensor]]:
+    def _tensors(self, like: Tensor) -> dict[str, Tensor]:
+        """Stacked geom constants for a dtype and device (built once per pair)."""
         key = (like.dtype, like.device)
-        if key not in self._consts:
-            to = dict(dtype=like.dtype, device=like.device)
-            self._consts[key] = [{
-                "size": torch.as_tensor(b.sizes, **to),
-                "rot": torch.as_tensor(b.rot, **to),
-                "pos": torch.as_tensor(b.pos, **to),
-                "offset": torch.einsum("gi,gij->gj", torch.as_tensor(b.pos, **to), torch.as_tensor(b.rot, **to)),
-            } for b in self._blocks]
-        return self._consts[key]
+        if key in self._consts:
+            return self._consts[key]
+        to = dict(dtype=like.dtype, device=like.device)
+        geoms = self._geoms
+        box, disk, ball = np.zeros((len(geoms), 3)), np.zeros(len(geoms)), np.zeros(len(geoms))
+        for i, geom in enumerate(geoms[:self._num_round]):
+            box[i], disk[i], ball[i] = primitives.round_params(geom.type_name, geom.size)
+        axes = np.array([geom.size for geom in geoms[self._slices[ELLIPSOID]]]).reshape(-1, 3)
+        spheres = [geom.mesh.bounding_sphere() for geom in geoms[self._slices[MESH]]]
+        moving = [i for i, geom in enumerate(geoms) if geom.track >= 0]
+        c = {
+            "rot": torch.as_tensor(np.array([geom.rot for geom in geoms]).reshape(-1, 3, 3), **to),
+            "pos": torch.as_tensor(np.array([geom.pos for geom in geoms]).reshape(-1, 3), **to),
+            "box": torch.as_tensor(box, **to), "disk": torch.as_tensor(disk, **to), "ball": torch.as_tensor(ball, **to),
+            "axes": torch.as_tensor(axes, **to),
+            "axes_max": torch.as_tensor(axes.max(-1) if len(axes) else np.zeros(0), **to),
+            "mesh_centre": torch.as_tensor(np.array([s[0] for s in spheres]).reshape(-1, 3), **to),
+            "mesh_radius": torch.as_tensor(np.array([s[1] for s in spheres]), **to),
+            "moving": torch.as_tensor(moving, dtype=torch.long, device=like.device),
+            "moving_track": torch.as_tensor([geoms[i].track for i in moving], dtype=torch.long, device=like.device),
+            # kind-sorted position of each geom_ids column
+            "order": torch.as_tensor(np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device),
+        }
+        sb, sc = self._slices[BOX], self._slices[CYLINDER]
+        c["box_half"], c["box_ball"] = c["box"][sb, :, None].contiguous(), c["ball"][sb, None].contiguous()
+        c["cyl_half"], c["cyl_radius"] = c["box"][sc, 2:].contiguous(), c["disk"][sc, None].contiguous()
+        c["closest_column"] = (torch.arange(len(geoms), device=like.device) - self._num_round).clamp_min(0)
+        rot_t = c["rot"].transpose(-1, -2)
+        c["table"] = torch.cat([rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1).T.contiguous()
+        c["frames"] = kernels.stack_frames(rot_t[None], c["pos"][None])
+        self._consts[key] = c
+        return c
+
+    # -- public surface ---------------------------------------------------------------------------
+
+    @property
+    def num_geoms(self) -> int:
+        return len(self.geom_ids)
+
+    @property
+    def is_moving(self) -> bool:
+        return bool(self._tracks)
+
+    def mesh(self, geom_id: int) -> MeshSDF:
+        """The :class:`MeshSDF` of a mesh or height-field obstacle geom (in its local frame)."""
+        for geom in self._geoms:
+            if geom.geom_id == geom_id and geom.mesh is not None:
+                return geom.mesh
+        raise ControlMMError(f"geom {geom_id} is not a mesh or height-field obstacle of this SDF")
 
     def __call__(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Scene SDF (..., N) of world points (..., N, 3) at frame times ``t`` (see module doc)."""
-        per_geom = self.per_geom(points, t)
-        if per_geom.shape[-1] == 0:
-            return torch.full(per_geom.shape[:-1], float("inf"), dtype=points.dtype, device=points.device)
-        return per_geom.amin(dim=-1)
-
-    def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
-        """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order."""
         points = _check_points(points)
         lead, n = points.shape[:-2], points.shape[-2]
         times = None if t is None else _check_times(t, lead, points)
-        consts = self._tensors(points)
-        flat = points.reshape(-1, 3)
-        out: list[Tensor | None] = [None] * len(self.geom_ids)
-        for block, c in zip(self._blocks, consts):
-            if block.track is None:
-                # local = R^T (x - c) for every geom at once: (M, G, 3)
-                local = torch.einsum("mi,gij->mgj", flat, c["rot"]) - c["offset"]
-                local = local.reshape(*lead, n, len(block.columns), 3)
-            else:
-                rot, pos = self._moving_pose(block, c, times, points)  # (..., G, 3, 3), (..., G, 3)
-                local = (torch.einsum("...ni,...gij->...ngj", points, rot)
-                         - torch.einsum("...gi,...gij->...gj", pos, rot)[..., None, :, :])
-            if block.mesh is not None:
-                values = block.mesh(local[..., 0, :])[..., None]
-            else:
-                values = PRIMITIVES[block.geom_type](local, c["size"])
-            for k, col in enumerate(block.columns):
-                out[col] = values[..., k]
-        if not out:
-            return points.new_zeros((*lead, n, 0))
-        return torch.stack(out, dim=-1)
+        if not self._geoms:
+            return torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
+        c = self._tensors(points)
+        grad = points.requires_grad and torch.is_grad_enabled()
+        with torch.no_grad():
+            p, rot_t, pos, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
+            local = kernels.to_local(p, frames)  # (L, 3, G, N')
+            value, winner, closest = self._nearest(local, c, need_winner=grad)
+            if not grad:
+                return value.reshape(*lead, n)
+            table = c["table"] if rot_t is None else torch.cat(  # (16, L * G), see _TABLE
+                [rot_t.reshape(-1, 9), pos.reshape(-1, 3), c["box"].repeat(rot_t.shape[0], 1),
+                 c["disk"].repeat(rot_t.shape[0])[:, None]], dim=1).T.contiguous()
+            gradient = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
+        return kernels.WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
 
-    def _moving_pose(self, block: _Block, c: dict[str, Tensor], times: Tensor | None,
-                     like: Tensor) -> tuple[Tensor, Tensor]:
-        rots, poss = [], []
-        lead = like.shape[:-2]
-        for k, track in enumerate(block.track):
-            tt = (torch.full(lead, float(track.times[0]), dtype=like.dtype, device=like.device)
-                  if times is None else times)
-            body_pos, body_quat = track.pose(tt)
-            body_rot = quat_to_mat(body_quat)
-            rots.append(body_rot @ c["rot"][k])
-            poss.append(body_pos + (body_rot @ c["pos"][k][:, None])[..., 0])
-        return torch.stack(rots, dim=-3), torch.stack(poss, dim=-2)
+    def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
+        """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every
+        geom evaluated (no culling) with plain autograd."""
+        points = _check_points(points)
+        lead, n = points.shape[:-2], points.shape[-2]
+        times = None if t is None else _check_times(t, lead, points)
+        if not self._geoms:
+            return points.new_zeros((*lead, n, 0))
+        c = self._tensors(points)
+        p, _, _, frames = self._posed(points, times, c)
+        local = kernels.to_local(p, frames)  # (L, 3, G, N')
+        r = self._num_round
+        cols = [primitives.sdf_round(local[:, :, :r].permute(0, 2, 3, 1), c["box"][:r, None],
+                                     c["disk"][:r, None], c["ball"][:r, None]),
+                local[:, 2, self._slices[PLANE]]]
+        s = self._slices[ELLIPSOID]
+        if s.stop > s.start:
+            cols.append(primitives.sdf_ellipsoid(local[:, :, s].permute(0, 2, 3, 1), c["axes"][:, None]))
+        for j in range(self._slices[MESH].start, self._slices[MESH].stop):
+            cols.append(self._geoms[j].mesh(local[:, :, j].transpose(1, 2))[:, None])
+        out = torch.cat(cols, dim=1)[:, c["order"]]  # (L, G, N') in geom_ids order
+        return out.transpose(1, 2).reshape(*lead, n, len(self._geoms))
+
+    # -- the steps ------------------------------------------------------------------------------
+
+    def _posed(self, points: Tensor, times: Tensor | None, c: dict[str, Tensor]):
+        """Points as (L, N', 3) and the geom poses they meet: L = 1 (all points share the poses)
+        or one per leading index (per-frame mocap poses). Returns the points, the geom-from-world
+        rotations (L, G, 3, 3) and world origins (L, G, 3) of the geoms (None, None when static:
+        the precomputed table is used), and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for
+        ``kernels.to_local``."""
+        if not self._tracks:
+            return points.reshape(1, -1, 3), None, None, c["frames"]
+        if times is None:
+            times_k = points.new_tensor([float(tr.times[0]) for tr in self._tracks])[:, None]  # (K, 1)
+            p = points.reshape(1, -1, 3)
+        else:
+            times_k = times.reshape(1, -1).expand(len(self._tracks), -1)  # (K, L)
+            p = points.reshape(-1, points.shape[-2], 3)
+        body_rot, body_pos = [], []
+        for k, track in enumerate(self._tracks):
+            pos_k, quat_k = track.pose(times_k[k])
+            body_rot.append(quat_to_mat(quat_k))
+            body_pos.append(pos_k)
+        mv = c["moving"]
+        body_rot = torch.stack(body_rot, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
+        body_pos = torch.stack(body_pos, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
+        rot_m = (body_rot @ c["rot"][mv]).transpose(-1, -2)  # geom-from-world
+        pos_m = body_pos + (body_rot @ c["pos"][mv][..., None])[..., 0]
+        if len(mv) == len(self._geoms):
+            rot_t, pos = rot_m, pos_m
+        else:
+            num_l = body_rot.shape[0]
+            rot_t = c["rot"].transpose(-1, -2).expand(num_l, -1, -1, -1).clone()
+            pos = c["pos"].expand(num_l, -1, -1).clone()
+            rot_t[:, mv], pos[:, mv] = rot_m, pos_m
+        return p, rot_t, pos, kernels.stack_frames(rot_t, pos)
+
+    def _nearest(self, local: Tensor, c: dict[str, Tensor], need_winner: bool):
+        """The minimum (L, N') over geoms of points in every geom frame ``local`` (L, 3, G, N');
+        when ``need_winner``, also its geom (kind-sorted index, (L, N')) and the closest points
+        (L, 3, G - G_round, N') of the plane, ellipsoid and mesh columns (written where
+        evaluated). No autograd."""
+        num_l, _, num_g, num_n = local.shape
+        x, y, z = local.unbind(1)  # (L, G, N') each
+        first_cp = self._num_round
+        closest = closest_v = None
+        if need_winner and num_g > first_cp:
+            closest = local.new_zeros((num_l, 3, num_g - first_cp, num_n))
+            closest_v = closest.permute(0, 2, 3, 1)  # (L, G - G_round, N', 3) view, for writing
+        best = winner = None
+
+        def merge(d: Tensor, offset: int) -> None:  # fold distances d (L, Gk, N') into best / winner
+            nonlocal best, winner
+            if need_winner:
+                v, i = d.min(dim=1)
+                i = i + offset
+            else:
+                v, i = d.amin(dim=1), None
+            if best is None:
+                best, winner = v, i
+            else:
+                if need_winner:
+                    winner = torch.where(v < best, i, winner)
+                best = torch.minimum(best, v)
+
+        s = self._slices[BOX]
+        if s.stop > s.start:
+            merge(kernels.box_distance(x[:, s], y[:, s], z[:, s], c["box_half"], c["box_ball"]), s.start)
+        s = self._slices[CYLINDER]
+        if s.stop > s.start:
+            merge(kernels.cylinder_distance(x[:, s], y[:, s], z[:, s], c["cyl_half"], c["cyl_radius"]), s.start)
+        s = self._slices[PLANE]
+        if s.stop > s.start:
+            if need_winner:
+                cp = slice(s.start - first_cp, s.stop - first_cp)
+                closest[:, 0:2, cp] = local[:, 0:2, s]
+            merge(z[:, s], s.start)
+        s = self._slices[ELLIPSOID]
+        if s.stop > s.start:
+            xe, ye, ze = x[:, s], y[:, s], z[:, s]
+            d = (xe * xe).addcmul_(ye, ye).addcmul_(ze, ze).sqrt_().sub_(c["axes_max"][:, None])  # lower bound
+            pts = local[:, :, s].permute(0, 2, 3, 1)  # (L, Ge, N', 3)
+            cp = slice(s.start - first_cp, s.stop - first_cp)
+            if best is None:  # nothing to cull against: every pair
+                hit, pts, axes = None, pts.reshape(-1, 3), c["axes"][None, :, None].expand_as(pts).reshape(-1, 3)
+            else:
+                hit = (d <= best[:, None]).nonzero(as_tuple=True)
+                pts, axes = pts[hit], c["axes"].index_select(0, hit[1])
+            if len(pts):
+                q = primitives._ellipsoid_closest(pts, axes, primitives.ELLIPSOID_NEWTON_STEPS)
+                inside = (pts / axes).square_().sum(dim=-1).sub_(1.0)  # < 0 inside
+                exact = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside)
+                kernels.put(d, hit, exact)
+                if need_winner:
+                    kernels.put(closest_v[:, cp], hit, q)
+            merge(d, s.start)
+        for j in range(self._slices[MESH].start, self._slices[MESH].stop):
+            pts = local[:, :, j].transpose(1, 2)  # (L, N', 3)
+            k = j - self._slices[MESH].start
+            d = torch.linalg.vector_norm(pts - c["mesh_centre"][k], dim=-1) - c["mesh_radius"][k]  # lower bound
+            hit = None if best is None else (d <= best).nonzero(as_tuple=True)
+            pts = pts.reshape(-1, 3) if hit is None else pts[hit]
+            if len(pts):
+                q, sgn = self._geoms[j].mesh.closest(pts.contiguous())
+                kernels.put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
+                if need_winner:
+                    kernels.put(closest_v[:, j - first_cp], hit, q)
+            merge(d[:, None], j)
+        return best, winner, closest
+
+    def _winner_gradient(self, local: Tensor, value: Tensor, winner: Tensor, table: Tensor,
+                         closest: Tensor | None, c: dict[str, Tensor]) -> Tensor:
+        """World gradient (L, N', 3) of the SDF ``value`` (L, N') from the points in every geom frame
+        ``local`` (L, 3, G, N') and the winning geom (L, N'). No autograd."""
+        num_l, _, num_g, num_n = local.shape
+        lw = local.gather(2, winner[:, None, None, :].expand(-1, 3, 1, -1))[:, :, 0]  # (L, 3, N')
+        flat = winner if num_l == 1 else winner + (torch.arange(num_l, device=winner.device) * num_g)[:, None]
+        row = table.index_select(1, flat.reshape(-1)).view(_TABLE, num_l, num_n).transpose(0, 1)  # (L, 16, N')
+        first_cp = self._num_round
+        g = kernels.round_gradient(lw, row[:, 12:15], row[:, 15]) if first_cp > 0 else None
+        if closest is not None:  # planes, ellipsoids, meshes: side (p - q) / ||p - q|| = (p - q) value / ||p - q||^2
+            k = c["closest_column"][winner]
+            diff = lw - closest.gather(2, k[:, None, None, :].expand(-1, 3, 1, -1))[:, :, 0]
+            x, y, z = diff.unbind(1)
+            norm2 = (x * x).addcmul_(y, y).addcmul_(z, z).clamp_min_(torch.finfo(diff.dtype).tiny)
+            g_cp = diff.mul_((value / norm2)[:, None])
+            g = g_cp if g is None else torch.where((winner >= first_cp)[:, None], g_cp, g)
+        world = row[:, 0:3] * g[:, 0:1]  # R g = sum_k g_k (row k of R^T)
+        world.addcmul_(row[:, 3:6], g[:, 1:2]).addcmul_(row[:, 6:9], g[:, 2:3])
+        return world.transpose(1, 2)
+
+
+EXTENT_MARGIN = 1.0
+"""Metres added around the obstacles (and start pose) to get the region where meshes' SDFs are
+accurate (their grids reach it; see :mod:`scenes.sdf.mesh`)."""
+
+
+def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence[int],
+                  tracks: Mapping[str, MocapTrack], start: tuple[float, float] | None) -> np.ndarray:
+    """(2, 3) world box holding the obstacles (every key pose of moving ones), the start pose
+    (0 to 2 m high) and ``EXTENT_MARGIN`` around them."""
+    points = [] if start is None else [np.array([start[0], start[1], 0.0]), np.array([start[0], start[1], 2.0])]
+    for g in geom_ids:
+        if model.geom_type[g] == G.mjGEOM_PLANE:
+            continue
+        rot = data.geom_xmat[g].reshape(3, 3)
+        centre = data.geom_xpos[g] + rot @ model.geom_aabb[g, :3]
+        half = np.abs(rot) @ model.geom_aabb[g, 3:]
+        points += [centre - half, centre + half]
+    for name, track in tracks.items():
+        body = model.body(name).id
+        radius = max([float(model.geom_rbound[g]) + float(np.linalg.norm(model.geom_pos[g]))
+                      for g in geom_ids if model.geom_bodyid[g] == body] or [0.0])
+        points += [track.pos.min(0) - radius, track.pos.max(0) + radius]
+    if not points:
+        return np.zeros((2, 3))
+    pts = np.stack(points)
+    return np.stack([pts.min(0) - EXTENT_MARGIN, pts.max(0) + EXTENT_MARGIN])
 
 
 def _quat_mat(quat: np.ndarray) -> np.ndarray:
@@ -230,7 +440,7 @@ def _check_points(points) -> Tensor:
         raise ShapeError(f"points must have shape (..., N, 3); got {tuple(points.shape)}")
     if not points.is_floating_point():
         points = points.to(torch.get_default_dtype())
-    if not bool(torch.isfinite(points.detach()).all()):
+    if not bool(torch.isfinite(points.detach().sum())) and not bool(torch.isfinite(points.detach()).all()):
         raise ShapeError("points hold NaN or inf; the SDF needs finite world coordinates (m)")
     return points
 
