@@ -15,7 +15,7 @@ import sys
 from controlmm import __version__
 from controlmm.errors import ControlMMError
 
-SUBCOMMANDS: tuple[str, ...] = ("corpus", "convert", "plot", "retarget", "scene", "eval", "info")
+SUBCOMMANDS: tuple[str, ...] = ("corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info")
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 
 EXIT_USAGE = 2
@@ -63,6 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("controlmm: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except Exception as exc:  # noqa: BLE001
         if os.environ.get("CONTROLMM_DEBUG"):
             raise

@@ -1,0 +1,53 @@
+"""``controlmm validate ROBOT.npz|ROBOT.csv --scene ... --robot g1 --out report.json``."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = """Check an existing robot trajectory in a MuJoCo scene (e.g. one written by another
+retargeter) with the same kinematic and dynamic checks as `controlmm plan`.
+
+Input: this project's robot.npz, any .npz with qpos (T, nq; root quaternion wxyz) and fps,
+or a Unitree LAFAN1 / BeyondMimic CSV (no header; xyz, qx qy qz qw, joints in MJCF order;
+give --fps, LAFAN1 is 30). Writes report.json (--out) and a per-frame plot beside it
+(report.png), and prints a short summary.
+
+Exit status: 0 when every check passes, 1 when the trajectory fails a check, 2 on bad input."""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("validate", help="check a robot trajectory in a scene (penetration, limits, sliding, dynamics)",
+                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("trajectory", help="robot trajectory (.npz or .csv)")
+    p.add_argument("--scene", default="empty", help="scene name (see `controlmm scene list`) or MJCF file (default: empty)")
+    p.add_argument("--robot", default=None, help="robot name or mapping .json (default: the file's robot, else g1)")
+    p.add_argument("--fps", type=float, default=None, help="frame rate (required for .csv; overrides the file's)")
+    p.add_argument("--out", required=True, help="report .json to write (a .png plot is written beside it)")
+    p.add_argument("--no-plot", action="store_true", help="skip the per-frame plot")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from controlmm.errors import ControlMMError
+    from retarget import DEFAULT_ROBOT
+    from scenes import load_scene
+    from sim import check_trajectory, plot_report
+    from sim.files import load_qpos
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise ControlMMError(f"--out must be a .json file; got '{args.out}'")
+    qpos, fps, file_robot = load_qpos(args.trajectory, args.fps)
+    robot = args.robot or file_robot or DEFAULT_ROBOT
+    if args.robot and file_robot and Path(file_robot).name != Path(args.robot).name:
+        raise ControlMMError(f"--robot {args.robot} does not match the trajectory's robot '{file_robot}'")
+    scene = load_scene(args.scene, robot=robot)
+    report = check_trajectory(scene, qpos, fps)
+    report.save(out)
+    if not args.no_plot:
+        plot_report(report, out.with_suffix(".png"), title=f"{Path(args.trajectory).name} in {scene.name} ({robot})")
+    print(report.summary())
+    print(f"wrote {out}" + ("" if args.no_plot else f" and {out.with_suffix('.png')}"))
+    return 0 if report.passed else 1
