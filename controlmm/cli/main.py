@@ -15,7 +15,7 @@ import sys
 from controlmm import __version__
 from controlmm.errors import ControlMMError
 
-SUBCOMMANDS: tuple[str, ...] = ("convert", "plot", "info")
+SUBCOMMANDS: tuple[str, ...] = ("convert", "plot", "info", "train", "generate")
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 
 EXIT_USAGE = 2

@@ -1,0 +1,82 @@
+"""Fixtures of the model tests: a tiny HumanML3D-format dataset and a tiny trained model directory.
+
+The dataset is built from the real HumanML3D sample 012314 (crops, left/right mirror, time stretch)
+with made-up captions, written exactly in the HumanML3D layout. The trained model uses the ``tiny``
+preset for a few dozen iterations per stage: enough to exercise every code path, not to be good.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controlmm.motion import joints_to_features
+from controlmm.motion.container import resample
+from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR
+
+CAPTIONS = [
+    "a person bends down and stands back up",
+    "someone crouches then rises",
+    "a man leans forward and straightens",
+    "the person squats slowly",
+    "a person reaches down to the floor",
+    "someone bends over and comes back",
+]
+
+
+def _caption_line(text: str, start: float = 0.0, end: float = 0.0) -> str:
+    tokens = " ".join(f"{w}/OTHER" for w in text.split())
+    return f"{text}#{tokens}#{start}#{end}"
+
+
+def build_tiny_dataset(root: Path, features: np.ndarray, joints: np.ndarray, stats: Path) -> Path:
+    """Write a 16-clip HumanML3D-format directory under ``root`` and return it."""
+    mirrored = joints.copy()
+    mirrored[..., 0] *= -1
+    mirrored = mirrored[:, list(LEFT_RIGHT_MIRROR)]
+    mirror_feats, _ = joints_to_features(mirrored)
+    slow_feats, _ = joints_to_features(resample(joints, 24.0, 20.0))  # 1.2x slower
+    sources = [features, mirror_feats, slow_feats]
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    rng = np.random.default_rng(0)
+    ids = []
+    for k in range(16):
+        src = sources[k % 3]
+        length = int(rng.integers(48, min(len(src), 180)))
+        start = int(rng.integers(0, len(src) - length + 1))
+        clip = src[start:start + length].astype(np.float32)
+        motion_id = f"{k:06d}"
+        np.save(root / "new_joint_vecs" / f"{motion_id}.npy", clip)
+        lines = [_caption_line(CAPTIONS[(k + j) % len(CAPTIONS)]) for j in range(3)]
+        if k % 4 == 0 and length >= 90:  # a span caption becomes its own sample
+            lines.append(_caption_line("a person holds still", 0.5, 0.5 + 44 / 20))
+        (root / "texts" / f"{motion_id}.txt").write_text("\n".join(lines) + "\n")
+        ids.append(motion_id)
+    (root / "train.txt").write_text("\n".join(ids[:11]) + "\n")
+    (root / "val.txt").write_text("\n".join(ids[11:14]) + "\n")
+    (root / "test.txt").write_text("\n".join(ids[14:]) + "\n")
+    shutil.copy(stats / "Mean.npy", root / "Mean.npy")
+    shutil.copy(stats / "Std.npy", root / "Std.npy")
+    return root
+
+
+@pytest.fixture(scope="session")
+def tiny_data(tmp_path_factory, humanml3d_dir, sample_features, sample_joints) -> Path:
+    return build_tiny_dataset(tmp_path_factory.mktemp("data") / "tiny", sample_features, sample_joints,
+                              humanml3d_dir)
+
+
+@pytest.fixture(scope="session")
+def tiny_model_dir(tmp_path_factory, tiny_data) -> Path:
+    """A model directory with every part trained on the tiny dataset (tiny preset)."""
+    from controlmm.training import TrainOptions, train
+
+    out = tmp_path_factory.mktemp("model") / "tiny"
+    for stage, iters in (("tokenizer", 30), ("transformer", 20), ("residual", 20)):
+        train(stage, TrainOptions(data=tiny_data, out=out, preset="tiny", iters=iters, progress=False,
+                                  device="cpu"))
+    return out
