@@ -99,7 +99,7 @@ def top_k_filter(logits: torch.Tensor, thres: float = 0.9) -> torch.Tensor:
 def gumbel_noise(like: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
     """Standard Gumbel noise of the shape/dtype/device of ``like``."""
     u = torch.rand(like.shape, generator=generator, device=like.device, dtype=like.dtype)
-    return -torch.log(-torch.log(u.clamp(min=1e-20)).clamp(min=1e-20))
+    return -torch.log((-torch.log(u.clamp(min=1e-20))).clamp(min=1e-20))
 
 
 def run_layers(layers: nn.ModuleList, x: torch.Tensor, padding_mask: torch.Tensor,

@@ -299,7 +299,7 @@ def load_model(model_dir: str | Path | None = None, device: str | torch.device |
             if trained_on and current and trained_on != current:
                 raise InputFileError(f"'{model_dir / (name + '.pt')}' was trained on a different {dep}.pt; "
                                      f"retrain it (controlmm train {name} --out {model_dir} --force)")
-        loaded[name] = module.eval()
+        loaded[name] = module.eval().requires_grad_(False)  # inference: gradients only reach inputs
     model = MotionModel(config=config, normalizer=normalizer, parts=loaded, manifest=manifest,
                         directory=model_dir, clip_weights=clip_weights)
     return model.to(resolve_device(device))

@@ -7,6 +7,7 @@ preset for a few dozen iterations per stage: enough to exercise every code path,
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 from pathlib import Path
 
@@ -76,7 +77,36 @@ def tiny_model_dir(tmp_path_factory, tiny_data) -> Path:
     from controlmm.training import TrainOptions, train
 
     out = tmp_path_factory.mktemp("model") / "tiny"
-    for stage, iters in (("tokenizer", 30), ("transformer", 20), ("residual", 20)):
-        train(stage, TrainOptions(data=tiny_data, out=out, preset="tiny", iters=iters, progress=False,
-                                  device="cpu"))
+    with one_thread():
+        for stage, iters in (("tokenizer", 30), ("transformer", 20), ("residual", 20)):
+            train(stage, TrainOptions(data=tiny_data, out=out, preset="tiny", iters=iters, progress=False,
+                                      device="cpu"))
     return out
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Tiny models run fastest single-threaded (and immune to other processes' load)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_torch_thread():
+    with one_thread():
+        yield
+
+
+def subprocess_env() -> dict:
+    """Environment of CLI subprocesses in these tests: one thread, offline."""
+    import os
+
+    env = dict(os.environ)
+    env.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", HF_HUB_OFFLINE="1", TRANSFORMERS_OFFLINE="1")
+    return env
