@@ -35,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--iterations", type=int, default=10, help="masked-decoding iterations (default 10)")
     p.add_argument("--no-residual", action="store_true", help="decode the base layer only")
     p.add_argument("--clip-weights", default=None, metavar="PATH", help="CLIP weights for CLIP-conditioned models")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.set_defaults(func=run)
 
 
@@ -66,6 +67,12 @@ def run(args: argparse.Namespace) -> int:
     for path in outs + plots:
         if not Path(path).parent.is_dir():
             raise ControlMMError(f"cannot write '{path}': directory '{Path(path).parent}' does not exist")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
     if args.topk is not None and not 0.0 <= args.topk < 1.0:
         raise ControlMMError(f"--topk must be in [0, 1); got {args.topk}")
     model = load_model(args.model, device=args.device, clip_weights=args.clip_weights)

@@ -62,6 +62,10 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--workers", type=int, default=0, help="data-loading worker processes (default 0)")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    p.add_argument("--precision", default="fp32", choices=("fp32", "bf16"),
+                   help="bf16 = bfloat16 autocast of the forward pass: ~1.5x faster on CPUs with AVX512-BF16 "
+                        "(default fp32)")
     if creates:
         p.add_argument("--text-encoder", default=None,
                        help="minilm or clip (default: the preset's; fixed for the model directory)")
@@ -85,6 +89,7 @@ def run_stage(name: str, args: argparse.Namespace) -> int:
         force=args.force, seed=args.seed, device=args.device, workers=args.workers,
         text_encoder=getattr(args, "text_encoder", None), clip_weights=args.clip_weights,
         progress=not args.no_progress, command="controlmm " + " ".join(sys.argv[1:]),
+        precision=args.precision, threads=args.threads,
     )
     train(name, options)
     return 0

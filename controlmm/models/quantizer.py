@@ -151,6 +151,10 @@ class ResidualVQ(nn.Module):
             quantized (B, C, T) straight-through sum of the used layers, indices (B, T, Q) with -1 for
             skipped layers, mean commitment loss over used layers, mean perplexity over used layers.
         """
+        with torch.autocast(x.device.type, enabled=False):  # nearest-code search needs float32
+            return self._forward(x.float(), temperature, force_dropout_index)
+
+    def _forward(self, x: torch.Tensor, temperature: float, force_dropout_index: int):
         b, _, t = x.shape
         cut = self.num_quantizers
         if force_dropout_index >= 0:

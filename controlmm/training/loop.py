@@ -74,6 +74,8 @@ class TrainOptions:
     clip_weights: str | None = None
     progress: bool = True
     command: str | None = None
+    precision: str = "fp32"  # "bf16": bfloat16 autocast of the training forward pass (CPU with AVX512-BF16, GPUs)
+    threads: int | None = None  # torch CPU threads (None: torch's default)
 
 
 @dataclass
@@ -94,9 +96,8 @@ def lr_factor(step: int, schedule: StageSchedule) -> float:
 
 # -- model directory ------------------------------------------------------------------------------
 def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: DistContext,
-                    creates: bool) -> tuple[ModelConfig, dict[str, Any]]:
+                    creates: bool, exists: bool) -> tuple[ModelConfig, dict[str, Any]]:
     out = Path(opts.out)
-    exists = (out / "model.json").is_file()
     if exists:
         manifest = read_manifest(out)
         config = ModelConfig.from_dict(manifest["config"])
@@ -167,6 +168,12 @@ def train(stage_name: str, opts: TrainOptions) -> TrainResult:
     if stage_name not in STAGES:
         raise ControlMMError(f"unknown training stage '{stage_name}'; allowed: {', '.join(STAGES)}")
     stage_cls = STAGES[stage_name]
+    if opts.precision not in ("fp32", "bf16"):
+        raise ControlMMError(f"unknown precision '{opts.precision}'; allowed: fp32, bf16")
+    if opts.threads is not None:
+        if opts.threads < 1:
+            raise ControlMMError(f"threads must be at least 1; got {opts.threads}")
+        torch.set_num_threads(opts.threads)
     ctx = init_distributed(opts.device)
     try:
         return _train(stage_cls, opts, ctx)
@@ -180,16 +187,17 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     ckpt_path = out / "checkpoints" / f"{name}.pt"
     data = HumanML3D(opts.data)
     creates = not stage_cls.requires
-    # Refuse to clobber earlier work unless asked.
-    if not opts.resume and ((out / f"{name}.pt").exists() or ckpt_path.exists()):
-        if not opts.force:
-            raise ControlMMError(f"'{out}' already has {name} training; pass --resume to continue it "
-                                 "or --force to start it over")
+    # What exists is decided once, by rank 0, before anyone writes (every process takes the same path).
+    found = ctx.broadcast({"part": (out / f"{name}.pt").exists(), "checkpoint": ckpt_path.is_file(),
+                           "manifest": (out / "model.json").is_file()})
     if opts.resume and opts.force:
         raise ControlMMError("--resume and --force exclude each other")
-    if opts.resume and not ckpt_path.is_file():
+    if not opts.resume and not opts.force and (found["part"] or found["checkpoint"]):
+        raise ControlMMError(f"'{out}' already has {name} training; pass --resume to continue it "
+                             "or --force to start it over")
+    if opts.resume and not found["checkpoint"]:
         raise InputFileError(f"nothing to resume: '{ckpt_path}' does not exist")
-    config, manifest = _open_model_dir(name, opts, data, ctx, creates)
+    config, manifest = _open_model_dir(name, opts, data, ctx, creates, found["manifest"])
     if opts.force and ctx.is_main and ckpt_path.exists():
         ckpt_path.unlink()
     ctx.barrier()
@@ -292,7 +300,8 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
         tick = time.time()
         for batch in loader:
             inputs = stage.prepare(batch)
-            loss, metrics = wrapped(*inputs)
+            with torch.autocast(ctx.device.type, dtype=torch.bfloat16, enabled=opts.precision == "bf16"):
+                loss, metrics = wrapped(*inputs)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -344,6 +353,8 @@ def _export(name: str, stage: Stage, model: nn.Module, best_state, best, last, s
         "steps_per_epoch": steps_per_epoch,
         "schedule": asdict(schedule),
         "seed": opts.seed,
+        "precision": opts.precision,
+        "threads": torch.get_num_threads(),
         "processes": ctx.world,
         "device": str(ctx.device),
         "wall_time_s": round(wall, 1),

@@ -22,6 +22,7 @@ RIC = slice(4, 67)
 
 
 def reconstruction_loss(recon: torch.Tensor, target: torch.Tensor, commit: torch.Tensor) -> torch.Tensor:
+    recon = recon.float()
     return (F.smooth_l1_loss(recon, target) + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
             + 0.02 * commit)
 

@@ -129,8 +129,14 @@ def _ddp_worker(rank: int, world: int, port: int, data: str, out: str, result_di
 
 
 def test_distributed_data_parallel_on_two_gloo_processes(tiny_data, tmp_path):
-    mp.spawn(_ddp_worker, args=(2, _free_port(), str(tiny_data), str(tmp_path / "ddp"), str(tmp_path)),
-             nprocs=2, join=True)
+    context = mp.spawn(_ddp_worker, args=(2, _free_port(), str(tiny_data), str(tmp_path / "ddp"), str(tmp_path)),
+                       nprocs=2, join=False)
+    deadline = time.time() + 180
+    while not context.join(timeout=1):
+        if time.time() > deadline:  # a collective mismatch would hang forever: fail instead
+            for process in context.processes:
+                process.kill()
+            pytest.fail("the two DDP processes did not finish within 180 s")
     r0, r1 = torch.load(tmp_path / "rank0.pt"), torch.load(tmp_path / "rank1.pt")
     for key in r0:  # gradients and codebook statistics are synchronised: identical replicas
         assert torch.allclose(r0[key], r1[key], atol=1e-6), key
