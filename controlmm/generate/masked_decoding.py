@@ -9,10 +9,12 @@ token by its probability under the unfiltered logits. Positions left unmasked at
 
 Extension points for the control model and editing:
 
-- ``logits_fn(tokens, state) -> (B, N, K)`` replaces the plain CFG transformer (e.g. the motion
-  control model), ``tokens`` being ids (B, N) or, with ``soft_inputs``, embeddings (B, N, code_dim);
+- ``logits_fn(ids, state) -> (B, N, K)`` replaces the plain CFG transformer (e.g. the motion
+  control model);
 - ``logits_hook(logits, state) -> logits`` edits the logits of each iteration before sampling
   (logits editing); the final, possibly edited, logits are returned with the ids.
+- ``state.previous_logits`` (the last iteration's edited logits) lets a ``logits_fn`` feed soft token
+  embeddings (softmax(L) @ token_emb) instead of ids, as MaskControl's decoding does.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class DecodeState:
     is_mask: torch.Tensor  # (B, N) bool, positions being predicted now
     padding_mask: torch.Tensor  # (B, N) bool, True at pads
     cond: torch.Tensor  # (B, text_dim)
+    previous_logits: torch.Tensor | None = None  # (B, N, K) logits of the previous iteration (after the hook)
 
 
 @dataclass
@@ -95,7 +98,8 @@ def masked_decode(transformer, cond: torch.Tensor, token_lengths: torch.Tensor,
         ranks = scores.argsort(dim=1, stable=True).argsort(dim=1, stable=True)
         is_mask = ranks < count.to(device)[:, None]
         ids = torch.where(is_mask, mask_id, ids)
-        state = DecodeState(step=k, ids=ids, is_mask=is_mask, padding_mask=padding, cond=cond)
+        state = DecodeState(step=k, ids=ids, is_mask=is_mask, padding_mask=padding, cond=cond,
+                            previous_logits=logits)
         if logits_fn is not None:
             logits = logits_fn(ids, state)
         else:

@@ -287,7 +287,7 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     bar = tqdm(total=schedule.iters, initial=min(step, schedule.iters), desc=f"train {name}", unit="it",
                disable=not (opts.progress and ctx.is_main), dynamic_ncols=True, file=sys.stderr)
     model.train()
-    train_time, train_steps = 0.0, 0
+    train_time, train_cpu, train_steps = 0.0, 0.0, 0
     running: dict[str, float] = {}
     while step < schedule.iters:
         epoch, in_epoch = divmod(step, steps_per_epoch)
@@ -297,7 +297,7 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
         # Its own generator: creating a loader must not draw from the global RNG (exact resumption).
         loader = DataLoader(dataset, batch_sampler=sampler, num_workers=opts.workers, collate_fn=stage.collate,
                             generator=torch.Generator().manual_seed(opts.seed + epoch))
-        tick = time.time()
+        tick, cpu_tick = time.time(), time.process_time()
         for batch in loader:
             inputs = stage.prepare(batch)
             with torch.autocast(ctx.device.type, dtype=torch.bfloat16, enabled=opts.precision == "bf16"):
@@ -315,9 +315,11 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
                 bar.set_postfix({k: f"{v:.3g}" for k, v in running.items()} | {"lr": f"{scheduler.get_last_lr()[0]:.2e}"})
             if step % schedule.checkpoint_every == 0 and step % steps_per_epoch != 0:
                 train_time += time.time() - tick
+                train_cpu += time.process_time() - cpu_tick
                 checkpoint()
-                tick = time.time()
+                tick, cpu_tick = time.time(), time.process_time()
         train_time += time.time() - tick
+        train_cpu += time.process_time() - cpu_tick
         if step % steps_per_epoch == 0 and step != last_val_step:
             validate()
             checkpoint()
@@ -329,14 +331,15 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     last = history[-1] if history else {}
     if ctx.is_main:
         _export(name, stage, model, best_state, best, last, schedule, steps_per_epoch, opts, ctx, out,
-                total_elapsed, train_steps / train_time if train_time > 0 else 0.0)
+                total_elapsed, train_steps / train_time if train_time > 0 else 0.0,
+                train_cpu / train_steps if train_steps else 0.0)
     ctx.barrier()
     return TrainResult(model=model, step=step, metrics=last, best=best or {}, model_dir=out)
 
 
 def _export(name: str, stage: Stage, model: nn.Module, best_state, best, last, schedule: StageSchedule,
             steps_per_epoch: int, opts: TrainOptions, ctx: DistContext, out: Path, wall: float,
-            throughput: float) -> None:
+            throughput: float, cpu_per_step: float) -> None:
     manifest = read_manifest(out)
     config = ModelConfig.from_dict(manifest["config"])
     export = copy.deepcopy(model).cpu()
@@ -358,7 +361,8 @@ def _export(name: str, stage: Stage, model: nn.Module, best_state, best, last, s
         "processes": ctx.world,
         "device": str(ctx.device),
         "wall_time_s": round(wall, 1),
-        "throughput_it_s": round(throughput, 3),
+        "throughput_it_s": round(throughput, 3),  # this run (wall clock, this session only)
+        "cpu_s_per_it": round(cpu_per_step, 4),  # CPU time of this process per iteration (all threads)
         "exported": "best" if best_state is not None else "last",
         "best_metric": stage.best_metric,
         "best": best,

@@ -173,3 +173,14 @@ def test_float16_storage_round_trip(tiny_model_dir, tmp_path, model):
     loaded = load_part_state(tmp_path, "transformer", entry)
     assert loaded["token_emb.weight"].dtype == torch.float32
     assert torch.allclose(loaded["token_emb.weight"], model.transformer.token_emb.weight, atol=1e-3)
+
+
+def test_default_model_is_found_without_configuration():
+    from controlmm.assets import default_model_dir
+
+    if (default_model_dir() / "model.json").is_file():
+        model = load_model()
+        assert model.directory == default_model_dir() and "transformer" in model.parts
+    else:
+        with pytest.raises(InputFileError, match="no embedded default model"):
+            load_model()
