@@ -110,10 +110,12 @@ class TextEncoderConfig:
     name: str = "minilm"
     weights: str | None = None
     precision: str = "float32"  # "float16" reproduces the official GPU CLIP features
+    size: int | None = None  # vector size when it differs from the encoder's usual one (other CLIP weights)
 
     @property
     def dim(self) -> int:
-        return TEXT_ENCODER_DIMS[self.name]
+        """Size of the sentence vectors (384 MiniLM, 512 CLIP ViT-B/32, or ``size``)."""
+        return self.size if self.size is not None else TEXT_ENCODER_DIMS[self.name]
 
 
 TEXT_ENCODER_DIMS: dict[str, int] = {"minilm": 384, "clip": 512}

@@ -240,7 +240,12 @@ class MotionModel:
 
     def encode_text(self, texts: list[str]) -> torch.Tensor:
         """(B,) texts -> (B, text_dim) condition vectors on the model's device."""
-        return self.text_encoder.encode(texts).to(self.device)
+        vectors = self.text_encoder.encode(texts)
+        expected = self.config.transformer.text_dim
+        if vectors.shape[-1] != expected:
+            raise ControlMMError(f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "
+                                 f"the model expects {expected}-d (wrong CLIP weights?)")
+        return vectors.to(self.device)
 
     def to(self, device: str | torch.device) -> "MotionModel":
         self.device = torch.device(device)

@@ -116,8 +116,13 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
         weights = opts.clip_weights if name == "clip" else None
         if name == "clip" and weights is None:
             weights = config.text_encoder.weights
-        config = config.with_text_encoder(TextEncoderConfig(name=name, weights=weights,
-                                                            precision=config.text_encoder.precision))
+        text = TextEncoderConfig(name=name, weights=weights, precision=config.text_encoder.precision)
+        if name == "clip":  # the vector size comes from the weights (512 for ViT-B/32)
+            from controlmm.text import load_text_encoder
+
+            dim = load_text_encoder(text, device="cpu").dim
+            text = replace(text, size=None if dim == text.dim else dim)
+        config = config.with_text_encoder(text)
     normalizer = data.normalizer.with_feat_bias(config.feat_bias, config.feat_bias_times)
     normalization = {
         "source": str(data.root.resolve()),

@@ -14,6 +14,7 @@ import torch
 from torch import nn
 
 from controlmm.data.datasets import TextMotionDataset
+from controlmm.errors import ControlMMError
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.text import embed_captions
 from controlmm.training.stage import Stage
@@ -33,6 +34,9 @@ class TextConditionedStage(Stage):
         captions = [c for s in self.train_samples + self.val_samples for c in s.captions]
         encoder = ctx.base.text_encoder
         emb = embed_captions(encoder, captions, cache_dir=ctx.model_dir / "cache", progress=ctx.progress)
+        if emb.vectors.shape[1] != ctx.config.transformer.text_dim:
+            raise ControlMMError(f"text encoder '{encoder.name}' gives {emb.vectors.shape[1]}-d vectors; the "
+                                 f"model expects {ctx.config.transformer.text_dim}-d (wrong CLIP weights?)")
         self.caption_index = emb.index
         self.text_vectors = emb.vectors.to(ctx.device)
         self.tokenizer = ctx.base.tokenizer.eval()

@@ -15,41 +15,6 @@ def minilm():
     return load_text_encoder("minilm")
 
 
-def _byte_vocab() -> dict[str, int]:
-    """A byte-level BPE vocabulary without merges (every byte, and every byte ending a word)."""
-    keep = list(range(ord("!"), ord("~") + 1)) + list(range(ord("¡"), ord("¬") + 1)) + list(range(ord("®"), 256))
-    chars, extra = [], 0
-    for b in range(256):
-        chars.append(chr(b) if b in keep else chr(256 + extra))
-        extra += b not in keep
-    vocab = {c: i for i, c in enumerate(chars)}
-    vocab.update({c + "</w>": 256 + i for i, c in enumerate(chars)})
-    vocab["<|startoftext|>"] = 512
-    vocab["<|endoftext|>"] = 513
-    return vocab
-
-
-@pytest.fixture(scope="module")
-def tiny_clip_dir(tmp_path_factory):
-    """A randomly initialised CLIPModel + tokenizer written with save_pretrained (nothing downloaded)."""
-    from transformers import CLIPConfig, CLIPModel, CLIPTokenizer
-
-    vocab = _byte_vocab()
-    torch.manual_seed(0)
-    config = CLIPConfig(
-        text_config=dict(vocab_size=len(vocab), hidden_size=32, intermediate_size=64, num_hidden_layers=2,
-                         num_attention_heads=2, max_position_embeddings=77, bos_token_id=512, eos_token_id=513,
-                         pad_token_id=513),
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2,
-                           image_size=32, patch_size=16),
-        projection_dim=24,
-    )
-    path = tmp_path_factory.mktemp("clip") / "tiny-clip"
-    CLIPModel(config).save_pretrained(path)
-    CLIPTokenizer(vocab=vocab, merges=[]).save_pretrained(path)
-    return path
-
-
 def test_minilm_sentence_vectors(minilm):
     vectors = minilm.encode(["a person walks forward", "a person walks backwards", "someone jumps twice"])
     assert vectors.shape == (3, 384) and vectors.dtype == torch.float32

@@ -146,3 +146,18 @@ def test_distributed_data_parallel_on_two_gloo_processes(tiny_data, tmp_path):
     assert manifest["training"]["tokenizer"]["processes"] == 2
     initial = torch.load(tmp_path / "ddp" / "checkpoints" / "tokenizer.pt", weights_only=False)["history"]
     assert len(initial) >= 1
+
+
+def test_clip_conditioned_model_trains_and_generates(tiny_data, tiny_clip_dir, tmp_path):
+    from controlmm.generate import generate, load_model
+
+    out = tmp_path / "clip-model"
+    train("tokenizer", TrainOptions(data=tiny_data, out=out, preset="tiny", iters=4, progress=False,
+                                    text_encoder="clip", clip_weights=str(tiny_clip_dir)))
+    manifest = json.loads((out / "model.json").read_text())
+    assert manifest["text_encoder"]["name"] == "clip" and manifest["config"]["transformer"]["text_dim"] == 24
+    train("transformer", TrainOptions(data=tiny_data, out=out, iters=3, progress=False))
+    assert len(list((out / "cache").glob("text-clip-*.pt"))) == 1
+    model = load_model(out)
+    result = generate(model, "a person squats slowly", frames=48, seed=0)
+    assert result.motion.joints.shape == (48, 22, 3) and model.residual is None
