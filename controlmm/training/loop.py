@@ -288,6 +288,10 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
 
     from tqdm import tqdm
 
+    if ctx.is_main:
+        print(f"{name}: {len(dataset)} training items, batch {schedule.batch_size} on {ctx.world} process(es) "
+              f"({ctx.device}), {steps_per_epoch} steps/epoch, {schedule.iters} iterations "
+              f"({schedule.iters / steps_per_epoch:.1f} epochs), checkpoints in {ckpt_path.parent}", flush=True)
     started = time.time()
     bar = tqdm(total=schedule.iters, initial=min(step, schedule.iters), desc=f"train {name}", unit="it",
                disable=not (opts.progress and ctx.is_main), dynamic_ncols=True, file=sys.stderr)
