@@ -257,11 +257,11 @@ def _demo() -> ModelConfig:
     # 0.97 s/it, residual 0.78 s/it, i.e. about 77 min for the three stages on one core and less on two,
     # leaving the rest of the two-hour budget to the control branch and the evaluator.
     schedules = {
-        "tokenizer": StageSchedule(iters=4000, batch_size=64, lr=3e-4, warmup=200, milestones=(3000,),
+        "tokenizer": StageSchedule(iters=4000, batch_size=64, lr=1e-3, warmup=200, milestones=(3000,),
                                    gamma=0.2, checkpoint_every=250),
-        "transformer": StageSchedule(iters=2500, batch_size=64, lr=4e-4, weight_decay=1e-5, warmup=200,
+        "transformer": StageSchedule(iters=2500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
                                      milestones=(2000,), gamma=0.2, checkpoint_every=250),
-        "residual": StageSchedule(iters=1200, batch_size=64, lr=4e-4, weight_decay=1e-5, warmup=100,
+        "residual": StageSchedule(iters=1200, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
                                   milestones=(950,), gamma=0.2, checkpoint_every=250),
     }
     return ModelConfig(
