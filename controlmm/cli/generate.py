@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="top-k filter threshold: keep ceil((1 - topk) x 512) logits (default 0.9)")
     p.add_argument("--iterations", type=int, default=10, help="masked-decoding iterations (default 10)")
     p.add_argument("--no-residual", action="store_true", help="decode the base layer only")
+    p.add_argument("--residual-layers", type=int, default=None, metavar="N",
+                   help="predict only the first N residual layers (default: all)")
     p.add_argument("--clip-weights", default=None, metavar="PATH", help="CLIP weights for CLIP-conditioned models")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.set_defaults(func=run)
@@ -79,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     options = DecodeOptions(iterations=args.iterations, cfg_scale=args.cfg_scale, temperature=args.temperature,
                             topk=args.topk)
     result = generate(model, texts, seconds=args.seconds, frames=args.frames, seed=args.seed, options=options,
-                      use_residual=not args.no_residual, residual_cfg_scale=args.residual_cfg_scale)
+                      use_residual=not args.no_residual, residual_cfg_scale=args.residual_cfg_scale,
+                      residual_layers=args.residual_layers)
     for i, motion in enumerate(result.motions):
         save_motion(motion, outs[i])
         print(f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): "

@@ -87,7 +87,8 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
              frames: int | Sequence[int] | None = None, seed: int | None = None,
              options: DecodeOptions = DecodeOptions(), use_residual: bool = True,
              residual_cfg_scale: float = 5.0, residual_temperature: float = 1.0,
-             residual_topk: float | None = 0.9, batch_size: int = 64) -> GenerationResult:
+             residual_topk: float | None = 0.9, residual_layers: int | None = None,
+             batch_size: int = 64) -> GenerationResult:
     """Generate one motion per prompt.
 
     Args:
@@ -97,6 +98,7 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
         seed: makes the result reproducible (None: a random seed, recorded in the metadata).
         options: base-layer decoding (iterations 10, CFG 4, temperature 1, top-k 0.9).
         use_residual: add the residual layers when the model has a residual transformer.
+        residual_layers: how many residual layers to predict (default all, Q - 1).
         batch_size: prompts decoded together.
     """
     texts = check_texts(text)
@@ -105,6 +107,9 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
     lengths = frames_for(len(texts), seconds, frames)
     if options.iterations < 1:
         raise ControlMMError(f"iterations must be at least 1; got {options.iterations}")
+    max_layers = model.config.tokenizer.num_quantizers - 1
+    if residual_layers is not None and not 0 <= residual_layers <= max_layers:
+        raise ControlMMError(f"residual_layers must be in 0..{max_layers}; got {residual_layers}")
     if seed is None:
         seed = secrets.randbits(31)
     device = model.device
@@ -121,7 +126,7 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
         res_logits: list[torch.Tensor] = []
         if residual is not None:
             ids, res_logits = residual_decode(residual, base.ids, cond, token_lengths, residual_cfg_scale,
-                                              residual_temperature, residual_topk, generator)
+                                              residual_temperature, residual_topk, generator, residual_layers)
         else:
             ids = base.ids[..., None]
         latent = model.tokenizer.ids_to_latent(ids)
@@ -131,7 +136,7 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
             meta = {"seed": int(seed), "index": start + i, "model": str(model.directory or ""),
                     "preset": model.config.preset, "cfg_scale": options.cfg_scale,
                     "temperature": options.temperature, "topk": options.topk, "iterations": options.iterations,
-                    "residual": residual is not None, "frames": f}
+                    "residual": residual is not None, "residual_layers": residual_layers, "frames": f}
             motions.append(Motion(joints=joints[i, :f].cpu().numpy(), fps=float(FPS),
                                   features=features[i, :f].cpu().numpy(), text=prompt, metadata=meta))
         id_chunks.append(ids)

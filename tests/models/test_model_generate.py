@@ -70,6 +70,11 @@ def test_seed_makes_generation_reproducible(model):
     assert not torch.equal(a.ids, c.ids)
     base_only = generate(model, "a person squats slowly", seconds=3, seed=7, use_residual=False)
     assert base_only.ids.shape[-1] == 1 and torch.equal(base_only.ids[..., 0], a.ids[..., 0])
+    one_layer = generate(model, "a person squats slowly", seconds=3, seed=7, residual_layers=1)
+    assert one_layer.ids.shape[-1] == 2 and torch.equal(one_layer.ids, a.ids[..., :2])
+    assert len(one_layer.residual_logits) == 1
+    with pytest.raises(ControlMMError, match="residual_layers must be in 0..2"):
+        generate(model, "a person squats slowly", seconds=3, residual_layers=5)
 
 
 def test_guidance_scale_changes_the_sampling_distribution(model):
