@@ -253,9 +253,9 @@ def _demo() -> ModelConfig:
     tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
     common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
                   text_dim=384, max_len=64)
-    # Measured on the corpus (benchmarks/model.py, fp32, one thread, CPU time per iteration): tokenizer
-    # 0.28 s, transformer 0.89 s, residual 0.76 s, i.e. about 14 + 37 + 19 = 70 min on one core (less on
-    # two), leaving the rest of the two-hour budget to the control branch and the evaluator.
+    # Measured on the corpus (benchmarks/model.py, fp32, 2 threads on 2 cores): tokenizer 5.8 it/s,
+    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 9 + 24 + 12 = 45 min (70 min on one core),
+    # leaving the rest of the two-hour budget to the control branch and the evaluator.
     schedules = {
         "tokenizer": StageSchedule(iters=3000, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
