@@ -25,8 +25,8 @@ creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages ad
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
-EPILOG = """presets: demo (CPU-sized, MiniLM text, ~2 h for all stages on 2 cores), paper (the released
-MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
+EPILOG = """presets: demo (CPU-sized, MiniLM text; about 45 min for the three stages on 2 cores), paper
+(the released MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,8 +64,8 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     p.add_argument("--workers", type=int, default=0, help="data-loading worker processes (default 0)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--precision", default="fp32", choices=("fp32", "bf16"),
-                   help="bf16 = bfloat16 autocast of the forward pass: ~1.5x faster on CPUs with AVX512-BF16 "
-                        "(default fp32)")
+                   help="bf16 = bfloat16 autocast of the forward pass: 1.2-1.5x faster on CPUs with "
+                        "AVX512-BF16 and on GPUs (default fp32)")
     if creates:
         p.add_argument("--text-encoder", default=None,
                        help="minilm or clip (default: the preset's; fixed for the model directory)")
