@@ -133,7 +133,8 @@ class HumanML3D:
             try:
                 start, end = float(parts[2]), float(parts[3])
             except ValueError as exc:
-                raise InputFileError(f"'{path}' line {number}: start/end '{parts[2]}'/'{parts[3]}' are not numbers") from exc
+                raise InputFileError(f"'{path}' line {number}: start/end '{parts[2]}'/'{parts[3]}' "
+                                     "are not numbers") from exc
             start = 0.0 if math.isnan(start) else start
             end = 0.0 if math.isnan(end) else end
             captions.append(Caption(parts[0].strip(), tuple(parts[1].split()), start, end))

@@ -254,7 +254,8 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     loss_module = stage.loss_module(model)
     wrapped: nn.Module = loss_module
     if ctx.distributed:
-        wrapped = DistributedDataParallel(loss_module, device_ids=[ctx.device.index] if ctx.device.type == "cuda" else None)
+        device_ids = [ctx.device.index] if ctx.device.type == "cuda" else None
+        wrapped = DistributedDataParallel(loss_module, device_ids=device_ids)
 
     def checkpoint() -> None:
         states = ctx.gather(rng_state())
@@ -321,7 +322,8 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
                 running[k] = 0.9 * running.get(k, float(v)) + 0.1 * float(v)
             bar.update(1)
             if bar.n % 10 == 0 or step == schedule.iters:
-                bar.set_postfix({k: f"{v:.3g}" for k, v in running.items()} | {"lr": f"{scheduler.get_last_lr()[0]:.2e}"})
+                shown = {k: f"{v:.3g}" for k, v in running.items()}
+                bar.set_postfix(shown | {"lr": f"{scheduler.get_last_lr()[0]:.2e}"})
             if step % schedule.checkpoint_every == 0 and step % steps_per_epoch != 0:
                 train_time += time.time() - tick
                 train_cpu += time.process_time() - cpu_tick

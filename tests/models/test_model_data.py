@@ -100,7 +100,8 @@ def test_window_dataset_and_sampler(quirky):
     (lambda r: (r / "texts" / "spanonly.txt").unlink(), "spanonly.txt' does not exist"),
     (lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.zeros((50, 22, 3))), "must hold (T, 263) features"),
     (lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.full((50, 263), np.nan)), "non-finite"),
-    (lambda r: (r / "texts" / "whole.txt").write_text("just a caption\n"), "line 1: expected 'caption#tokens#start#end'"),
+    (lambda r: (r / "texts" / "whole.txt").write_text("just a caption\n"),
+     "line 1: expected 'caption#tokens#start#end'"),
     (lambda r: (r / "texts" / "whole.txt").write_text("a#b#x#y\n"), "are not numbers"),
 ])
 def test_malformed_directories_name_the_problem(quirky, breakage, needle):
