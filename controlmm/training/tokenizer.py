@@ -1,0 +1,135 @@
+"""Stage ``tokenizer``: the RVQ-VAE on random 64-frame windows (MoMask ``train_vq.py``).
+
+Loss = SmoothL1(x_hat, x) + 0.5 SmoothL1 on the RIC positions (dims 4:67) + 0.02 commitment.
+Validation on fixed windows of the val split: the same loss; MPJPE in mm as MoMask computes it
+(joints recovered from the features, each frame aligned at the pelvis; ``val_mpjpe_mm``, the metric that
+selects the exported weights); the error of the unaligned global joints (``val_global_mpjpe_mm``, windows
+start at the origin); the share of base-layer codes in use.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from controlmm.data.datasets import WindowDataset
+from controlmm.models.rvqvae import RVQVAE
+from controlmm.motion.recover import features_to_joints
+from controlmm.training.stage import Stage
+
+RIC = slice(4, 67)
+
+
+def reconstruction_loss(recon: torch.Tensor, target: torch.Tensor, commit: torch.Tensor) -> torch.Tensor:
+    recon = recon.float()
+    return (F.smooth_l1_loss(recon, target) + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
+            + 0.02 * commit)
+
+
+def mpjpe(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """MoMask's MPJPE (m): joints (..., T, 22, 3) aligned at the pelvis in every frame, mean distance."""
+    pred = pred - pred[..., :1, :]
+    target = target - target[..., :1, :]
+    return (pred - target).norm(dim=-1).mean()
+
+
+class TokenizerLoss(nn.Module):
+    def __init__(self, model: RVQVAE) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, x: torch.Tensor):
+        recon, commit, perplexity, _ = self.model(x)
+        loss = reconstruction_loss(recon, x, commit)
+        return loss, {"loss": loss.detach(), "commit": commit.detach(), "perplexity": perplexity.detach()}
+
+
+class TokenizerStage(Stage):
+    name = "tokenizer"
+    requires = ()
+    best_metric = "val_mpjpe_mm"
+
+    def __init__(self, ctx) -> None:
+        super().__init__(ctx)
+        window = ctx.config.schedules["tokenizer"].window if "tokenizer" in ctx.config.schedules else 64
+        step = ctx.config.tokenizer.downsample
+        self.window = window - window % step
+        data = ctx.data
+        self.train_motions = data.motions("train", self.window, progress=ctx.progress)
+        self.val_motions = data.motions("val", self.window, progress=ctx.progress)
+
+    def build_model(self) -> nn.Module:
+        return RVQVAE(self.ctx.config.tokenizer)
+
+    def train_dataset(self):
+        return WindowDataset(self.train_motions, self.ctx.normalizer, self.window, seed=self.ctx.seed)
+
+    def loss_module(self, model: nn.Module) -> nn.Module:
+        return TokenizerLoss(model)
+
+    def prepare(self, batch: Any) -> tuple:
+        return (batch.to(self.ctx.device, non_blocking=True),)
+
+    @torch.no_grad()
+    def validate(self, model: nn.Module) -> dict[str, float]:
+        val = WindowDataset(self.val_motions, self.ctx.normalizer, self.window, seed=self.ctx.seed + 1)
+        losses, errors, global_errors = [], [], []
+        used = torch.zeros(self.ctx.config.tokenizer.nb_code, dtype=torch.bool)
+        device = self.ctx.device
+        for start in range(0, len(val), 64):
+            x = torch.stack([val[(i, 0)] for i in range(start, min(len(val), start + 64))]).to(device)
+            recon, commit, _, ids = model(x)
+            losses.append(float(reconstruction_loss(recon, x, commit)) * len(x))
+            joints_hat = features_to_joints(self.ctx.normalizer.denormalize(recon))
+            joints = features_to_joints(self.ctx.normalizer.denormalize(x))
+            errors.append(float(mpjpe(joints_hat, joints)) * len(x))
+            global_errors.append(float((joints_hat - joints).norm(dim=-1).mean()) * len(x))
+            used[ids[..., 0].flatten().cpu()] = True
+        n = len(val)
+        return {"val_loss": sum(losses) / n, "val_mpjpe_mm": 1000.0 * sum(errors) / n,
+                "val_global_mpjpe_mm": 1000.0 * sum(global_errors) / n, "code_usage": float(used.float().mean())}
+
+    def extra_state(self, model: nn.Module) -> dict[str, Any]:
+        return {"ema": model.quantizer.ema_state()}
+
+    def load_extra_state(self, model: nn.Module, state: dict[str, Any]) -> None:
+        if "ema" in state:
+            model.quantizer.load_ema_state(state["ema"])
+
+    def record(self) -> dict[str, Any]:
+        return {"train_motions": len(self.train_motions), "val_motions": len(self.val_motions),
+                "window": self.window}
+
+
+@torch.no_grad()
+def reconstruction_metrics(model, data, split: str = "test") -> dict[str, float]:
+    """Tokenizer reconstruction of whole motions of a split (MoMask's VQ evaluation).
+
+    Every motion (40 <= T < 200 frames, cropped to a multiple of 4) is encoded with all RVQ layers and
+    decoded; returns MPJPE (pelvis-aligned, mm), global MPJPE (mm) and the number of motions.
+
+    Args:
+        model: a loaded :class:`~controlmm.models.MotionModel` with a tokenizer.
+        data: a :class:`~controlmm.data.HumanML3D` directory.
+    """
+    tokenizer, norm = model.tokenizer, model.normalizer
+    unit = model.config.tokenizer.downsample
+    errors, global_errors = [], []
+    for motion_id in data.split_ids(split):
+        motion = data.load_motion(motion_id)
+        if not 40 <= len(motion) < 200:
+            continue
+        frames = len(motion) // unit * unit
+        x = torch.from_numpy(norm.normalize(motion[:frames])).float()[None].to(model.device)
+        recon = tokenizer.decode(tokenizer.encode(x))
+        joints_hat = features_to_joints(norm.denormalize(recon))[0]
+        joints = features_to_joints(norm.denormalize(x))[0]
+        errors.append(float(mpjpe(joints_hat, joints)))
+        global_errors.append(float((joints_hat - joints).norm(dim=-1).mean()))
+    if not errors:
+        return {"motions": 0}
+    return {"mpjpe_mm": 1000.0 * sum(errors) / len(errors),
+            "global_mpjpe_mm": 1000.0 * sum(global_errors) / len(global_errors), "motions": len(errors)}

@@ -1,0 +1,100 @@
+"""Stage ``transformer``: the masked transformer on base-layer tokens of the frozen tokenizer.
+
+Batches come from the text-to-motion loader (random caption, length rounding and crop, 196-frame
+padding); tokens are the frozen RVQ-VAE's deterministic base-layer ids of each batch, and text vectors
+come from the cached caption embeddings. Validation: masked-token cross-entropy and accuracy on the val
+split with fixed crops and masks.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import nn
+
+from controlmm.data.datasets import TextMotionDataset
+from controlmm.errors import ControlMMError
+from controlmm.models.mask_transformer import MaskTransformer
+from controlmm.text import embed_captions
+from controlmm.training.stage import Stage
+
+
+class TextConditionedStage(Stage):
+    """Shared by the masked and residual transformer stages: samples, captions, tokens."""
+
+    requires = ("tokenizer",)
+    best_metric = "val_loss"
+
+    def __init__(self, ctx) -> None:
+        super().__init__(ctx)
+        data = ctx.data
+        self.train_samples = data.text_samples("train", progress=ctx.progress)
+        self.val_samples = data.text_samples("val", progress=ctx.progress)
+        captions = [c for s in self.train_samples + self.val_samples for c in s.captions]
+        encoder = ctx.base.text_encoder
+        emb = embed_captions(encoder, captions, cache_dir=ctx.model_dir / "cache", progress=ctx.progress)
+        if emb.vectors.shape[1] != ctx.config.transformer.text_dim:
+            raise ControlMMError(f"text encoder '{encoder.name}' gives {emb.vectors.shape[1]}-d vectors; the "
+                                 f"model expects {ctx.config.transformer.text_dim}-d (wrong CLIP weights?)")
+        self.caption_index = emb.index
+        self.text_vectors = emb.vectors.to(ctx.device)
+        self.tokenizer = ctx.base.tokenizer.eval()
+        self.unit = ctx.config.tokenizer.downsample
+
+    def train_dataset(self):
+        return TextMotionDataset(self.train_samples, self.ctx.normalizer, self.caption_index, unit=self.unit,
+                                 seed=self.ctx.seed)
+
+    def tokens(self, motion: torch.Tensor) -> torch.Tensor:
+        """(B, 196, 263) normalised motions -> (B, 49, Q) ids of the frozen tokenizer."""
+        with torch.no_grad():
+            return self.tokenizer.encode(motion)
+
+    def prepare(self, batch: Any) -> tuple:
+        motion, lengths, caption = batch
+        motion = motion.to(self.ctx.device, non_blocking=True)
+        ids = self.tokens(motion)
+        return ids, self.text_vectors[caption.to(self.ctx.device)], (lengths // self.unit).to(self.ctx.device)
+
+    def val_batches(self, batch_size: int = 64):
+        val = TextMotionDataset(self.val_samples, self.ctx.normalizer, self.caption_index, unit=self.unit,
+                                seed=self.ctx.seed + 1)
+        for start in range(0, len(val), batch_size):
+            items = [val[(i, 0)] for i in range(start, min(len(val), start + batch_size))]
+            yield self.prepare(torch.utils.data.default_collate(items))
+
+    def record(self) -> dict[str, Any]:
+        return {"train_samples": len(self.train_samples), "val_samples": len(self.val_samples),
+                "captions": len(self.caption_index), "text_encoder": self.ctx.config.text_encoder.name}
+
+
+class MaskedLoss(nn.Module):
+    def __init__(self, model: MaskTransformer) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, ids, cond, lengths):
+        loss, acc = self.model.masked_loss(ids[..., 0], cond, lengths)
+        return loss, {"loss": loss.detach(), "acc": acc.detach()}
+
+
+class TransformerStage(TextConditionedStage):
+    name = "transformer"
+
+    def build_model(self) -> nn.Module:
+        return MaskTransformer(self.ctx.config.transformer)
+
+    def loss_module(self, model: nn.Module) -> nn.Module:
+        return MaskedLoss(model)
+
+    @torch.no_grad()
+    def validate(self, model: nn.Module) -> dict[str, float]:
+        gen = torch.Generator(self.ctx.device).manual_seed(self.ctx.seed + 2)
+        total, acc_sum, n = 0.0, 0.0, 0
+        for ids, cond, lengths in self.val_batches():
+            loss, acc = model.masked_loss(ids[..., 0], cond, lengths, generator=gen)
+            total += float(loss) * len(ids)
+            acc_sum += float(acc) * len(ids)
+            n += len(ids)
+        return {"val_loss": total / n, "val_acc": acc_sum / n}
