@@ -266,6 +266,28 @@ class KinematicTree:
                 jac[:, :, i, 6:][..., slide] = (poses.axis[:, None, slide, row] * mask[..., slide])
         return jac
 
+    def directional_jacobian(self, poses: Poses, frames: np.ndarray, nodes: np.ndarray, points: np.ndarray,
+                             direction: np.ndarray) -> np.ndarray:
+        """d(direction . point)/d(velocity coords), (E, 6 + nj), for E scattered entries.
+
+        Entry e is the world point ``points[e]`` (3,) fixed on node ``nodes[e]`` at frame
+        ``frames[e]``, projected on the world vector ``direction[e]`` (3,): one row of a
+        point Jacobian per entry, without materialising the (3, n) blocks.
+        """
+        e_len = len(frames)
+        jac = np.empty((e_len, self.nv))
+        u = direction
+        jac[:, 0:3] = u
+        jac[:, 3:6] = np.cross(points - poses.root_pos[frames], u)  # u . (w x r) = w . (r x u)
+        lever = points[:, None, :] - poses.anchor[frames]  # (E, nj, 3)
+        ax = poses.axis[frames]
+        col = np.einsum("ejk,ejk->ej", ax, np.cross(lever, u[:, None, :]))  # u . (a x l) = a . (l x u)
+        if np.any(self.is_slide_joint):
+            slide = self.is_slide_joint
+            col[:, slide] = np.einsum("ejk,ek->ej", ax[:, slide], u)
+        jac[:, 6:] = col * self.ancestor[nodes]
+        return jac
+
     def rotation_jacobian(self, poses: Poses, nodes: np.ndarray) -> np.ndarray:
         """d(world angular displacement of nodes)/d(velocity coords): (T, K, 3, 6 + nj)."""
         t, k = poses.pos.shape[0], len(nodes)

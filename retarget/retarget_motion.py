@@ -23,6 +23,7 @@ from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
+from retarget.feet import lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.resample import resample_qpos
@@ -87,6 +88,23 @@ def check_fps(fps: float) -> float:
     if not (np.isfinite(value) and lo <= value <= hi):
         raise ControlMMError(f"fps {fps} is out of range; allowed {lo:g} to {hi:g} frames per second")
     return value
+
+
+SWING_WATCH = 0.012
+"""Output frames between motion frames where a swing foot is within this of its clearance are
+checked for dips (:func:`retarget.feet.lift_swing_feet`)."""
+
+
+def _dip_candidates(robot: RobotModel, sol, targets, times: np.ndarray, src_fps: float) -> np.ndarray:
+    """Output frames (bool) next to a motion frame whose swing foot is near its clearance."""
+    poses = robot.tree.forward(sol.root_pos, sol.root_rot, sol.q)
+    near = np.zeros(len(sol.q), dtype=bool)
+    for side in ("left", "right"):
+        swing = targets.clearance[side] > 0.005
+        near |= swing & (robot.foot_lowest(poses, side) - targets.clearance[side] < SWING_WATCH)
+    near = near | np.r_[near[1:], False] | np.r_[False, near[:-1]]
+    src = np.clip(times * src_fps, 0, len(near) - 1)
+    return near[np.floor(src).astype(int)] | near[np.ceil(src).astype(int)]
 
 
 def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
@@ -161,15 +179,21 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
-    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     times = np.arange(len(qpos)) / fps
+    src_times = np.arange(len(joints)) / src_fps
+    clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
+    root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
+    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps,
+                                              candidates=_dip_candidates(rm, sol, targets, times, src_fps))
+    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
     method = {"batched": "whole-sequence Levenberg-Marquardt (banded)", "mink": "mink per-frame differential IK"}
     solver_info = {"method": method[solver], "iterations": sol.iterations,
                    "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
                    "solve_seconds": round(sol.seconds, 4),
-                   "floor_lift_max_mm": round(lift * 1000, 3)}
+                   "floor_lift_max_mm": round(lift * 1000, 3),
+                   "swing_lift_max_mm": round(swing_lift * 1000, 3)}
     traj = RobotTrajectory(robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:")
                                      else rm.mapping.source),
                            fps=fps, qpos=qpos, joint_names=list(rm.tree.joint_names), scale=transform.scale,

@@ -175,6 +175,27 @@ class RobotModel:
         self.scale = mapping.scale if mapping.scale is not None else self._auto_scale()
         self.body_joints = self._body_joints()
 
+    @functools.cached_property
+    def capsules(self):
+        """Enclosing capsules of the collision geoms (:func:`retarget.selfcollision.robot_capsules`)."""
+        from retarget.selfcollision import robot_capsules
+
+        return robot_capsules(self)
+
+    @functools.cached_property
+    def body_floor(self):
+        """Support points of every body but the feet (:class:`retarget.bodyfloor.BodyFloor`)."""
+        from retarget.bodyfloor import build_body_floor
+
+        return build_body_floor(self)
+
+    @functools.cached_property
+    def self_clearance(self):
+        """Arm self-clearance capsules and pairs (:func:`retarget.selfcollision.build_self_clearance`)."""
+        from retarget.selfcollision import build_self_clearance
+
+        return build_self_clearance(self)
+
     # -- lookups -------------------------------------------------------------------------
     def keypoint_index(self, joint: str) -> int:
         """Index into the keypoint arrays of a mapped human joint."""
