@@ -40,7 +40,7 @@ def pin_stance_feet(robot: RobotModel, targets: Targets, root_pos: np.ndarray, r
         o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= 6) else None
         goal = targets.kp_pos[frames, k]
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
-        lo, hi = tree.lower[leg], tree.upper[leg]
+        lo, hi = robot.lower[leg], robot.upper[leg]
         start = q[np.ix_(frames, leg)].copy()
         cur, best = start.copy(), start.copy()
         best_cost = np.full(len(frames), np.inf)
@@ -131,7 +131,7 @@ def lift_swing_feet(robot: RobotModel, root_pos: np.ndarray, root_rot: np.ndarra
             continue
         leg = leg_joints(robot, side)
         distal = leg[len(leg) // 2:]  # knee and below (chain order: hip ... ankle)
-        lo, hi = tree.lower[distal], tree.upper[distal]
+        lo, hi = robot.lower[distal], robot.upper[distal]
         h = np.full(len(q), np.inf)
         h_idx, point = _lowest(poses, f)
         h[idx] = h_idx

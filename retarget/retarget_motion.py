@@ -178,7 +178,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
         sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
-    qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
+    qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)
     times = np.arange(len(qpos)) / fps
     src_times = np.arange(len(joints)) / src_fps
     clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}

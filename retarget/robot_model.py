@@ -100,7 +100,9 @@ class RobotModel:
         joints: mapped human joint indices (K,), HumanML3D order.
         nodes: (K,) tree node of each keypoint; offsets: (K, 3) in the node frame.
         feet: {"left": FloorPoints, "right": FloorPoints} (the ankles' bodies).
-        rest_q: (nj,) rest joint angles (qpos0 clipped to the limits).
+        lower, upper: (nj,) joint ranges the retargeter uses (MJCF ranges narrowed by the
+            mapping's ``ranges``).
+        rest_q: (nj,) rest joint angles (qpos0 clipped to those ranges).
         rest: Poses of the rest pose with the root at the world origin, identity rotation.
         floor_z: lowest foot point (m) of the rest pose (subtract it to stand on the floor).
         scale: the human -> robot uniform scale.
@@ -167,8 +169,18 @@ class RobotModel:
                 raise ControlMMError(f"{where}: the {side} foot body '{m.body(body).name}' (body of "
                                      f"'{side}_ankle') has no collision geometry to stand on")
             self.feet[side] = FloorPoints(node, np.concatenate(pts), np.concatenate(rad), tuple(geoms))
+        # Retargeting ranges: the MJCF's, narrowed by the mapping's human-like ranges.
+        self.lower, self.upper = tree.lower.copy(), tree.upper.copy()
+        for name, (lo, hi) in mapping.ranges.items():
+            if name not in tree.joint_names:
+                raise ControlMMError(f"{where}: range for unknown joint '{name}'; joints: {', '.join(tree.joint_names)}")
+            j = tree.joint_names.index(name)
+            self.lower[j], self.upper[j] = max(self.lower[j], lo), min(self.upper[j], hi)
+            if self.lower[j] >= self.upper[j]:
+                raise ControlMMError(f"{where}: range {[lo, hi]} of '{name}' does not overlap its MJCF range "
+                                     f"[{tree.lower[j]:.4g}, {tree.upper[j]:.4g}]")
         # Rest pose: qpos0, root at the origin; the floor is its lowest foot point.
-        self.rest_q = np.clip(tree.qpos0, tree.lower, tree.upper)
+        self.rest_q = np.clip(tree.qpos0, self.lower, self.upper)
         self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
         self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
         self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)

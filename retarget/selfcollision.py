@@ -30,7 +30,7 @@ import numpy as np
 
 from retarget.kinematics import Poses, quat_to_mat
 
-SELF_MARGIN = 0.015
+SELF_MARGIN = 0.02
 """Metres between an arm capsule and any other capsule that the solver keeps free."""
 
 
@@ -64,6 +64,11 @@ class SelfClearance:
     def bound(self) -> np.ndarray:
         """(C,) radius of a sphere around each capsule's segment midpoint that encloses it."""
         return 0.5 * np.linalg.norm(self.p1 - self.p0, axis=1) + self.radius
+
+    @property
+    def mid(self) -> np.ndarray:
+        """(C, 3) segment midpoints in the node frames."""
+        return 0.5 * (self.p0 + self.p1)
 
     @property
     def num_pairs(self) -> int:
@@ -108,11 +113,11 @@ def _segment_distance(p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarr
     """Closest points of segments p + s d1 and q + t d2 (s, t in [0, 1]), arrays (..., 3):
     (distance between the axes (...), point on the first (..., 3), on the second (..., 3))."""
     r = p - q
-    a = np.einsum("...k,...k->...", d1, d1)
-    e = np.einsum("...k,...k->...", d2, d2)
-    f = np.einsum("...k,...k->...", d2, r)
-    c = np.einsum("...k,...k->...", d1, r)
-    b = np.einsum("...k,...k->...", d1, d2)
+    a = (d1 * d1).sum(-1)
+    e = (d2 * d2).sum(-1)
+    f = (d2 * r).sum(-1)
+    c = (d1 * r).sum(-1)
+    b = (d1 * d2).sum(-1)
     eps = 1e-12
     denom = a * e - b * b
     s = np.where((denom > eps) & (a > eps), np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
@@ -153,13 +158,19 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
     only entries whose spheres come within the margin get the segment distance.
     """
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
-    a0 = pos + np.einsum("tcij,cj->tci", rot, sc.p0)
-    a1 = pos + np.einsum("tcij,cj->tci", rot, sc.p1)
-    mid = 0.5 * (a0 + a1)
-    gap = np.linalg.norm(mid[:, sc.first] - mid[:, sc.second], axis=-1) - sc.bound[sc.first] - sc.bound[sc.second]
-    fr, pr = np.nonzero(gap < sc.margin)
+    mid = pos + np.einsum("tcij,cj->tci", rot, sc.mid)
+    diff = mid[:, sc.first] - mid[:, sc.second]
+    reach = sc.bound[sc.first] + sc.bound[sc.second] + sc.margin
+    fr, pr = np.nonzero(np.einsum("tpk,tpk->tp", diff, diff) < (reach * reach)[None, :])
     i, j = sc.first[pr], sc.second[pr]
-    axis, pa, pb = _segment_distance(a0[fr, i], a1[fr, i] - a0[fr, i], a0[fr, j], a1[fr, j] - a0[fr, j])
+
+    def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r, o = rot[fr, c], pos[fr, c]
+        return o + np.einsum("eij,ej->ei", r, sc.p0[c]), np.einsum("eij,ej->ei", r, sc.p1[c] - sc.p0[c])
+
+    a0, da = ends(i)
+    b0, db = ends(j)
+    axis, pa, pb = _segment_distance(a0, da, b0, db)
     dist = axis - sc.radius[i] - sc.radius[j]
     keep = dist < sc.margin[pr]
     return ClosePairs(fr[keep], pr[keep], dist[keep], pa[keep], pb[keep])

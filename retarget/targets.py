@@ -201,6 +201,41 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     return ok
 
 
+def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimum: float) -> None:
+    """Keep hanging arms at least ``minimum`` rad away from the body's side (in place).
+
+    A robot whose hips are wider than the scaled human's (G1, H1) cannot let its hands hang
+    where the human's do: they would pass through its hip and thigh links. Per frame and
+    side, the arm's frontal-plane angle (shoulder -> wrist target in the torso frame,
+    lateral against downward) is raised to ``minimum`` by rotating the elbow and wrist
+    targets about the torso's forward axis through the shoulder; the correction is weighted
+    by how much the arm points down (none for an arm held forward, sideways or up), so it is
+    continuous in time. The solver's self-clearance term handles the rest (squats, crossing).
+    """
+    x_axis = torso[..., :, 0]  # (T, 3) torso forward
+    for sign, side in ((1.0, "left"), (-1.0, "right")):
+        names = [f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"]
+        if not all(robot.has_keypoint(n) for n in names):
+            continue
+        ks, ke, kw = (robot.keypoint_index(n) for n in names)
+        arm = kp_pos[:, kw] - kp_pos[:, ks]
+        local = np.einsum("tji,tj->ti", torso, arm)  # torso frame: x forward, y left, z up
+        down = np.maximum(-local[:, 2], 0.0)
+        lateral = sign * local[:, 1]
+        angle = np.arctan2(lateral, np.maximum(down, 1e-9))
+        share = down / np.maximum(np.linalg.norm(local, axis=1), 1e-9)
+        delta = np.maximum(minimum - angle, 0.0) * share * sign  # rotation about torso x
+        if not np.any(delta):
+            continue
+        c, s_ = np.cos(delta)[:, None], np.sin(delta)[:, None]
+        for k in (ke, kw):
+            v = kp_pos[:, k] - kp_pos[:, ks]
+            along = np.sum(v * x_axis, axis=1, keepdims=True) * x_axis
+            perp = v - along
+            # Rodrigues about x_axis: perp rotates in the plane normal to x
+            kp_pos[:, k] = kp_pos[:, ks] + along + perp * c + np.cross(x_axis, perp) * s_
+
+
 def _ramp(stance: np.ndarray, fps: float, hold: int = 0) -> np.ndarray:
     """1 in stance (and ``hold`` frames around it), then falling linearly to 0 over RAMP_SECONDS."""
     r = max(1, int(round(RAMP_SECONDS * fps)))
@@ -300,6 +335,8 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
             seg_parent.append(a)
             seg_child.append(k)
             seg_weight.append(mapping.keypoints[k].segment_weight)
+    if mapping.arm_abduction > 0:
+        abduct_arms(robot, kp_pos, frames["spine3"], mapping.arm_abduction)
     kp_weight = np.tile([kp.position_weight for kp in mapping.keypoints], (t_len, 1)).astype(float)
     seg_vec = kp_pos[:, seg_child] - kp_pos[:, seg_parent] if seg_child else np.zeros((t_len, 0, 3))
 

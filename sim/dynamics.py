@@ -37,6 +37,11 @@ from sim.world import CheckWorld
 
 RIDGE = 1e-3
 """Ridge weight on contact forces (in units of m g) relative to the normalised residual."""
+TORQUE_WEIGHT = 0.1
+"""Weight of the joint torques (relative to their limits) in the force distribution: among
+the contact forces that cancel the root wrench equally well, the check picks those that load
+the joints least, as a controller would (a torque at its limit costs like 10 % of the
+residual-force threshold)."""
 
 
 @dataclass
@@ -110,6 +115,9 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
     J = world.joints
     w_force = 1.0 / (mg * max(config.max_residual_force_ratio, 1e-6))
     w_moment = 1.0 / (mg * max(config.max_residual_moment_m, 1e-6))
+    limited = np.isfinite(J.torque_limit) & (J.torque_limit > 0)
+    tau_dofs = J.dof_adr[limited]
+    w_tau = TORQUE_WEIGHT / J.torque_limit[limited]
     weights = np.array([w_force] * 3 + [w_moment] * 3)
 
     res_force = np.zeros((T, 3))
@@ -145,8 +153,10 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
                 cols[:, 4 * i:4 * i + 4] = jacp.T @ edges[i].T
             a = weights[:, None] * (to_com @ cols[root_dofs]) * mg
             b = weights * (to_com @ need[root_dofs])
-            lhs = np.vstack([a, sqrt_ridge * np.eye(a.shape[1])])
-            rhs = np.concatenate([b, np.zeros(a.shape[1])])
+            a_tau = w_tau[:, None] * cols[tau_dofs] * mg
+            b_tau = w_tau * need[tau_dofs]
+            lhs = np.vstack([a, a_tau, sqrt_ridge * np.eye(a.shape[1])])
+            rhs = np.concatenate([b, b_tau, np.zeros(a.shape[1])])
             lam, _ = nnls(lhs, rhs, maxiter=50 * a.shape[1])
             forces = lam * mg
             generalized = cols @ forces
