@@ -90,23 +90,6 @@ def check_fps(fps: float) -> float:
     return value
 
 
-SWING_WATCH = 0.012
-"""Output frames between motion frames where a swing foot is within this of its clearance are
-checked for dips (:func:`retarget.feet.lift_swing_feet`)."""
-
-
-def _dip_candidates(robot: RobotModel, sol, targets, times: np.ndarray, src_fps: float) -> np.ndarray:
-    """Output frames (bool) next to a motion frame whose swing foot is near its clearance."""
-    poses = robot.tree.forward(sol.root_pos, sol.root_rot, sol.q)
-    near = np.zeros(len(sol.q), dtype=bool)
-    for side in ("left", "right"):
-        swing = targets.clearance[side] > 0.005
-        near |= swing & (robot.foot_lowest(poses, side) - targets.clearance[side] < SWING_WATCH)
-    near = near | np.r_[near[1:], False] | np.r_[False, near[:-1]]
-    src = np.clip(times * src_fps, 0, len(near) - 1)
-    return near[np.floor(src).astype(int)] | near[np.ceil(src).astype(int)]
-
-
 def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
     """Raise the root where a foot's lowest collision point is below z = 0.
 
@@ -183,8 +166,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     src_times = np.arange(len(joints)) / src_fps
     clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
     root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
-    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps,
-                                              candidates=_dip_candidates(rm, sol, targets, times, src_fps))
+    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps)
     qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)

@@ -226,10 +226,16 @@ class _Problem:
                       body_end, close, x, cost, frame_cost)
 
     def frame_violation(self, st: "_State") -> np.ndarray:
-        """(T,) how deep (m) the enclosing capsules overlap each other or a body's support
-        points reach below the floor, per frame (the margins are only the terms' soft zone:
-        the check sees an overlap of the real geometry, which the capsules enclose)."""
+        """(T,) how deep (m) the enclosing capsules overlap each other, a body's support points
+        reach below the floor or a swing foot comes below half its clearance, per frame (the
+        margins are only the terms' soft zone: the check sees an overlap of the real
+        geometry, which the capsules enclose)."""
         worst = np.zeros(self.t_len)
+        # swing feet more than halfway down to the floor from their clearance
+        swing = self.foot_clearance > 0.005
+        if swing.any():
+            height = st.pts[:, self.k_len:, 2] - self.foot_radius
+            worst = np.maximum(worst, np.max(np.where(swing, 0.5 * self.foot_clearance - height, 0.0), axis=1))
         if st.body_low is not None and st.body_low.size:
             worst = np.maximum(worst, -(st.body_low.min(axis=1) + BODY_CLEARANCE))
         if st.self_close is not None and st.self_close.frame.size:

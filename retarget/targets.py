@@ -55,6 +55,8 @@ SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
 RAMP_SECONDS = 0.1
 """Foot locks ramp in and out over this time (s); horizontally they hold this much longer."""
+RAMP_SPEED = 1.0
+"""The ramp of a lock fades with the human foot's horizontal speed, to nothing at this (m/s)."""
 STANCE_CLEARANCE = 0.001
 """Locked feet stand this high (m) above the floor (the solver's floor margin)."""
 PITCH_SMOOTH_SECONDS = 0.05
@@ -287,6 +289,16 @@ def detect_contacts(joints: np.ndarray, fps: float, side: str, stance: np.ndarra
     return contact, heel & contact, toe & contact
 
 
+def _slowness(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
+    """(T,) 1 for a human foot at rest horizontally, falling to 0 at ``RAMP_SPEED``."""
+    feet = joints[:, [JOINT_INDEX[f"{side}_ankle"], JOINT_INDEX[f"{side}_foot"]]][..., [0, 2]]
+    if len(feet) < 2:
+        return np.ones(len(feet))
+    step = np.linalg.norm(np.diff(feet, axis=0), axis=2).max(axis=1) * fps  # (T-1,)
+    speed = np.minimum(np.r_[step[:1], step], np.r_[step, step[-1:]])  # arriving at / leaving rest counts
+    return np.clip(1.0 - speed / RAMP_SPEED, 0.0, 1.0)
+
+
 def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     """Heel and toe pivots (3,) of a foot in its node frame: the centres of its rearmost and
     foremost sole points (the collision points within 3 mm of the sole, rest pose, world +X
@@ -361,7 +373,9 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
     for side in ("left", "right"):
         flat = detect_stance(joints, fps, side)
         contact, heel, toe = detect_contacts(joints, fps, side, flat)
-        alpha = _ramp(contact, fps)
+        # The lock ramps in before and out after contact, but only as far as the human foot
+        # has stopped: a fast step lands (and takes off) without skimming the floor.
+        alpha = _ramp(contact, fps) * np.where(contact, 1.0, _slowness(joints, fps, side))
         stance[side], lock[side] = contact, alpha
         # Outside contact the solver keeps the foot SWING_CLEARANCE high; the clearance ramps
         # in with the lock ramping out, so a foot leaving the floor is not yanked up.
