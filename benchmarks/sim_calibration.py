@@ -53,8 +53,11 @@ MEASURES = [
     ("flight frames", 1, "", "flight_frames", None),
     ("residual force p95", 100, "% mg", "residual_force_p95", None),
     ("residual force max", 100, "% mg", "residual_force_max", "max_residual_force_ratio"),
+    ("residual force sustained", 100, "% mg", "residual_force_sustained", "max_sustained_residual_force_ratio"),
     ("residual moment max", 1000, "mm", "residual_moment_max", "max_residual_moment_m"),
+    ("residual moment sustained", 1000, "mm", "residual_moment_sustained", "max_sustained_residual_moment_m"),
     ("torque / limit max", 1, "", "max_torque_ratio", "max_torque_ratio"),
+    ("torque / limit sustained", 1, "", "max_sustained_torque_ratio", "max_sustained_torque_ratio"),
 ]
 
 
@@ -123,6 +126,9 @@ def _run(job: tuple[str, str, str, str]) -> dict:
             "floating_frames": s["floating_frames"], "flight_frames": s["flight_frames"],
             "residual_force_p95": rf.get("p95_ratio", 0.0), "residual_force_max": rf.get("max_ratio", 0.0),
             "residual_moment_max": rm.get("max_m", 0.0), "max_torque_ratio": s["max_torque_ratio"] or 0.0,
+            "residual_force_sustained": rf.get("sustained_max_ratio", 0.0),
+            "residual_moment_sustained": rm.get("sustained_max_m", 0.0),
+            "max_sustained_torque_ratio": s.get("max_sustained_torque_ratio") or 0.0,
         },
     }
 

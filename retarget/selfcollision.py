@@ -1,4 +1,4 @@
-"""Self-clearance of the arms: capsule proxies of the robot's own collision geometry.
+"""Self-clearance of the arms and legs: capsule proxies of the robot's own collision geometry.
 
 A humanoid's proportions differ from the scaled human's: G1's hips are 23 cm apart against
 the scaled human's 9 cm, so arms that hang beside the human's thighs pass through the
@@ -15,7 +15,9 @@ robot's collision geoms (:class:`SelfClearance`):
   (trunk, legs, the other arm) except the arm's own shoulder chain and the feet (the foot
   and ankle bodies: out of reach but for touching the toes); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
-  rest pose, comes at most ``REST_SLACK`` closer than there.
+  rest pose, comes at most ``REST_SLACK`` closer than there;
+* the left leg's geoms (above the foot) are paired with the right leg's (crossing steps,
+  hips turned out), with the same margins.
 
 The solver adds, per frame and active pair, the residual ``sqrt(W_SELF) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`).
@@ -253,7 +255,17 @@ def build_self_clearance(robot) -> SelfClearance | None:
         for b in range(1, m.nbody):  # the wrist body's descendants (hands)
             if wrist in ancestors(b):
                 arm[b] = side_i
-    if not arm:
+    # Legs: the bodies from below the trunk down to each foot (the feet themselves are left
+    # to the foot locks: a stance foot is placed where the human's was).
+    leg: dict[int, int] = {}
+    for side_i, side in enumerate(("left", "right")):
+        ankle = int(tree.node_body[robot.feet[side].node])
+        for b in ancestors(ankle)[1:]:
+            leg[b] = side_i
+    shared = set(ancestors(int(tree.node_body[robot.feet["left"].node]))) & set(
+        ancestors(int(tree.node_body[robot.feet["right"].node])))
+    leg = {b: s_ for b, s_ in leg.items() if b not in shared}
+    if not arm and not leg:
         return None
     caps = robot.capsules
     # The feet (ankle bodies and below) are out of the arms' reach but for touching the toes.
@@ -274,6 +286,13 @@ def build_self_clearance(robot) -> SelfClearance | None:
                 continue  # same arm, or an arm-arm pair already listed
             first.append(i)
             second.append(j)
+    for i, bi in enumerate(body_of):  # left leg against right leg (crossing steps, turned-out hips)
+        if leg.get(bi) != 0:
+            continue
+        for j, bj in enumerate(body_of):
+            if leg.get(bj) == 1:
+                first.append(i)
+                second.append(j)
     if not first:
         return None
     sc = SelfClearance(np.array(node), np.array(p0), np.array(p1), np.array(radius), np.array(first),
