@@ -91,15 +91,22 @@ def check_fps(fps: float) -> float:
 
 
 def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
-    """Raise the root where a foot's lowest collision point is below z = 0.
+    """Raise the root where the lowest collision point (feet, knees, hands) is below z = 0.
 
     The needed lift is max-filtered then smoothed over ~0.1 s (a smoothed max-filter never
     falls below the need), so the correction is smooth. Returns (qpos, its MuJoCo replay,
     largest lift in m).
     """
     rep = replay(robot.model, qpos)
+    m = robot.model
     geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
-    need = np.maximum(-geom_lowest_z(robot.model, rep, geoms).min(axis=1), 0.0)
+    # Every other collision geom whose bounding sphere reaches below the floor in some frame
+    # (a kneeling knee, a hand on the ground): the solver keeps them BODY_CLEARANCE above it
+    # with a stiff but finite weight, and the spline resampling may dip between frames.
+    others = [g for g in range(m.ngeom) if g not in geoms and (m.geom_contype[g] or m.geom_conaffinity[g])
+              and m.body_rootid[m.geom_bodyid[g]] == m.body_rootid[robot.tree.node_body[robot.feet["left"].node]]
+              and np.any(rep.geom_xpos[:, g, 2] - m.geom_rbound[g] < 0.0)]
+    need = np.maximum(-geom_lowest_z(m, rep, list(geoms) + others).min(axis=1), 0.0)
     if not np.any(need > 0):
         return qpos, rep, 0.0
     r = max(1, int(round(0.05 * fps)))

@@ -92,7 +92,7 @@ class SolverConfig:
     slowly); only those frames are solved again."""
     body_floor: bool = True
     """Keep every body's collision geometry above the floor, not only the feet (kneeling)."""
-    body_floor_weight: float = W_BODY_FLOOR
+    body_floor_weight: float = 10.0 * W_BODY_FLOOR
     """Weight of that term at the last (full-rate) level; coarser levels use W_BODY_FLOOR (a
     stiff floor from the start would lift a straight-legged initial guess off the ground)."""
     self_clearance: bool = True
