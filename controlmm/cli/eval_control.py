@@ -128,7 +128,6 @@ def run(args: argparse.Namespace) -> int:
         cases = build_cases(data, mode, densities, args.samples, seed=args.seed)
         result = evaluate_control(model, cases, preset=config, seed=args.seed, batch_size=args.batch_size,
                                   progress=not args.quiet, joints=mode)
-        result.preset = args.preset
         print(result.table())
         reports.append(result.to_json() | {"data": str(data), "model": str(model.directory)})
     if args.json:

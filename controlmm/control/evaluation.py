@@ -223,8 +223,9 @@ def evaluate_control(model, cases: Sequence[ControlCase], preset="accurate", see
             generated.append(motion)
         bar.update(len(chunk))
     bar.close()
-    name = preset if isinstance(preset, str) else "custom"
-    result = ControlEvaluation(preset=name, joints=joints, cases=list(cases), rows=rows, generated=generated,
+    from controlmm.editing import editing_preset
+
+    result = ControlEvaluation(preset=editing_preset(preset).name, joints=joints, cases=list(cases), rows=rows, generated=generated,
                                seconds=time.perf_counter() - started)
     if text_metrics is not None:
         truth = [Motion.from_features(c.features, text=c.text) for c in cases]

@@ -21,8 +21,9 @@ from controlmm.errors import ControlMMError
 
 @dataclass(frozen=True)
 class EditingConfig:
-    """How a controlled generation uses the control model and the two editors."""
+    """How a controlled generation uses the control model and the two editors (``name``: for records)."""
 
+    name: str = "custom"
     control_model: bool = True
     logits_steps: int = 100  # per decoding iteration
     codebook_steps: int = 600  # once, after the residual layers
@@ -54,9 +55,9 @@ class EditingConfig:
 
 
 PRESETS: dict[str, EditingConfig] = {
-    "fast": EditingConfig(control_model=True, logits_steps=0, codebook_steps=100),
-    "medium": EditingConfig(control_model=True, logits_steps=0, codebook_steps=600),
-    "accurate": EditingConfig(control_model=True, logits_steps=100, codebook_steps=600),
+    "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
+    "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
+    "accurate": EditingConfig(name="accurate", control_model=True, logits_steps=100, codebook_steps=600),
 }
 """The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""
 

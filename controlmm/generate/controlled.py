@@ -69,6 +69,7 @@ class EditingRecord:
 
     preset: str
     control_model: bool
+    budget: dict[str, float] = field(default_factory=dict)  # step budgets and tolerances of the preset
     logits_steps: list[int] = field(default_factory=list)  # per decoding iteration
     codebook_steps: int = 0
     converged: bool = False  # every constraint within tolerance and every other term ~0 at the end
@@ -81,7 +82,8 @@ class EditingRecord:
         return int(sum(self.logits_steps)) + int(self.codebook_steps)
 
     def to_json(self) -> dict[str, Any]:
-        return {"preset": self.preset, "control_model": self.control_model, "logits_steps": list(self.logits_steps),
+        return {"preset": self.preset, "control_model": self.control_model, "budget": dict(self.budget),
+                "logits_steps": list(self.logits_steps),
                 "codebook_steps": int(self.codebook_steps), "converged": bool(self.converged),
                 "max_error_m": float(self.max_error), "losses": dict(self.losses), "seconds": round(self.seconds, 3)}
 
@@ -145,7 +147,7 @@ def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
     if not texts:
         raise ControlMMError("no text given")
     config = editing_preset(preset)
-    preset_name = preset if isinstance(preset, str) else "custom"
+    preset_name = config.name
     count = len(texts)
     specs = _specs(control, count)
     dense_t, dense_m, dense_frames = _dense_targets(targets, mask, count)
@@ -272,10 +274,12 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         values = {k: v.cpu() for k, v in objective.term_values(joints[:, :t_max]).items()}
         _, done, max_err = objective.evaluate(joints[:, :t_max])
     seconds = (time.perf_counter() - started) / b
+    budget = {"logits_steps": config.logits_steps, "codebook_steps": config.codebook_steps,
+              "tolerance_m": config.tolerance, "logits_tolerance_m": config.logits_tolerance}
     records = []
     for i in range(b):
         records.append(EditingRecord(
-            preset=preset_name, control_model=use_control,
+            preset=preset_name, control_model=use_control, budget=budget,
             logits_steps=[int(s[i]) for s in logit_steps], codebook_steps=int(codebook_steps[i]),
             converged=bool(done[i]) if editing else True, max_error=float(max_err[i]),
             losses={k: float(v[i]) for k, v in values.items()}, seconds=seconds))
