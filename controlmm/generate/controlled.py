@@ -242,7 +242,7 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         ctrl_in = control_input(targets, mask, current, control.joint_ids)
         return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
 
-    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance))
+    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean")
 
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
         known = ~state.is_mask & ~state.padding_mask
