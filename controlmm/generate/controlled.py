@@ -69,7 +69,7 @@ class EditingRecord:
 
     preset: str
     control_model: bool
-    budget: dict[str, float] = field(default_factory=dict)  # step budgets and tolerances of the preset
+    budget: dict[str, Any] = field(default_factory=dict)  # step budgets, optimiser and tolerances of the preset
     logits_steps: list[int] = field(default_factory=list)  # per decoding iteration
     codebook_steps: int = 0
     converged: bool = False  # every constraint within tolerance and every other term ~0 at the end
@@ -278,7 +278,8 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
     seconds = (time.perf_counter() - started) / b
     cpu_seconds = (time.process_time() - cpu_started) / b
     budget = {"logits_steps": config.logits_steps, "codebook_steps": config.codebook_steps,
-              "tolerance_m": config.tolerance, "logits_tolerance_m": config.logits_tolerance}
+              "codebook_optimizer": config.codebook_optimizer, "tolerance_m": config.tolerance,
+              "logits_tolerance_m": config.logits_tolerance}
     records = []
     for i in range(b):
         records.append(EditingRecord(
