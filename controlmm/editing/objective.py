@@ -37,6 +37,7 @@ class Objective:
     loss_tolerance: float = 1e-6
     control_weight: float = 1.0
     stop_on: str = "max"  # "max": every constraint within tolerance; "mean": their mean error (logits editing)
+    hinge_weight: float = 0.0  # extra weight on the constraints still over half the tolerance (see control_hinge)
 
     def __post_init__(self) -> None:
         if (self.targets is None) != (self.mask is None):
@@ -78,13 +79,29 @@ class Objective:
         total = torch.where(mask, err, torch.zeros_like(err)).flatten(1).sum(-1)
         return total / mask.flatten(1).sum(-1).clamp(min=1)
 
+    def control_hinge(self, joints: torch.Tensor) -> torch.Tensor:
+        """(B,) mean over the controlled entries of max(0, error - tolerance / 2)^2.
+
+        Zero once every constraint is within half the tolerance; it pulls on the few constraints that
+        lag behind, which the mean squared error barely feels once most constraints are met.
+        """
+        t = joints.shape[1]
+        mask = self.mask[:, :t]
+        err = ((joints - self.targets[:, :t].to(joints)).square().sum(-1) + 1e-12).sqrt()
+        excess = torch.relu(err - 0.5 * self.tolerance).square()
+        total = torch.where(mask, excess, torch.zeros_like(excess)).flatten(1).sum(-1)
+        return total / mask.flatten(1).sum(-1).clamp(min=1)
+
     def term_values(self, joints: torch.Tensor) -> dict[str, torch.Tensor]:
         """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
         from controlmm.control.loss import control_loss  # (controlmm.control imports this package)
 
         values: dict[str, torch.Tensor] = {}
         if self.has_control:
-            values["control"] = self.control_weight * control_loss(joints, self.targets, self.mask)
+            value = control_loss(joints, self.targets, self.mask)
+            if self.hinge_weight > 0:
+                value = value + self.hinge_weight * self.control_hinge(joints)
+            values["control"] = self.control_weight * value
         for term in self.terms:
             name = term.name if term.name not in values else f"{term.name}#{len(values)}"
             values[name] = term(joints)
