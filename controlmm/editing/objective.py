@@ -3,13 +3,15 @@
 An :class:`Objective` is the spatial-control targets (optional) plus any other :class:`LossTerm`s
 (obstacle SDF, floor, simulation feedback...). Per sample:
 
-    loss(joints)  = control_weight * L_ctrl(joints) + sum_k w_k term_k(joints)          (B,)
+    loss(joints)  = control_weight * (L_ctrl + hinge_weight * H)(joints) + sum_k w_k term_k(joints)   (B,)
     done(joints)  = every constraint within ``tolerance`` (m)  and  every other term <= ``loss_tolerance``
 
 ``L_ctrl`` is ControlMM's inference loss (squared error over the controlled (t, j, xyz) entries divided
-by their number, per sample; reference §5.2). Stopping looks at the worst constraint, not the mean, so
-an early-stopped motion meets *every* constraint to the tolerance (``stop_on="max"``); logits editing,
-which only steers the sampling of the tokens, stops on the mean error (``stop_on="mean"``).
+by their number, per sample; reference §5.2); H (:meth:`Objective.control_hinge`) pulls on the
+constraints still over half the tolerance (codebook editing uses it, weight 10). Stopping looks at the
+worst constraint, not the mean, so an early-stopped motion meets *every* constraint to the tolerance
+(``stop_on="max"``); logits editing, which only steers the sampling of the tokens, stops on the mean
+error (``stop_on="mean"``).
 """
 
 from __future__ import annotations
