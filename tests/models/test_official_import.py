@@ -239,3 +239,21 @@ def test_cli_import_then_generate(official, tmp_path, tiny_clip_dir, capsys):
     from controlmm.motion import load_motion
 
     assert load_motion(motion).joints.shape == (40, 22, 3)
+
+
+def test_clip_float16_as_the_official_code(tiny_clip_dir):
+    """Official CLIP: float16 weights, LayerNorms computed in float32, HTML-unescaped text, no normalisation."""
+    from controlmm.models.config import TextEncoderConfig
+    from controlmm.text import load_text_encoder
+
+    half = load_text_encoder(TextEncoderConfig(name="clip", precision="float16"), weights=str(tiny_clip_dir))
+    full = load_text_encoder(TextEncoderConfig(name="clip", precision="float32"), weights=str(tiny_clip_dir))
+    norms = [m for m in half.text_model.modules() if isinstance(m, torch.nn.LayerNorm)]
+    linears = [m for m in half.text_model.modules() if isinstance(m, torch.nn.Linear)]
+    assert norms and all(m.weight.dtype == torch.float32 for m in norms)
+    assert linears and all(m.weight.dtype == torch.float16 for m in linears)
+    texts = ["a person walks &amp; waves", "someone   jumps\ttwice"]
+    a, b = half.encode(texts), full.encode(texts)
+    assert a.dtype == torch.float32 and a.shape == b.shape == (2, 24)
+    assert 0 < (a - b).abs().max() < 2e-2 * b.abs().max()  # float16 rounding only
+    torch.testing.assert_close(full.encode(["a person walks & waves", "someone jumps twice"]), b, atol=0, rtol=0)
