@@ -299,7 +299,7 @@ def ref_residual_logits(sd, ids, q: int, cond, pad, d: Dims):
     proj = torch.cat([sd["embed_proj_shared_weight"], sd["output_proj_weight_"]])
     history = sum(emb[j][ids[..., j]] for j in range(q))
     x = _lin(history, sd, "input_process.poseEmbedding").permute(1, 0, 2) + sd["position_enc.pe"][: ids.shape[1]]
-    onehot = F.one_hot(torch.full((ids.shape[0],), q), d.num_q).float()
+    onehot = F.one_hot(torch.full((ids.shape[0],), q), d.num_q).to(cond.dtype)
     h = torch.cat([_lin(cond, sd, "cond_emb")[None], _lin(onehot, sd, "quant_emb")[None], x])
     mask = torch.cat([torch.zeros_like(pad[:, :2]), pad], dim=1)
     for i in range(d.layers):

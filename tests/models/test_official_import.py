@@ -257,3 +257,25 @@ def test_clip_float16_as_the_official_code(tiny_clip_dir):
     assert a.dtype == torch.float32 and a.shape == b.shape == (2, 24)
     assert 0 < (a - b).abs().max() < 2e-2 * b.abs().max()  # float16 rounding only
     torch.testing.assert_close(full.encode(["a person walks & waves", "someone jumps twice"]), b, atol=0, rtol=0)
+
+
+def test_float64_forward_matches_to_rounding(official):
+    """In float64 the imported modules and the reference agree to 1e-10: the float32 gaps are rounding only."""
+    tree, out = official
+    model = load_model(out)
+    ids, pad, cond, gen = _inputs(seed=3)
+    cond, valid = cond.double(), ~pad
+    sd = {name: {k: v.double() for k, v in tree[name].items()} for name in ("vq", "res", "ctrl")}
+    with torch.no_grad():
+        all_ids = torch.randint(0, D.nb_code, (3, 6, D.num_q), generator=gen)
+        torch.testing.assert_close(model.tokenizer.double().decode(all_ids), ref_vq_decode(sd["vq"], all_ids, D),
+                                   atol=1e-10, rtol=0)
+        res_ids = torch.where(pad[..., None], D.nb_code, all_ids)
+        res = model.residual.double()
+        ours = res(res.history(res_ids, 2), torch.full((3,), 2), cond, pad)
+        torch.testing.assert_close(ours[valid], ref_residual_logits(sd["res"], res_ids, 2, cond, pad, D)[valid],
+                                   atol=1e-10, rtol=0)
+        ctrl_in = torch.randn(3, 36, 24, generator=gen, dtype=torch.float64)
+        ours = model.parts["control"].double()(model.transformer.double(), ids, cond, pad, ctrl_in)
+        ref = ref_control_logits(sd["ctrl"], ids, cond, pad, ctrl_in, D)
+        torch.testing.assert_close(ours[valid], ref[valid], atol=1e-10, rtol=0)
