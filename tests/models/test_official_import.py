@@ -126,7 +126,8 @@ def test_import_reproduces_the_official_forward(official):
         ours = model.transformer(ids, cond, pad)
         ref = ref_mask_logits(tree["base"], ids, cond, pad, D)
         torch.testing.assert_close(ours[valid], ref[valid], atol=TOL, rtol=0)
-        soft = torch.softmax(torch.randn(3, 6, D.nb_code, generator=gen), -1) @ tree["base"]["token_emb.weight"][:D.nb_code]
+        probs = torch.softmax(torch.randn(3, 6, D.nb_code, generator=gen), -1)
+        soft = probs @ tree["base"]["token_emb.weight"][:D.nb_code]
         torch.testing.assert_close(model.transformer(soft, cond, pad)[valid],
                                    ref_mask_logits(tree["base"], soft, cond, pad, D)[valid], atol=TOL, rtol=0)
         # Residual transformer, every layer q, with the shared/tied projections.

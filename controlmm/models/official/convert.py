@@ -208,7 +208,8 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
         split = map_official_state("control", raw)
         for part in ("tokenizer", "transformer"):
             diff = _max_difference(states[part], split[part])
-            what = "identical" if diff == 0.0 else ("different names/shapes" if diff is None else f"max |diff| {diff:.3g}")
+            what = ("different names/shapes" if diff is None
+                    else "identical" if diff == 0.0 else f"max |diff| {diff:.3g}")
             notes.append(f"{part}: taken from the control checkpoint (as the official control scripts do); "
                          f"the MoMask folder's copy is {what}")
         states.update(split)
