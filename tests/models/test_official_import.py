@@ -168,6 +168,7 @@ def test_import_writes_a_paper_model_directory(official):
     assert (out / "evaluator" / "text_mot_match" / "model" / "finest.tar").is_file()
     assert (out / "evaluator" / "glove" / "our_vab_idx.pkl").is_file()
     assert manifest["official"]["evaluator"]["path"] == "evaluator"
+    assert any(n.startswith("evaluator Comp_v6_KLD005/meta vs the VQ meta") for n in manifest["official"]["notes"])
 
 
 def test_pelvis_model_and_control_checkpoint_copies_win(tmp_path):

@@ -30,6 +30,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from controlmm.atomic import atomic_dir
@@ -285,6 +286,19 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
                     "controlmm.eval.evaluator.official.load_official_evaluator(MODEL_DIR / 'evaluator')"}
 
 
+def _compare_statistics(normalizer, meta: Path) -> str:
+    """A note comparing the VQ statistics with the evaluator's (MaskControl denormalises its decoded motion
+    with the evaluator loader's mean/std while the data were normalised with the VQ's; the released files
+    are expected to agree)."""
+    from controlmm.motion.normalization import Normalizer
+
+    other = Normalizer.load(meta / "mean.npy", meta / "std.npy")
+    mean_gap = float(np.abs(other.mean - normalizer.mean).max())
+    std_gap = float(np.abs(other.std / normalizer.std - 1.0).max())
+    return (f"evaluator Comp_v6_KLD005/meta vs the VQ meta: max |mean diff| {mean_gap:.3g}, max |std ratio - 1| "
+            f"{std_gap:.3g} (the model directory uses the VQ meta)")
+
+
 def import_official(momask: str | Path, out: str | Path, control: str | Path | None = None,
                     evaluator: str | Path | None = None, clip_weights: str | None = None,
                     clip_precision: str = "float16", force: bool = False,
@@ -324,6 +338,7 @@ def import_official(momask: str | Path, out: str | Path, control: str | Path | N
             log(f"{name}: {entry['parameters']:,} parameters from {record['sources'][name]['folder']}")
         if evaluator is not None:
             record["evaluator"] = _copy_evaluator(evaluator, tmp / "evaluator")
+            record["notes"].append(_compare_statistics(normalizer, tmp / "evaluator" / "Comp_v6_KLD005" / "meta"))
             log(f"evaluator: copied to {out / 'evaluator'}")
         manifest["official"] = record
         write_manifest(tmp, manifest)
