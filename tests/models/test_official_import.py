@@ -181,6 +181,7 @@ def test_pelvis_model_and_control_checkpoint_copies_win(tmp_path):
     torch.testing.assert_close(model.tokenizer.codebooks[1], ctrl_vq["quantizer.layers.1.codebook"], atol=0, rtol=0)
     assert any("tokenizer: taken from the control checkpoint" in n and "max |diff|" in n
                for n in model.manifest["official"]["notes"])
+    assert model.manifest["official"]["sources"]["tokenizer"]["weights_from"].endswith("latest.tar")
     ids, pad, cond, gen = _inputs(n=4, b=2, seed=1)
     targets, current = torch.randn(2, 16, 22, 3, generator=gen), torch.randn(2, 16, 22, 3, generator=gen)
     mask = torch.rand(2, 16, 22, generator=gen) < 0.5
@@ -218,6 +219,13 @@ def test_mismatches_are_one_line_errors(tmp_path):
     _expect_error("cannot read official checkpoint", momask=tmp_path, out=tmp_path / "m")
     torch.save(original, res_file)
     _expect_error("--control", momask=tmp_path, out=tmp_path / "m", control=tmp_path / "nowhere")
+    ctrl_tree = write_official_checkpoints(tmp_path / "c", D, control_channels=36)
+    ctrl_file = ctrl_tree["control_dir"] / "model" / "latest.tar"
+    payload = torch.load(ctrl_file, weights_only=True)
+    payload["ct2m_transformer"]["vq_model.decoder.model.0.bias"] = torch.zeros(3)
+    torch.save(payload, ctrl_file)
+    _expect_error([f"{ctrl_file} (tokenizer)", "wrong shape: decoder.model.0.bias"], momask=ctrl_tree["t2m"],
+                  out=tmp_path / "m", control=ctrl_tree["control_dir"])
     vq_dir = tree["t2m"] / "rvq_nq6_dc512_nc512_noshare_qdp0.2"
     _expect_error("expected one tokenizer folder", momask=vq_dir, out=tmp_path / "m")
     (vq_dir / "meta" / "std.npy").unlink()

@@ -197,10 +197,12 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
     notes: list[str] = []
     folders = find_momask(momask)
     states: dict[str, State] = {}
+    origin: dict[str, Path] = {}  # part -> the file its tensors come from
     sources: dict[str, Any] = {}
     for kind, folder in folders.items():
         raw, extras = load_official_checkpoint(folder.checkpoint, kind)
         states.update(map_official_state(kind, raw))
+        origin[kind] = folder.checkpoint
         sources[kind] = {"folder": str(folder.folder.resolve()), "checkpoint": folder.checkpoint.name,
                          "opt_txt": folder.has_opt, **extras}
     if control is not None:
@@ -213,7 +215,9 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
                     else "identical" if diff == 0.0 else f"max |diff| {diff:.3g}")
             notes.append(f"{part}: taken from the control checkpoint (as the official control scripts do); "
                          f"the MoMask folder's copy is {what}")
+            sources[part]["weights_from"] = str(ctrl_folder.checkpoint.resolve())
         states.update(split)
+        origin.update({part: ctrl_folder.checkpoint for part in split})
         sources["control"] = {"folder": str(ctrl_folder.folder.resolve()), "checkpoint": ctrl_folder.checkpoint.name,
                               "opt_txt": ctrl_folder.has_opt, "control": ctrl_folder.opt.get("control"), **extras}
         folders["control"] = ctrl_folder
@@ -236,7 +240,7 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
     modules: dict[str, torch.nn.Module] = {}
     for part, state in states.items():
         module = PARTS[part].build(config)
-        where = f"{folders[part if part in folders else 'control'].checkpoint} ({part})"
+        where = f"{origin[part]} ({part})"
         load_state_strict(module, {k: v.float() if v.is_floating_point() else v for k, v in state.items()}, where)
         modules[part] = module.eval()
     record = {"sources": sources, "differs_from_paper_preset": paper_differences(config), "notes": notes}
