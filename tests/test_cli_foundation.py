@@ -19,7 +19,7 @@ def test_version_and_help():
     out = run("--version")
     assert out.returncode == 0 and out.stdout.startswith("controlmm ")
     for name in SUBCOMMANDS:
-        res = run(name, "--help")
+        res = run(name.replace("_", "-"), "--help")  # module import_official -> command import-official
         assert res.returncode == 0, res.stderr
         assert "usage: controlmm" in res.stdout
 
