@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "residual", "evaluator")
+TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "residual", "control", "evaluator")
 """Modules ``controlmm.cli.train_<name>`` that register a training stage, in ``--help`` order."""
 
 HELP = """Train a model directory stage by stage (the same commands for the demo and the paper preset):
@@ -19,10 +19,12 @@ HELP = """Train a model directory stage by stage (the same commands for the demo
   controlmm train tokenizer   --data DIR --preset demo --out MODEL_DIR
   controlmm train transformer --data DIR --out MODEL_DIR
   controlmm train residual    --data DIR --out MODEL_DIR
+  controlmm train control     --data DIR --out MODEL_DIR [--joints all|pelvis]
   controlmm train evaluator   --data DIR --out EVAL_DIR   (text-motion evaluator for eval quality)
 
 DIR is a HumanML3D-format directory (the real dataset or the project's corpus). The tokenizer stage
-creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages add their part.
+creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages add their part
+(transformer.pt, residual.pt, control.pt: the motion control model for spatial control).
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
@@ -31,7 +33,7 @@ EPILOG = """presets: demo (CPU-sized, MiniLM text; about 45 min for the three st
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train the tokenizer, masked transformer, residual transformer or evaluator",
+    p = sub.add_parser("train", help="train the tokenizer, transformers, motion control model or evaluator",
                        description=HELP, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     stages = p.add_subparsers(dest="stage", metavar="STAGE", parser_class=type(p))
     for name in TRAIN_SUBCOMMANDS:
@@ -75,7 +77,7 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def run_stage(name: str, args: argparse.Namespace) -> int:
+def run_stage(name: str, args: argparse.Namespace, stage_options: dict | None = None) -> int:
     from pathlib import Path
 
     from controlmm.training import TrainOptions, train
@@ -90,7 +92,7 @@ def run_stage(name: str, args: argparse.Namespace) -> int:
         force=args.force, seed=args.seed, device=args.device, workers=args.workers,
         text_encoder=getattr(args, "text_encoder", None), clip_weights=args.clip_weights,
         progress=not args.no_progress, command="controlmm " + " ".join(sys.argv[1:]),
-        precision=args.precision, threads=args.threads,
+        precision=args.precision, threads=args.threads, stage_options=dict(stage_options or {}),
     )
     train(name, options)
     return 0

@@ -1,5 +1,20 @@
-"""Inference-time editing: loss terms on generated joints, logits editing, codebook editing."""
+"""Inference-time editing: loss terms on generated joints, logits editing, codebook editing.
 
+- :class:`LossTerm` / :func:`total_loss`: the one loss interface (control, obstacles, feedback...);
+- :class:`Objective`: control targets + loss terms + the early-stopping rule;
+- :func:`logits_editing`, :func:`codebook_editing`: the two editors (reference §5.2-5.4);
+- :class:`EditingConfig`, :data:`PRESETS` (``fast``, ``medium``, ``accurate``), :func:`editing_preset`.
+
+Controlled generation itself (decoding with the control model and both editors) is
+:func:`controlmm.generate.generate_controlled`.
+"""
+
+from controlmm.editing.codebook_editing import codebook_editing
+from controlmm.editing.logits_editing import logits_editing
+from controlmm.editing.objective import Objective
+from controlmm.editing.optimize import EditOutcome, optimize
+from controlmm.editing.presets import PRESETS, EditingConfig, editing_preset
 from controlmm.editing.terms import LossTerm, total_loss
 
-__all__ = ["LossTerm", "total_loss"]
+__all__ = ["PRESETS", "EditOutcome", "EditingConfig", "LossTerm", "Objective", "codebook_editing", "editing_preset",
+           "logits_editing", "optimize", "total_loss"]

@@ -97,6 +97,33 @@ class ResidualConfig:
         return self.nb_code
 
 
+CONTROL_JOINT_SETS: dict[str, tuple[int, ...]] = {"pelvis": (0,), "all": (0, 10, 11, 15, 20, 21)}
+"""Joints the motion control model sees (reference §4.2): pelvis only, or pelvis, feet, head, wrists."""
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    """Motion control model (ControlMM's ControlNet branch, MaskControl ``ControlTransformer``).
+
+    ``joints``: ``"all"`` (joints 0, 10, 11, 15, 20, 21: 36 input channels, the official all-joint
+    model) or ``"pelvis"`` (6 channels, the official pelvis model). The control encoder is the
+    tokenizer's ``Encoder`` class with the tokenizer's width and downsampling; the trainable
+    transformer copy has the masked transformer's size.
+    """
+
+    joints: str = "all"
+    encoder_dropout: float = 0.2
+
+    @property
+    def joint_ids(self) -> tuple[int, ...]:
+        return CONTROL_JOINT_SETS[self.joints]
+
+    @property
+    def channels(self) -> int:
+        """Input channels of ``encoder_control``: relative and absolute xyz of each joint (6 or 36)."""
+        return 6 * len(self.joint_ids)
+
+
 @dataclass(frozen=True)
 class TextEncoderConfig:
     """Which sentence encoder conditions the transformers.
@@ -152,6 +179,7 @@ class ModelConfig:
     transformer: TransformerConfig
     residual: ResidualConfig
     text_encoder: TextEncoderConfig = field(default_factory=TextEncoderConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
     storage_dtype: str = "float32"  # dtype of the weights written to the model directory
     feat_bias: float = 5.0  # std of dims 0-3 and 259-262 divided by feat_bias ** feat_bias_times
     feat_bias_times: int = 2  # the official code applies feat_bias twice (Std/25)
@@ -179,6 +207,7 @@ class ModelConfig:
                 transformer=_from_dict(TransformerConfig, data["transformer"]),
                 residual=_from_dict(ResidualConfig, data["residual"]),
                 text_encoder=_from_dict(TextEncoderConfig, data.get("text_encoder", {})),
+                control=_from_dict(ControlConfig, data.get("control", {})),
                 storage_dtype=str(data.get("storage_dtype", "float32")),
                 feat_bias=float(data.get("feat_bias", 5.0)),
                 feat_bias_times=int(data.get("feat_bias_times", 2)),
@@ -209,6 +238,8 @@ def check_consistent(cfg: ModelConfig) -> None:
     if cfg.text_encoder.name not in TEXT_ENCODER_DIMS:
         raise ControlMMError(f"unknown text encoder '{cfg.text_encoder.name}'; "
                              f"allowed: {', '.join(TEXT_ENCODER_DIMS)}")
+    if cfg.control.joints not in CONTROL_JOINT_SETS:
+        raise ControlMMError(f"unknown control joint set '{cfg.control.joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}")
     if cfg.text_encoder.precision not in ("float32", "float16"):
         raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
     checks = [
@@ -237,6 +268,9 @@ def _paper() -> ModelConfig:
                                      milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
         "residual": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
                                   milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
+        # MaskControl train_ctrlnet.py: AdamW 2e-4, betas (0.9, 0.99), wd 1e-5, warm-up 2000, x0.1 at 50k.
+        "control": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
+                                 milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
     }
     return ModelConfig(
         preset="paper",
@@ -263,6 +297,9 @@ def _demo() -> ModelConfig:
                                      milestones=(2000,), gamma=0.2, checkpoint_every=250),
         "residual": StageSchedule(iters=1500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
                                   milestones=(1200,), gamma=0.2, checkpoint_every=250),
+        # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
+        "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
+                                 milestones=(1200,), gamma=0.2, checkpoint_every=100),
     }
     return ModelConfig(
         preset="demo",
@@ -281,7 +318,7 @@ def _tiny() -> ModelConfig:
                   dropout=0.0, text_dim=384, max_len=64)
     schedules = {
         name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32)
-        for name in ("tokenizer", "transformer", "residual")
+        for name in ("tokenizer", "transformer", "residual", "control")
     }
     return ModelConfig(
         preset="tiny",

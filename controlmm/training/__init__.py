@@ -4,6 +4,7 @@
 (``control``, ``evaluator``) add themselves here.
 """
 
+from controlmm.training.control import ControlStage
 from controlmm.training.loop import TrainOptions, TrainResult, lr_factor, train
 from controlmm.training.residual import ResidualStage
 from controlmm.training.stage import Stage, StageContext
@@ -14,6 +15,7 @@ STAGES: dict[str, type[Stage]] = {
     "tokenizer": TokenizerStage,
     "transformer": TransformerStage,
     "residual": ResidualStage,
+    "control": ControlStage,
 }
 
 __all__ = ["STAGES", "Stage", "StageContext", "TrainOptions", "TrainResult", "lr_factor", "train"]

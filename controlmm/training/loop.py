@@ -20,7 +20,7 @@ import copy
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,7 @@ from torch.utils.data import DataLoader
 from controlmm.data.datasets import StepBatchSampler
 from controlmm.data.humanml3d import HumanML3D
 from controlmm.errors import ControlMMError, InputFileError
-from controlmm.models.config import ModelConfig, StageSchedule, TextEncoderConfig, preset_config
+from controlmm.models.config import PRESETS, ModelConfig, StageSchedule, TextEncoderConfig, preset_config
 from controlmm.models.model_dir import (
     load_model,
     new_manifest,
@@ -76,6 +76,7 @@ class TrainOptions:
     command: str | None = None
     precision: str = "fp32"  # "bf16": bfloat16 autocast of the training forward pass (CPU with AVX512-BF16, GPUs)
     threads: int | None = None  # torch CPU threads (None: torch's default)
+    stage_options: dict[str, Any] = field(default_factory=dict)  # options of one stage (e.g. control's --joints)
 
 
 @dataclass
@@ -143,7 +144,10 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
 def _schedule(config: ModelConfig, stage_name: str, opts: TrainOptions, num_items: int,
               world: int) -> StageSchedule:
     """The stage's schedule from the preset, with the command line's overrides."""
-    schedule = config.schedules.get(stage_name) or StageSchedule(iters=1000, batch_size=64)
+    schedule = config.schedules.get(stage_name)
+    if schedule is None:  # a model directory created before this stage had a schedule: the preset's
+        schedule = preset_config(config.preset).schedules.get(stage_name) if config.preset in PRESETS else None
+    schedule = schedule or StageSchedule(iters=1000, batch_size=64)
     for field_name, value in (("batch_size", opts.batch_size), ("lr", opts.lr),
                               ("checkpoint_every", opts.checkpoint_every), ("iters", opts.iters)):
         if value is not None:
@@ -218,7 +222,8 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     seed_everything(opts.seed + ctx.rank)
     sctx = StageContext(config=config, data=data, normalizer=read_statistics(out), model_dir=out,
                         device=ctx.device, seed=opts.seed, progress=opts.progress and ctx.is_main,
-                        base=base, clip_weights=opts.clip_weights, is_main=ctx.is_main)
+                        base=base, clip_weights=opts.clip_weights, is_main=ctx.is_main,
+                        options=dict(opts.stage_options), resume=opts.resume)
     stage = stage_cls(sctx)
     model = stage.build_model().to(ctx.device)
     dataset = stage.train_dataset()

@@ -8,7 +8,7 @@ distribution, optimisation, checkpoints, resumption, progress and the model dire
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,8 @@ class StageContext:
     base: MotionModel | None  # parts trained by earlier stages (eval mode, frozen), or None
     clip_weights: str | None = None
     is_main: bool = True
+    options: dict[str, Any] = field(default_factory=dict)  # stage-specific command-line options
+    resume: bool = False
 
 
 class Stage:

@@ -146,3 +146,16 @@ def tiny_clip_dir(tmp_path_factory):
     CLIPModel(config).save_pretrained(path)
     CLIPTokenizer(vocab=vocab, merges=[]).save_pretrained(path)
     return path
+
+
+@pytest.fixture(scope="session")
+def tiny_control_dir(tmp_path_factory, tiny_data, tiny_model_dir) -> Path:
+    """A copy of the tiny model directory with a motion control model (all joints) trained on top."""
+    from controlmm.training import TrainOptions, train
+
+    out = tmp_path_factory.mktemp("control") / "tiny"
+    shutil.copytree(tiny_model_dir, out, ignore=shutil.ignore_patterns("checkpoints"))
+    with one_thread():
+        train("control", TrainOptions(data=tiny_data, out=out, iters=20, progress=False, device="cpu",
+                                      stage_options={"joints": "all"}))
+    return out

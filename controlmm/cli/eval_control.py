@@ -1,0 +1,136 @@
+"""``controlmm eval control``: the spatial-control evaluation protocol (OmniControl / ControlMM)."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = """Evaluate spatial control the way OmniControl and ControlMM do: targets taken from held-out motions
+(the test split of --data, default the data the model was trained on), controlled joints at 1, 2 or 5
+frames or 25 % / 100 % of the frames (--density 1, 2, 5, 49, 196; default: the five in turn), one
+motion per case generated from the clip's caption and length under the control, then:
+
+  Traj. err  fraction of motions with any keyframe off by more than 50 cm
+  Loc. err   fraction of keyframes off by more than 50 cm
+  Avg. err   mean keyframe error (cm)
+  max        worst controlled-joint error over all cases (cm)
+  skate      foot-skating ratio (feet below 5 cm moving faster than 0.5 m/s)
+  steps      editing steps used (logits + codebook), s/motion wall time
+
+--joints: pelvis, left_foot, right_foot, head, left_wrist, right_wrist (one joint), cross (the 63
+combinations of the six, in turn), all (the six at once), random (one of the six per case); several
+separated by commas.
+
+examples:
+  controlmm eval control --preset accurate --joints pelvis --samples 50
+  controlmm eval control --model MODEL_DIR --preset fast --joints cross --density 196 --json out.json"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("control", help="spatial-control metrics (Traj./Loc./Avg. err, foot skating)",
+                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
+    p.add_argument("--data", default=None,
+                   help="HumanML3D-format directory whose test split gives the targets "
+                        "(default: the data the model was trained on)")
+    p.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"),
+                   help="control/editing preset (default accurate)")
+    p.add_argument("--joints", default="pelvis", help="joint mode(s), comma-separated (default pelvis)")
+    p.add_argument("--density", default="all",
+                   help="controlled frames: 1, 2, 5, 49 (25%%), 196 (100%%) or all (the five in turn; default)")
+    p.add_argument("--samples", type=int, default=50, help="cases per joint mode (default 50)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the cases and of generation (default 0)")
+    p.add_argument("--batch-size", type=int, default=1,
+                   help="cases generated together (default 1: per-motion timings)")
+    p.add_argument("--tolerance", type=float, default=None, metavar="CM", help="editing tolerance in cm (default 1)")
+    p.add_argument("--no-control-model", action="store_true", help="editing only, without the control model")
+    p.add_argument("--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps")
+    p.add_argument("--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps")
+    p.add_argument("--json", default=None, help="also write the per-case results to this JSON file")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def parse_modes(text: str) -> list[str]:
+    from controlmm.control.evaluation import JOINT_MODES
+    from controlmm.errors import ControlMMError
+
+    modes = [m.strip() for m in text.split(",") if m.strip()]
+    for m in modes:
+        if m not in JOINT_MODES:
+            raise ControlMMError(f"unknown --joints '{m}'; allowed: {', '.join(JOINT_MODES)}")
+    if not modes:
+        raise ControlMMError("--joints is empty")
+    return modes
+
+
+def parse_densities(text: str) -> tuple[int, ...]:
+    from controlmm.control.evaluation import DENSITIES
+    from controlmm.errors import ControlMMError
+
+    if text == "all":
+        return DENSITIES
+    try:
+        values = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or any(v not in DENSITIES for v in values):
+        raise ControlMMError(f"unknown --density '{text}'; allowed: {', '.join(map(str, DENSITIES))} or all")
+    return values
+
+
+def default_data(model) -> str:
+    """The data directory recorded in the model's training record (control stage first)."""
+    from pathlib import Path
+
+    from controlmm.errors import ControlMMError
+
+    training = model.manifest.get("training", {})
+    for stage in ("control", "transformer", "tokenizer"):
+        data = training.get(stage, {}).get("data")
+        if data and Path(data).is_dir():
+            return data
+    raise ControlMMError("the model's training data is not on this machine; pass --data DIR "
+                         "(a HumanML3D-format directory with a test split)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    import torch
+
+    from controlmm.atomic import write_text
+    from controlmm.control.evaluation import build_cases, evaluate_control
+    from controlmm.editing import editing_preset
+    from controlmm.errors import ControlMMError
+    from controlmm.generate import load_model
+
+    modes = parse_modes(args.joints)
+    densities = parse_densities(args.density)
+    if args.samples < 1:
+        raise ControlMMError(f"--samples must be at least 1; got {args.samples}")
+    if args.batch_size < 1:
+        raise ControlMMError(f"--batch-size must be at least 1; got {args.batch_size}")
+    if args.tolerance is not None and not args.tolerance > 0:
+        raise ControlMMError(f"--tolerance must be positive (cm); got {args.tolerance}")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
+        torch.set_num_threads(args.threads)
+    model = load_model(args.model)
+    data = args.data or default_data(model)
+    config = editing_preset(args.preset).with_overrides(
+        tolerance=None if args.tolerance is None else args.tolerance / 100.0,
+        control_model=False if args.no_control_model else None,
+        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps)
+    reports = []
+    for mode in modes:
+        cases = build_cases(data, mode, densities, args.samples, seed=args.seed)
+        result = evaluate_control(model, cases, preset=config, seed=args.seed, batch_size=args.batch_size,
+                                  progress=not args.quiet, joints=mode)
+        print(result.table())
+        reports.append(result.to_json() | {"data": str(data), "model": str(model.directory)})
+    if args.json:
+        write_text(args.json, json.dumps(reports if len(reports) > 1 else reports[0], indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,31 @@
+"""Codebook editing (ControlMM §3.3, "embedding editing" in the code): optimise the decoder input.
+
+After the base and residual layers are decoded, the latent e = sum_q C_q[id_q] (B, N, code_dim), the
+sum of the RVQ layers' code vectors at every token position, becomes a free per-sample tensor and is
+optimised (at most ``codebook_steps`` AdamW steps, lr 0.06, betas (0.5, 0.9)) against the objective on
+R(denorm(decoder(e))). The shared codebooks themselves never change (reference §11.2). The latent with
+the lowest loss is kept; a sample stops as soon as it meets the stopping rule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+
+from controlmm.editing.objective import Objective
+from controlmm.editing.optimize import EditOutcome, optimize
+from controlmm.editing.presets import EditingConfig
+
+
+def codebook_editing(latent: torch.Tensor, decode: Callable[[torch.Tensor], torch.Tensor], objective: Objective,
+                     config: EditingConfig) -> EditOutcome:
+    """Edit the decoder latent (B, N, code_dim); returns the edited latent and the steps used.
+
+    Args:
+        latent: the decoded tokens' latent (not modified).
+        decode: latent -> joints (B, T, 22, 3), differentiable.
+        objective: loss terms and the stopping rule.
+        config: ``codebook_steps`` and the optimiser.
+    """
+    return optimize(latent, decode, objective, config.codebook_steps, config, keep_best=True)

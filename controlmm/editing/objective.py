@@ -1,0 +1,88 @@
+"""What the editors minimise and when they stop.
+
+An :class:`Objective` is the spatial-control targets (optional) plus any other :class:`LossTerm`s
+(obstacle SDF, floor, simulation feedback...). Per sample:
+
+    loss(joints)  = control_weight * L_ctrl(joints) + sum_k w_k term_k(joints)          (B,)
+    done(joints)  = every constraint within ``tolerance`` (m)  and  every other term <= ``loss_tolerance``
+
+``L_ctrl`` is ControlMM's inference loss (squared error over the controlled (t, j, xyz) entries divided
+by their number, per sample; reference §5.2). Stopping looks at the worst constraint, not the mean, so
+an early-stopped motion meets *every* constraint to the tolerance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import torch
+
+from controlmm.editing.terms import LossTerm
+
+
+@dataclass
+class Objective:
+    """Control targets (B, T, 22, 3) with mask (B, T, 22) and other loss terms on joints (B, T, 22, 3).
+
+    ``targets``/``mask`` cover the frames the editors decode (frames past a motion's end are never
+    controlled). ``terms`` are called on the same joints.
+    """
+
+    targets: torch.Tensor | None = None
+    mask: torch.Tensor | None = None
+    terms: Sequence[LossTerm] = field(default_factory=tuple)
+    tolerance: float = 0.01
+    loss_tolerance: float = 1e-6
+    control_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        if (self.targets is None) != (self.mask is None):
+            raise ValueError("targets and mask go together")
+        if self.mask is not None:
+            self.mask = self.mask.bool()
+        self.terms = tuple(self.terms)
+
+    @property
+    def has_control(self) -> bool:
+        return self.mask is not None and bool(self.mask.any())
+
+    @property
+    def active(self) -> bool:
+        """Whether there is anything to optimise at all."""
+        return self.has_control or bool(self.terms)
+
+    def controlled(self) -> torch.Tensor | None:
+        """(B,) bool: samples with at least one constraint."""
+        return None if self.mask is None else self.mask.flatten(1).any(-1)
+
+    def max_error(self, joints: torch.Tensor) -> torch.Tensor:
+        """Worst constraint error per sample (B,) in metres (0 without constraints)."""
+        if self.mask is None:
+            return joints.new_zeros(joints.shape[0])
+        t = joints.shape[1]
+        err = (joints.detach() - self.targets[:, :t]).norm(dim=-1)
+        return torch.where(self.mask[:, :t], err, torch.zeros_like(err)).flatten(1).amax(-1)
+
+    def term_values(self, joints: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
+        from controlmm.control.loss import control_loss  # (controlmm.control imports this package)
+
+        values: dict[str, torch.Tensor] = {}
+        if self.has_control:
+            values["control"] = self.control_weight * control_loss(joints, self.targets, self.mask)
+        for term in self.terms:
+            name = term.name if term.name not in values else f"{term.name}#{len(values)}"
+            values[name] = term(joints)
+        return values
+
+    def evaluate(self, joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(loss (B,) differentiable, done (B,) bool, worst constraint error (B,) m) of joints."""
+        values = self.term_values(joints)
+        loss = sum(values.values(), joints.new_zeros(joints.shape[0]))
+        max_err = self.max_error(joints)
+        done = max_err <= self.tolerance
+        for name, value in values.items():
+            if name != "control":
+                done = done & (value.detach() <= self.loss_tolerance)
+        return loss, done, max_err

@@ -1,0 +1,71 @@
+"""Editing settings and the named presets of the paper (reference §5.5, Paper A.3/A.4, Table 5).
+
+| preset | motion control model | logits editing (steps per decoding iteration) | codebook editing (steps at the end) |
+|---|---|---|---|
+| ``fast`` | on | 0 | 100 |
+| ``medium`` | on | 0 | 600 |
+| ``accurate`` | on | 100 | 600 |
+
+Step counts are maxima: every editor stops as soon as every constraint is within ``tolerance``
+(default 1 cm) and every other loss term is at most ``loss_tolerance``; the steps actually used are
+reported. Optimiser (official code): a fresh AdamW per editing run, lr 0.06, betas (0.5, 0.9),
+weight decay 1e-6; Gumbel-softmax temperature 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from controlmm.errors import ControlMMError
+
+
+@dataclass(frozen=True)
+class EditingConfig:
+    """How a controlled generation uses the control model and the two editors (``name``: for records)."""
+
+    name: str = "custom"
+    control_model: bool = True
+    logits_steps: int = 100  # per decoding iteration
+    codebook_steps: int = 600  # once, after the residual layers
+    lr: float = 0.06
+    betas: tuple[float, float] = (0.5, 0.9)
+    weight_decay: float = 1e-6
+    temperature: float = 1.0  # Gumbel-softmax temperature of logits editing
+    tolerance: float = 0.01  # metres: stop when every constraint is this close
+    logits_tolerance: float = 0.03  # metres: logits editing stops when its motion estimate is this close
+    loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
+    early_stop: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("logits_steps", "codebook_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ControlMMError(f"{name} must be a whole number >= 0; got {value!r}")
+        for name in ("lr", "temperature"):
+            if not getattr(self, name) > 0:
+                raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
+        if not self.tolerance > 0 or not self.logits_tolerance > 0:
+            raise ControlMMError(f"tolerances must be positive (metres); got {self.tolerance}, {self.logits_tolerance}")
+        if self.loss_tolerance < 0:
+            raise ControlMMError(f"loss_tolerance must be >= 0; got {self.loss_tolerance}")
+
+    def with_overrides(self, **changes) -> "EditingConfig":
+        """A copy with the non-None ``changes`` applied."""
+        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+PRESETS: dict[str, EditingConfig] = {
+    "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
+    "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
+    "accurate": EditingConfig(name="accurate", control_model=True, logits_steps=100, codebook_steps=600),
+}
+"""The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""
+
+
+def editing_preset(preset: str | EditingConfig) -> EditingConfig:
+    """The :class:`EditingConfig` of a preset name (``fast``, ``medium``, ``accurate``) or the config itself."""
+    if isinstance(preset, EditingConfig):
+        return preset
+    if preset not in PRESETS:
+        raise ControlMMError(f"unknown editing preset '{preset}'; allowed: {', '.join(PRESETS)}")
+    return PRESETS[preset]
