@@ -9,6 +9,7 @@ from typing import Any
 
 from controlmm.errors import ControlMMError
 from controlmm.pipeline.feedback import FeedbackConfig
+from sim.config import CheckConfig
 
 DEFAULT_SCENE = "table"
 """The bundled example: a table to keep clear of and a right-hand target beyond its edge."""
@@ -35,6 +36,7 @@ class PlanConfig:
         render: write ``render.mp4``; render_fps / render_size: its frame rate and (width, height).
         timeline: a body-part timeline spec (JSON path) instead of ``text`` (when supported).
         feedback: how failures become loss terms.
+        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
     """
 
     scene: str = DEFAULT_SCENE
@@ -53,6 +55,7 @@ class PlanConfig:
     render_size: tuple[int, int] = (480, 360)
     timeline: str | None = None
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    check: CheckConfig = field(default_factory=CheckConfig)
 
     def __post_init__(self) -> None:
         if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
@@ -72,6 +75,7 @@ class PlanConfig:
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
+        out["check"] = self.check.to_dict()
         if isinstance(self.control, (str, Path)):
             out["control"] = str(self.control)
         return out

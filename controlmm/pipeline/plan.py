@@ -206,7 +206,7 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         traj = retarget_motion(motion, robot=config.robot, fps=config.fps, transform=transform)
         timer["retarget"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        report = check_trajectory(world, traj)
+        report = check_trajectory(world, traj, config=config.check)
         timer["check"] = time.perf_counter() - t0
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
         blocking = blocking_failures(report)
