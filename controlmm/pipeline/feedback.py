@@ -9,7 +9,8 @@ those joints over the matching human frames (20 fps, padded by ``frame_pad`` eac
 failure kind            loss term (world metres unless stated; 0 when satisfied)
 ======================  ===================================================================
 obstacle_penetration    body-volume SDF loss on the body's bones with a larger safe distance
-                        (scene margin + depth + ``margin_m``)
+                        (scene margin + depth + ``margin_m``, accumulating over rounds while
+                        the same body keeps penetrating)
 floor_penetration       *lift*: the body's joints at least depth + margin higher than in the
                         failed round
 self_collision          *separation*: the two bodies' joints at least (depth + margin) / scale
@@ -89,7 +90,8 @@ def body_human_joints(body_joints: dict[str, Sequence[str]], body: str | None) -
 
 def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dict[str, Sequence[str]],
                    transform: HumanToWorld, robot_fps: float, round_index: int, sdf=None,
-                   floor_height: float = 0.0, config: FeedbackConfig = FeedbackConfig()) -> list[LossTerm]:
+                   floor_height: float = 0.0, config: FeedbackConfig = FeedbackConfig(),
+                   history: dict | None = None) -> list[LossTerm]:
     """Loss terms that ask the next round to fix ``failures``.
 
     Args:
@@ -101,6 +103,10 @@ def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dic
         round_index: 0 for the first feedback round (weights grow with it).
         sdf: the scene's SDF (``scene.sdf()``), needed for obstacle penetrations.
         floor_height: world z of the floor.
+        history: a dict kept across rounds by the caller: the extra obstacle clearance asked for each
+            robot body so far. A body that still penetrates although its last term was met needs
+            that clearance plus the new depth (the human body volume does not cover that robot
+            part by at least this much), so obstacle margins accumulate over rounds.
 
     Returns:
         One term per (kind, robot body[, other body]) over the union of its failures' frames
@@ -126,7 +132,10 @@ def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dic
             from scenes.losses import BODY_BONES, body_obstacle_loss
 
             bones = [b for b in BODY_BONES if b.child in joints] or list(BODY_BONES)
-            distance = config.obstacle_distance_m + depth + config.margin_m
+            extra = (history.get(("obstacle", body), 0.0) if history is not None else 0.0) + depth + config.margin_m
+            if history is not None:
+                history[("obstacle", body)] = extra
+            distance = config.obstacle_distance_m + extra
             terms.append(body_obstacle_loss(sdf, transform, safe_distance=distance, bones=bones, frames=frames,
                                             weight=weight, name=label))
         elif kind == "floor_penetration":

@@ -187,6 +187,7 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
     world = make_world(scene)
     editing = editing_preset(config.preset)
     extra: list[LossTerm] = []
+    history: dict = {}  # feedback margins per robot body, across rounds
     rounds: list[PlanRound] = []
     latent = None
     for index in range(config.rounds + 1):
@@ -213,12 +214,15 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
         say(f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
             f"in {sum(timer.values()):.1f} s")
-        if (report.passed and rounds[-1].constraints_met) or index == config.rounds:
+        # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
+        # editing round (more codebook steps toward the targets), not more.
+        settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
+        if (report.passed and settled) or index == config.rounds:
             break
         extra = extra + feedback_terms(blocking, motion.joints, body_joints=body_joints, transform=transform,
                                        robot_fps=traj.fps, round_index=index,
                                        sdf=scene.sdf() if scene.obstacle_geom_ids else None,
-                                       floor_height=scene.floor_height, config=config.feedback)
+                                       floor_height=scene.floor_height, config=config.feedback, history=history)
     best = min(rounds, key=lambda r: (not r.passed, not r.constraints_met, r.failing_frames(),
                                       max(r.constraint_errors_m, default=0.0))).index
     return PlanResult(config=config, scene=scene, text=text, spec=spec, transform=transform, rounds=rounds,
