@@ -8,11 +8,14 @@ result.passed, result.report.summary()
 write_plan(result, "out/plan")            # motion.npz, robot.csv/npz/json, report.json, render.mp4, plots/
 ```
 
-Round 0 generates with the scene's obstacle and floor losses (and the control spec); every later
-round adds the feedback terms of the failures found so far (:mod:`controlmm.pipeline.feedback`) and
-generates again from the same seed, so the motion changes only where the losses ask it to. The loop
-stops at the first round that passes or after ``rounds`` feedback rounds; the result is the passing
-round, else the round with the fewest failing frames.
+Round 0 generates the tokens (masked decoding with the motion control model and logits editing)
+and codebook-edits their latent against the control spec and the scene's obstacle and floor losses.
+Every later round adds the feedback terms of the failures found so far
+(:mod:`controlmm.pipeline.feedback`) and codebook-edits the previous round's latent again
+(:mod:`controlmm.pipeline.refine`), so the motion changes only where the losses ask it to. The loop
+stops at the first round that passes with every constraint within 2 cm (one more editing round when a
+passing round misses a constraint) or after ``rounds`` feedback rounds; the result is the best round:
+passing first, then meeting the constraints, then the fewest failing frames.
 """
 
 from __future__ import annotations
