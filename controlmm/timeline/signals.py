@@ -36,17 +36,25 @@ WORLD = -1  # anchor of an entry compared in the world frame
 
 @dataclass(frozen=True)
 class Entries:
-    """Entries compared one by one: frames (E,), joints (E,), anchors (E,) (-1 = world), margins (E,) m."""
+    """Entries compared one by one: frames (E,), joints (E,), anchors (E,) (-1 = world), margins (E,) m,
+    and optionally origins (E,): the joint an anchored entry is measured from (-1 = the pelvis on the floor).
+    """
 
     frames: np.ndarray
     joints: np.ndarray
     anchors: np.ndarray
     margins: np.ndarray
+    origins: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> "Entries":
         z = np.zeros(0, dtype=np.int64)
         return cls(z, z, z, np.zeros(0, dtype=np.float32))
+
+    def shifted(self, shift: int) -> "Entries":
+        """The same entries with frames and anchors moved by -shift."""
+        return Entries(self.frames - shift, self.joints, np.where(self.anchors >= 0, self.anchors - shift, self.anchors),
+                       self.margins, self.origins)
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])
@@ -138,6 +146,10 @@ def local_positions(joints: torch.Tensor, entries: Entries) -> torch.Tensor:
     p = joints[..., frames, js, :]
     safe = anchors.clamp(min=0)
     origin = joints[..., safe, PELVIS, :] * joints.new_tensor([1.0, 0.0, 1.0])
+    if entries.origins is not None:
+        origins = torch.as_tensor(entries.origins, device=joints.device)
+        attached = joints[..., safe, origins.clamp(min=0), :]
+        origin = torch.where((origins >= 0)[..., None], attached, origin)
     across = joints[..., safe, LEFT_HIP, :] - joints[..., safe, RIGHT_HIP, :]
     cx, cz = across[..., 0], across[..., 2]
     norm = torch.sqrt(cx * cx + cz * cz + 1e-12)
@@ -153,10 +165,14 @@ def entry_distances(joints: torch.Tensor, reference: torch.Tensor, entries: Entr
     return (local_positions(joints, entries) - ref).norm(dim=-1)
 
 
-def hinge_term(name: str, reference: np.ndarray | torch.Tensor, entries: Entries, weight: float = 1.0) -> LossTerm:
-    """LossTerm ``mean_e relu(distance_e - margin_e)^2`` (per sample; 0 once every entry is within its margin)."""
-    ref = torch.as_tensor(np.asarray(reference, dtype=np.float32))
-    ref_local = local_positions(ref, entries)
+def hinge_term(name: str, target: np.ndarray | torch.Tensor, entries: Entries, weight: float = 1.0) -> LossTerm:
+    """LossTerm ``mean_e relu(distance_e - margin_e)^2`` per sample (0 once every entry is within its margin).
+
+    ``target`` (E, 3): the wanted :func:`local_positions` of the entries (see :func:`reference_targets`).
+    Unlike a mean squared error, entries already within their margin pull no more, so the editors
+    spend their steps on the worst ones (the stopping rule looks at the worst entry too).
+    """
+    ref_local = torch.as_tensor(np.asarray(target, dtype=np.float32))
     margins = torch.as_tensor(entries.margins, dtype=torch.float32)
 
     def fn(joints: torch.Tensor) -> torch.Tensor:
@@ -166,13 +182,63 @@ def hinge_term(name: str, reference: np.ndarray | torch.Tensor, entries: Entries
     return LossTerm(name, fn, weight)
 
 
-def signal_terms(signal: ControlSignal, reference: np.ndarray) -> list[LossTerm]:
-    """The loss terms of a pass (held-relative entries and edge blending), beside its dense control."""
+def reference_targets(reference: np.ndarray, entries: Entries, shift: int = 0) -> np.ndarray:
+    """(E, 3) local positions of the entries in ``reference`` (T', 22, 3), frames and anchors moved by -shift."""
+    with torch.no_grad():
+        return local_positions(torch.as_tensor(np.asarray(reference, dtype=np.float32)), entries.shifted(shift)).numpy()
+
+
+def world_entries(mask: np.ndarray, margin: float) -> Entries:
+    """The entries of a (T, 22) mask, compared in the world with one margin."""
+    frames, js = np.nonzero(mask)
+    return Entries(frames.astype(np.int64), js.astype(np.int64), np.full(len(frames), WORLD, dtype=np.int64),
+                   np.full(len(frames), margin, dtype=np.float32))
+
+
+def prompt_entries(signal: ControlSignal, joints: tuple[int, ...], *, root_moves: bool, attachment: int = PELVIS,
+                   margin: float = 0.03, blend_frames: int = 10, blend_rate: float = 0.05) -> Entries:
+    """The free entries of a pass as soft targets from the track's prompt generated alone over the span.
+
+    Anchors: the ``attachment`` joint and facing of the entry's own frame (the part's pose relative to
+    what it hangs from), or, for parts holding the pelvis, the pelvis and facing of the span's first
+    frame (the path the part takes the body along).
+    Margins grow by ``blend_rate`` per frame towards interior span edges (over ``blend_frames``), where
+    the blend toward the held motion takes over.
+    """
+    s, e = signal.span
+    num_frames = signal.free.shape[0]
+    frames, js, anchors, margins = [], [], [], []
+    origin = -1 if root_moves else attachment
+    for t in range(s, e):
+        relax = 0
+        if s > 0:
+            relax = max(relax, blend_frames - (t - s))
+        if e < num_frames:
+            relax = max(relax, blend_frames - (e - 1 - t))
+        for j in joints:
+            frames.append(t), js.append(j), anchors.append(s if root_moves else t)
+            margins.append(margin + blend_rate * max(relax, 0))
+    return Entries(np.array(frames, dtype=np.int64), np.array(js, dtype=np.int64), np.array(anchors, dtype=np.int64),
+                   np.array(margins, dtype=np.float32), np.full(len(frames), origin, dtype=np.int64))
+
+
+def signal_terms(signal: ControlSignal, reference: np.ndarray, prompt_clip: np.ndarray | None = None,
+                 prompt: Entries | None = None, tolerance: float = 0.008, prompt_weight: float = 0.3,
+                 prompt_shift: int | None = None, held_weight: float = 20.0) -> list[LossTerm]:
+    """The loss terms of a pass beside its dense control: world-held outliers, body-held entries, edge
+    blending and (with ``prompt_clip`` (L, 22, 3), whose frame 0 is frame ``prompt_shift`` of the motion,
+    default the span's first frame) the prompt's part."""
     terms = []
-    if len(signal.hold):
-        terms.append(hinge_term("timeline:hold", reference, signal.hold))
-    if len(signal.blend):
-        terms.append(hinge_term("timeline:blend", reference, signal.blend))
+    if signal.mask.any():
+        held = world_entries(signal.mask, tolerance)
+        terms.append(hinge_term("timeline:held", reference_targets(reference, held), held, held_weight))
+    for name, entries, weight in (("timeline:hold", signal.hold, held_weight), ("timeline:blend", signal.blend, 1.0)):
+        if len(entries):
+            terms.append(hinge_term(name, reference_targets(reference, entries), entries, weight))
+    if prompt_clip is not None and prompt is not None and len(prompt):
+        terms.append(hinge_term("timeline:prompt", reference_targets(
+            prompt_clip, prompt, shift=signal.span[0] if prompt_shift is None else prompt_shift),
+                                prompt, weight=prompt_weight))
     return terms
 
 
