@@ -16,7 +16,7 @@ from controlmm import __version__
 from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
-    "generate", "train", "corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info",
+    "generate", "timeline", "train", "corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info",
 )
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 

@@ -16,8 +16,10 @@ Why editing starts from the held motion: editing a motion generated afresh from 
 toward thousands of held entries converges slowly (on the dev model, the controlled generator left
 held joints up to 10 cm off after 600 codebook-editing steps, 5 cm after 2400, 8 cm with logits
 editing; pasting the prompt's latent into the span, 5.6 cm); from the held motion the editors keep
-the held entries within about 2 cm while the part follows its prompt. Held entries weigh
-``held_weight`` (20) times a prompt entry's 0.3 (``prompt_weight``). Without an explicit ``base``, a
+the held entries within about 2 cm while the part follows its prompt. Held entries weigh 20 times a
+prompt entry's 0.3 (``prompt_weight``), and a second editing run without the prompt target (the held
+entries, the blend and the caller's terms only; it stops as soon as they are met) gives them the last
+word. Without an explicit ``base``, a
 first track spanning the whole timeline is made by the base pass itself (its prompt drove the whole
 body there), so it is not regenerated.
 
@@ -31,6 +33,7 @@ from __future__ import annotations
 import secrets
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -134,7 +137,12 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         objective = Objective(targets=torch.as_tensor(reference)[None], mask=torch.as_tensor(signal.mask)[None],
                               terms=tuple(terms) + tuple(pass_terms), tolerance=config.tolerance,
                               loss_tolerance=config.loss_tolerance)
-        latent, record = _edit(model, latent, num_frames, objective, config)
+        latent, first_record = _edit(model, latent, num_frames, objective, config)
+        # the held entries, the blend and the caller's terms get the last word (the prompt target is soft)
+        hard = replace(objective, terms=tuple(t for t in objective.terms if t.name != "timeline:prompt"))
+        latent, record = _edit(model, latent, num_frames, hard, config)
+        record["steps"] += first_record["steps"]
+        record["losses"]["timeline:prompt"] = first_record["losses"].get("timeline:prompt", 0.0)
         joints, features = _decode(model, latent, num_frames)
         drift = held_drift(joints, reference, signal)
         passes.append(_pass_record(k, track.prompt, track.part, span, record, float(drift.max()),
