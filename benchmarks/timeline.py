@@ -5,7 +5,8 @@
 For every spec: wall seconds, the largest drift (cm) of entries held by a later pass from what the
 pass that fixed them produced, the fastest joint at any track boundary (m/s) against the 99th
 percentile of joint speeds in the corpus' test split, and the text-adherence probe of every track
-(``controlmm.eval.probes``) on its span. Runs single-threaded (torch and BLAS) so figures are stable on
+(``controlmm.eval.probes``) on its span, beside the pass rate of the same prompt generated alone by the
+model over the span's length (3 seeds: what the model can do without the timeline). Runs single-threaded (torch and BLAS) so figures are stable on
 a shared machine.
 """
 
@@ -56,6 +57,22 @@ def corpus_speed_percentile(corpus: Path, q: float = 99.0, split: str = "test") 
     return float(np.percentile(np.concatenate(speeds), q))
 
 
+def _alone(model, track: dict) -> int:
+    """How many of 3 seeds of the track's prompt, generated alone over its span, pass its probe."""
+    from controlmm.eval.probes import probe
+    from controlmm.generate import generate
+    from controlmm.motion.skeleton import MIN_FRAMES
+
+    frames = max(track["frames"][1] - track["frames"][0], MIN_FRAMES)
+    family, claims = track["probe"]["family"], SPEC_CLAIMS[(track["prompt"], family)]
+    return sum(probe(generate(model, track["prompt"], frames=frames, seed=s).motion.joints, family, claims).passed
+               for s in range(3))
+
+
+SPEC_CLAIMS = {(t["prompt"], t["probe"]["family"]): t["probe"]["claims"] for spec in SPECS.values()
+               for t in spec["tracks"] if "probe" in t}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", required=True, help="trained model directory")
@@ -75,9 +92,9 @@ def main() -> int:
     for name in args.specs:
         started = time.perf_counter()
         _, report = generate_timeline(model, SPECS[name], seed=args.seed, preset=args.preset)
-        seconds = time.perf_counter() - started
-        probes = " ".join(f"{t['part']}:{'pass' if t['probe']['passed'] else 'FAIL'}" for t in report["tracks"]
-                          if "probe" in t)
+        seconds = time.perf_counter() - started  # (the probes of the prompts alone below are not timed)
+        probes = " ".join(f"{t['part']}:{'pass' if t['probe']['passed'] else 'FAIL'} (alone {_alone(model, t)}/3)"
+                          for t in report["tracks"] if "probe" in t)
         rows.append((name, len(report["passes"]), seconds, report["max_drift_cm"], report["max_boundary_speed_mps"],
                      probes, report["probes_passed"]))
     print(f"model {args.model}, preset {args.preset}, seed {args.seed}, torch threads 1, "

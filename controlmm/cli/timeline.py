@@ -38,6 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="editing preset: codebook-editing steps per pass, 100 (fast) or 600 (default accurate)")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N",
                    help="codebook-editing steps per pass (default: the preset's)")
+    p.add_argument("--settle-steps", type=int, default=None, metavar="N",
+                   help="steps of each pass's second editing run, held entries only (default 4x codebook steps)")
     p.add_argument("--blend-frames", type=int, default=10, metavar="N",
                    help="frames blended at each interior span edge (default 10)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
@@ -61,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
             raise ControlMMError(f"cannot write '{path}': directory '{Path(path).parent}' does not exist")
     if args.codebook_steps is not None and args.codebook_steps < 0:
         raise ControlMMError(f"--codebook-steps must be >= 0; got {args.codebook_steps}")
+    if args.settle_steps is not None and args.settle_steps < 0:
+        raise ControlMMError(f"--settle-steps must be >= 0; got {args.settle_steps}")
     if args.blend_frames < 0:
         raise ControlMMError(f"--blend-frames must be >= 0; got {args.blend_frames}")
     timeline = Timeline.load(args.spec)  # validate before loading the model
@@ -80,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
     config = editing_preset(args.preset).with_overrides(codebook_steps=args.codebook_steps)
     model = load_model(args.model, device=args.device)
     motion, report = generate_timeline(model, timeline, seed=args.seed, preset=config,
-                                       blend_frames=args.blend_frames, progress=True)
+                                       blend_frames=args.blend_frames, settle_steps=args.settle_steps,
+                                       progress=True)
     save_motion(motion, args.out)
     print(f"wrote {args.out} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {report['seed']}, "
           f"{report['wall_seconds']:.1f} s)")

@@ -18,8 +18,9 @@ held joints up to 10 cm off after 600 codebook-editing steps, 5 cm after 2400, 8
 editing; pasting the prompt's latent into the span, 5.6 cm); from the held motion the editors keep
 the held entries within about 2 cm while the part follows its prompt. Held entries weigh 20 times a
 prompt entry's 0.3 (``prompt_weight``), and a second editing run without the prompt target (the held
-entries, the blend and the caller's terms only; it stops as soon as they are met) gives them the last
-word. Without an explicit ``base``, a
+entries, the blend and the caller's terms only; up to ``settle_steps``, 4x the preset's codebook steps,
+stopping as soon as they are met) gives them the last word: on the dev model the worst held entry went
+from 2.6 cm (600 steps) to 1.9 (1200) and 1.6 cm (2400). Without an explicit ``base``, a
 first track spanning the whole timeline is made by the base pass itself (its prompt drove the whole
 body there), so it is not regenerated.
 
@@ -70,7 +71,8 @@ def as_timeline(timeline: Timeline | dict | str | Path) -> Timeline:
 def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: int | None = None,
                       preset: str | EditingConfig = "accurate", terms: Sequence[LossTerm] = (),
                       transform: HumanToWorld | None = None, blend_frames: int = 10, blend_rate: float = 0.05,
-                      prompt_weight: float = 0.3, progress: bool = False) -> tuple[Motion, dict[str, Any]]:
+                      prompt_weight: float = 0.3, settle_steps: int | None = None,
+                      progress: bool = False) -> tuple[Motion, dict[str, Any]]:
     """Generate a motion whose body parts follow their tracks' prompts over their spans.
 
     Args:
@@ -86,6 +88,8 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         blend_frames: frames blended at each interior span edge.
         blend_rate: how fast (m per frame) a regenerated part may leave the held motion at an edge.
         prompt_weight: weight of the soft target a track's part gets from its prompt's own motion.
+        settle_steps: step budget of each pass's second editing run (held entries, blend and ``terms``
+            only; it stops once they are met). Default: 4x the preset's ``codebook_steps``.
 
     Returns:
         (motion, report): the motion (T, 22, 3) with ``metadata["timeline"]`` (spec and report) and
@@ -100,6 +104,10 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         raise ControlMMError(f"blend_frames, blend_rate and prompt_weight must be >= 0; "
                              f"got {blend_frames}, {blend_rate}, {prompt_weight}")
     seed = secrets.randbits(31) if seed is None else int(seed)
+    if settle_steps is not None and (isinstance(settle_steps, bool) or int(settle_steps) != settle_steps
+                                     or settle_steps < 0):
+        raise ControlMMError(f"settle_steps must be a whole number >= 0; got {settle_steps!r}")
+    settle = replace(config, codebook_steps=4 * config.codebook_steps if settle_steps is None else int(settle_steps))
     num_frames = timeline.num_frames
     tracks = timeline.tracks
     first = 1 if timeline.base is None and tracks[0].frames(num_frames) == (0, num_frames) else 0
@@ -140,7 +148,7 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         latent, first_record = _edit(model, latent, num_frames, objective, config)
         # the held entries, the blend and the caller's terms get the last word (the prompt target is soft)
         hard = replace(objective, terms=tuple(t for t in objective.terms if t.name != "timeline:prompt"))
-        latent, record = _edit(model, latent, num_frames, hard, config)
+        latent, record = _edit(model, latent, num_frames, hard, settle)
         record["steps"] += first_record["steps"]
         record["losses"]["timeline:prompt"] = first_record["losses"].get("timeline:prompt", 0.0)
         joints, features = _decode(model, latent, num_frames)

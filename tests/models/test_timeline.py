@@ -160,9 +160,9 @@ def test_tracks_keep_what_earlier_passes_fixed(model):
     arm = {"part": "right_arm", "prompt": "a person waves the right hand", "start": 0.8, "end": 1.8}
     height = float(generate(model, "a person walks forward", frames=48, seed=3).motion.joints[20:30, 21, 1].max()) + 0.3
     terms = [_wrist_up(height)]
-    base, base_report = generate_timeline(model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms)
+    base, base_report = generate_timeline(model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms, settle_steps=400)
     assert len(base_report["passes"]) == 1 and base_report["passes"][0]["editing_steps"] > 0  # the base made track 0
-    motion, report = generate_timeline(model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms)
+    motion, report = generate_timeline(model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms, settle_steps=400)
     assert motion.joints.shape == (48, 22, 3) and motion.features.shape == (48, 263)
     assert motion.joints[20:30, 21, 1].min() > height - 0.02  # the extra term holds in every pass
     assert report["passes"][1]["editing_steps"] > 0
@@ -183,8 +183,12 @@ def test_tracks_keep_what_earlier_passes_fixed(model):
 def test_a_legs_track_carries_the_held_parts_along(model):
     timeline = Timeline([Track("left_arm", "a person raises the left arm", 0, 2.4),
                          Track("legs", "a person jumps forward", 0.6, 1.6)], base="a person stands")
-    motion, report = generate_timeline(model, timeline, seed=1, preset=STEPS, prompt_weight=0.3)
+    motion, report = generate_timeline(model, timeline, seed=1, preset=STEPS, settle_steps=400)
     assert [p["track"] for p in report["passes"]] == [None, 0, 1]
+    # the legs pass holds the frames before its span in the world and everything else relative to the body
+    assert report["passes"][2]["held_entries"] == 48 * 22 - 20 * 9
+    owner = motion.extras["timeline_owner"]
+    assert (owner[12:32][:, list(part_joints("legs"))] == 1).all() and (owner[:, [13, 16, 18, 20]] == 0).all()
     assert report["passes"][2]["drift_cm"] < 2.0 and report["max_drift_cm"] < 2.0
     assert report["tracks"][0]["final_drift_cm"] < 2.0
 
