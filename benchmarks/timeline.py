@@ -6,8 +6,8 @@ For every spec: wall seconds, the largest drift (cm) of entries held by a later 
 pass that fixed them produced, the fastest joint at any track boundary (m/s) against the 99th
 percentile of joint speeds in the corpus' test split, and the text-adherence probe of every track
 (``controlmm.eval.probes``) on its span, beside the pass rate of the same prompt generated alone by the
-model over the span's length (3 seeds: what the model can do without the timeline). Runs single-threaded (torch and BLAS) so figures are stable on
-a shared machine.
+model over the span's length (3 seeds: what the model can do without the timeline). Runs
+single-threaded (torch and BLAS) so figures are stable on a shared machine.
 """
 
 from __future__ import annotations
@@ -64,7 +64,8 @@ def _alone(model, track: dict) -> int:
     from controlmm.motion.skeleton import MIN_FRAMES
 
     frames = max(track["frames"][1] - track["frames"][0], MIN_FRAMES)
-    family, claims = track["probe"]["family"], SPEC_CLAIMS[(track["prompt"], family)]
+    family = track["probe"]["family"]
+    claims = SPEC_CLAIMS[(track["prompt"], family)]
     return sum(probe(generate(model, track["prompt"], frames=frames, seed=s).motion.joints, family, claims).passed
                for s in range(3))
 
@@ -100,10 +101,11 @@ def main() -> int:
     print(f"model {args.model}, preset {args.preset}, seed {args.seed}, torch threads 1, "
           f"corpus joint speed p99 {p99:.2f} m/s ({args.corpus}, test split)")
     print("| spec | passes | seconds | max drift of fixed parts (cm) | max boundary speed (m/s) | "
-          "vs corpus p99 | probes per track |")
+          "vs corpus p99 | probe per track (prompt alone: passes of 3 seeds) |")
     print("|---|---|---|---|---|---|---|")
     for name, n, sec, drift, speed, probes, _ in rows:
-        print(f"| {name} | {n} | {sec:.1f} | {drift:.2f} | {speed:.2f} | {'below' if speed < p99 else 'ABOVE'} | {probes} |")
+        verdict = "below" if speed < p99 else "ABOVE"
+        print(f"| {name} | {n} | {sec:.1f} | {drift:.2f} | {speed:.2f} | {verdict} | {probes} |")
     passed = sum(r[6][0] for r in rows)
     total = sum(r[6][1] for r in rows)
     print(f"probe pass rate per track: {passed}/{total}; mean seconds per spec "

@@ -35,7 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: random, stored in the output)")
     p.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"),
-                   help="editing preset: codebook-editing steps per pass, 100 (fast) or 600 (default accurate)")
+                   help="editing preset; its codebook-editing budget per pass: fast 100 + 400 settle steps, "
+                        "medium and accurate (default) 600 + 2400")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N",
                    help="codebook-editing steps per pass (default: the preset's)")
     p.add_argument("--settle-steps", type=int, default=None, metavar="N",

@@ -2,7 +2,8 @@
 
 | part | joints (index: name) |
 |---|---|
-| ``legs`` | 0 pelvis, 1 left_hip, 2 right_hip, 4 left_knee, 5 right_knee, 7 left_ankle, 8 right_ankle, 10 left_foot, 11 right_foot |
+| ``legs`` | 0 pelvis, 1 left_hip, 2 right_hip, 4 left_knee, 5 right_knee, 7 left_ankle, 8 right_ankle, |
+| | 10 left_foot, 11 right_foot |
 | ``torso`` | 3 spine1, 6 spine2, 9 spine3 |
 | ``head`` | 12 neck, 15 head |
 | ``left_arm`` | 13 left_collar, 16 left_shoulder, 18 left_elbow, 20 left_wrist |

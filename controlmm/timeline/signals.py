@@ -53,8 +53,8 @@ class Entries:
 
     def shifted(self, shift: int) -> "Entries":
         """The same entries with frames and anchors moved by -shift."""
-        return Entries(self.frames - shift, self.joints, np.where(self.anchors >= 0, self.anchors - shift, self.anchors),
-                       self.margins, self.origins)
+        anchors = np.where(self.anchors >= 0, self.anchors - shift, self.anchors)
+        return Entries(self.frames - shift, self.joints, anchors, self.margins, self.origins)
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])

@@ -147,7 +147,8 @@ class Timeline:
                 raise ControlMMError(f"track {k} must be a JSON object; got {type(item).__name__}")
             unknown = sorted(set(item) - set(TRACK_KEYS))
             if unknown:
-                raise ControlMMError(f"track {k}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(TRACK_KEYS)}")
+                raise ControlMMError(f"track {k}: unknown key(s) {', '.join(unknown)}; "
+                                     f"allowed: {', '.join(TRACK_KEYS)}")
             missing = [key for key in ("part", "prompt", "start", "end") if key not in item]
             if missing:
                 raise ControlMMError(f"track {k} is missing {', '.join(missing)}")
@@ -181,7 +182,8 @@ def _check_probe(probe: Any, part: str) -> None:
     from controlmm.eval.probes import PROBES
 
     if not isinstance(probe, dict) or "family" not in probe or set(probe) - {"family", "claims"}:
-        raise ControlMMError(f"track '{part}': probe must be {{\"family\": NAME, \"claims\": {{...}}}}; got {probe!r}")
+        raise ControlMMError(f"track '{part}': probe must be {{\"family\": NAME, \"claims\": {{...}}}}; "
+                             f"got {probe!r}")
     if probe["family"] not in PROBES:
         raise ControlMMError(f"track '{part}': no probe for family '{probe['family']}'; known: {', '.join(PROBES)}")
     if not isinstance(probe.get("claims", {}), dict):

@@ -76,16 +76,20 @@ def test_spec_round_trip_and_defaults(tmp_path):
 
 @pytest.mark.parametrize("data, message", [
     ({"tracks": []}, "non-empty 'tracks' list"),
-    ({"tracks": [{"part": "tail", "prompt": "x", "start": 0, "end": 3}]}, "track 0: unknown body part 'tail'; allowed: legs, torso"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3}], "seconds": 2.5}, "ends at 3 s, after the timeline's end"),
+    ({"tracks": [{"part": "tail", "prompt": "x", "start": 0, "end": 3}]},
+     "track 0: unknown body part 'tail'; allowed: legs, torso"),
+    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3}], "seconds": 2.5},
+     "ends at 3 s, after the timeline's end"),
     ({"tracks": [{"part": "legs", "prompt": "x", "start": -1, "end": 3}]}, "start -1 s is negative"),
     ({"tracks": [{"part": "legs", "prompt": "x", "start": 1, "end": 1.1}], "seconds": 3}, "too short"),
     ({"tracks": [{"part": "legs", "prompt": "", "start": 0, "end": 3}]}, "non-empty prompt"),
     ({"tracks": [{"part": "legs", "prompt": "x", "start": "0", "end": 3}]}, "start must be a number"),
     ({"tracks": [{"part": "legs", "prompt": "x", "start": 0}]}, "track 0 is missing end"),
     ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "speed": 1}]}, "unknown key(s) speed"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 12}]}, "length 12 s is out of range; allowed 2..9.8"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "probe": {"family": "fly"}}]}, "no probe for family 'fly'"),
+    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 12}]},
+     "length 12 s is out of range; allowed 2..9.8"),
+    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "probe": {"family": "fly"}}]},
+     "no probe for family 'fly'"),
     ({"track": []}, "unknown timeline key(s) track"),
     ([1], "must be a JSON object"),
 ])
@@ -137,7 +141,8 @@ def test_hinge_term_is_zero_inside_its_margins_and_pulls_outside(sample_joints):
     loss = term(far + torch.tensor([0.0, 0.3, 0.0]))
     loss.sum().backward()
     assert float(loss[0].detach()) > 0 and far.grad[0, 10, 20].abs().sum() > 0 and far.grad[0, 20, 20].abs().sum() == 0
-    np.testing.assert_allclose(local_positions(ref, signal.blend).numpy(), ref[signal.blend.frames, signal.blend.joints])
+    world = ref[signal.blend.frames, signal.blend.joints]
+    np.testing.assert_allclose(local_positions(ref, signal.blend).numpy(), world)  # world entries stay as they are
 
 
 def test_boundary_speed_sees_a_jump():
@@ -158,11 +163,14 @@ def _wrist_up(height: float) -> LossTerm:
 def test_tracks_keep_what_earlier_passes_fixed(model):
     legs = {"part": "legs", "prompt": "a person walks forward", "start": 0, "end": 2.4}
     arm = {"part": "right_arm", "prompt": "a person waves the right hand", "start": 0.8, "end": 1.8}
-    height = float(generate(model, "a person walks forward", frames=48, seed=3).motion.joints[20:30, 21, 1].max()) + 0.3
+    plain = generate(model, "a person walks forward", frames=48, seed=3).motion
+    height = float(plain.joints[20:30, 21, 1].max()) + 0.3
     terms = [_wrist_up(height)]
-    base, base_report = generate_timeline(model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms, settle_steps=400)
+    base, base_report = generate_timeline(model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms,
+                                          settle_steps=400)
     assert len(base_report["passes"]) == 1 and base_report["passes"][0]["editing_steps"] > 0  # the base made track 0
-    motion, report = generate_timeline(model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms, settle_steps=400)
+    motion, report = generate_timeline(model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms,
+                                       settle_steps=400)
     assert motion.joints.shape == (48, 22, 3) and motion.features.shape == (48, 263)
     assert motion.joints[20:30, 21, 1].min() > height - 0.02  # the extra term holds in every pass
     assert report["passes"][1]["editing_steps"] > 0
