@@ -16,7 +16,7 @@ def default_model_dir() -> Path:
 
 
 def available_models() -> list[str]:
-    """Names of the embedded model directories that are present."""
+    """Names of the embedded model directories that are present (folders with a model.json)."""
     if not CHECKPOINT_ROOT.is_dir():
         return []
-    return sorted(p.name for p in CHECKPOINT_ROOT.iterdir() if p.is_dir() and any(p.iterdir()))
+    return sorted(p.name for p in CHECKPOINT_ROOT.iterdir() if (p / "model.json").is_file())

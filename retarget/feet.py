@@ -40,7 +40,7 @@ def pin_stance_feet(robot: RobotModel, targets: Targets, root_pos: np.ndarray, r
         o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= 6) else None
         goal = targets.kp_pos[frames, k]
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
-        lo, hi = tree.lower[leg], tree.upper[leg]
+        lo, hi = robot.lower[leg], robot.upper[leg]
         start = q[np.ix_(frames, leg)].copy()
         cur, best = start.copy(), start.copy()
         best_cost = np.full(len(frames), np.inf)
@@ -75,3 +75,97 @@ def pin_stance_feet(robot: RobotModel, targets: Targets, root_pos: np.ndarray, r
         delta = gaussian_filter1d(delta, sigma=1.0, axis=0, mode="nearest")
         q[:, leg] = np.clip(q[:, leg] + delta, lo, hi)
     return q
+
+
+SWING_TOLERANCE = 0.002
+"""Swing feet may come this much (m) below their clearance at the output rate before being raised."""
+
+
+def leg_joints(robot: RobotModel, side: str) -> np.ndarray:
+    """Indices (into q) of the joints between the trunk and one foot."""
+    other = {"left": "right", "right": "left"}[side]
+    anc = robot.tree.ancestor
+    return np.flatnonzero(anc[int(robot.feet[side].node)] & ~anc[int(robot.feet[other].node)])
+
+
+SKIM_HEIGHT = 0.012
+"""A foot that moves horizontally is kept at least this high (m): the simulation check counts
+a foot within 1 cm of the floor as standing, and a standing foot must not slide."""
+SKIM_SPEED = 0.1
+"""Horizontal speed (m/s) of a foot's sole points above which it counts as moving."""
+
+
+def lift_swing_feet(robot: RobotModel, root_pos: np.ndarray, root_rot: np.ndarray, q: np.ndarray,
+                    clearance: dict[str, np.ndarray], fps: float) -> tuple[np.ndarray, float]:
+    """Joint angles (T, nj) with moving feet kept off the floor at the output rate.
+
+    The solver keeps a swing foot ``clearance`` high at the motion's frames; between them the
+    resampled joints may swing the foot's lowest point (a toe sweeping past the floor) a few
+    millimetres lower, and a foot that lands or takes off may still be moving horizontally
+    while it is within a centimetre of the floor. Per output frame a foot needs its
+    clearance (where that asks for more than standing height) and, wherever its slowest
+    sole point moves faster than :data:`SKIM_SPEED`, :data:`SKIM_HEIGHT`. Where it is more
+    than :data:`SWING_TOLERANCE` below that, the rise is max-filtered and smoothed over
+    ~0.2 s (never below the need) and the leg's joints translate the foot straight up by it,
+    its orientation and horizontal place unchanged (one damped least-squares step per frame,
+    smoothed over time like the rise: a smooth correction adds no jerk), limits kept.
+
+    Args:
+        robot: the robot; root_pos (T, 3), root_rot (T, 3, 3), q (T, nj) at ``fps``.
+        clearance: per side, (T,) minimum height of the foot's collision points (m).
+
+    Returns:
+        (q, largest rise in m).
+    """
+    from scipy.ndimage import maximum_filter1d
+
+    tree = robot.tree
+    q = q.copy()
+    worst = 0.0
+    r = max(1, int(round(0.05 * fps)))
+    poses = tree.forward(root_pos, root_rot, q)
+    t_len = len(q)
+    for side in ("left", "right"):
+        f = robot.feet[side]
+        leg = leg_joints(robot, side)
+        lo, hi = robot.lower[leg], robot.upper[leg]
+        h, _ = _lowest(poses, f)
+        pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
+        step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps if t_len > 1 else np.zeros(0)
+        moving = np.zeros(t_len, dtype=bool)
+        moving[1:] |= step > SKIM_SPEED
+        moving[:-1] |= step > SKIM_SPEED
+        need = np.where(clearance[side] > 0.005, clearance[side], 0.0)
+        need = np.where(moving, np.maximum(need, SKIM_HEIGHT), need)
+        deficit = np.where(need > 0, need - h, 0.0)
+        if deficit.max() <= SWING_TOLERANCE:
+            continue
+        rise = maximum_filter1d(np.maximum(deficit, 0.0), size=4 * r + 1, mode="nearest")
+        rise = gaussian_filter1d(rise, sigma=r, mode="nearest", truncate=3.0)
+        rise = np.maximum(rise, np.maximum(deficit, 0.0))
+        worst = max(worst, float(rise.max()))
+        idx = np.flatnonzero(rise > 1e-5)
+        # Translate the foot straight up by the rise, its orientation and place unchanged:
+        # the leg's joints solve [d position; d rotation] = [0, 0, rise; 0] (damped least squares).
+        sub = type(poses)(*(getattr(poses, k)[idx] for k in ("rot", "pos", "axis", "anchor", "root_pos")))
+        node = np.array([f.node])
+        jp = tree.point_jacobian(sub, node, sub.pos[:, node])[:, 0][..., 6 + leg]  # (F, 3, nl)
+        jr = tree.rotation_jacobian(sub, node)[:, 0][..., 6 + leg]
+        jac = np.concatenate([jp, jr], axis=1)  # (F, 6, nl)
+        goal = np.zeros((len(idx), 6))
+        goal[:, 2] = rise[idx]
+        jt = np.swapaxes(jac, 1, 2)
+        dq = np.zeros((t_len, len(leg)))
+        dq[idx] = np.linalg.solve(jt @ jac + 1e-6 * np.eye(len(leg)), (jt @ goal[..., None]))[..., 0]
+        dq = gaussian_filter1d(dq, sigma=r / 2.0, axis=0, mode="nearest")
+        q[:, leg] = np.clip(q[:, leg] + dq, lo, hi)
+    return q, worst
+
+
+def _lowest(poses, f) -> tuple[np.ndarray, np.ndarray]:
+    """Height (T,) of a foot's lowest collision point above z = 0 and that point (T, 3)."""
+    pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
+    low = pts[..., 2] - f.radius
+    i = np.argmin(low, axis=1)
+    t = np.arange(len(low))
+    return low[t, i], pts[t, i]

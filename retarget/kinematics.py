@@ -18,6 +18,7 @@ rotation about the root body's origin.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mujoco
@@ -251,19 +252,40 @@ class KinematicTree:
         t, k = points.shape[:2]
         jac = np.zeros((t, k, len(rows), self.nv))
         rel = points - poses.root_pos[:, None, :]
-        mask = self.ancestor[nodes][None]  # (1, K, nj)
-        ax = poses.axis[:, None]  # (T, 1, nj, 3)
-        lever = points[:, :, None, :] - poses.anchor[:, None]  # (T, K, nj, 3)
-        slide = self.is_slide_joint
+        kk, jj = np.nonzero(self.ancestor[nodes])  # (point, joint) pairs where the joint moves the point
+        col = np.cross(poses.axis[:, jj], points[:, kk, :] - poses.anchor[:, jj])  # (T, P, 3): axis x lever
+        slide = self.is_slide_joint[jj]
+        if self._any_slide and np.any(slide):
+            col[:, slide] = poses.axis[:, jj[slide]]
         for i, row in enumerate(rows):
             a, b = (row + 1) % 3, (row + 2) % 3
             jac[:, :, i, row] = 1.0
             # d p / d theta = theta x rel  ->  row: (theta_a rel_b - theta_b rel_a)
             jac[:, :, i, 3 + a] = rel[..., b]
             jac[:, :, i, 3 + b] = -rel[..., a]
-            jac[:, :, i, 6:] = (ax[..., a] * lever[..., b] - ax[..., b] * lever[..., a]) * mask
-            if np.any(slide):
-                jac[:, :, i, 6:][..., slide] = (poses.axis[:, None, slide, row] * mask[..., slide])
+            jac[:, kk, i, 6 + jj] = col[..., row]
+        return jac
+
+    def directional_jacobian(self, poses: Poses, frames: np.ndarray, nodes: np.ndarray, points: np.ndarray,
+                             direction: np.ndarray) -> np.ndarray:
+        """d(direction . point)/d(velocity coords), (E, 6 + nj), for E scattered entries.
+
+        Entry e is the world point ``points[e]`` (3,) fixed on node ``nodes[e]`` at frame
+        ``frames[e]``, projected on the world vector ``direction[e]`` (3,): one row of a
+        point Jacobian per entry, without materialising the (3, n) blocks.
+        """
+        e_len = len(frames)
+        jac = np.empty((e_len, self.nv))
+        u = direction
+        jac[:, 0:3] = u
+        jac[:, 3:6] = np.cross(points - poses.root_pos[frames], u)  # u . (w x r) = w . (r x u)
+        lever = points[:, None, :] - poses.anchor[frames]  # (E, nj, 3)
+        ax = poses.axis[frames]
+        col = np.einsum("ejk,ejk->ej", ax, np.cross(lever, u[:, None, :]))  # u . (a x l) = a . (l x u)
+        if self._any_slide:
+            slide = self.is_slide_joint
+            col[:, slide] = np.einsum("ejk,ek->ej", ax[:, slide], u)
+        jac[:, 6:] = col * self.ancestor[nodes]
         return jac
 
     def rotation_jacobian(self, poses: Poses, nodes: np.ndarray) -> np.ndarray:
@@ -275,14 +297,14 @@ class KinematicTree:
         jac[:, :, :, 6:] = np.swapaxes(col, -1, -2)
         return jac
 
-    @property
+    @functools.cached_property
     def is_slide_joint(self) -> np.ndarray:
         """(nj,) True for slide joints."""
         out = np.zeros(self.nj, dtype=bool)
         out[self.node_joint[self.is_slide]] = True
         return out
 
-    @property
+    @functools.cached_property
     def is_hinge_joint(self) -> np.ndarray:
         """(nj,) True for hinge joints."""
         return ~self.is_slide_joint

@@ -60,7 +60,8 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float, float]] = {
 """Weights used when a keypoint entry leaves them out (unlisted joints: 0.5, 1.0, 0.0)."""
 
 _KEYPOINT_FIELDS = {"body", "site", "offset", "position_weight", "segment_weight", "orientation_weight"}
-_TOP_FIELDS = {"format", "description", "robot", "scale", "keypoints", "posture_weights", "body_joints", "solver"}
+_TOP_FIELDS = {"format", "description", "robot", "scale", "keypoints", "posture_weights", "ranges", "arm_abduction",
+               "body_joints", "solver"}
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,11 @@ class Mapping:
         keypoints: the mapped human joints in HumanML3D order.
         scale: fixed human -> robot scale, or None for automatic (leg height ratio).
         posture_weights: joint name -> weight pulling that joint toward 0 (``default`` for others).
+        ranges: joint name -> (lower, upper) rad the retargeter keeps the joint in (intersected
+            with the MJCF range): human-like ranges for joints the robot can move further
+            than a person (an elbow bending backwards, an upper arm twisted half a turn).
+        arm_abduction: rad a hanging arm keeps away from the body's side
+            (:func:`retarget.targets.abduct_arms`; 0: as the human's).
         body_joints: robot body -> human joints it follows (as written in the file).
         solver: :class:`retarget.solver.SolverConfig` fields this robot changes (e.g. ``levels``).
         source: where the mapping came from (file path or ``packaged:g1``).
@@ -103,6 +109,8 @@ class Mapping:
     keypoints: tuple[Keypoint, ...]
     scale: float | None = None
     posture_weights: dict[str, float] = field(default_factory=dict)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    arm_abduction: float = 0.0
     body_joints: dict[str, tuple[str, ...]] = field(default_factory=dict)
     solver: dict = field(default_factory=dict)
     source: str = ""
@@ -193,6 +201,21 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
     if not isinstance(posture, dict):
         raise ControlMMError(f"{source}: 'posture_weights' must map joint names to weights")
     posture = {str(k): _number(v, f"{source}: posture weight of '{k}'") for k, v in posture.items()}
+    ranges_in = data.get("ranges", {})
+    if not isinstance(ranges_in, dict):
+        raise ControlMMError(f"{source}: 'ranges' must map joint names to [lower, upper] in radians")
+    ranges: dict[str, tuple[float, float]] = {}
+    for joint, pair in ranges_in.items():
+        if not (isinstance(pair, (list, tuple)) and len(pair) == 2):
+            raise ControlMMError(f"{source}: ranges['{joint}'] must be [lower, upper]; got {pair!r}")
+        lo = _number(pair[0], f"{source}: ranges['{joint}'] lower", minimum=-float("inf"))
+        hi = _number(pair[1], f"{source}: ranges['{joint}'] upper", minimum=-float("inf"))
+        if not lo < hi:
+            raise ControlMMError(f"{source}: ranges['{joint}'] must have lower < upper; got {pair!r}")
+        ranges[str(joint)] = (lo, hi)
+    arm_abduction = _number(data.get("arm_abduction", 0.0), f"{source}: arm_abduction")
+    if arm_abduction >= 1.5:
+        raise ControlMMError(f"{source}: arm_abduction must be below 1.5 rad; got {arm_abduction!r}")
     bj = data.get("body_joints", {})
     if not isinstance(bj, dict):
         raise ControlMMError(f"{source}: 'body_joints' must map robot body names to lists of human joints")
@@ -209,7 +232,8 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
         body_joints[str(body)] = tuple(joints)
     solver = _parse_solver(data.get("solver", {}), source)
     name = robot if not robot.endswith(".xml") else Path(robot).stem
-    return Mapping(robot=robot, keypoints=tuple(keypoints), scale=scale, posture_weights=posture,
+    return Mapping(robot=robot, keypoints=tuple(keypoints), scale=scale, posture_weights=posture, ranges=ranges,
+                   arm_abduction=arm_abduction,
                    body_joints=body_joints, solver=solver, source=source, name=name)
 
 

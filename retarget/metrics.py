@@ -7,9 +7,12 @@ sliding and smoothness (joint velocity and jerk).
 
 Foot contact: a foot touches the floor when the lowest point of its collision geoms is at
 most ``CONTACT_HEIGHT`` (5 mm) above it in two consecutive frames; a stance is a run of
-such frame pairs. Per stance: *sliding* = largest horizontal distance of the foot body from
-where the stance began (mm), *path* = horizontal path length (mm, includes sub-mm jitter);
-*skate* = mean horizontal foot displacement per contact frame (PhysDiff's skate, mm).
+such frame pairs. The feet roll (heel strike, flat, toe-off): the ankle moves while the
+geom on the floor stays put, so slip is measured at the contact: per frame pair, the
+horizontal displacement of the foot's collision geom that is down in both frames and moved
+least (as :mod:`sim.kinematic` does). Per stance: *sliding* = the largest horizontal
+distance of a down geom from where it touched down, while it stays down (mm), *path* = the foot body's horizontal path length (mm, includes the
+roll); *skate* = mean contact slide per contact frame (PhysDiff's skate, mm).
 """
 
 from __future__ import annotations
@@ -143,14 +146,24 @@ def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndar
     out["floor_penetration_max_mm"] = round(float(max(0.0, -low_all.min()) * 1000.0), 3)
     drift, path, steps = [], [], []
     for side in ("left", "right"):
-        body = robot.tree.node_body[robot.feet[side].node]
-        contact = (lowest[side][:-1] <= CONTACT_HEIGHT) & (lowest[side][1:] <= CONTACT_HEIGHT)
+        f = robot.feet[side]
+        body = robot.tree.node_body[f.node]
+        geom_low = geom_lowest_z(model, rep, f.geoms)  # (T, G)
+        down = (geom_low[:-1] <= CONTACT_HEIGHT) & (geom_low[1:] <= CONTACT_HEIGHT)
+        geom_step = np.linalg.norm(np.diff(rep.geom_xpos[:, list(f.geoms), :2], axis=0), axis=2)
+        slide = np.where(down, geom_step, np.inf).min(axis=1) * 1000.0  # (T-1,) contact slide
+        contact = np.isfinite(slide)
         xy = rep.xpos[:, body, :2]
-        step = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 1000.0
+        body_step = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 1000.0
         for s, e in _runs(contact):  # contact pairs s..e-1 cover frames s..e
-            drift.append(float(np.linalg.norm(xy[s:e + 1] - xy[s], axis=1).max() * 1000.0))
-            path.append(float(step[s:e].sum()))
-            steps.append(step[s:e])
+            worst = 0.0  # each geom, from where it touched down, while it stays down
+            for i, g in enumerate(f.geoms):
+                for a, b in _runs(down[s:e, i]):
+                    p = rep.geom_xpos[s + a:s + b + 1, g, :2]
+                    worst = max(worst, float(np.linalg.norm(p - p[0], axis=1).max()))
+            drift.append(worst * 1000.0)
+            path.append(float(body_step[s:e].sum()))
+            steps.append(slide[s:e])
     out["stances"] = len(drift)
 
     def stat(v: list[float]) -> dict:

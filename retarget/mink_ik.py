@@ -62,7 +62,7 @@ def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, to
     root_pos, root_rot, q = initial_guess(robot, targets)
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, root_rot[0].reshape(-1))
-    config.update(np.concatenate([root_pos[0], quat, np.clip(q[0], robot.tree.lower, robot.tree.upper)]))
+    config.update(np.concatenate([root_pos[0], quat, np.clip(q[0], robot.lower, robot.upper)]))
     t_len = len(targets.kp_pos)
     out_q = np.empty((t_len, model.nq))
     solves = 0
@@ -85,7 +85,7 @@ def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, to
             if np.linalg.norm(vel) < tolerance:  # the step (rad, m) became negligible
                 break
         out_q[t] = config.q
-    joints = np.clip(out_q[:, 7:], robot.tree.lower, robot.tree.upper)
+    joints = np.clip(out_q[:, 7:], robot.lower, robot.upper)
     rot = np.empty((t_len, 3, 3))
     for t in range(t_len):
         m9 = np.empty(9)

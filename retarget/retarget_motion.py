@@ -23,6 +23,7 @@ from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
+from retarget.feet import lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.resample import resample_qpos
@@ -90,15 +91,22 @@ def check_fps(fps: float) -> float:
 
 
 def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, Replay, float]:
-    """Raise the root where a foot's lowest collision point is below z = 0.
+    """Raise the root where the lowest collision point (feet, knees, hands) is below z = 0.
 
     The needed lift is max-filtered then smoothed over ~0.1 s (a smoothed max-filter never
     falls below the need), so the correction is smooth. Returns (qpos, its MuJoCo replay,
     largest lift in m).
     """
     rep = replay(robot.model, qpos)
+    m = robot.model
     geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
-    need = np.maximum(-geom_lowest_z(robot.model, rep, geoms).min(axis=1), 0.0)
+    # Every other collision geom whose bounding sphere reaches below the floor in some frame
+    # (a kneeling knee, a hand on the ground): the solver keeps them BODY_CLEARANCE above it
+    # with a stiff but finite weight, and the spline resampling may dip between frames.
+    others = [g for g in range(m.ngeom) if g not in geoms and (m.geom_contype[g] or m.geom_conaffinity[g])
+              and m.body_rootid[m.geom_bodyid[g]] == m.body_rootid[robot.tree.node_body[robot.feet["left"].node]]
+              and np.any(rep.geom_xpos[:, g, 2] - m.geom_rbound[g] < 0.0)]
+    need = np.maximum(-geom_lowest_z(m, rep, list(geoms) + others).min(axis=1), 0.0)
     if not np.any(need > 0):
         return qpos, rep, 0.0
     r = max(1, int(round(0.05 * fps)))
@@ -160,16 +168,21 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
         sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
-    qpos = resample_qpos(qpos_in, src_fps, fps, rm.tree.lower, rm.tree.upper)
-    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
+    qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)
     times = np.arange(len(qpos)) / fps
+    src_times = np.arange(len(joints)) / src_fps
+    clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
+    root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
+    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps)
+    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
     method = {"batched": "whole-sequence Levenberg-Marquardt (banded)", "mink": "mink per-frame differential IK"}
     solver_info = {"method": method[solver], "iterations": sol.iterations,
                    "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
                    "solve_seconds": round(sol.seconds, 4),
-                   "floor_lift_max_mm": round(lift * 1000, 3)}
+                   "floor_lift_max_mm": round(lift * 1000, 3),
+                   "swing_lift_max_mm": round(swing_lift * 1000, 3)}
     traj = RobotTrajectory(robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:")
                                      else rm.mapping.source),
                            fps=fps, qpos=qpos, joint_names=list(rm.tree.joint_names), scale=transform.scale,

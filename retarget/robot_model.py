@@ -100,7 +100,9 @@ class RobotModel:
         joints: mapped human joint indices (K,), HumanML3D order.
         nodes: (K,) tree node of each keypoint; offsets: (K, 3) in the node frame.
         feet: {"left": FloorPoints, "right": FloorPoints} (the ankles' bodies).
-        rest_q: (nj,) rest joint angles (qpos0 clipped to the limits).
+        lower, upper: (nj,) joint ranges the retargeter uses (MJCF ranges narrowed by the
+            mapping's ``ranges``).
+        rest_q: (nj,) rest joint angles (qpos0 clipped to those ranges).
         rest: Poses of the rest pose with the root at the world origin, identity rotation.
         floor_z: lowest foot point (m) of the rest pose (subtract it to stand on the floor).
         scale: the human -> robot uniform scale.
@@ -167,13 +169,44 @@ class RobotModel:
                 raise ControlMMError(f"{where}: the {side} foot body '{m.body(body).name}' (body of "
                                      f"'{side}_ankle') has no collision geometry to stand on")
             self.feet[side] = FloorPoints(node, np.concatenate(pts), np.concatenate(rad), tuple(geoms))
+        # Retargeting ranges: the MJCF's, narrowed by the mapping's human-like ranges.
+        self.lower, self.upper = tree.lower.copy(), tree.upper.copy()
+        for name, (lo, hi) in mapping.ranges.items():
+            if name not in tree.joint_names:
+                raise ControlMMError(f"{where}: range for unknown joint '{name}'; joints: {', '.join(tree.joint_names)}")
+            j = tree.joint_names.index(name)
+            self.lower[j], self.upper[j] = max(self.lower[j], lo), min(self.upper[j], hi)
+            if self.lower[j] >= self.upper[j]:
+                raise ControlMMError(f"{where}: range {[lo, hi]} of '{name}' does not overlap its MJCF range "
+                                     f"[{tree.lower[j]:.4g}, {tree.upper[j]:.4g}]")
         # Rest pose: qpos0, root at the origin; the floor is its lowest foot point.
-        self.rest_q = np.clip(tree.qpos0, tree.lower, tree.upper)
+        self.rest_q = np.clip(tree.qpos0, self.lower, self.upper)
         self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
         self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
         self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)
         self.scale = mapping.scale if mapping.scale is not None else self._auto_scale()
         self.body_joints = self._body_joints()
+
+    @functools.cached_property
+    def capsules(self):
+        """Enclosing capsules of the collision geoms (:func:`retarget.selfcollision.robot_capsules`)."""
+        from retarget.selfcollision import robot_capsules
+
+        return robot_capsules(self)
+
+    @functools.cached_property
+    def body_floor(self):
+        """Support points of every body but the feet (:class:`retarget.bodyfloor.BodyFloor`)."""
+        from retarget.bodyfloor import build_body_floor
+
+        return build_body_floor(self)
+
+    @functools.cached_property
+    def self_clearance(self):
+        """Arm self-clearance capsules and pairs (:func:`retarget.selfcollision.build_self_clearance`)."""
+        from retarget.selfcollision import build_self_clearance
+
+        return build_self_clearance(self)
 
     # -- lookups -------------------------------------------------------------------------
     def keypoint_index(self, joint: str) -> int:

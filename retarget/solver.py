@@ -34,9 +34,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
+from scipy.ndimage import gaussian_filter1d
 
+from retarget.bodyfloor import lowest_points
 from retarget.kinematics import Poses, so3_exp, so3_log
 from retarget.robot_model import RobotModel
+from retarget.selfcollision import ClosePairs, clearance_normal_equations, close_pairs
 from retarget.targets import Targets
 
 L_ROT = 0.2
@@ -45,6 +48,16 @@ L_POSTURE = 0.1
 """Metres per radian of posture error."""
 W_FLOOR = 100.0
 """Weight of the floor/clearance term (per foot collision point)."""
+BODY_CLEARANCE = 0.002
+"""Metres the collision geometry of the non-foot bodies keeps above the floor (knees, hands)."""
+W_BODY_FLOOR = 100.0
+"""Weight of that term: stiff, a knee must not sink while the locked feet pull the legs."""
+W_SELF = 100.0
+"""Weight of the arms' self-clearance term (per capsule pair, :mod:`retarget.selfcollision`)."""
+CONSTRAINT_TOLERANCE = 0.002
+"""Capsule overlap or depth below the floor (m) that earns frames a local refinement."""
+REF_SMOOTH_SECONDS = 0.05
+"""Gaussian sigma (s) of the human pelvis reference of the root's temporal terms."""
 PIN = 1e9
 """Diagonal weight that pins a coordinate to a prescribed step (active joint limits)."""
 CROSS_TOLERANCE = 0.01
@@ -67,12 +80,23 @@ class SolverConfig:
     """Initial Levenberg-Marquardt damping (per frame)."""
     w_vel_root: float = 0.5
     w_vel_joint: float = 0.1
-    w_acc_root: float = 2.0
-    w_acc_joint: float = 1.0
+    w_acc_root: float = 100.0
+    w_acc_joint: float = 5.0
     exact_acceleration: bool = False
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
     levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
     """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with max_iterations."""
+    extra_iterations: int = 6
+    """Iterations of the local refinement of frames where the self-clearance or body-floor
+    terms are still violated by more than CONSTRAINT_TOLERANCE (stiff terms converge more
+    slowly); only those frames are solved again."""
+    body_floor: bool = True
+    """Keep every body's collision geometry above the floor, not only the feet (kneeling)."""
+    body_floor_weight: float = 10.0 * W_BODY_FLOOR
+    """Weight of that term at the last (full-rate) level; coarser levels use W_BODY_FLOOR (a
+    stiff floor from the start would lift a straight-legged initial guess off the ground)."""
+    self_clearance: bool = True
+    """Keep the arms clear of the trunk, the legs and each other (:mod:`retarget.selfcollision`)."""
     pin_iterations: int = 1
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
 
@@ -111,6 +135,9 @@ class _State:
     seg_res: np.ndarray
     ori_res: np.ndarray
     floor_res: np.ndarray
+    body_low: np.ndarray | None
+    body_low_end: np.ndarray | None
+    self_close: ClosePairs | None
     x: np.ndarray
     cost: float
     frame_cost: np.ndarray
@@ -141,12 +168,23 @@ class _Problem:
         self.sqrt_ori = (np.sqrt(targets.ori_weight)[..., None] * L_ROT
                          * np.sqrt(targets.ori_axis_weight)[None])  # (T, O, 3)
         self.posture = robot.posture_weights * L_POSTURE ** 2
+        self.self_clearance = robot.self_clearance if config.self_clearance else None
+        self.body_floor = robot.body_floor if config.body_floor else None
+        self.w_body_floor = config.body_floor_weight
         # Temporal weights per velocity coordinate, rescaled to the frame rate.
         r = targets.fps / 20.0
         c = config
         self.w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
         self.w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
         self._banded_indices()
+        # The temporal terms act on the root position's deviation from the human pelvis (the
+        # initial guess, smoothed over REF_SMOOTH_SECONDS against joint noise): the robot's
+        # root may accelerate as the human's does (a jump's arc), but not on its own.
+        ref_pos = initial_guess(robot, targets)[0]
+        if len(ref_pos) > 2:
+            ref_pos = gaussian_filter1d(ref_pos, REF_SMOOTH_SECONDS * targets.fps, axis=0, mode="nearest")
+        self.ref_x = np.zeros((len(ref_pos), self.n))
+        self.ref_x[:, :3] = ref_pos
         # Segment s pulls keypoints child(+) and parent(-): incidence (K, S) and sum_s w_s d d^T.
         inc = np.zeros((self.k_len, len(targets.seg_child)))
         inc[targets.seg_child, np.arange(inc.shape[1])] = 1.0
@@ -168,15 +206,41 @@ class _Problem:
         low = foot[..., 2] - self.foot_radius - self.foot_clearance
         active = low < 0
         floor_res = np.sqrt(W_FLOOR) * np.where(active, low, 0.0)
-        frame_cost = (np.sum(tg.kp_weight * np.sum(kp_res ** 2, axis=-1), axis=1)
+        body_low = body_end = close = None
+        extra_cost = np.zeros(len(q))
+        if self.body_floor is not None:
+            body_z, body_end = lowest_points(poses, self.body_floor, BODY_CLEARANCE)
+            body_low = np.minimum(body_z - BODY_CLEARANCE, 0.0)
+            extra_cost += self.w_body_floor * np.sum(body_low ** 2, axis=1)
+        if self.self_clearance is not None:
+            close = close_pairs(poses, self.self_clearance)
+            np.add.at(extra_cost, close.frame, W_SELF * (close.dist - self.self_clearance.margin[close.pair]) ** 2)
+        frame_cost = extra_cost + (np.sum(tg.kp_weight * np.sum(kp_res ** 2, axis=-1), axis=1)
                       + np.sum(tg.seg_weight * np.sum(seg_res ** 2, axis=-1), axis=1)
                       + np.sum(ori_res ** 2, axis=(1, 2)) + np.sum(floor_res ** 2, axis=1)
                       + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1))
         x = self.temporal_values(root_pos, root_rot, q)
         d1, d2 = np.diff(x, axis=0), np.diff(x, n=2, axis=0)
         cost = float(frame_cost.sum() + np.sum(self.w_vel * d1 * d1) + np.sum(self.w_acc * d2 * d2))
-        return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, x, cost,
-                      frame_cost)
+        return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, body_low,
+                      body_end, close, x, cost, frame_cost)
+
+    def frame_violation(self, st: "_State") -> np.ndarray:
+        """(T,) how deep (m) the enclosing capsules overlap each other, a body's support points
+        reach below the floor or a swing foot comes below half its clearance, per frame (the
+        margins are only the terms' soft zone: the check sees an overlap of the real
+        geometry, which the capsules enclose)."""
+        worst = np.zeros(self.t_len)
+        # swing feet more than halfway down to the floor from their clearance
+        swing = self.foot_clearance > 0.005
+        if swing.any():
+            height = st.pts[:, self.k_len:, 2] - self.foot_radius
+            worst = np.maximum(worst, np.max(np.where(swing, 0.5 * self.foot_clearance - height, 0.0), axis=1))
+        if st.body_low is not None and st.body_low.size:
+            worst = np.maximum(worst, -(st.body_low.min(axis=1) + BODY_CLEARANCE))
+        if st.self_close is not None and st.self_close.frame.size:
+            np.maximum.at(worst, st.self_close.frame, -st.self_close.dist)
+        return worst
 
     def normal_equations(self, st: "_State") -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton blocks H (T, n, n) and gradient g (T, n) of the per-frame terms.
@@ -204,13 +268,43 @@ class _Problem:
             jft = np.swapaxes(jf, 1, 2)
             h += jft @ jf
             g += (jft @ st.floor_res[..., None])[..., 0]
+        rows = []
+        if st.body_low is not None:
+            fr, b = np.nonzero(st.body_low < 0)
+            if fr.size:
+                up = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (fr.size, 3))
+                jb = tree.directional_jacobian(st.poses, fr, self.body_floor.node[b], st.body_low_end[fr, b], up)
+                root = np.sqrt(self.w_body_floor)
+                rows.append((fr, root * jb, root * st.body_low[fr, b]))
+        if st.self_close is not None and st.self_close.frame.size:
+            rows.append(clearance_normal_equations(tree, st.poses, self.self_clearance, st.self_close, W_SELF))
+        if rows:  # sparse rows: accumulate J^T J and J^T r per frame (padded, batched matmul)
+            fr = np.concatenate([r[0] for r in rows])
+            jr = np.concatenate([r[1] for r in rows])
+            res = np.concatenate([r[2] for r in rows])
+            order = np.argsort(fr, kind="stable")
+            fr, jr, res = fr[order], jr[order], res[order]
+            first = np.searchsorted(fr, fr, side="left")
+            slot = np.arange(len(fr)) - first  # rank of each row within its frame
+            pad = np.zeros((t, int(slot.max()) + 1, n))
+            pad[fr, slot] = jr
+            rpad = np.zeros((t, pad.shape[1]))
+            rpad[fr, slot] = res
+            padt = np.swapaxes(pad, 1, 2)
+            h += padt @ pad
+            g += (padt @ rpad[..., None])[..., 0]
         return h, g
 
-    def temporal_values(self, root_pos, root_rot, q) -> np.ndarray:
-        """(T, n) sequences the temporal terms act on (root rotation unwrapped as a rotation vector)."""
+    @staticmethod
+    def _unwrap(root_rot: np.ndarray) -> np.ndarray:
+        """(T, 3) root rotation unwrapped as a world-frame rotation vector (cumulative steps)."""
         steps = so3_log(root_rot[1:] @ np.swapaxes(root_rot[:-1], -1, -2))
-        phi = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
-        return np.concatenate([root_pos, phi, q], axis=1)
+        return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+
+    def temporal_values(self, root_pos, root_rot, q) -> np.ndarray:
+        """(T, n) sequences the temporal terms act on: the root's position relative to the
+        human pelvis reference, its unwrapped rotation and the joint angles."""
+        return np.concatenate([root_pos, self._unwrap(root_rot), q], axis=1) - self.ref_x
 
     def gradient_temporal(self, x: np.ndarray) -> np.ndarray:
         """Gradient (T, n) of the velocity and acceleration terms."""
@@ -296,19 +390,24 @@ def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.n
     return pos, rot, q
 
 
-def _subsample(targets: Targets, step: int) -> Targets:
+def _subsample(targets: Targets, step: int) -> tuple[Targets, np.ndarray]:
     """Every ``step``-th frame of the targets (the last frame always kept)."""
     idx = np.unique(np.r_[np.arange(0, len(targets.kp_pos), step), len(targets.kp_pos) - 1])
+    return _take(targets, idx, targets.fps / step), idx
+
+
+def _take(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
+    """The targets of frames ``idx``, labelled with frame rate ``fps``."""
     pick = lambda a: a[idx]  # noqa: E731
     return Targets(
-        fps=targets.fps / step, transform=targets.transform, human_world=pick(targets.human_world),
+        fps=fps, transform=targets.transform, human_world=pick(targets.human_world),
         kp_pos=pick(targets.kp_pos), kp_weight=pick(targets.kp_weight), seg_parent=targets.seg_parent,
         seg_child=targets.seg_child, seg_vec=pick(targets.seg_vec), seg_weight=targets.seg_weight,
         ori_kp=targets.ori_kp, ori_rot=pick(targets.ori_rot), ori_weight=pick(targets.ori_weight),
         ori_axis_weight=targets.ori_axis_weight,
         stance={k: pick(v) for k, v in targets.stance.items()}, lock={k: pick(v) for k, v in targets.lock.items()},
         clearance={k: pick(v) for k, v in targets.clearance.items()},
-    ), idx
+    )
 
 
 def _upsample(sol_pos, sol_rot, sol_q, idx, dst):
@@ -340,11 +439,15 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
         small, idx = _subsample(targets, k) if k > 1 else (targets, np.arange(n))
         if prev is not None:
             init = _upsample(*prev, idx)
-        cfg = replace(config, max_iterations=iters, damping=damping)
+        last = k == 1
+        cfg = replace(config, max_iterations=iters, damping=damping,
+                      body_floor_weight=config.body_floor_weight if last else min(W_BODY_FLOOR, config.body_floor_weight))
         sol = _solve(robot, small, cfg, init)
         total += sol.iterations
         damping = max(config.damping, float(np.median(sol.damping)))
         prev = (sol.root_pos, sol.root_rot, sol.q, idx)
+    if config.extra_iterations > 0:
+        total += _refine_violations(robot, targets, config, sol, damping)
     sol.iterations = total
     if config.pin_iterations > 0:
         from retarget.feet import pin_stance_feet
@@ -354,13 +457,49 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
     return sol
 
 
+REFINE_PAD = 3
+"""Frames added on each side of a violated span for its local refinement (2 of them pinned)."""
+
+
+def _refine_violations(robot: RobotModel, targets: Targets, config: SolverConfig, sol: Solution,
+                       damping: float) -> int:
+    """More iterations where the stiff terms are still violated, on those frames only.
+
+    Self-clearance and body-floor terms converge more slowly than the rest. Each span of
+    frames violating them by more than CONSTRAINT_TOLERANCE (padded by REFINE_PAD) is solved
+    again as its own small problem for up to ``extra_iterations`` iterations, its two outer
+    frames on each side pinned so the temporal terms join the span to the rest. Updates
+    ``sol`` in place; returns the iterations spent (the largest over spans).
+    """
+    prob = _Problem(robot, targets, config)
+    st = prob.evaluate(sol.root_pos, sol.root_rot, sol.q)
+    bad = prob.frame_violation(st) > CONSTRAINT_TOLERANCE
+    if not bad.any():
+        return 0
+    n = len(bad)
+    grow = np.convolve(bad, np.ones(2 * REFINE_PAD + 1), mode="same") > 0
+    spent = 0
+    padded = np.concatenate([[False], grow, [False]]).astype(int)
+    edges = np.flatnonzero(np.diff(padded))
+    for a, b in zip(edges[::2], edges[1::2]):
+        lo, hi = max(a - 2, 0), min(b + 2, n)
+        idx = np.arange(lo, hi)
+        pinned = (idx < a) | (idx >= b)
+        sub = _take(targets, idx, targets.fps)
+        cfg = replace(config, max_iterations=config.extra_iterations, extra_iterations=0, damping=damping)
+        out = _solve(robot, sub, cfg, (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]), pinned=pinned)
+        sol.root_pos[idx], sol.root_rot[idx], sol.q[idx] = out.root_pos, out.root_rot, out.q
+        spent = max(spent, out.iterations)
+    return spent
+
+
 def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
-           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> Solution:
+           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None, pinned: np.ndarray | None = None) -> Solution:
     start = time.perf_counter()
     prob = _Problem(robot, targets, config)
     tree = robot.tree
     root_pos, root_rot, q = init if init is not None else initial_guess(robot, targets)
-    lower, upper = tree.lower, tree.upper
+    lower, upper = robot.lower, robot.upper
     st = prob.evaluate(root_pos, root_rot, np.clip(q, lower, upper))
     history = [st.cost]
     # Levenberg-Marquardt with one damping per frame: frames are nearly independent, so
@@ -368,13 +507,16 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
     lam = np.full(prob.t_len, config.damping)
     iterations = 0
     need_linearise = True
-    for iterations in range(1, config.max_iterations + 1):
+    while iterations < config.max_iterations:
+        iterations += 1
         if need_linearise:
             h, g = prob.normal_equations(st)
             g += prob.gradient_temporal(st.x)
             g[:, 6:] += prob.posture * (st.q - robot.rest_q)
             frozen = np.zeros_like(g, dtype=bool)
             frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | ((st.q >= upper - 1e-12) & (g[:, 6:] < 0))
+            if pinned is not None:
+                frozen[pinned] = True
         try:
             ab = prob.normal_matrix(h, lam)
             step = prob.solve_step(ab, g, frozen)
@@ -406,13 +548,14 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             history.append(st.cost)
             lam = np.where(better, np.maximum(lam / 3, 1e-9), lam * 10)
             need_linearise = True
-            if done:
-                break
         else:
+            done = False
             lam *= 10
             need_linearise = False
             if lam.min() > 1e6:
                 break
+        if done:
+            break
     root_pos, root_rot, q, cost = st.root_pos, st.root_rot, st.q, st.cost
     # re-orthonormalise the root rotations
     u, _, vt = np.linalg.svd(root_rot)

@@ -42,7 +42,8 @@ def check_trajectory(
             the scene's (or the automatic) geom sets, mocap motion and feet.
 
     Returns:
-        A :class:`~sim.report.Report`; ``report.passed`` is True when nothing failed.
+        A :class:`~sim.report.Report`; ``report.passed`` is True when no failure is an error
+        (warnings are reported in ``report.warnings``).
 
     Raises:
         ControlMMError: bad qpos (width other than nq, NaN/inf), fps outside [1, 1000], a
@@ -68,8 +69,8 @@ def check_trajectory(
 
     qvel, qacc, half = timed("differences_s", lambda: velocities_and_accelerations(world.model, q, rate))
     kin = timed("kinematic_s", lambda: kinematic_check(world, q, rate, half, config))
-    dyn = timed("dynamics_s", lambda: dynamics_check(world, q, qvel, qacc, kin.support, config)) \
-        if config.dynamics else None
+    dyn = timed("dynamics_s", lambda: dynamics_check(world, q, qvel, qacc, kin.support, config, rate,
+                                                     kin.supported)) if config.dynamics else None
     trk = timed("tracking_s", lambda: tracking_check(world, q, qvel, half, rate, config)) \
         if config.tracking else None
     extra = {"timings_s": {k: round(v, 4) for k, v in timings.items()},

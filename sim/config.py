@@ -62,12 +62,26 @@ class CheckConfig:
             is closer than this to the floor or an obstacle.
         max_flight_s: longest unsupported phase that may count as a flight (jump, run).
         ballistic_tol_m: a flight must follow a ballistic centre-of-mass height within this RMS.
+        flight_edge_s: the ballistic fit leaves out this much of each end of an unsupported
+            phase (take-off and landing impulses smeared over the frames around contact).
         clearance_sense_m: obstacle distances are measured up to this far (MuJoCo ``gap``).
         dynamics: run the inverse-dynamics feasibility check.
-        max_residual_force_ratio: allowed non-physical root force, as a fraction of m g.
-        max_residual_moment_m: allowed non-physical moment about the centre of mass divided by
-            m g (an equivalent centre-of-pressure error in metres).
-        max_torque_ratio: allowed |joint torque| / torque limit.
+        max_residual_force_ratio: non-physical root force, as a fraction of m g, above which a
+            frame gets a ``residual_force`` warning.
+        max_residual_moment_m: non-physical moment about the centre of mass divided by m g
+            (an equivalent centre-of-pressure error in metres) above which a frame gets a
+            ``residual_moment`` warning.
+        max_torque_ratio: |joint torque| / torque limit above which a frame gets a
+            ``torque_limit`` warning.
+        sustained_window_s: the window (s, centred) of the sustained dynamic checks.
+        max_sustained_residual_force_ratio: the residual force averaged (as a vector, over
+            supported frames) over the window, as a fraction of m g, above which the motion
+            fails (``residual_force`` error): a hand of god the support cannot replace.
+        max_sustained_residual_moment_m: the same for the residual moment / (m g) (metres).
+        max_sustained_torque_ratio: |joint torque| / limit averaged over the window above
+            which the motion fails (``torque_limit`` error).
+        strict_dynamics: make every per-frame dynamic exceedance an error (as the sustained
+            ones), not a warning.
         friction: contact friction coefficient for the support (None: from the model's geoms).
         substeps: extra linearly interpolated poses checked between consecutive frames
             (0 = only the given frames).
@@ -88,13 +102,19 @@ class CheckConfig:
     stance_height_m: float = 0.01
     max_foot_slide_speed: float = 0.2
     support_height_m: float = 0.02
-    max_flight_s: float = 0.5
-    ballistic_tol_m: float = 0.02
+    max_flight_s: float = 0.8
+    ballistic_tol_m: float = 0.025
+    flight_edge_s: float = 0.1
     clearance_sense_m: float = 0.1
     dynamics: bool = True
     max_residual_force_ratio: float = 0.1
     max_residual_moment_m: float = 0.03
     max_torque_ratio: float = 1.0
+    sustained_window_s: float = 0.5
+    max_sustained_residual_force_ratio: float = 0.5
+    max_sustained_residual_moment_m: float = 0.1
+    max_sustained_torque_ratio: float = 1.0
+    strict_dynamics: bool = False
     friction: float | None = None
     substeps: int = 0
     tracking: bool = False

@@ -16,6 +16,13 @@ Per frame (robotics reference §4.5/§4.6):
    ``|F| / (m g)`` and a moment about the centre of mass divided by ``m g`` (metres: how far
    the centre of pressure would have to move outside the support). Joint torques are
    ``qfrc_inverse - J^T f`` at the joints, compared with the model's torque limits.
+4. Severity. A frame above a per-frame threshold is a *warning*: a kinematic motion from
+   human data (20 fps, impacts smeared over neighbouring frames, a human's centre of mass
+   that a 33 kg robot does not share) needs brief residual wrenches and torque peaks that
+   a tracking controller absorbs. Averaged over ``sustained_window_s`` (the residual as
+   an impulse over the supported frames, the torque ratio as a mean) the same quantities
+   are *errors* above their sustained thresholds: a hand of god held for half a second
+   (leaning past the toes, pushing off nothing) or a torque the motors cannot hold.
 
 Unsupported frames thus need the whole wrench (about ``m g`` when hovering), except in a
 ballistic flight where gravity alone explains the motion.
@@ -28,6 +35,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from scipy.optimize import nnls
 
 from sim.config import CheckConfig
@@ -37,6 +45,11 @@ from sim.world import CheckWorld
 
 RIDGE = 1e-3
 """Ridge weight on contact forces (in units of m g) relative to the normalised residual."""
+TORQUE_WEIGHT = 0.1
+"""Weight of the joint torques (relative to their limits) in the force distribution: among
+the contact forces that cancel the root wrench equally well, the check picks those that load
+the joints least, as a controller would (a torque at its limit costs like 10 % of the
+residual-force threshold)."""
 
 
 @dataclass
@@ -51,7 +64,12 @@ class DynamicsResult:
         support_force: (T, 3) total force the support contacts carry (world, N).
         joint_torque: (T, J) actuator torques the motion needs (N m).
         torque_limit: (J,) limits (NaN: none); torque_ratio: (T, J) |torque| / limit.
-        failures: residual_force, residual_moment and torque_limit failures.
+        sustained_force_ratio: (T,) |residual force averaged over the window| / (m g), the
+            unsupported frames counting zero (floating is the kinematic check's).
+        sustained_moment_m: (T,) the same for the residual moment / (m g).
+        sustained_torque_ratio: (T, J) |torque| / limit averaged over the window.
+        failures: residual_force, residual_moment and torque_limit failures (warnings per
+            frame, errors when sustained).
     """
 
     residual_force: np.ndarray
@@ -62,6 +80,9 @@ class DynamicsResult:
     joint_torque: np.ndarray
     torque_limit: np.ndarray
     torque_ratio: np.ndarray
+    sustained_force_ratio: np.ndarray
+    sustained_moment_m: np.ndarray
+    sustained_torque_ratio: np.ndarray
     failures: list[Failure] = field(default_factory=list)
 
 
@@ -88,8 +109,17 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+def window_mean(values: np.ndarray, frames: int) -> np.ndarray:
+    """Centred moving average over ``frames`` (odd), axis 0; nothing is assumed beyond the ends
+    (zeros: a clip is not extrapolated)."""
+    if frames <= 1 or len(values) < 2:
+        return np.asarray(values, dtype=np.float64).copy()
+    return uniform_filter1d(np.asarray(values, dtype=np.float64), size=frames, axis=0, mode="constant")
+
+
 def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray,
-                   support: SupportContacts, config: CheckConfig) -> DynamicsResult:
+                   support: SupportContacts, config: CheckConfig, fps: float = 50.0,
+                   supported: np.ndarray | None = None) -> DynamicsResult:
     """Inverse dynamics of a trajectory against what its support can supply.
 
     Args:
@@ -97,7 +127,10 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
         qpos, qvel, qacc: (T, nq), (T, nv), (T, nv) from :mod:`sim.trajectory`.
         support: load-carrying contacts per frame (from :func:`sim.kinematic.kinematic_check`).
         config: thresholds (``max_residual_force_ratio``, ``max_residual_moment_m``,
-            ``max_torque_ratio``).
+            ``max_torque_ratio`` and their sustained counterparts).
+        fps: frame rate (for the sustained window).
+        supported: (T,) frames with a support (default: every frame); the sustained residual
+            counts only those.
     """
     m = world.derived(("inverse",), lambda: inverse_model(world))
     d = mujoco.MjData(m)
@@ -110,6 +143,9 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
     J = world.joints
     w_force = 1.0 / (mg * max(config.max_residual_force_ratio, 1e-6))
     w_moment = 1.0 / (mg * max(config.max_residual_moment_m, 1e-6))
+    limited = np.isfinite(J.torque_limit) & (J.torque_limit > 0)
+    tau_dofs = J.dof_adr[limited]
+    w_tau = TORQUE_WEIGHT / J.torque_limit[limited]
     weights = np.array([w_force] * 3 + [w_moment] * 3)
 
     res_force = np.zeros((T, 3))
@@ -145,8 +181,10 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
                 cols[:, 4 * i:4 * i + 4] = jacp.T @ edges[i].T
             a = weights[:, None] * (to_com @ cols[root_dofs]) * mg
             b = weights * (to_com @ need[root_dofs])
-            lhs = np.vstack([a, sqrt_ridge * np.eye(a.shape[1])])
-            rhs = np.concatenate([b, np.zeros(a.shape[1])])
+            a_tau = w_tau[:, None] * cols[tau_dofs] * mg
+            b_tau = w_tau * need[tau_dofs]
+            lhs = np.vstack([a, a_tau, sqrt_ridge * np.eye(a.shape[1])])
+            rhs = np.concatenate([b, b_tau, np.zeros(a.shape[1])])
             lam, _ = nnls(lhs, rhs, maxiter=50 * a.shape[1])
             forces = lam * mg
             generalized = cols @ forces
@@ -161,10 +199,22 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.abs(torque) / J.torque_limit
     ratio = np.where(np.isfinite(ratio), ratio, 0.0)
-    failures = from_mask("residual_force", force_ratio > config.max_residual_force_ratio, force_ratio)
-    failures += from_mask("residual_moment", moment_m > config.max_residual_moment_m, moment_m)
+    # Sustained: impulses over the window (supported frames only) and mean torque ratios.
+    on = np.ones(T, dtype=bool) if supported is None else np.asarray(supported, dtype=bool)
+    width = max(1, int(round(config.sustained_window_s * fps)) // 2 * 2 + 1)
+    sus_force = np.linalg.norm(window_mean(res_force * on[:, None], width), axis=1) / mg
+    sus_moment = np.linalg.norm(window_mean(res_moment * on[:, None], width), axis=1) / mg
+    sus_torque = window_mean(ratio, width) if ratio.size else ratio
+    per_frame = "error" if config.strict_dynamics else "warning"
+    failures = from_mask("residual_force", sus_force > config.max_sustained_residual_force_ratio, sus_force)
+    failures += from_mask("residual_moment", sus_moment > config.max_sustained_residual_moment_m, sus_moment)
+    failures += from_mask("residual_force", force_ratio > config.max_residual_force_ratio, force_ratio,
+                          severity=per_frame)
+    failures += from_mask("residual_moment", moment_m > config.max_residual_moment_m, moment_m, severity=per_frame)
     for j, name in enumerate(J.names):
+        failures += from_mask("torque_limit", sus_torque[:, j] > config.max_sustained_torque_ratio,
+                              sus_torque[:, j], robot_body=J.bodies[j], joint=name)
         failures += from_mask("torque_limit", ratio[:, j] > config.max_torque_ratio, ratio[:, j],
-                              robot_body=J.bodies[j], joint=name)
+                              robot_body=J.bodies[j], joint=name, severity=per_frame)
     return DynamicsResult(res_force, res_moment, force_ratio, moment_m, sup_force, torque, J.torque_limit.copy(),
-                          ratio, failures)
+                          ratio, sus_force, sus_moment, sus_torque, failures)

@@ -19,6 +19,10 @@ tracking_fall          metres the root dropped below its reference height (PD re
 =====================  =======================================================================
 
 Frame ranges are inclusive: ``frame_start <= t <= frame_end``.
+
+Every failure has a ``severity``: ``"error"`` fails the report (``passed`` is False),
+``"warning"`` is reported but does not. The kinematic kinds are errors; the dynamic kinds
+are warnings frame by frame and errors when sustained (see ``docs/simulation-checks.md``).
 """
 
 from __future__ import annotations
@@ -28,6 +32,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
+SEVERITIES = ("error", "warning")
 
 KINDS = ("obstacle_penetration", "floor_penetration", "self_collision", "joint_limit", "joint_velocity",
          "foot_sliding", "floating", "residual_force", "residual_moment", "torque_limit", "tracking_fall")
@@ -45,6 +51,7 @@ class Failure:
             ``self_collision`` the other robot body; None otherwise.
         depth: the worst value over the range (unit per kind, see the module docstring).
         joint: the joint for joint_limit / joint_velocity / torque_limit failures.
+        severity: ``"error"`` (fails the report) or ``"warning"`` (reported only).
     """
 
     kind: str
@@ -54,6 +61,11 @@ class Failure:
     obstacle_geom: str | None
     depth: float
     joint: str | None = None
+    severity: str = "error"
+
+    @property
+    def is_error(self) -> bool:
+        return self.severity == "error"
 
     @property
     def num_frames(self) -> int:
@@ -74,7 +86,8 @@ class Failure:
         span = f"frame {self.frame_start}" if self.num_frames == 1 else f"frames {self.frame_start}-{self.frame_end}"
         if fps:
             span += f" ({self.frame_start / fps:.2f}-{self.frame_end / fps:.2f} s)"
-        return f"{self.kind} {who} {span}: {self.depth:.4g}"
+        tag = "" if self.is_error else " (warning)"
+        return f"{self.kind}{tag} {who} {span}: {self.depth:.4g}"
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -89,13 +102,14 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def from_mask(kind: str, mask: np.ndarray, values: np.ndarray, *, robot_body: str | None = None,
-              obstacle_geom: str | None = None, joint: str | None = None, total: bool = False) -> list[Failure]:
+              obstacle_geom: str | None = None, joint: str | None = None, total: bool = False,
+              severity: str = "error") -> list[Failure]:
     """One failure per run of ``mask``; depth = max of ``values`` over the run (sum if ``total``)."""
     out = []
     for a, b in runs(mask):
         seg = np.asarray(values[a:b + 1], dtype=np.float64)
         depth = float(np.nansum(seg) if total else np.nanmax(seg))
-        out.append(Failure(kind, a, b, robot_body, obstacle_geom, depth, joint))
+        out.append(Failure(kind, a, b, robot_body, obstacle_geom, depth, joint, severity))
     return out
 
 
@@ -135,7 +149,7 @@ def from_events(kind: str, frames: np.ndarray, keys: np.ndarray, depths: np.ndar
 
 
 def sort_failures(failures: list[Failure]) -> list[Failure]:
-    """Order by kind (as in :data:`KINDS`), then start frame, then body."""
+    """Order errors before warnings, then by kind (as in :data:`KINDS`), start frame, body."""
     order = {k: i for i, k in enumerate(KINDS)}
-    return sorted(failures, key=lambda f: (order.get(f.kind, len(order)), f.frame_start,
+    return sorted(failures, key=lambda f: (not f.is_error, order.get(f.kind, len(order)), f.frame_start,
                                            f.robot_body or "", f.obstacle_geom or "", f.joint or ""))

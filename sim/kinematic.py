@@ -274,9 +274,14 @@ def _support_measures(world: CheckWorld, rep: Replay, support_dist: np.ndarray, 
     flight = np.zeros(T, dtype=bool)
     floating = np.zeros(T, dtype=bool)
     g = float(np.linalg.norm(m.opt.gravity))
+    edge = int(round(config.flight_edge_s * fps))
     for a, b in runs(~supported):
         span = slice(a, b + 1)
-        if (b - a + 1) / fps <= config.max_flight_s and _ballistic(com[span, 2], fps, g, config.ballistic_tol_m):
+        # The take-off and landing impulses of a kinematic motion are smeared over the frames
+        # around the contact (20 fps source, splines): the centre of mass may still rise just
+        # after the feet left the floor. The ballistic fit skips flight_edge_s at each end.
+        middle = slice(a + edge, b + 1 - edge) if b + 1 - a > 2 * edge + 2 else span
+        if (b - a + 1) / fps <= config.max_flight_s and _ballistic(com[middle, 2], fps, g, config.ballistic_tol_m):
             flight[span] = True
         else:
             floating[span] = True

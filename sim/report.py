@@ -7,14 +7,17 @@
      "self_collision_frames", "joint_limit_violations", "max_joint_limit_violation_rad",
      "joint_velocity_violations", "max_joint_velocity_ratio", "foot_sliding_m",
      "max_foot_slide_speed_mps", "floating_frames", "flight_frames",
-     "residual_force": {"mean_ratio", "p95_ratio", "max_ratio", "max_N"},
-     "residual_moment": {"mean_m", "p95_m", "max_m"}, "max_torque_ratio",
-     "tracking": {...} | null, "per_body": {body: {...}},
-     "failures": [{"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint"}],
+     "error_count", "warning_count", "error_kinds",
+     "residual_force": {"mean_ratio", "p95_ratio", "max_ratio", "max_N", "sustained_max_ratio"},
+     "residual_moment": {"mean_m", "p95_m", "max_m", "sustained_max_m"}, "max_torque_ratio",
+     "max_sustained_torque_ratio", "tracking": {...} | null, "per_body": {body: {...}},
+     "failures": [{"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint",
+                   "severity"}],
      "frames": {name: [per-frame values]}, "feet", "joints", "config", "extra"}
 
 Per-frame arrays use metres, radians and ratios as in their names; ``null`` marks a value
 that was not measured (e.g. clearance when no obstacle was within the sensing distance).
+``passed`` is true when no failure has ``severity == "error"``; warnings are reported too.
 """
 
 from __future__ import annotations
@@ -67,7 +70,8 @@ def _stats(values: np.ndarray) -> tuple[float, float, float]:
 class Report:
     """Outcome of :func:`sim.check_trajectory`.
 
-    ``passed`` is True when there is no failure. Statistics use metres, radians and ratios
+    ``passed`` is True when no failure is an error (warnings are listed in ``failures`` with
+    ``severity == "warning"``). Statistics use metres, radians and ratios
     as their names say; ``frames`` maps names to per-frame numpy arrays (see the module
     docstring); ``kinematic``/``dynamics``/``tracking`` keep the full in-memory results
     (None after :func:`load_report`). ``extra`` is free-form (e.g. feedback rounds).
@@ -116,12 +120,23 @@ class Report:
     def duration_s(self) -> float:
         return self.num_frames / self.fps
 
-    def failures_of(self, kind: str) -> list[Failure]:
-        return [f for f in self.failures if f.kind == kind]
+    def failures_of(self, kind: str, severity: str | None = None) -> list[Failure]:
+        """Failures of one kind (and one severity when given)."""
+        return [f for f in self.failures if f.kind == kind and (severity is None or f.severity == severity)]
+
+    @property
+    def errors(self) -> list[Failure]:
+        """The failures that make the report fail."""
+        return [f for f in self.failures if f.is_error]
+
+    @property
+    def warnings(self) -> list[Failure]:
+        """Failures reported as warnings only (brief dynamic exceedances by default)."""
+        return [f for f in self.failures if not f.is_error]
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        stats = {k: (v if isinstance(v, dict) or v is None else _num(v)) for k, v in self.stats.items()}
+        stats = {k: (v if isinstance(v, (dict, list)) or v is None else _num(v)) for k, v in self.stats.items()}
         for key in ("residual_force", "residual_moment", "tracking"):
             if isinstance(stats.get(key), dict):
                 stats[key] = {k: _num(v) for k, v in stats[key].items()}
@@ -152,8 +167,9 @@ class Report:
         """A few human-readable lines: verdict, the main figures, the first failures."""
         s, c = self.stats, self.config
         verdict = "PASSED" if self.passed else "FAILED"
+        n_err, n_warn = len(self.errors), len(self.warnings)
         lines = [f"{verdict}: {self.num_frames} frames at {self.fps:g} fps ({self.duration_s:.2f} s), "
-                 f"{len(self.failures)} failure{'s' if len(self.failures) != 1 else ''}"]
+                 f"{n_err} error{'s' if n_err != 1 else ''}, {n_warn} warning{'s' if n_warn != 1 else ''}"]
         clearance = s.get("min_clearance_m")
         clear_txt = f", min clearance {clearance * 1000:.1f} mm" if clearance is not None else ""
         lines.append(
@@ -169,14 +185,17 @@ class Report:
         if rf is not None and rm is not None:
             lines.append(
                 f"  dynamics: residual force mean {rf['mean_ratio'] * 100:.1f}% / max "
-                f"{rf['max_ratio'] * 100:.1f}% of m g "
-                f"(tol {c.max_residual_force_ratio * 100:.0f}%), residual moment max {rm['max_m'] * 1000:.0f} mm "
-                f"(tol {c.max_residual_moment_m * 1000:.0f}), torque peak {s['max_torque_ratio'] * 100:.0f}% of limit")
+                f"{rf['max_ratio'] * 100:.1f}% of m g (warn {c.max_residual_force_ratio * 100:.0f}%), sustained "
+                f"{rf['sustained_max_ratio'] * 100:.1f}% (fail {c.max_sustained_residual_force_ratio * 100:.0f}%); "
+                f"residual moment max {rm['max_m'] * 1000:.0f} mm (warn {c.max_residual_moment_m * 1000:.0f}), "
+                f"sustained {rm['sustained_max_m'] * 1000:.0f} mm (fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
+                f"torque peak {s['max_torque_ratio'] * 100:.0f}% of limit, sustained "
+                f"{s['max_sustained_torque_ratio'] * 100:.0f}% (fail {c.max_sustained_torque_ratio * 100:.0f}%)")
         tr = s.get("tracking")
         if tr:
             state = f"fell at {tr['time_up_s']:.2f} s" if tr["fell"] else "stayed up"
             lines.append(f"  PD tracking: {state}, joint error mean {tr['mean_joint_error_rad']:.3f} rad")
-        for f in self.failures[:max_failures]:
+        for f in self.failures[:max_failures]:  # errors first
             lines.append(f"  - {f.describe(self.fps)}")
         if len(self.failures) > max_failures:
             lines.append(f"  ... and {len(self.failures) - max_failures} more (see report.json)")
@@ -194,6 +213,7 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
     for part in (dyn, trk):
         failures += part.failures if part is not None else []
     failures = sort_failures(failures)
+    errors = [f for f in failures if f.is_error]
     tol = config
     violated = kin.joint_limit_violation > tol.joint_limit_tol_rad
     stance_slide = np.where(kin.foot_stance, kin.foot_slide, 0.0)
@@ -212,9 +232,13 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         "max_foot_slide_speed_mps": float(stance_slide.max(initial=0.0) * fps),
         "floating_frames": int(kin.floating.sum()),
         "flight_frames": int(kin.flight.sum()),
+        "error_count": len(errors),
+        "warning_count": len(failures) - len(errors),
+        "error_kinds": sorted({f.kind for f in errors}),
         "residual_force": None,
         "residual_moment": None,
         "max_torque_ratio": None,
+        "max_sustained_torque_ratio": None,
         "tracking": None,
     }
     frames: dict[str, np.ndarray] = {
@@ -239,13 +263,20 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
     if dyn is not None:
         mean, p95, peak = _stats(dyn.residual_force_ratio)
         stats["residual_force"] = {"mean_ratio": mean, "p95_ratio": p95, "max_ratio": peak,
-                                   "max_N": peak * world.mass * float(np.linalg.norm(world.model.opt.gravity))}
+                                   "max_N": peak * world.mass * float(np.linalg.norm(world.model.opt.gravity)),
+                                   "sustained_max_ratio": float(dyn.sustained_force_ratio.max(initial=0.0))}
         mean, p95, peak = _stats(dyn.residual_moment_m)
-        stats["residual_moment"] = {"mean_m": mean, "p95_m": p95, "max_m": peak}
+        stats["residual_moment"] = {"mean_m": mean, "p95_m": p95, "max_m": peak,
+                                    "sustained_max_m": float(dyn.sustained_moment_m.max(initial=0.0))}
         stats["max_torque_ratio"] = float(dyn.torque_ratio.max(initial=0.0))
+        stats["max_sustained_torque_ratio"] = float(dyn.sustained_torque_ratio.max(initial=0.0))
         frames["residual_force_ratio"] = dyn.residual_force_ratio
         frames["residual_moment_m"] = dyn.residual_moment_m
         frames["max_torque_ratio"] = dyn.torque_ratio.max(axis=1) if dyn.torque_ratio.size else np.zeros(T)
+        frames["sustained_residual_force_ratio"] = dyn.sustained_force_ratio
+        frames["sustained_residual_moment_m"] = dyn.sustained_moment_m
+        frames["max_sustained_torque_ratio"] = (dyn.sustained_torque_ratio.max(axis=1) if dyn.sustained_torque_ratio.size
+                                                else np.zeros(T))
     if trk is not None:
         stats["tracking"] = {"fell": trk.fell, "fall_frame": trk.fall_frame, "time_up_s": trk.time_up_s,
                              "mean_joint_error_rad": float(trk.joint_error.mean()),
@@ -261,7 +292,7 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         if any(v > 0 for v in values.values()):
             per_body[world.body_name(b)] = {k: _num(v) for k, v in values.items()}
     stats["per_body"] = per_body
-    return Report(passed=not failures, num_frames=T, fps=fps, failures=failures, stats=stats, frames=frames,
+    return Report(passed=not errors, num_frames=T, fps=fps, failures=failures, stats=stats, frames=frames,
                   feet=feet, joints=list(world.joints.names), config=config, extra=dict(extra or {}),
                   kinematic=kin, dynamics=dyn, tracking=trk)
 

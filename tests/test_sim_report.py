@@ -34,13 +34,16 @@ def test_report_json_fields(failing_report, tmp_path):
                 "joint_limit_violations", "foot_sliding_m", "residual_force", "failures", "frames"):
         assert key in data
     assert data["passed"] is False and data["format"] == "controlmm.sim.report/1"
-    assert set(data["residual_force"]) == {"mean_ratio", "p95_ratio", "max_ratio", "max_N"}
+    assert set(data["residual_force"]) == {"mean_ratio", "p95_ratio", "max_ratio", "max_N", "sustained_max_ratio"}
+    assert data["error_count"] >= 2 and set(data["error_kinds"]) >= {"floor_penetration", "joint_limit"}
     assert data["floor_penetration_m"] == pytest.approx(0.03186, abs=3e-4)
     assert data["joint_limit_violations"] > 0
     kinds = {f["kind"] for f in data["failures"]}
     assert {"floor_penetration", "joint_limit"} <= kinds
     for f in data["failures"]:
-        assert set(f) == {"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint"}
+        assert set(f) == {"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint",
+                          "severity"}
+        assert f["severity"] in ("error", "warning")
         assert 0 <= f["frame_start"] <= f["frame_end"] < r.num_frames
     frames = data["frames"]
     assert all(len(v) == r.num_frames for v in frames.values())
@@ -54,8 +57,8 @@ def test_report_json_fields(failing_report, tmp_path):
     back = load_report(path)
     assert back.passed is False and len(back.failures) == len(r.failures)
     for a, b in zip(back.failures, r.failures):
-        assert (a.kind, a.frame_start, a.frame_end, a.robot_body, a.obstacle_geom, a.joint) == (
-            b.kind, b.frame_start, b.frame_end, b.robot_body, b.obstacle_geom, b.joint)
+        assert (a.kind, a.frame_start, a.frame_end, a.robot_body, a.obstacle_geom, a.joint, a.severity) == (
+            b.kind, b.frame_start, b.frame_end, b.robot_body, b.obstacle_geom, b.joint, b.severity)
         assert a.depth == pytest.approx(b.depth, abs=1e-6)
     assert back.floor_penetration_m == pytest.approx(r.floor_penetration_m, abs=1e-6)
     np.testing.assert_allclose(back.frames["floor_penetration_m"], r.frames["floor_penetration_m"], atol=1e-6)

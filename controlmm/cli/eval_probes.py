@@ -1,4 +1,4 @@
-"""``controlmm eval probes --data DIR``: text-adherence probes per motion family."""
+"""``controlmm eval probes --data DIR [--model M]``: text-adherence probes per motion family."""
 
 from __future__ import annotations
 
@@ -11,19 +11,33 @@ direction; "waves right hand": the right wrist is above the head and swings side
 two flight phases). Every caption's claims (direction, speed, hand, count, angle...) come
 from the corpus' meta/<id>.json. Prints the pass rate per family.
 
---data DIR checks the corpus' own motions (ground truth: 100% expected).
+--data DIR alone checks the corpus' own motions (ground truth: 100% expected).
+--model M generates a motion from every caption of the split (the clip's length, seeds
+SEED, SEED+1, ... per batch) and checks it: the model's text adherence on captions it has
+not seen (the test split's wording is held out from training). --samples and --families
+keep it quick.
 
 examples:
   controlmm eval probes --data corpus
-  controlmm eval probes --data corpus --split all --json probes.json"""
+  controlmm eval probes --data corpus --split all --json probes.json
+  controlmm eval probes --data corpus --model MODEL_DIR --samples 20
+  controlmm eval probes --data corpus --model MODEL_DIR --families wave_left,wave_right"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("probes", help="text-adherence probes per motion family",
+    p = sub.add_parser("probes", help="text-adherence probes per motion family (ground truth or a model)",
                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="corpus directory (HumanML3D format with meta/)")
     p.add_argument("--split", default="test", choices=("train", "val", "test", "all"),
                    help="which split's captions to check (default test)")
+    p.add_argument("--model", default=None, metavar="MODEL_DIR",
+                   help="generate from each caption with this model directory ('default': the embedded model)")
+    p.add_argument("--samples", type=int, default=None, metavar="N",
+                   help="at most N captions per family (a seeded random choice; default all)")
+    p.add_argument("--families", default=None, help="comma-separated families to check (default all)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the caption choice and the generation (default 0)")
+    p.add_argument("--batch-size", type=int, default=32, help="captions generated together (default 32)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda, for --model (default cpu)")
     p.add_argument("--json", default=None, help="also write the report (with failed checks) to this JSON file")
     p.add_argument("--show-failures", type=int, default=10, help="print up to N failed captions (default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -35,17 +49,33 @@ def run(args: argparse.Namespace) -> int:
 
     from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
+    from controlmm.eval.model_probes import generated_motions, select_cases
     from controlmm.eval.probes import evaluate, ground_truth, list_cases
 
     cases = list_cases(args.data, args.split)
+    families = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
+    if args.families is not None and not families:
+        raise ControlMMError("--families is empty; give comma-separated family names")
+    cases = select_cases(cases, families, args.samples, args.seed)
     if not cases:
         raise ControlMMError(f"the {args.split} split of '{args.data}' has no captions to check")
-    report = evaluate(cases, ground_truth(args.data), split=args.split, per_clip=True, progress=not args.quiet)
-    print(f"probes on {args.data} ({args.split} split, ground truth)")
+    if args.model is None:
+        source, what = ground_truth(args.data), "ground truth"
+        report = evaluate(cases, source, split=args.split, per_clip=True, progress=not args.quiet)
+    else:
+        from controlmm.generate import load_model
+
+        model = load_model(None if args.model == "default" else args.model, device=args.device)
+        source = generated_motions(model, cases, seed=args.seed, batch_size=args.batch_size, progress=not args.quiet)
+        what = f"model {model.directory}, seed {args.seed}"
+        report = evaluate(cases, source, split=args.split, progress=not args.quiet)
+    print(f"probes on {args.data} ({args.split} split, {what})")
     print(report.table())
     for case, result in report.failures[: max(args.show_failures, 0)]:
         print(f"FAIL {case.clip_id} {case.family}: \"{case.caption}\" -> {result.describe()}")
     if args.json:
-        write_text(args.json, json.dumps(report.to_json(), indent=1) + "\n")
+        data = report.to_json()
+        data["source"] = what
+        write_text(args.json, json.dumps(data, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0

@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "residual", "control")
+TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "residual", "control", "evaluator")
 """Modules ``controlmm.cli.train_<name>`` that register a training stage, in ``--help`` order."""
 
 HELP = """Train a model directory stage by stage (the same commands for the demo and the paper preset):
@@ -20,6 +20,7 @@ HELP = """Train a model directory stage by stage (the same commands for the demo
   controlmm train transformer --data DIR --out MODEL_DIR
   controlmm train residual    --data DIR --out MODEL_DIR
   controlmm train control     --data DIR --out MODEL_DIR [--joints all|pelvis]
+  controlmm train evaluator   --data DIR --out EVAL_DIR   (text-motion evaluator for eval quality)
 
 DIR is a HumanML3D-format directory (the real dataset or the project's corpus). The tokenizer stage
 creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages add their part
@@ -32,7 +33,7 @@ EPILOG = """presets: demo (CPU-sized, MiniLM text; about 45 min for the three st
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train the tokenizer, transformers or motion control model",
+    p = sub.add_parser("train", help="train the tokenizer, transformers, motion control model or evaluator",
                        description=HELP, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     stages = p.add_subparsers(dest="stage", metavar="STAGE", parser_class=type(p))
     for name in TRAIN_SUBCOMMANDS:

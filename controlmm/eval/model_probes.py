@@ -1,0 +1,81 @@
+"""Probes on a model: generate from each held-out caption and check the claims of its words.
+
+```python
+from controlmm.eval.probes import evaluate, list_cases
+from controlmm.eval.model_probes import generated_motions, select_cases
+from controlmm.generate import load_model
+
+cases = select_cases(list_cases("corpus", "test"), samples=10, seed=0)    # <= 10 captions per family
+source = generated_motions(load_model("MODEL_DIR"), cases, seed=0)       # case -> Motion
+report = evaluate(cases, source)
+```
+
+Each case is generated from ``case.caption`` with ``case.frames`` frames (the length of the clip the
+caption describes); cases are generated in batches, batch k with seed ``seed + k``, so a run is
+reproducible for a given (cases, seed, batch size).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from controlmm.errors import ControlMMError
+from controlmm.eval.cases import ProbeCase
+from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
+
+
+def select_cases(cases: Sequence[ProbeCase], families: Sequence[str] | None = None, samples: int | None = None,
+                 seed: int = 0) -> list[ProbeCase]:
+    """Cases of the given families (all by default), at most ``samples`` per family (a seeded random
+    choice, kept in the original order)."""
+    cases = list(cases)
+    if families:
+        from controlmm.eval.probes import PROBES
+
+        unknown = [f for f in families if f not in PROBES]
+        if unknown:
+            raise ControlMMError(f"unknown family {', '.join(unknown)}; known: {', '.join(PROBES)}")
+        present = sorted({c.family for c in cases})
+        absent = [f for f in families if f not in present]
+        if absent:
+            raise ControlMMError(f"no captions of {', '.join(absent)} in this split; present: {', '.join(present)}")
+        cases = [c for c in cases if c.family in set(families)]
+    if samples is not None:
+        if samples < 1:
+            raise ControlMMError(f"samples per family must be at least 1; got {samples}")
+        rng = np.random.default_rng(seed)
+        keep: set[int] = set()
+        for family in dict.fromkeys(c.family for c in cases):
+            idx = [i for i, c in enumerate(cases) if c.family == family]
+            keep.update(int(i) for i in (rng.choice(idx, samples, replace=False) if len(idx) > samples else idx))
+        cases = [c for i, c in enumerate(cases) if i in keep]
+    return cases
+
+
+def generated_motions(model, cases: Sequence[ProbeCase], seed: int = 0, batch_size: int = 32,
+                      progress: bool = False, **generate_kwargs) -> Callable[[ProbeCase], object]:
+    """Generate one motion per case (text ``case.caption``, ``case.frames`` frames) with a loaded
+    :class:`~controlmm.models.MotionModel`; returns the ``motion_for`` function of
+    :func:`controlmm.eval.probes.evaluate`."""
+    from tqdm import tqdm
+
+    from controlmm.generate import generate
+
+    if batch_size < 1:
+        raise ControlMMError(f"batch size must be at least 1; got {batch_size}")
+    motions: dict[tuple[str, str], object] = {}
+    starts = range(0, len(cases), batch_size)
+    for k, start in enumerate(tqdm(starts, desc="generating", unit="batch", disable=not progress)):
+        chunk = cases[start:start + batch_size]
+        frames = [min(max(c.frames, MIN_FRAMES), MAX_FRAMES) for c in chunk]
+        result = generate(model, [c.caption for c in chunk], frames=frames, seed=seed + k, batch_size=batch_size,
+                          **generate_kwargs)
+        for case, motion in zip(chunk, result.motions):
+            motions[(case.clip_id, case.caption)] = motion
+
+    def motion_for(case: ProbeCase):
+        return motions[(case.clip_id, case.caption)]
+
+    return motion_for
