@@ -51,10 +51,19 @@ from controlmm.motion.container import Motion
 from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, MIN_FRAMES, NUM_JOINTS
 from controlmm.timeline.parts import ATTACHMENT, moves_root
-from controlmm.timeline.signals import boundary_speed, build_signal, held_drift, prompt_entries, signal_terms
+from controlmm.timeline.signals import (
+    boundary_speed,
+    build_signal,
+    held_drift,
+    hinge_term,
+    prompt_entries,
+    reference_targets,
+    signal_terms,
+)
 from controlmm.timeline.spec import Timeline
 
 BASE = -1  # owner id of entries fixed by the base pass
+KEEP_SLACK = (0.0, 0.1)  # m: extra margins of the keep term in the second editing run's successive tries
 
 
 def as_timeline(timeline: Timeline | dict | str | Path) -> Timeline:
@@ -146,10 +155,22 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
                               terms=tuple(terms) + tuple(pass_terms), tolerance=config.tolerance,
                               loss_tolerance=config.loss_tolerance)
         latent, first_record = _edit(model, latent, num_frames, objective, config)
-        # the held entries, the blend and the caller's terms get the last word (the prompt target is soft)
+        # the held entries, the blend and the caller's terms get the last word (the prompt target is soft);
+        # the part may not leave where the first run took it by more than the prompt target's margins
         hard = replace(objective, terms=tuple(t for t in objective.terms if t.name != "timeline:prompt"))
-        latent, record = _edit(model, latent, num_frames, hard, settle)
-        record["steps"] += first_record["steps"]
+        keeps = [()]
+        if prompt is not None:
+            moved_to, _ = _decode(model, latent, num_frames)
+            targets = reference_targets(moved_to, prompt)
+            keeps = [(hinge_term("timeline:keep", targets, replace(prompt, margins=prompt.margins + extra),
+                                 prompt_weight),) for extra in KEEP_SLACK] + [()]
+        steps = first_record["steps"]
+        for keep in keeps:  # looser and looser, until the held entries are met
+            latent, record = _edit(model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle)
+            steps += record["steps"]
+            if record["converged"]:
+                break
+        record["steps"] = steps
         record["losses"]["timeline:prompt"] = first_record["losses"].get("timeline:prompt", 0.0)
         joints, features = _decode(model, latent, num_frames)
         drift = held_drift(joints, reference, signal)
