@@ -35,12 +35,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: random, stored in the output)")
     p.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"),
-                   help="editing preset; its codebook-editing budget per pass: fast 100 + 400 settle steps, "
-                        "medium and accurate (default) 600 + 2400")
+                   help="editing preset; its codebook-editing budget per pass: fast 100 + 200 settle steps per try, "
+                        "medium and accurate (default) 600 + 1200")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N",
                    help="codebook-editing steps per pass (default: the preset's)")
     p.add_argument("--settle-steps", type=int, default=None, metavar="N",
-                   help="steps of each pass's second editing run, held entries only (default 4x codebook steps)")
+                   help="steps of each pass's second editing run, per try (default 2x codebook steps)")
     p.add_argument("--blend-frames", type=int, default=10, metavar="N",
                    help="frames blended at each interior span edge (default 10)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")

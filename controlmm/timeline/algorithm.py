@@ -13,16 +13,19 @@
 3. The result is the last pass's motion, decoded as one piece (its features match its joints).
 
 Why editing starts from the held motion: editing a motion generated afresh from the track's prompt
-toward thousands of held entries converges slowly (on the dev model, the controlled generator left
-held joints up to 10 cm off after 600 codebook-editing steps, 5 cm after 2400, 8 cm with logits
-editing; pasting the prompt's latent into the span, 5.6 cm); from the held motion the editors keep
-the held entries within about 2 cm while the part follows its prompt. Held entries weigh 20 times a
-prompt entry's 0.3 (``prompt_weight``), and a second editing run without the prompt target (the held
-entries, the blend and the caller's terms only; up to ``settle_steps``, 4x the preset's codebook steps,
-stopping as soon as they are met) gives them the last word: on the dev model the worst held entry went
-from 2.6 cm (600 steps) to 1.9 (1200) and 1.6 cm (2400). Without an explicit ``base``, a
-first track spanning the whole timeline is made by the base pass itself (its prompt drove the whole
-body there), so it is not regenerated.
+toward thousands of held entries converged slowly with first-order steps (on the dev model, the
+controlled generator left held joints up to 10 cm off after 600 AdamW codebook-editing steps, 5 cm
+after 2400); from the held motion the editors only have to keep them. Each pass edits in two runs:
+
+* run 1: held (weight 20) + blend + prompt target (``prompt_weight`` 0.3) + the caller's terms, up to
+  the preset's ``codebook_steps``;
+* run 2, up to ``settle_steps`` (default 2x ``codebook_steps``) per try: held + blend + the caller's
+  terms + a *keep* term holding the part near where run 1 took it (the prompt target's margins, then
+  10 cm looser, then no keep term), stopping as soon as every held entry is within the tolerance. So
+  the held entries get the last word without the part falling back to the held motion's pose.
+
+Without an explicit ``base``, a first track spanning the whole timeline is made by the base pass
+itself (its prompt drove the whole body there), so it is not regenerated.
 
 The report says, per pass, how far the held entries moved (cm), whether editing converged and how many
 steps it took; per track, the fastest joint at its span edges (m/s), how far the entries it fixed are in
@@ -98,7 +101,7 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         blend_rate: how fast (m per frame) a regenerated part may leave the held motion at an edge.
         prompt_weight: weight of the soft target a track's part gets from its prompt's own motion.
         settle_steps: step budget of each pass's second editing run (held entries, blend and ``terms``
-            only; it stops once they are met). Default: 4x the preset's ``codebook_steps``.
+            only; it stops once they are met). Default: 2x the preset's ``codebook_steps``.
 
     Returns:
         (motion, report): the motion (T, 22, 3) with ``metadata["timeline"]`` (spec and report) and
@@ -116,7 +119,7 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
     if settle_steps is not None and (isinstance(settle_steps, bool) or int(settle_steps) != settle_steps
                                      or settle_steps < 0):
         raise ControlMMError(f"settle_steps must be a whole number >= 0; got {settle_steps!r}")
-    settle = replace(config, codebook_steps=4 * config.codebook_steps if settle_steps is None else int(settle_steps))
+    settle = replace(config, codebook_steps=2 * config.codebook_steps if settle_steps is None else int(settle_steps))
     num_frames = timeline.num_frames
     tracks = timeline.tracks
     first = 1 if timeline.base is None and tracks[0].frames(num_frames) == (0, num_frames) else 0
