@@ -3,13 +3,15 @@
 An :class:`Objective` is the spatial-control targets (optional) plus any other :class:`LossTerm`s
 (obstacle SDF, floor, simulation feedback...). Per sample:
 
-    loss(joints)  = control_weight * L_ctrl(joints) + sum_k w_k term_k(joints)          (B,)
+    loss(joints)  = control_weight * (L_ctrl + hinge_weight * H)(joints) + sum_k w_k term_k(joints)   (B,)
     done(joints)  = every constraint within ``tolerance`` (m)  and  every other term <= ``loss_tolerance``
 
 ``L_ctrl`` is ControlMM's inference loss (squared error over the controlled (t, j, xyz) entries divided
-by their number, per sample; reference §5.2). Stopping looks at the worst constraint, not the mean, so
-an early-stopped motion meets *every* constraint to the tolerance (``stop_on="max"``); logits editing,
-which only steers the sampling of the tokens, stops on the mean error (``stop_on="mean"``).
+by their number, per sample; reference §5.2); H (:meth:`Objective.control_hinge`) pulls on the
+constraints still over half the tolerance (codebook editing uses it, weight 10). Stopping looks at the
+worst constraint, not the mean, so an early-stopped motion meets *every* constraint to the tolerance
+(``stop_on="max"``); logits editing, which only steers the sampling of the tokens, stops on the mean
+error (``stop_on="mean"``).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ class Objective:
     loss_tolerance: float = 1e-6
     control_weight: float = 1.0
     stop_on: str = "max"  # "max": every constraint within tolerance; "mean": their mean error (logits editing)
+    hinge_weight: float = 0.0  # extra weight on the constraints still over half the tolerance (see control_hinge)
 
     def __post_init__(self) -> None:
         if (self.targets is None) != (self.mask is None):
@@ -78,13 +81,29 @@ class Objective:
         total = torch.where(mask, err, torch.zeros_like(err)).flatten(1).sum(-1)
         return total / mask.flatten(1).sum(-1).clamp(min=1)
 
+    def control_hinge(self, joints: torch.Tensor) -> torch.Tensor:
+        """(B,) mean over the controlled entries of max(0, error - tolerance / 2)^2.
+
+        Zero once every constraint is within half the tolerance; it pulls on the few constraints that
+        lag behind, which the mean squared error barely feels once most constraints are met.
+        """
+        t = joints.shape[1]
+        mask = self.mask[:, :t]
+        err = ((joints - self.targets[:, :t].to(joints)).square().sum(-1) + 1e-12).sqrt()
+        excess = torch.relu(err - 0.5 * self.tolerance).square()
+        total = torch.where(mask, excess, torch.zeros_like(excess)).flatten(1).sum(-1)
+        return total / mask.flatten(1).sum(-1).clamp(min=1)
+
     def term_values(self, joints: torch.Tensor) -> dict[str, torch.Tensor]:
         """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
         from controlmm.control.loss import control_loss  # (controlmm.control imports this package)
 
         values: dict[str, torch.Tensor] = {}
         if self.has_control:
-            values["control"] = self.control_weight * control_loss(joints, self.targets, self.mask)
+            value = control_loss(joints, self.targets, self.mask)
+            if self.hinge_weight > 0:
+                value = value + self.hinge_weight * self.control_hinge(joints)
+            values["control"] = self.control_weight * value
         for term in self.terms:
             name = term.name if term.name not in values else f"{term.name}#{len(values)}"
             values[name] = term(joints)

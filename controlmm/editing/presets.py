@@ -36,6 +36,7 @@ class EditingConfig:
     temperature: float = 1.0  # Gumbel-softmax temperature of logits editing
     tolerance: float = 0.01  # metres: stop when every constraint is this close
     logits_tolerance: float = 0.03  # metres: logits editing stops when its motion estimate is this close
+    hinge_weight: float = 10.0  # codebook editing: weight of the hinge on lagging constraints (Objective)
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
 

@@ -226,7 +226,8 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
     t_max = max(lengths)
     targets, mask = targets[:, :span].to(device), mask[:, :span].to(device)
     objective = Objective(targets=targets[:, :t_max], mask=mask[:, :t_max], terms=terms,
-                          tolerance=config.tolerance, loss_tolerance=config.loss_tolerance)
+                          tolerance=config.tolerance, loss_tolerance=config.loss_tolerance,
+                          hinge_weight=config.hinge_weight)
     cond = model.encode_text(texts)
     tokenizer, transformer = model.tokenizer, model.transformer
     codebook = tokenizer.codebooks[0]
@@ -244,7 +245,8 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         ctrl_in = control_input(targets, mask, current, control.joint_ids)
         return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
 
-    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean")
+    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean",
+                               hinge_weight=0.0)
 
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
         known = ~state.is_mask & ~state.padding_mask

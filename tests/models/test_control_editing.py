@@ -115,6 +115,12 @@ def test_editing_stops_on_a_plateau_and_on_the_mean_error(model, reference):
     _, done_max, _ = Objective(targets=targets, mask=mask, tolerance=0.01).evaluate(joints)
     _, done_mean, _ = Objective(targets=targets, mask=mask, tolerance=0.01, stop_on="mean").evaluate(joints)
     assert not bool(done_max[0]) and bool(done_mean[0])
+    # the hinge only pulls on constraints over half the tolerance: 5 cm over 10 entries -> (0.045^2) / 10
+    hinge = Objective(targets=targets, mask=mask, tolerance=0.01, hinge_weight=10.0)
+    torch.testing.assert_close(hinge.control_hinge(joints), torch.tensor([0.045 ** 2 / 10]), atol=1e-6, rtol=1e-3)
+    plain = Objective(targets=targets, mask=mask, tolerance=0.01).term_values(joints)["control"]
+    torch.testing.assert_close(hinge.term_values(joints)["control"], plain + 10.0 * 0.045 ** 2 / 10,
+                               atol=1e-6, rtol=1e-3)
 
 
 def test_codebook_editing_takes_any_loss_term(model, reference):
