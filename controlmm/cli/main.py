@@ -16,8 +16,8 @@ from controlmm import __version__
 from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
-    "plan", "generate", "train", "import_official", "corpus", "convert", "plot", "retarget", "scene", "validate",
-    "eval", "info",
+    "plan", "generate", "timeline", "train", "import_official", "corpus", "convert", "plot", "retarget", "scene",
+    "validate", "eval", "info",
 )
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 

@@ -153,7 +153,12 @@ def resolve_inputs(config: PlanConfig):
     elif config.text is None and config.timeline is None and scene.suggested_control:
         spec = ControlSpec.from_dict(scene.suggested_control)
     text = config.text if config.text is not None else scene.suggested_prompt
-    if not text and config.timeline is None:
+    if config.timeline is not None:
+        from controlmm.timeline import as_timeline
+
+        timeline = as_timeline(config.timeline)  # a bad spec fails here, before any model is loaded
+        text = "; ".join(f"{t.part} {t.start:g}-{t.end:g} s: {t.prompt}" for t in timeline.tracks)
+    if not text:
         raise ControlMMError(f"scene '{scene.name}' suggests no prompt; give one with --text")
     return scene, text, spec, transform
 
@@ -197,7 +202,10 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         terms = base_terms + extra
         timer: dict[str, float] = {}
         t0 = time.perf_counter()
-        if index == 0:
+        if config.timeline is not None:  # a timeline is regenerated whole, its passes minimising every term
+            say(f"round {index}: generating the timeline ({len(terms)} loss terms, preset {editing.name})")
+            motion, errors, record = _timeline(model, config, terms, transform, editing)
+        elif index == 0:
             say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
             motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
         else:
@@ -238,16 +246,6 @@ def _generate(model, config: PlanConfig, text: str, spec: ControlSpec | None, te
 
     Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
     """
-    if config.timeline is not None:
-        from controlmm.timeline import generate_timeline, load_timeline
-
-        timeline = load_timeline(config.timeline)
-        first, info = generate_timeline(model, timeline, seed=config.seed, preset=editing.name, terms=terms,
-                                        transform=transform)
-        latent = _latent_of(model, first)
-        edited = edit_motion(model, latent, first.num_frames, None, transform, terms, editing, first.text,
-                             metadata={**first.metadata, "timeline": info})
-        return edited.motion, [], {"timeline": info, **edited.record}, edited.latent
     from controlmm.generate import generate_controlled
 
     out = generate_controlled(model, text, control=spec, terms=terms, preset=replace(editing, codebook_steps=0),
@@ -262,12 +260,15 @@ def _generate(model, config: PlanConfig, text: str, spec: ControlSpec | None, te
     return edited.motion, edited.errors, record, edited.latent
 
 
-def _latent_of(model, motion: Motion) -> torch.Tensor:
-    """Decoder latent (1, N, code_dim) of a motion's features through the tokenizer's encoder and quantizer."""
-    with torch.no_grad():
-        x = torch.as_tensor(model.normalizer.normalize(motion.features), dtype=torch.float32, device=model.device)
-        ids = model.tokenizer.encode(x[None])
-        return model.tokenizer.ids_to_latent(ids)
+def _timeline(model, config: PlanConfig, terms: list[LossTerm], transform: HumanToWorld,
+              editing: EditingConfig) -> tuple[Motion, list[float], dict[str, Any]]:
+    """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
+    from controlmm.timeline import as_timeline, generate_timeline
+
+    motion, info = generate_timeline(model, as_timeline(config.timeline), seed=config.seed, preset=editing,
+                                     terms=terms, transform=transform)
+    summary = {k: info[k] for k in ("max_drift_cm", "max_boundary_speed_mps") if k in info}
+    return motion, [], {"timeline": summary}
 
 
 def _logger(progress: bool, log):

@@ -62,3 +62,15 @@ def test_same_seed_same_plan(strict_plan, tiny_model_dir):
     again = plan(PlanConfig(scene="table", rounds=0, preset="fast", model=str(tiny_model_dir), seed=3, check=STRICT),
                  progress=False)
     np.testing.assert_allclose(again.rounds[0].motion.joints, strict_plan.rounds[0].motion.joints, atol=1e-5)
+
+
+def test_plan_with_a_timeline(tiny_model_dir, tmp_path):
+    spec = tmp_path / "timeline.json"
+    spec.write_text(json.dumps({"seconds": 3.0, "tracks": [
+        {"part": "whole_body", "prompt": "a person walks forward", "start": 0.0, "end": 3.0},
+        {"part": "right_arm", "prompt": "a person waves the right hand", "start": 1.0, "end": 2.0}]}))
+    result = plan(PlanConfig(scene="empty", timeline=str(spec), rounds=0, preset="fast", model=str(tiny_model_dir)),
+                  progress=False)
+    assert result.spec is None and "right_arm 1-2 s" in result.text
+    assert result.motion.num_frames == 60 and "timeline" in result.final.editing
+    assert result.trajectory.qpos.shape[0] == result.report.num_frames
