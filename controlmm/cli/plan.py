@@ -53,6 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fps", type=float, default=50.0, help="robot trajectory rate in Hz (default 50)")
     p.add_argument("--safe-distance", type=float, default=0.03,
                    help="clearance to keep from obstacles in metres (default 0.03)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="torch CPU threads (default 1: the editing loops are small and sequential; on a busy "
+                        "machine more threads spin-wait and run slower)")
     p.add_argument("--no-render", action="store_true", help="skip render.mp4 (the slowest output)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines or bars")
     p.set_defaults(func=run)
@@ -64,9 +67,12 @@ def run(args: argparse.Namespace) -> int:
     _import_mujoco("egl")
     import torch
 
+    from controlmm.errors import ControlMMError
     from controlmm.pipeline import DEFAULT_SCENE, PlanConfig, plan, write_plan
 
-    torch.set_num_threads(max(1, min(torch.get_num_threads(), 2)))
+    if args.threads < 1:
+        raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
+    torch.set_num_threads(args.threads)
     config = PlanConfig(scene=args.scene or DEFAULT_SCENE, text=args.text, control=args.control, robot=args.robot,
                         seconds=args.seconds, seed=args.seed, rounds=args.rounds, preset=args.preset,
                         model=args.model, fps=args.fps, safe_distance_m=args.safe_distance,
