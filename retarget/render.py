@@ -46,9 +46,16 @@ def _frame_indices(traj, fps: float) -> np.ndarray:
     return np.clip(np.rint(np.arange(count) / fps * traj.fps).astype(int), 0, traj.num_frames - 1)
 
 
-def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) -> Iterator[np.ndarray]:
-    """RGB frames (H, W, 3) from MuJoCo's offscreen renderer, a camera following the root."""
-    model = _scene_model(traj)
+def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0, scene=None) -> Iterator[np.ndarray]:
+    """RGB frames (H, W, 3) from MuJoCo's offscreen renderer, a camera following the root.
+
+    ``scene``: a ``scenes.Scene`` with this robot attached (same qpos layout) to render the robot
+    among its obstacles, moving ones at each frame's time; default: the robot's own floor scene.
+    """
+    if scene is not None and scene.model.nq != traj.qpos.shape[1]:
+        raise ControlMMError(f"scene '{scene.name}' has nq={scene.model.nq} but the trajectory has "
+                             f"{traj.qpos.shape[1]}; load the scene with the trajectory's robot")
+    model = _scene_model(traj) if scene is None else scene.model
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
     model.vis.global_.offheight = max(model.vis.global_.offheight, height)
     data = mujoco.MjData(model)
@@ -56,6 +63,8 @@ def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) 
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
     cam.distance, cam.azimuth, cam.elevation = 3.2 * float(traj.qpos[0, 2]), 135.0, -12.0
+    if scene is not None:  # further and higher, so that the obstacles around the robot show
+        cam.distance, cam.elevation = 4.5 * float(traj.qpos[0, 2]), -22.0
     idx = _frame_indices(traj, fps)
     root = traj.qpos[idx, 0:3]
     # A smoothed look-at point so that the camera does not shake with the pelvis.
@@ -64,6 +73,8 @@ def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) 
     try:
         for i, t in enumerate(idx):
             data.qpos[:] = traj.qpos[t]
+            if scene is not None:
+                scene.set_time(data, t / traj.fps)
             mujoco.mj_forward(model, data)
             cam.lookat[:] = [look[i, 0], look[i, 1], 0.75 * traj.qpos[0, 2]]
             renderer.update_scene(data, camera=cam)
@@ -117,11 +128,12 @@ def stick_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) -
 
 
 def render_trajectory(traj, path: str | Path, width: int = 640, height: int = 480, fps: float = 25.0,
-                      backend: str = "auto", progress: bool = True) -> str:
+                      backend: str = "auto", progress: bool = True, scene=None) -> str:
     """Write a video of ``traj`` to ``path`` (.mp4 or .gif); returns the backend used.
 
     ``backend``: ``"mujoco"``, ``"stick"`` or ``"auto"`` (MuJoCo, falling back to the stick
-    figure with a one-line message on stderr when no OpenGL backend loads).
+    figure with a one-line message on stderr when no OpenGL backend loads). ``scene``: render
+    in this ``scenes.Scene`` (MuJoCo backend; the stick figure draws the robot alone).
     """
     if backend not in ("auto", "mujoco", "stick"):
         raise ControlMMError(f"unknown render backend '{backend}'; allowed: auto, mujoco, stick")
@@ -132,7 +144,7 @@ def render_trajectory(traj, path: str | Path, width: int = 640, height: int = 48
     if backend in ("auto", "mujoco"):
         gl = os.environ.get("MUJOCO_GL", "") or "default"
         try:
-            gen = mujoco_frames(traj, width, height, fps)
+            gen = mujoco_frames(traj, width, height, fps, scene=scene)
             first = next(gen)
         except Exception as exc:  # noqa: BLE001 - any GL failure means: fall back
             reason = " ".join(str(exc).split()) or type(exc).__name__

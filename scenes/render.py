@@ -125,7 +125,8 @@ def _mujoco_views(scene: Scene, width: int, height: int, t: float) -> list[np.nd
     return [perspective, top]
 
 
-def _occupancy(scene: Scene, lo: np.ndarray, hi: np.ndarray, t: float, res: int = 140) -> tuple[np.ndarray, ...]:
+def occupancy_grid(scene: Scene, lo: np.ndarray, hi: np.ndarray, t: float, res: int = 140) -> tuple[np.ndarray, ...]:
+    """Scene SDF on a (res, res, max(20, res // 3)) grid over the box lo..hi at time t: (xs, ys, zs, values)."""
     sdf = scene.sdf()
     xs, ys = np.linspace(lo[0], hi[0], res), np.linspace(lo[1], hi[1], res)
     zs = np.linspace(max(lo[2], 0.0), hi[2], max(20, res // 3))
@@ -150,7 +151,7 @@ def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> No
     import matplotlib.pyplot as plt
 
     lo, hi = scene_bounds(scene)
-    xs, ys, zs, values = _occupancy(scene, lo, hi, t)
+    xs, ys, zs, values = occupancy_grid(scene, lo, hi, t)
     robot = _robot_points(scene, t)
     fig, (top, side) = plt.subplots(1, 2, figsize=(13, 5.5))
     top.imshow((values.min(axis=2) < 0).T, origin="lower", extent=(xs[0], xs[-1], ys[0], ys[-1]), cmap="Oranges",

@@ -16,7 +16,8 @@ from controlmm import __version__
 from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
-    "generate", "train", "corpus", "convert", "plot", "retarget", "scene", "validate", "eval", "info",
+    "plan", "generate", "train", "import_official", "corpus", "convert", "plot", "retarget", "scene", "validate",
+    "eval", "info",
 )
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 

@@ -2,8 +2,13 @@
 
 Official: ``clip_model.encode_text(clip.tokenize(texts, truncate=True)).float()``, i.e. the final
 layer-normed hidden state at the (first) end-of-text token, times ``text_projection``; 77 tokens,
-truncated; **not** L2-normalised. The official code runs CLIP in float16 on GPU (``precision=
-"float16"`` reproduces that); float32 is the default here.
+truncated; **not** L2-normalised. The official code converts CLIP to float16 (``clip.model.
+convert_weights``: linear/attention weights and the text projection) while its LayerNorms compute in
+float32 and cast back; ``precision="float16"`` reproduces that (the LayerNorms stay float32, see
+:class:`_Float32LayerNorm`); float32 is the default here. Text is cleaned as the official tokenizer does
+(HTML entities unescaped twice, whitespace collapsed, lower case; the ``ftfy`` repair step is skipped:
+it changes only mis-encoded text). The pooled token is the first end-of-text token, which is where the
+official ``argmax`` over token ids lands (end-of-text has the largest id).
 
 The weights come from disk only: a folder written by ``transformers`` (``CLIPModel.save_pretrained``,
 with its tokenizer) or a model id already present in the local Hugging Face cache.
@@ -11,6 +16,8 @@ with its tokenizer) or a model id already present in the local Hugging Face cach
 
 from __future__ import annotations
 
+import html
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -27,6 +34,30 @@ def _missing(where: str) -> ControlMMError:
         f"CLIP ViT-B/32 weights not found ({where}); pass --clip-weights DIR (a folder saved by "
         f"transformers' CLIPModel.save_pretrained with its tokenizer) or put '{CLIP_MODEL_ID}' in the local "
         "Hugging Face cache; nothing is downloaded (or use --text-encoder minilm)")
+
+
+class _Float32LayerNorm(torch.nn.Module):
+    """A LayerNorm kept in float32 inside a float16 model: input cast up, output cast back (official)."""
+
+    def __init__(self, norm: torch.nn.LayerNorm) -> None:
+        super().__init__()
+        self.norm = norm.float()
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.norm(x.float()).to(x.dtype)
+
+
+def _keep_layernorms_float32(module: torch.nn.Module) -> None:
+    for name, child in list(module.named_children()):
+        if isinstance(child, torch.nn.LayerNorm):
+            setattr(module, name, _Float32LayerNorm(child))
+        else:
+            _keep_layernorms_float32(child)
+
+
+def clean_text(text: str) -> str:
+    """The official CLIP tokenizer's cleaning without ftfy: unescape HTML twice, collapse whitespace."""
+    return re.sub(r"\s+", " ", html.unescape(html.unescape(text))).strip()
 
 
 class CLIPTextEncoder:
@@ -56,16 +87,18 @@ class CLIPTextEncoder:
         self.device = torch.device(device)
         dtype = torch.float16 if precision == "float16" else torch.float32
         self.text_model = model.text_model.to(self.device, dtype).eval()
+        if dtype == torch.float16:
+            _keep_layernorms_float32(self.text_model)
         self.text_projection = model.text_projection.to(self.device, dtype).eval()
         self.dim = int(self.text_projection.out_features)
         self.eos_token_id = int(self.tokenizer.eos_token_id)
-        self.identity = f"clip:{source}:{precision}"
+        self.identity = f"clip:{source}:{precision}:cleaned"
 
     @torch.no_grad()
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
         from controlmm.text.base import check_texts
 
-        texts = check_texts(texts)
+        texts = [clean_text(t) for t in check_texts(texts)]
         enc = self.tokenizer(texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True,
                              return_tensors="pt")
         ids = enc["input_ids"].to(self.device)

@@ -1,0 +1,23 @@
+"""The plan pipeline: text + constraints + scene -> ControlMM -> retarget -> MuJoCo check -> feedback -> export.
+
+```python
+from controlmm.pipeline import PlanConfig, plan, write_plan
+
+result = plan(PlanConfig(scene="table"))        # the bundled example: a table and a hand target
+print(result.report.summary())
+write_plan(result, "out/plan")
+```
+
+- :class:`PlanConfig`: what to plan (scene, prompt, control, robot, seed, rounds, preset...);
+- :func:`plan`: the generate/retarget/check loop with simulation feedback, -> :class:`PlanResult`;
+- :func:`write_plan`: every output file, atomically;
+- :func:`feedback_terms`, :class:`FeedbackConfig`: failures -> editing loss terms.
+"""
+
+from controlmm.pipeline.config import DEFAULT_SCENE, PlanConfig
+from controlmm.pipeline.feedback import FeedbackConfig, feedback_terms
+from controlmm.pipeline.outputs import write_plan
+from controlmm.pipeline.plan import PlanResult, PlanRound, plan
+
+__all__ = ["DEFAULT_SCENE", "FeedbackConfig", "PlanConfig", "PlanResult", "PlanRound", "feedback_terms", "plan",
+           "write_plan"]

@@ -1,0 +1,81 @@
+"""Settings of one ``plan`` run (:class:`PlanConfig`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from controlmm.errors import ControlMMError
+from controlmm.pipeline.feedback import FeedbackConfig
+from sim.config import CheckConfig
+
+DEFAULT_SCENE = "table"
+"""The bundled example: a table to keep clear of and a right-hand target beyond its edge."""
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """What to plan and how.
+
+    Attributes:
+        scene: packaged scene name or an MJCF path (``controlmm scene list``).
+        text: the prompt; None uses the scene's suggested prompt.
+        control: a control-spec JSON path, a spec dict, or None. With neither ``text`` nor
+            ``control`` given, the scene's suggested control is used (the bundled example);
+            with a ``text`` of your own, no control unless you give one.
+        robot: packaged robot (``g1``, ``h1``) or a mapping ``.json``.
+        seconds: motion length (2..9.8 s); None: 6 s or long enough for the last constraint.
+        seed: reproducibility (generation sampling).
+        rounds: feedback rounds after the first generation (0 = check only).
+        preset: editing preset (``fast``, ``medium``, ``accurate``).
+        model: model directory; None = the embedded default.
+        fps: robot trajectory rate (Hz).
+        safe_distance_m: clearance the obstacle loss keeps from every obstacle (world m).
+        render: write ``render.mp4``; render_fps / render_size: its frame rate and (width, height).
+        timeline: a body-part timeline spec (JSON path) instead of ``text`` (when supported).
+        feedback: how failures become loss terms.
+        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
+    """
+
+    scene: str = DEFAULT_SCENE
+    text: str | None = None
+    control: str | dict | None = None
+    robot: str = "g1"
+    seconds: float | None = None
+    seed: int = 0
+    rounds: int = 3
+    preset: str = "accurate"
+    model: str | None = None
+    fps: float = 50.0
+    safe_distance_m: float = 0.03
+    render: bool = True
+    render_fps: float = 25.0
+    render_size: tuple[int, int] = (480, 360)
+    timeline: str | None = None
+    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    check: CheckConfig = field(default_factory=CheckConfig)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
+            raise ControlMMError(f"rounds must be a whole number from 0 to 10; got {self.rounds!r}")
+        if self.seconds is not None and not (math.isfinite(self.seconds) and 2.0 <= self.seconds <= 9.8):
+            raise ControlMMError(f"seconds must be from 2 to 9.8 (40..196 frames at 20 fps); got {self.seconds}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ControlMMError(f"seed must be a whole number >= 0; got {self.seed!r}")
+        if not (math.isfinite(self.fps) and 10 <= self.fps <= 1000):
+            raise ControlMMError(f"fps must be from 10 to 1000; got {self.fps}")
+        if not (math.isfinite(self.safe_distance_m) and 0 <= self.safe_distance_m <= 0.5):
+            raise ControlMMError(f"safe distance must be from 0 to 0.5 m; got {self.safe_distance_m}")
+        if self.text is not None and not self.text.strip():
+            raise ControlMMError("text is empty; give a prompt such as 'a person walks forward'")
+        if self.text is not None and self.timeline is not None:
+            raise ControlMMError("give either a text prompt or a timeline, not both")
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["check"] = self.check.to_dict()
+        if isinstance(self.control, (str, Path)):
+            out["control"] = str(self.control)
+        return out

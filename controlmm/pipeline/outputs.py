@@ -1,0 +1,65 @@
+"""The files of a plan, written all at once: a complete directory or none.
+
+``write_plan(result, "out/plan")`` builds the directory beside its destination and renames it into
+place when every file is written (``controlmm.atomic.atomic_dir``), so an interrupted or failed run
+never leaves a half-written ``out/plan``:
+
+==================  ===========================================================================
+file                content
+==================  ===========================================================================
+motion.npz          the human motion (HumanML3D joints and features, 20 fps, Y up) with the
+                    control targets and errors (``controlmm.motion.load_motion``)
+robot.csv           one row per frame: root xyz, root quaternion xyzw, joint angles (rad)
+robot.npz           qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
+robot.json          the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
+report.json         the chosen round's simulation report (``passed``, penetrations, failures...)
+                    plus ``plan`` (inputs, chosen round) and ``rounds`` (every round's figures)
+render.mp4          the robot in the scene (MuJoCo; a matplotlib stick figure without OpenGL)
+plots/top_view.png  obstacles, paths, control targets and achieved positions from above
+plots/clearance.png per-frame obstacle clearance and floor height of every round
+plots/report.png    the per-frame simulation report of the chosen round
+plots/motion.png    snapshots of the human motion
+plan.json           the settings of the run (to reproduce it)
+==================  ===========================================================================
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from controlmm.atomic import atomic_dir, write_text
+from controlmm.pipeline.plan import PlanResult
+
+
+def write_plan(result: PlanResult, out: str | Path, *, render: bool | None = None, progress: bool = True) -> str | None:
+    """Write every output of ``result`` into the directory ``out`` (replaced atomically).
+
+    Returns the render backend used (``"mujoco"`` or ``"stick"``), or None without a video.
+    """
+    from controlmm.motion.io import save_motion
+    from controlmm.motion.plot import plot_motion
+    from controlmm.pipeline.plots import plot_clearance, plot_top_view
+    from retarget.render import render_trajectory
+    from sim import plot_report
+
+    config = result.config
+    render = config.render if render is None else render
+    backend = None
+    Path(out).parent.mkdir(parents=True, exist_ok=True)  # only the parent: the directory itself appears whole
+    with atomic_dir(out) as tmp:
+        plots = tmp / "plots"
+        plots.mkdir()
+        save_motion(result.motion, tmp / "motion.npz")
+        result.trajectory.save(tmp / "robot")
+        write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
+        write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
+        plot_top_view(result, plots / "top_view.png")
+        plot_clearance(result, plots / "clearance.png")
+        plot_report(result.report, plots / "report.png", title=f"{result.scene.name}: {result.text[:80]}")
+        plot_motion(result.motion, plots / "motion.png")
+        if render:
+            width, height = config.render_size
+            backend = render_trajectory(result.trajectory, tmp / "render.mp4", width=width, height=height,
+                                        fps=config.render_fps, progress=progress, scene=result.scene)
+    return backend

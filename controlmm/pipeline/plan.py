@@ -1,0 +1,280 @@
+"""The plan loop: text + constraints + scene -> motion -> robot -> check -> feedback -> ... -> result.
+
+```python
+from controlmm.pipeline import PlanConfig, plan, write_plan
+
+result = plan(PlanConfig(scene="table", rounds=3, seed=0))
+result.passed, result.report.summary()
+write_plan(result, "out/plan")            # motion.npz, robot.csv/npz/json, report.json, render.mp4, plots/
+```
+
+Round 0 generates the tokens (masked decoding with the motion control model and logits editing)
+and codebook-edits their latent against the control spec and the scene's obstacle and floor losses.
+Every later round adds the feedback terms of the failures found so far
+(:mod:`controlmm.pipeline.feedback`) and codebook-edits the previous round's latent again
+(:mod:`controlmm.pipeline.refine`), so the motion changes only where the losses ask it to. The loop
+stops at the first round that passes with every constraint within 2 cm (one more editing round when a
+passing round misses a constraint) or after ``rounds`` feedback rounds; the result is the best round:
+passing first, then meeting the constraints, then the fewest failing frames.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import torch
+
+from controlmm.control.spec import ControlSpec
+from controlmm.editing.presets import EditingConfig, editing_preset
+from controlmm.editing.terms import LossTerm
+from controlmm.errors import ControlMMError
+from controlmm.frames import HumanToWorld
+from controlmm.motion.container import Motion
+from controlmm.pipeline.config import PlanConfig
+from controlmm.pipeline.feedback import feedback_terms
+from controlmm.pipeline.inputs import constraint_warnings, start_pose_error
+from controlmm.pipeline.refine import edit_motion
+
+CONSTRAINT_TOLERANCE_M = 0.02
+"""A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
+
+
+@dataclass
+class PlanRound:
+    """One generate -> retarget -> check pass."""
+
+    index: int
+    motion: Motion
+    trajectory: Any  # retarget.RobotTrajectory
+    report: Any  # sim.Report
+    terms: list[str]  # names of the loss terms this round was generated with
+    constraint_errors_m: list[float]
+    editing: dict[str, Any]
+    seconds: dict[str, float]
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.report.passed)
+
+    @property
+    def constraints_met(self) -> bool:
+        return all(e <= CONSTRAINT_TOLERANCE_M for e in self.constraint_errors_m)
+
+    def failing_frames(self) -> int:
+        return sum(f.num_frames for f in blocking_failures(self.report))
+
+    def to_dict(self) -> dict[str, Any]:
+        r = self.report
+        kinds: dict[str, int] = {}
+        for f in blocking_failures(r):
+            kinds[f.kind] = kinds.get(f.kind, 0) + 1
+        return {"round": self.index, "passed": self.passed, "constraints_met": self.constraints_met,
+                "failures": len(r.failures), "failure_kinds": kinds,
+                "max_penetration_m": round(float(r.max_penetration_m), 6),
+                "floor_penetration_m": round(float(r.floor_penetration_m), 6),
+                "self_collision_frames": int(r.self_collision_frames),
+                "foot_sliding_m": round(float(r.foot_sliding_m), 6),
+                "constraint_errors_m": [round(e, 5) for e in self.constraint_errors_m],
+                "loss_terms": list(self.terms), "editing": self.editing,
+                "seconds": {k: round(v, 3) for k, v in self.seconds.items()}}
+
+
+@dataclass
+class PlanResult:
+    """Every round and the chosen one (``best``)."""
+
+    config: PlanConfig
+    scene: Any  # scenes.Scene
+    text: str
+    spec: ControlSpec | None
+    transform: HumanToWorld
+    rounds: list[PlanRound]
+    best: int
+    warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def final(self) -> PlanRound:
+        return self.rounds[self.best]
+
+    @property
+    def passed(self) -> bool:
+        return self.final.passed
+
+    @property
+    def motion(self) -> Motion:
+        return self.final.motion
+
+    @property
+    def trajectory(self):
+        return self.final.trajectory
+
+    @property
+    def report(self):
+        return self.final.report
+
+    def to_dict(self) -> dict[str, Any]:
+        """``report.json``: the chosen round's simulation report plus the plan and every round."""
+        out = self.final.report.to_dict()
+        out["plan"] = {"scene": self.scene.name, "robot": self.config.robot, "text": self.text,
+                       "control": self.spec.to_dict() if self.spec is not None else None,
+                       "seed": self.config.seed, "preset": self.config.preset, "rounds_allowed": self.config.rounds,
+                       "rounds_run": len(self.rounds), "chosen_round": self.best,
+                       "passed_before_feedback": self.rounds[0].passed, "warnings": list(self.warnings),
+                       "transform": {"scale": self.transform.scale, "yaw": self.transform.yaw,
+                                     "translation": list(self.transform.translation)},
+                       "seconds": round(self.seconds, 3)}
+        out["rounds"] = [r.to_dict() for r in self.rounds]
+        return out
+
+
+def blocking_failures(report) -> list:
+    """Failures that make a report fail (errors; warnings, when the checks grade them, do not)."""
+    return [f for f in report.failures if getattr(f, "severity", "error") == "error"]
+
+
+def resolve_inputs(config: PlanConfig):
+    """Scene, prompt, control spec and the human -> world placement of a config (or one-line errors)."""
+    from retarget import load_robot, robot_scale
+    from scenes import load_scene
+
+    load_robot(config.robot)  # an unknown robot fails here, with the list of packaged ones
+    scene = load_scene(config.scene, robot=config.robot)
+    transform = scene.human_to_world(robot_scale(config.robot))
+    spec: ControlSpec | None = None
+    if isinstance(config.control, dict):
+        spec = ControlSpec.from_dict(config.control)
+    elif config.control is not None:
+        spec = ControlSpec.load(config.control)
+    elif config.text is None and config.timeline is None and scene.suggested_control:
+        spec = ControlSpec.from_dict(scene.suggested_control)
+    text = config.text if config.text is not None else scene.suggested_prompt
+    if not text and config.timeline is None:
+        raise ControlMMError(f"scene '{scene.name}' suggests no prompt; give one with --text")
+    return scene, text, spec, transform
+
+
+def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True, log=None) -> PlanResult:
+    """Plan a robot motion in a scene (see the module docstring).
+
+    Args:
+        config: what to plan.
+        model: a loaded :class:`controlmm.models.MotionModel` (default: load ``config.model``).
+        progress: progress bars and one line per stage on stderr.
+        log: where stage lines go (default stderr); None with ``progress=False`` silences them.
+    """
+    from retarget import load_robot, retarget_motion
+    from scenes import scene_loss_terms
+    from sim import check_trajectory, make_world
+
+    start = time.perf_counter()
+    say = _logger(progress, log)
+    scene, text, spec, transform = resolve_inputs(config)
+    error = start_pose_error(scene)
+    if error:
+        raise ControlMMError(error)
+    warnings = constraint_warnings(spec, transform, scene.sdf() if scene.obstacle_geom_ids else None) if spec else []
+    for w in warnings:
+        print(f"controlmm: warning: {w}", file=sys.stderr)
+    if model is None:
+        from controlmm.generate import load_model
+
+        say("loading the model")
+        model = load_model(config.model)
+    body_joints = load_robot(config.robot).body_joints
+    base_terms = scene_loss_terms(scene, transform, safe_distance=config.safe_distance_m)
+    world = make_world(scene)
+    editing = editing_preset(config.preset)
+    extra: list[LossTerm] = []
+    history: dict = {}  # feedback margins per robot body, across rounds
+    rounds: list[PlanRound] = []
+    latent = None
+    for index in range(config.rounds + 1):
+        terms = base_terms + extra
+        timer: dict[str, float] = {}
+        t0 = time.perf_counter()
+        if index == 0:
+            say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
+            motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
+        else:
+            say(f"round {index}: codebook editing with {len(extra)} feedback terms")
+            edited = edit_motion(model, latent, motion.num_frames, spec, transform, terms, editing, text,
+                                 metadata=motion.metadata)
+            motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
+        timer["generate"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        traj = retarget_motion(motion, robot=config.robot, fps=config.fps, transform=transform)
+        timer["retarget"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        report = check_trajectory(world, traj, config=config.check)
+        timer["check"] = time.perf_counter() - t0
+        rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
+        blocking = blocking_failures(report)
+        worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
+        say(f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
+            f"in {sum(timer.values()):.1f} s")
+        # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
+        # editing round (more codebook steps toward the targets), not more.
+        settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
+        if (report.passed and settled) or index == config.rounds:
+            break
+        extra = extra + feedback_terms(blocking, motion.joints, body_joints=body_joints, transform=transform,
+                                       robot_fps=traj.fps, round_index=index,
+                                       sdf=scene.sdf() if scene.obstacle_geom_ids else None,
+                                       floor_height=scene.floor_height, config=config.feedback, history=history)
+    best = min(rounds, key=lambda r: (not r.passed, not r.constraints_met, r.failing_frames(),
+                                      max(r.constraint_errors_m, default=0.0))).index
+    return PlanResult(config=config, scene=scene, text=text, spec=spec, transform=transform, rounds=rounds,
+                      best=best, warnings=warnings, seconds=time.perf_counter() - start)
+
+
+def _generate(model, config: PlanConfig, text: str, spec: ControlSpec | None, terms: list[LossTerm],
+              transform: HumanToWorld, editing: EditingConfig):
+    """Round 0: tokens by masked decoding (control model + logits editing), then codebook editing.
+
+    Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
+    """
+    if config.timeline is not None:
+        from controlmm.timeline import generate_timeline, load_timeline
+
+        timeline = load_timeline(config.timeline)
+        first, info = generate_timeline(model, timeline, seed=config.seed, preset=editing.name, terms=terms,
+                                        transform=transform)
+        latent = _latent_of(model, first)
+        edited = edit_motion(model, latent, first.num_frames, None, transform, terms, editing, first.text,
+                             metadata={**first.metadata, "timeline": info})
+        return edited.motion, [], {"timeline": info, **edited.record}, edited.latent
+    from controlmm.generate import generate_controlled
+
+    out = generate_controlled(model, text, control=spec, terms=terms, preset=replace(editing, codebook_steps=0),
+                              seconds=config.seconds, seed=config.seed, transform=transform, progress=False)
+    ids = out.ids[0].to(model.device)
+    with torch.no_grad():
+        latent = model.tokenizer.ids_to_latent(ids.reshape(1, ids.shape[0], -1))
+    edited = edit_motion(model, latent, out.frames[0], spec, transform, terms, editing, text,
+                         metadata=out.motion.metadata)
+    record = {"logits_steps": out.records[0].logits_steps, "control_model": out.records[0].control_model,
+              **edited.record}
+    return edited.motion, edited.errors, record, edited.latent
+
+
+def _latent_of(model, motion: Motion) -> torch.Tensor:
+    """Decoder latent (1, N, code_dim) of a motion's features through the tokenizer's encoder and quantizer."""
+    with torch.no_grad():
+        x = torch.as_tensor(model.normalizer.normalize(motion.features), dtype=torch.float32, device=model.device)
+        ids = model.tokenizer.encode(x[None])
+        return model.tokenizer.ids_to_latent(ids)
+
+
+def _logger(progress: bool, log):
+    stream = log if log is not None else (sys.stderr if progress else None)
+
+    def say(message: str) -> None:
+        if stream is not None:
+            print(f"controlmm plan: {message}", file=stream, flush=True)
+
+    return say
