@@ -102,31 +102,29 @@ def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.
     view = (b,) + (1,) * (param.ndim - 1)
     device = param.device
     x = param.detach().clone().requires_grad_(True)
-    kept = x.detach().clone()
-    kept_loss = torch.full((b,), float("inf"), device=device)
-    kept_err = torch.zeros(b, device=device)
-    active = torch.ones(b, dtype=torch.bool, device=device)
-    done = torch.zeros(b, dtype=torch.bool, device=device)
-    used = torch.zeros(b, dtype=torch.long, device=device)
-    count = 0
+    active = torch.ones(b, dtype=torch.bool, device=device)  # still optimised (restarts drop the done ones)
     scale = torch.ones(b, device=device)  # 1 / initial loss: L-BFGS's first step is sized by the gradient
-    state = {"kept": kept, "kept_loss": kept_loss, "kept_err": kept_err, "done": done}
+    state = {"kept": x.detach().clone(), "kept_loss": torch.full((b,), float("inf"), device=device),
+             "kept_err": torch.zeros(b, device=device), "done": torch.zeros(b, dtype=torch.bool, device=device),
+             "used": torch.zeros(b, dtype=torch.long, device=device), "count": 0}
 
     def closure() -> torch.Tensor:
-        nonlocal count
         optimizer.zero_grad(set_to_none=True)
         loss, finished, max_err = objective.evaluate(forward(x))
         value = loss.detach()
         finished = finished if config.early_stop else torch.zeros_like(finished)
         ok = torch.isfinite(value)
-        take = active & ~state["done"] & ok & (finished | (value < state["kept_loss"]))
+        moving = active & ~state["done"]
+        if state["count"] == 0:
+            scale.copy_(1.0 / value.clamp(min=1e-12).nan_to_num(1.0))
+        else:  # the first evaluation is the starting point, not a step
+            state["used"] = state["used"] + moving.long()
+        take = moving & ok & (finished | (value < state["kept_loss"]))
         state["kept"] = torch.where(take.view(view), x.detach(), state["kept"])
         state["kept_loss"] = torch.where(take, value, state["kept_loss"])
         state["kept_err"] = torch.where(take, max_err, state["kept_err"])
-        state["done"] = state["done"] | (active & finished & ok)
-        if count == 0:
-            scale.copy_(1.0 / value.clamp(min=1e-12).nan_to_num(1.0))
-        count += 1
+        state["done"] = state["done"] | (moving & finished & ok)
+        state["count"] += 1
         # samples done in this chunk stop moving; once all are, the zero gradient ends the L-BFGS step
         total = torch.where(active & ~state["done"] & ok, loss * scale, torch.zeros_like(loss)).sum()
         if total.requires_grad:
@@ -135,25 +133,22 @@ def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.
 
     optimizer = None
     while True:
-        newly = active & state["done"]
-        if bool(newly.any()) or optimizer is None:
+        if optimizer is None or bool((active & state["done"]).any()):
             active = active & ~state["done"]
             optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=chunk, max_eval=chunk * 2, history_size=50,
                                           tolerance_grad=0.0, tolerance_change=0.0, line_search_fn="strong_wolfe")
             with torch.no_grad():
                 x.copy_(torch.where(active.view(view), x, state["kept"]))
-        if count == 0:
+        if state["count"] == 0:
             with torch.enable_grad():
                 closure()
             active = active & ~state["done"]
-        if count > evaluations or not bool(active.any()):
+        if state["count"] > evaluations or not bool(active.any()):
             break
-        before = count
-        optimizer.max_eval = max(1, min(chunk * 2, evaluations + 1 - count))
-        optimizer.param_groups[0]["max_eval"] = optimizer.max_eval
+        before = state["count"]
+        optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state["count"]))
         optimizer.step(closure)
-        used = used + active.long() * (count - before)
-        if count == before:  # converged to machine precision
+        if state["count"] == before:  # converged to machine precision
             break
-    return EditOutcome(param=state["kept"], steps=used, done=state["done"], loss=state["kept_loss"],
+    return EditOutcome(param=state["kept"], steps=state["used"], done=state["done"], loss=state["kept_loss"],
                        max_error=state["kept_err"])
