@@ -218,7 +218,8 @@ def evaluate_control(model, cases: Sequence[ControlCase], preset="accurate", see
         for c, motion, record in zip(chunk, out.motions, out.records):
             row = case_metrics(motion.joints, c.targets, c.mask)
             row |= {"skate": foot_skating_ratio(motion.joints, FPS), "steps": float(record.total_steps),
-                    "seconds": record.seconds, "converged": float(record.converged)}
+                    "seconds": record.seconds, "cpu_seconds": record.cpu_seconds,
+                    "converged": float(record.converged)}
             rows.append(row)
             generated.append(motion)
         bar.update(len(chunk))

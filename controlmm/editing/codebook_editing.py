@@ -14,7 +14,7 @@ from collections.abc import Callable
 import torch
 
 from controlmm.editing.objective import Objective
-from controlmm.editing.optimize import EditOutcome, optimize
+from controlmm.editing.optimize import EditOutcome, optimize, optimize_lbfgs
 from controlmm.editing.presets import EditingConfig
 
 
@@ -28,4 +28,6 @@ def codebook_editing(latent: torch.Tensor, decode: Callable[[torch.Tensor], torc
         objective: loss terms and the stopping rule.
         config: ``codebook_steps`` and the optimiser.
     """
+    if config.codebook_optimizer == "lbfgs":
+        return optimize_lbfgs(latent, decode, objective, config.codebook_steps, config)
     return optimize(latent, decode, objective, config.codebook_steps, config, keep_best=True)

@@ -18,6 +18,7 @@ motion the committed tokens will produce, and editing only moves the tokens stil
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import torch
 
@@ -51,4 +52,5 @@ def logits_editing(logits: torch.Tensor, editable: torch.Tensor, fixed: torch.Te
     def forward(x: torch.Tensor) -> torch.Tensor:
         return decode(soft_latent(x, codebook, editable, fixed, config.temperature, generator))
 
-    return optimize(logits, forward, objective, config.logits_steps, config, keep_best=False)
+    return optimize(logits, forward, objective, config.logits_steps, replace(config, lr=config.logits_lr),
+                    keep_best=False, patience=config.logits_patience)

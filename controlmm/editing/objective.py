@@ -8,7 +8,8 @@ An :class:`Objective` is the spatial-control targets (optional) plus any other :
 
 ``L_ctrl`` is ControlMM's inference loss (squared error over the controlled (t, j, xyz) entries divided
 by their number, per sample; reference §5.2). Stopping looks at the worst constraint, not the mean, so
-an early-stopped motion meets *every* constraint to the tolerance.
+an early-stopped motion meets *every* constraint to the tolerance (``stop_on="max"``); logits editing,
+which only steers the sampling of the tokens, stops on the mean error (``stop_on="mean"``).
 """
 
 from __future__ import annotations
@@ -35,10 +36,13 @@ class Objective:
     tolerance: float = 0.01
     loss_tolerance: float = 1e-6
     control_weight: float = 1.0
+    stop_on: str = "max"  # "max": every constraint within tolerance; "mean": their mean error (logits editing)
 
     def __post_init__(self) -> None:
         if (self.targets is None) != (self.mask is None):
             raise ValueError("targets and mask go together")
+        if self.stop_on not in ("max", "mean"):
+            raise ValueError(f"stop_on must be 'max' or 'mean'; got {self.stop_on!r}")
         if self.mask is not None:
             self.mask = self.mask.bool()
         self.terms = tuple(self.terms)
@@ -64,6 +68,16 @@ class Objective:
         err = (joints.detach() - self.targets[:, :t]).norm(dim=-1)
         return torch.where(self.mask[:, :t], err, torch.zeros_like(err)).flatten(1).amax(-1)
 
+    def mean_error(self, joints: torch.Tensor) -> torch.Tensor:
+        """Mean constraint error per sample (B,) in metres (0 without constraints)."""
+        if self.mask is None:
+            return joints.new_zeros(joints.shape[0])
+        t = joints.shape[1]
+        err = (joints.detach() - self.targets[:, :t]).norm(dim=-1)
+        mask = self.mask[:, :t]
+        total = torch.where(mask, err, torch.zeros_like(err)).flatten(1).sum(-1)
+        return total / mask.flatten(1).sum(-1).clamp(min=1)
+
     def term_values(self, joints: torch.Tensor) -> dict[str, torch.Tensor]:
         """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
         from controlmm.control.loss import control_loss  # (controlmm.control imports this package)
@@ -81,7 +95,7 @@ class Objective:
         values = self.term_values(joints)
         loss = sum(values.values(), joints.new_zeros(joints.shape[0]))
         max_err = self.max_error(joints)
-        done = max_err <= self.tolerance
+        done = (max_err if self.stop_on == "max" else self.mean_error(joints)) <= self.tolerance
         for name, value in values.items():
             if name != "control":
                 done = done & (value.detach() <= self.loss_tolerance)

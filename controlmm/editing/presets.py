@@ -27,7 +27,10 @@ class EditingConfig:
     control_model: bool = True
     logits_steps: int = 100  # per decoding iteration
     codebook_steps: int = 600  # once, after the residual layers
-    lr: float = 0.06
+    lr: float = 0.06  # AdamW learning rate of codebook editing with codebook_optimizer="adam"
+    logits_lr: float = 0.3  # AdamW learning rate of logits editing
+    logits_patience: int = 10  # logits editing stops on a plateau of this many steps (0: never)
+    codebook_optimizer: str = "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
     betas: tuple[float, float] = (0.5, 0.9)
     weight_decay: float = 1e-6
     temperature: float = 1.0  # Gumbel-softmax temperature of logits editing
@@ -41,7 +44,11 @@ class EditingConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ControlMMError(f"{name} must be a whole number >= 0; got {value!r}")
-        for name in ("lr", "temperature"):
+        if self.codebook_optimizer not in ("adam", "lbfgs"):
+            raise ControlMMError(f"codebook_optimizer must be adam or lbfgs; got '{self.codebook_optimizer}'")
+        if self.logits_patience < 0:
+            raise ControlMMError(f"logits_patience must be >= 0; got {self.logits_patience}")
+        for name in ("lr", "logits_lr", "temperature"):
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
         if not self.tolerance > 0 or not self.logits_tolerance > 0:

@@ -76,6 +76,7 @@ class EditingRecord:
     max_error: float = 0.0  # worst constraint error (m) of the final motion
     losses: dict[str, float] = field(default_factory=dict)  # final value of every loss term
     seconds: float = 0.0  # wall time of the batch this motion was generated in, divided by its size
+    cpu_seconds: float = 0.0  # CPU time of this process (all threads) for the batch, divided by its size
 
     @property
     def total_steps(self) -> int:
@@ -85,7 +86,8 @@ class EditingRecord:
         return {"preset": self.preset, "control_model": self.control_model, "budget": dict(self.budget),
                 "logits_steps": list(self.logits_steps),
                 "codebook_steps": int(self.codebook_steps), "converged": bool(self.converged),
-                "max_error_m": float(self.max_error), "losses": dict(self.losses), "seconds": round(self.seconds, 3)}
+                "max_error_m": float(self.max_error), "losses": dict(self.losses), "seconds": round(self.seconds, 3),
+                "cpu_seconds": round(self.cpu_seconds, 3)}
 
 
 @dataclass
@@ -215,7 +217,7 @@ def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
 def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], targets: torch.Tensor,
                     mask: torch.Tensor, terms: Sequence[LossTerm], config: EditingConfig, preset_name: str,
                     options: DecodeOptions, residual_cfg_scale: float, generator: torch.Generator):
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     device = model.device
     unit = model.config.tokenizer.downsample
     token_lengths = torch.tensor([math.ceil(f / unit) for f in lengths], device=device)
@@ -242,7 +244,7 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         ctrl_in = control_input(targets, mask, current, control.joint_ids)
         return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
 
-    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance))
+    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean")
 
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
         known = ~state.is_mask & ~state.padding_mask
@@ -274,6 +276,7 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         values = {k: v.cpu() for k, v in objective.term_values(joints[:, :t_max]).items()}
         _, done, max_err = objective.evaluate(joints[:, :t_max])
     seconds = (time.perf_counter() - started) / b
+    cpu_seconds = (time.process_time() - cpu_started) / b
     budget = {"logits_steps": config.logits_steps, "codebook_steps": config.codebook_steps,
               "tolerance_m": config.tolerance, "logits_tolerance_m": config.logits_tolerance}
     records = []
@@ -282,7 +285,8 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
             preset=preset_name, control_model=use_control, budget=budget,
             logits_steps=[int(s[i]) for s in logit_steps], codebook_steps=int(codebook_steps[i]),
             converged=bool(done[i]) if editing else True, max_error=float(max_err[i]),
-            losses={k: float(v[i]) for k, v in values.items()}, seconds=seconds))
+            losses={k: float(v[i]) for k, v in values.items()}, seconds=seconds,
+            cpu_seconds=cpu_seconds))
     joints_np = joints.cpu().numpy()
     features_np = features.cpu().numpy()
     tokens = [ids[i, : int(token_lengths[i])].cpu() for i in range(b)]

@@ -16,6 +16,7 @@ from controlmm.editing import (
     codebook_editing,
     editing_preset,
     logits_editing,
+    optimize,
 )
 from controlmm.errors import ControlMMError
 from controlmm.generate import (
@@ -94,6 +95,26 @@ def test_codebook_editing_meets_a_reachable_target_and_stops_early(model, refere
     full = codebook_editing(latent, _decode(model, 64), objective,
                             EditingConfig(codebook_steps=10, early_stop=False))
     assert int(full.steps[0]) == 10 and not bool(full.done[0])
+    # the paper's first-order optimiser (AdamW) behind the same interface
+    adam = codebook_editing(latent, _decode(model, 64), objective,
+                            EditingConfig(codebook_steps=400, codebook_optimizer="adam"))
+    assert float(adam.loss[0]) < 0.05 * float(objective.evaluate(joints)[0])
+    with pytest.raises(ControlMMError, match="codebook_optimizer must be adam or lbfgs; got 'sgd'"):
+        EditingConfig(codebook_optimizer="sgd")
+
+
+def test_editing_stops_on_a_plateau_and_on_the_mean_error(model, reference):
+    latent, joints = reference
+    flat = LossTerm("flat", lambda j: (j * 0.0).sum(dim=(1, 2, 3)) + 1.0)
+    outcome = optimize(latent, _decode(model, 64), Objective(terms=[flat]), 50, EditingConfig(), patience=4)
+    assert int(outcome.steps[0]) == 4 and not bool(outcome.done[0])
+    targets = joints.clone()
+    targets[0, 10, 0, 0] += 0.05  # one constraint 5 cm off, nine met exactly
+    mask = torch.zeros(joints.shape[:3], dtype=torch.bool)
+    mask[0, 10:20, 0] = True
+    _, done_max, _ = Objective(targets=targets, mask=mask, tolerance=0.01).evaluate(joints)
+    _, done_mean, _ = Objective(targets=targets, mask=mask, tolerance=0.01, stop_on="mean").evaluate(joints)
+    assert not bool(done_max[0]) and bool(done_mean[0])
 
 
 def test_codebook_editing_takes_any_loss_term(model, reference):
@@ -127,7 +148,7 @@ def test_logits_editing_reduces_the_loss(model, reference):
     fixed[0, :3] = codebook[:3]
     targets, mask = _shifted_targets(joints, [(20, 0), (50, 0)], [0.0, 0.0, 0.0])
     objective = Objective(targets=targets, mask=mask, tolerance=1e-4)
-    config = EditingConfig(logits_steps=60)
+    config = EditingConfig(logits_steps=60, logits_patience=0)  # the full budget: no plateau stop
     from controlmm.editing.logits_editing import soft_latent
 
     def expected_loss(x):
