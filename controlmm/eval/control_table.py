@@ -34,8 +34,8 @@ from controlmm.eval.scoring import SCORE_COLUMNS, MotionSet, Scores, score_motio
 CONTROL_COLUMNS = ("skate", "traj", "loc", "avg")
 TABLE_COLUMNS = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "diversity", "mm_dist") + CONTROL_COLUMNS
 HEADERS = {"r_precision_top1": "R@1", "r_precision_top2": "R@2", "r_precision_top3": "R@3", "fid": "FID",
-           "mm_dist": "MM-Dist", "diversity": "Diversity", "skate": "Skate", "traj": "Traj.err", "loc": "Loc.err",
-           "avg": "Avg.err cm"}
+           "mm_dist": "MM-Dist", "diversity": "Diversity", "skate": "Skate", "traj": "Traj. err", "loc": "Loc. err",
+           "avg": "Avg. err cm"}
 UNCONTROLLED = EditingConfig(name="uncontrolled", control_model=False, logits_steps=0, codebook_steps=0)
 """Plain generation through the controlled path: no control model, no editing (Table 3 row 1)."""
 REAL_SEED_OFFSET = 100_003
