@@ -65,7 +65,7 @@ def test_generate_bad_input(tiny_model_dir, tmp_path, capsys):
 
 
 def test_train_help_and_bad_input(tiny_data, tmp_path, capsys):
-    assert TRAIN_SUBCOMMANDS == ("tokenizer", "transformer", "residual", "control")
+    assert TRAIN_SUBCOMMANDS == ("tokenizer", "transformer", "residual", "control", "evaluator")
     for stage in TRAIN_SUBCOMMANDS:
         with pytest.raises(SystemExit) as info:
             main(["train", stage, "--help"])
