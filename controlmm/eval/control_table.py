@@ -11,7 +11,8 @@ crops, keyframes) and generates every row on them with seed + r. Per row and rep
   Diversity.
 
 The **Real** row scores the ground truth itself (control errors 0 by construction, its own foot
-skating; FID against an independent draw of cases, seed + r + 100003). The **uncontrolled** row
+skating; FID against the same clips with other random crops, :func:`recropped`, as the official
+"ground truth" row compares two loader passes over the same test clips). The **uncontrolled** row
 (:data:`UNCONTROLLED`) generates the same prompts and lengths with neither the control model nor
 editing, its errors measured against the targets of its joint mode (Table 3 row 1). Every column is
 reported as mean and 95 % CI (1.96 std / sqrt(repeats)).
@@ -107,6 +108,31 @@ def _real_values(cases) -> dict[str, float]:
             "traj": 0.0, "loc": 0.0, "avg": 0.0}
 
 
+def recropped(data: str | Path, cases, seed: int, split: str = "test") -> list[np.ndarray]:
+    """The ground truth of the same samples with another random crop: per case, the clip (or captioned
+    span) it was cut from, m = its length rounded down to a multiple of 4 (at most 196) with one unit
+    less with probability 1/3 (the official loader's coin), a random start. Returns (m, 263) arrays."""
+    from controlmm.data.humanml3d import HumanML3D
+    from controlmm.motion.skeleton import MAX_FRAMES
+
+    by_id: dict[str, list] = {}
+    for sample in HumanML3D(data).text_samples(split):
+        by_id.setdefault(sample.motion_id, []).append(sample)
+    rng = np.random.default_rng([seed, REAL_SEED_OFFSET])
+    out = []
+    for case in cases:
+        candidates = by_id.get(case.motion_id)
+        if not candidates:
+            raise ControlMMError(f"clip '{case.motion_id}' is not in the {split} split of '{data}'")
+        source = next((s for s in candidates if case.text in s.captions), candidates[0])
+        units = min(source.length, MAX_FRAMES) // 4
+        if rng.integers(3) == 2 and units > 1:
+            units -= 1
+        start = int(rng.integers(0, source.length - 4 * units + 1))
+        out.append(source.motion[start:start + 4 * units].astype(np.float32))
+    return out
+
+
 def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *, evaluator: Evaluator | None = None,
                            densities: Sequence[int] = (1, 2, 5, 49, 196), samples: int = 64, repeats: int = 1,
                            seed: int = 0, batch_size: int = 1, real: bool = True,
@@ -123,7 +149,8 @@ def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *,
         densities, samples, seed, batch_size: as :func:`~controlmm.control.evaluation.build_cases` and
             :func:`~controlmm.control.evaluation.evaluate_control`.
         repeats: draws of cases (and generations); the CIs are over these.
-        real: include the "Real" row (ground truth, cases of the first row's joint mode).
+        real: include the "Real" row (ground truth, cases of the first row's joint mode; FID against
+            :func:`recropped`).
     """
     from controlmm.control.evaluation import build_cases, evaluate_control
 
@@ -150,9 +177,8 @@ def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *,
         if real:
             cases = cases_by_mode[rows[0].joints]
             table.rows.setdefault("Real", Scores()).add(_real_values(cases), CONTROL_COLUMNS)
-            other = build_cases(data, rows[0].joints, densities, samples, seed=run_seed + REAL_SEED_OFFSET)
             sets.setdefault("Real", []).append(MotionSet([c.features for c in cases], [c.text for c in cases],
-                                                         [c.features for c in other]))
+                                                         recropped(data, cases, run_seed)))
         for row in rows:
             cases = cases_by_mode[row.joints]
             result = evaluate_control(model, cases, preset=row.preset, seed=run_seed, batch_size=batch_size,
@@ -176,4 +202,4 @@ def _preset_record(preset: str | EditingConfig) -> Any:
 
 
 __all__ = ["CONTROL_COLUMNS", "ControlTable", "SCORE_COLUMNS", "TABLE_COLUMNS", "TableRow", "UNCONTROLLED",
-           "evaluate_control_table"]
+           "evaluate_control_table", "recropped"]

@@ -9,7 +9,7 @@ import pytest
 
 from controlmm.cli.main import main
 from controlmm.control.evaluation import build_cases
-from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table
+from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table, recropped
 from controlmm.eval.evaluator import load_evaluator
 from controlmm.eval.scoring import MotionSet, score_motions
 from controlmm.generate import load_model
@@ -50,6 +50,19 @@ def test_each_mode_cycles_the_six_joints(tiny_data):
     pelvis = build_cases(tiny_data, "pelvis", densities=(5,), samples=8, seed=0)
     assert [c.text for c in cases] == [c.text for c in pelvis]  # same clips, captions, crops, keyframes
     assert all(np.array_equal(a.mask.any(-1), b.mask.any(-1)) for a, b in zip(cases, pelvis))
+
+
+def test_real_reference_recrops_the_same_clips(tiny_data):
+    cases = build_cases(tiny_data, "pelvis", samples=12, seed=3)
+    crops = recropped(tiny_data, cases, seed=3)
+    assert len(crops) == 12 and crops[0].dtype == np.float32
+    for case, crop in zip(cases, crops):
+        clip = np.load(tiny_data / "new_joint_vecs" / f"{case.motion_id}.npy")
+        m = len(crop)
+        assert m % 4 == 0 and m > len(clip) - 8 - 1, (m, len(clip))
+        assert any(np.array_equal(clip[i:i + m], crop) for i in range(len(clip) - m + 1))
+    assert any(len(c.features) != len(r) or not np.array_equal(c.features, r) for c, r in zip(cases, crops))
+    assert all(np.array_equal(a, b) for a, b in zip(crops, recropped(tiny_data, cases, seed=3)))
 
 
 def test_control_table_rows(tiny_control_dir, tiny_data, evaluator):
