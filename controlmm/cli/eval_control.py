@@ -16,13 +16,21 @@ motion per case generated from the clip's caption and length under the control, 
   skate      foot-skating ratio (feet below 5 cm moving faster than 0.5 m/s)
   steps      editing steps used (logits + codebook), s/motion wall time
 
+Text-motion quality of the generated motions, scored by the text-motion evaluator (--evaluator,
+default the shipped one; --no-quality to skip) against the ground truth of the same cases:
+R-precision top-1/2/3 (groups of 32), FID, Diversity, MM-Dist. --repeats N draws the cases N times
+(seed + r) and reports every column as mean +- 95% CI (1.96 std / sqrt(N)); --real adds the ground
+truth row, --uncontrolled a row generated without control model or editing (the paper's Table 1:
+--joints pelvis,each --real --uncontrolled).
+
 --joints: pelvis, left_foot, right_foot, head, left_wrist, right_wrist (one joint), cross (the 63
-combinations of the six, in turn), all (the six at once), random (one of the six per case); several
-separated by commas.
+combinations of the six, in turn), all (the six at once), random (one of the six per case), each (the
+six in turn, one per case: the paper's all-joints average); several separated by commas.
 
 examples:
   controlmm eval control --preset accurate --joints pelvis --samples 50
-  controlmm eval control --model MODEL_DIR --preset fast --joints cross --density 196 --json out.json"""
+  controlmm eval control --model MODEL_DIR --preset fast --joints cross --density 196 --json out.json
+  controlmm eval control --joints pelvis,each --real --uncontrolled --samples 64 --repeats 3 --batch-size 32"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,6 +53,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-control-model", action="store_true", help="editing only, without the control model")
     p.add_argument("--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps")
+    p.add_argument("--repeats", type=int, default=1,
+                   help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)")
+    p.add_argument("--evaluator", default=None, metavar="E",
+                   help="text-motion evaluator directory for the quality columns (default: the shipped one)")
+    p.add_argument("--no-quality", action="store_true", help="skip the text-motion columns (R-precision, FID, ...)")
+    p.add_argument("--real", action="store_true", help="add the Real row (the ground truth of the cases)")
+    p.add_argument("--uncontrolled", action="store_true",
+                   help="add a row generated without control model or editing (errors against the first mode's targets)")
     p.add_argument("--json", default=None, help="also write the per-case results to this JSON file")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -100,7 +116,6 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from controlmm.atomic import write_text
-    from controlmm.control.evaluation import build_cases, evaluate_control
     from controlmm.editing import editing_preset
     from controlmm.errors import ControlMMError
     from controlmm.generate import load_model
@@ -111,6 +126,10 @@ def run(args: argparse.Namespace) -> int:
         raise ControlMMError(f"--samples must be at least 1; got {args.samples}")
     if args.batch_size < 1:
         raise ControlMMError(f"--batch-size must be at least 1; got {args.batch_size}")
+    if args.repeats < 1:
+        raise ControlMMError(f"--repeats must be at least 1; got {args.repeats}")
+    if args.samples < 2 and not args.no_quality:
+        raise ControlMMError("the quality columns need --samples 2 or more (or pass --no-quality)")
     if args.tolerance is not None and not args.tolerance > 0:
         raise ControlMMError(f"--tolerance must be positive (cm); got {args.tolerance}")
     if args.threads is not None:
@@ -123,13 +142,38 @@ def run(args: argparse.Namespace) -> int:
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
         control_model=False if args.no_control_model else None,
         logits_steps=args.logits_steps, codebook_steps=args.codebook_steps)
+    from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table
+
+    evaluator = None
+    if not args.no_quality:
+        from controlmm.eval.evaluator import load_evaluator
+
+        evaluator = load_evaluator(args.evaluator)
+    rows = [TableRow("uncontrolled", modes[0], UNCONTROLLED)] if args.uncontrolled else []
+    rows += [TableRow(mode, mode, config) for mode in dict.fromkeys(modes)]
+    table = evaluate_control_table(model, data, rows, evaluator=evaluator, densities=densities, samples=args.samples,
+                                   repeats=args.repeats, seed=args.seed, batch_size=args.batch_size, real=args.real,
+                                   progress=not args.quiet)
+    unknown = getattr(evaluator, "unknown_word_share", None)
+    if unknown is not None:
+        share = unknown([c.text for c in table.evaluations[rows[0].name][0].cases])
+        if share > 0.5:
+            print(f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
+                  f"({evaluator.name}); train one on this data: controlmm train evaluator --data {data}")
     reports = []
-    for mode in modes:
-        cases = build_cases(data, mode, densities, args.samples, seed=args.seed)
-        result = evaluate_control(model, cases, preset=config, seed=args.seed, batch_size=args.batch_size,
-                                  progress=not args.quiet, joints=mode)
-        print(result.table())
-        reports.append(result.to_json() | {"data": str(data), "model": str(model.directory)})
+    for mode in dict.fromkeys(modes):
+        results = table.evaluations[mode]
+        print(results[0].table())
+        report = results[0].to_json() | {"data": str(data), "model": str(model.directory),
+                                         "table_row": table.rows[mode].to_json()}
+        if args.repeats > 1:
+            report["repeats"] = [r.by_density()["all"] for r in results]
+        reports.append(report)
+    reports += [{"joints": name, "table_row": table.rows[name].to_json()} for name in ("Real", "uncontrolled")
+                if name in table.rows]
+    print(f"\n{len(table.rows)} rows, {args.samples} cases x {args.repeats} repeat(s) each, mean ± 95% CI"
+          + (f"; quality by {evaluator.name}" if evaluator is not None else ""))
+    print(table.table())
     if args.json:
         write_text(args.json, json.dumps(reports if len(reports) > 1 else reports[0], indent=1) + "\n")
         print(f"wrote {args.json}")

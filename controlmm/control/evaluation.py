@@ -9,7 +9,8 @@ drawn uniformly without replacement; every coordinate of each controlled joint i
 Joint modes: a single control joint (``pelvis``, ``left_foot``, ``right_foot``, ``head``,
 ``left_wrist``, ``right_wrist``), ``cross`` (the 63 non-empty subsets of those six joints, Paper
 A.11 order; case i takes subset i mod 63, where the official script draws one subset per 256-sample
-call), ``all`` (the six at once) or ``random`` (one of the six per case).
+call), ``all`` (the six at once), ``random`` (one of the six per case) or ``each`` (the six in turn,
+case i controls joint i mod 6: the paper's all-joints average with a sixth of the cases per joint).
 
 Metrics (per case, keyframes F = frames with a controlled joint, e_t = mean over the controlled
 joints of frame t of the distance to the target, metres):
@@ -41,7 +42,7 @@ from controlmm.motion.skeleton import CONTROL_JOINTS, FPS, JOINT_NAMES, MAX_FRAM
 
 DENSITIES: tuple[int, ...] = (1, 2, 5, 49, 196)
 SINGLE_JOINTS: dict[str, int] = {JOINT_NAMES[j]: j for j in CONTROL_JOINTS}
-JOINT_MODES: tuple[str, ...] = tuple(SINGLE_JOINTS) + ("cross", "all", "random")
+JOINT_MODES: tuple[str, ...] = tuple(SINGLE_JOINTS) + ("cross", "all", "random", "each")
 CROSS_COMBINATIONS: tuple[tuple[int, ...], ...] = tuple(
     c for k in range(1, len(CONTROL_JOINTS) + 1) for c in itertools.combinations(CONTROL_JOINTS, k))
 """The 63 non-empty subsets of the six control joints: 6 singles, 15 pairs, 20 triples, 15, 6, 1."""
@@ -113,6 +114,8 @@ def _case_joints(mode: str, i: int, rng: np.random.Generator) -> tuple[int, ...]
         return CROSS_COMBINATIONS[i % len(CROSS_COMBINATIONS)]
     if mode == "all":
         return tuple(CONTROL_JOINTS)
+    if mode == "each":
+        return (CONTROL_JOINTS[i % len(CONTROL_JOINTS)],)
     return (CONTROL_JOINTS[int(rng.integers(len(CONTROL_JOINTS)))],)
 
 

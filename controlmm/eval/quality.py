@@ -26,7 +26,8 @@ import numpy as np
 from controlmm.data.humanml3d import Caption, HumanML3D
 from controlmm.errors import ControlMMError
 from controlmm.eval import metrics as M
-from controlmm.eval.evaluator.base import Evaluator, MotionLike, TextLike
+from controlmm.eval.evaluator.base import Evaluator, MotionLike
+from controlmm.eval.scoring import MotionSet, columns_from_embeddings, quality_columns, score_motions
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
 COLUMNS = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "mm_dist", "diversity", "multimodality")
@@ -34,64 +35,13 @@ HEADERS = {"r_precision_top1": "R@1", "r_precision_top2": "R@2", "r_precision_to
            "mm_dist": "MM-Dist", "diversity": "Diversity", "multimodality": "MModality"}
 UNIT = 4
 
+__all__ = ["COLUMNS", "EvalPass", "EvalSample", "EvalSet", "GenerateFn", "QualityReport", "columns_from_embeddings",
+           "evaluate_quality", "model_generator", "quality_columns"]
+
 GenerateFn = Callable[[list["EvalSample"], int], list[MotionLike]]
 """(samples, seed) -> one motion per sample, made from ``sample.caption.text`` with ``sample.frames``
 frames (raw 263-d features or Motion objects). A controlled generator may take its targets from the
 ground truth ``sample.features``."""
-
-
-# -- the columns ------------------------------------------------------------------------------------
-def columns_from_embeddings(text_emb: np.ndarray, motion_emb: np.ndarray, reference_emb: np.ndarray,
-                            group: int = M.R_PRECISION_GROUP, diversity_times: int = M.DIVERSITY_TIMES,
-                            seed: int = 0, shuffle: bool = True) -> dict[str, float]:
-    """R-precision top-1/2/3, MM-Dist, FID and Diversity from embeddings.
-
-    Args:
-        text_emb / motion_emb: (N, D) embeddings of captions and of the motions made from them (pairs).
-        reference_emb: (N', D) embeddings of ground-truth motions (the FID reference).
-        group: R-precision group size (32; smaller when N < 32, recorded as ``r_precision_group``).
-        diversity_times: pairs for Diversity (300; N - 1 when N <= 300, recorded as ``diversity_pairs``).
-        seed: random grouping (``shuffle``) and Diversity pairs.
-    """
-    rng = np.random.default_rng(seed)
-    n = len(text_emb)
-    if n < 2:
-        raise ControlMMError(f"quality columns need at least 2 motions; got {n}")
-    order = rng.permutation(n) if shuffle else np.arange(n)
-    group = min(group, n)
-    match = M.matching_metrics(np.asarray(text_emb)[order], np.asarray(motion_emb)[order], group=group)
-    times = min(diversity_times, n - 1)
-    return {
-        "r_precision_top1": match.r_precision[0], "r_precision_top2": match.r_precision[1],
-        "r_precision_top3": match.r_precision[2], "fid": M.fid(reference_emb, motion_emb),
-        "mm_dist": match.mm_dist, "diversity": M.diversity(motion_emb, times, rng),
-        "r_precision_group": group, "diversity_pairs": times, "samples": n,
-    }
-
-
-def quality_columns(evaluator: Evaluator, generated: Sequence[MotionLike], texts: Sequence[TextLike],
-                    ground_truth: Sequence[MotionLike], group: int = M.R_PRECISION_GROUP,
-                    diversity_times: int = M.DIVERSITY_TIMES, seed: int = 0) -> dict[str, float]:
-    """The paper's text-motion columns for one run of generated motions.
-
-    Args:
-        evaluator: from :func:`controlmm.eval.evaluator.load_evaluator` (None there = the shipped one).
-        generated: motions made from ``texts`` (Motion objects or raw (T, 263) features, <= 196 frames).
-        texts: their captions (strings, or HumanML3D :class:`~controlmm.data.humanml3d.Caption` objects,
-            whose ``word/POS`` tokens the official evaluator reads).
-        ground_truth: the ground-truth motions of the same samples (FID reference).
-        group, diversity_times, seed: see :func:`columns_from_embeddings`.
-
-    Returns:
-        ``r_precision_top1/2/3``, ``fid``, ``mm_dist``, ``diversity`` (+ ``samples``,
-        ``r_precision_group``, ``diversity_pairs``).
-    """
-    if len(generated) != len(texts):
-        raise ControlMMError(f"{len(generated)} generated motions for {len(texts)} captions")
-    if len(generated) < 2:
-        raise ControlMMError(f"quality columns need at least 2 motions; got {len(generated)}")
-    return columns_from_embeddings(evaluator.embed_texts(texts), evaluator.embed_motions(generated),
-                                   evaluator.embed_motions(ground_truth), group, diversity_times, seed)
 
 
 # -- evaluation passes ------------------------------------------------------------------------------
@@ -282,26 +232,28 @@ def evaluate_quality(evaluator: Evaluator, evalset: EvalSet, generators: dict[st
                                      "mm_repeats": mm_repeats, "mm_times": mm_times})
     steps = repeats * (int(real) + len(generators))
     bar = tqdm(total=steps, desc="quality", unit="run", disable=not progress, dynamic_ncols=True)
+    sets: dict[str, list[MotionSet]] = {}
+    modality: dict[str, list[float]] = {}
     for r in range(repeats):
         run_seed = seed + r
         passed = first if r == 0 else evalset.draw(run_seed, limit=limit)
-        text_emb = evaluator.embed_texts(passed.captions)
-        gt_emb = evaluator.embed_motions(passed.motions)
         if real:
             other = evalset.draw(run_seed + 100_003, limit=limit)
-            values = columns_from_embeddings(text_emb, gt_emb, evaluator.embed_motions(other.motions), seed=run_seed)
-            report.add("Real", values)
+            sets.setdefault("Real", []).append(MotionSet(passed.motions, passed.captions, other.motions))
             bar.update(1)
         for name, generate_fn in generators.items():
             bar.set_postfix_str(f"{name}, pass {r + 1}/{repeats}")
             motions = generate_fn(passed.samples, run_seed)
-            values = columns_from_embeddings(text_emb, evaluator.embed_motions(motions), gt_emb, seed=run_seed)
+            sets.setdefault(name, []).append(MotionSet(motions, passed.captions, passed.motions))
             k = min(mm_texts, len(passed.samples))
             if k > 0:
                 repeated = [s for s in passed.samples[:k] for _ in range(mm_repeats)]
                 emb = evaluator.embed_motions(generate_fn(repeated, run_seed + 7919)).reshape(k, mm_repeats, -1)
-                values["multimodality"] = M.multimodality(emb, mm_times, np.random.default_rng(run_seed))
-            report.add(name, values)
+                modality.setdefault(name, []).append(M.multimodality(emb, mm_times, np.random.default_rng(run_seed)))
             bar.update(1)
     bar.close()
+    for name, runs in sets.items():
+        report.rows[name] = score_motions(evaluator, runs, seed=seed).values
+        if name in modality:
+            report.rows[name]["multimodality"] = modality[name]
     return report
