@@ -146,9 +146,10 @@ def run(args: argparse.Namespace) -> int:
 
     evaluator = None
     if not args.no_quality:
-        from controlmm.eval.evaluator import load_evaluator
+        from controlmm.eval.evaluator import load_evaluator, model_evaluator
 
-        evaluator = load_evaluator(args.evaluator)
+        # Default: the evaluator the model directory carries (import-official --evaluator), else the shipped one.
+        evaluator = load_evaluator(args.evaluator or model_evaluator(args.model))
     rows = [TableRow("uncontrolled", modes[0], UNCONTROLLED)] if args.uncontrolled else []
     rows += [TableRow(mode, mode, config) for mode in dict.fromkeys(modes)]
     table = evaluate_control_table(model, data, rows, evaluator=evaluator, densities=densities, samples=args.samples,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 HELP = """Evaluate text-to-motion quality as the paper does: R-precision top-1/2/3 (groups of 32), FID,
 MM-Dist, Diversity (300 pairs) and Multimodality, measured by a text-motion evaluator, over REPEATS
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
     from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
-    from controlmm.eval.evaluator import load_evaluator
+    from controlmm.eval.evaluator import load_evaluator, model_evaluator
     from controlmm.eval.quality import EvalSet, evaluate_quality, model_generator
 
     if args.repeats < 1:
@@ -71,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     if args.real_only and args.model:
         raise ControlMMError("--real-only evaluates no model; drop --model or --real-only")
+    if args.evaluator is None and model_evaluator(args.model):  # e.g. the official one, from import-official
+        args.evaluator = model_evaluator(args.model)
+        print(f"evaluator: {args.evaluator} (carried by the model directory)", file=sys.stderr)
     evaluator = load_evaluator(args.evaluator, device=args.device)
     evalset = EvalSet.load(args.data, args.split, progress=not args.quiet)
     generators = {}

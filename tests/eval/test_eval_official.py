@@ -133,3 +133,18 @@ def test_official_layout_errors(tmp_path):
     (meta / "checkpoints" / "t2m" / "Comp_v6_KLD005" / "meta" / "std.npy").write_bytes(b"")
     with pytest.raises(InputFileError, match="finest.tar' is corrupt"):
         load_evaluator(meta)
+
+
+def test_imported_model_directory_carries_the_official_evaluator(tmp_path):
+    """import-official --evaluator copies the files; eval quality/control find them beside the model."""
+    from controlmm.eval.evaluator import OfficialEvaluator, load_evaluator, model_evaluator
+    from controlmm.models.official.convert import _copy_evaluator
+
+    _write_official(tmp_path / "momask")
+    model_dir = tmp_path / "model"
+    model_dir.mkdir()
+    assert model_evaluator(str(model_dir)) is None
+    _copy_evaluator(tmp_path / "momask", model_dir / "evaluator")
+    assert model_evaluator([str(model_dir)]) == model_dir / "evaluator"
+    assert model_evaluator([str(model_dir), str(tmp_path)]) is None  # several models: no implicit choice
+    assert isinstance(load_evaluator(model_evaluator(str(model_dir))), OfficialEvaluator)

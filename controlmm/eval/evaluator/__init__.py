@@ -31,7 +31,16 @@ from controlmm.eval.evaluator.words import Vocabulary, tokenize
 
 __all__ = ["EVALUATOR_PRESETS", "Evaluator", "EvaluatorConfig", "OfficialEvaluator", "TextMotionEncoder",
            "TextMotionEvaluator", "Vocabulary", "WordVectorizer", "default_evaluator_dir", "load_evaluator",
-           "load_evaluator_dir", "load_official_evaluator", "tokenize"]
+           "load_evaluator_dir", "load_official_evaluator", "model_evaluator", "tokenize"]
+
+
+def model_evaluator(model_dirs) -> Path | None:
+    """The evaluator a model directory carries (``MODEL_DIR/evaluator``, written by
+    ``controlmm import-official --evaluator``) when exactly one model is given, else None."""
+    dirs = [d for d in (model_dirs if isinstance(model_dirs, (list, tuple)) else [model_dirs]) if d]
+    if len(dirs) == 1 and (Path(dirs[0]) / "evaluator").is_dir():
+        return Path(dirs[0]) / "evaluator"
+    return None
 
 
 def load_evaluator(path: str | Path | None = None, device: str | torch.device = "cpu") -> Evaluator:
