@@ -34,6 +34,8 @@ BLOCKED_START = """<mujoco model="blocked">
     (["--seconds", "30"], "seconds"),
     (["--text", "  "], "text"),
     (["--fps", "5"], "fps"),
+    (["--preset", "turbo"], "turbo"),
+    (["--threads", "0"], "threads"),
 ])
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
     out = tmp_path / "plan"
