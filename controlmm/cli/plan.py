@@ -62,9 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.retarget import _import_mujoco
+    from controlmm.cli.gl import import_mujoco
 
-    _import_mujoco("egl")
+    import_mujoco("egl")
     import torch
 
     from controlmm.errors import ControlMMError

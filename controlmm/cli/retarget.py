@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
@@ -45,29 +44,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _import_mujoco(default_backend: str) -> str | None:
-    """Import MuJoCo with an offscreen GL backend; return why GL is unavailable, or None.
-
-    MuJoCo reads MUJOCO_GL once, at import; a backend whose libraries are missing (e.g.
-    MUJOCO_GL=osmesa without libosmesa6) makes the import itself fail. Then MuJoCo is
-    imported again with rendering disabled, and the video falls back to the stick figure.
-    """
-    if "mujoco" in sys.modules:
-        return None
-    os.environ.setdefault("MUJOCO_GL", default_backend)
-    try:
-        import mujoco  # noqa: F401
-        return None
-    except Exception as exc:  # noqa: BLE001 - AttributeError/ImportError/OSError from the GL layer
-        note = f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {' '.join(str(exc).split()) or type(exc).__name__}"
-        for name in list(sys.modules):
-            if name == "mujoco" or name.startswith(("mujoco.", "OpenGL")):
-                del sys.modules[name]
-        os.environ["MUJOCO_GL"] = "disable"
-        import mujoco  # noqa: F401
-        return note
-
-
 def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
     rows = [("scale (human -> robot)", f"{scale:.4f}")]
     for group, v in metrics.get("keypoint_error_mm", {}).items():
@@ -90,9 +66,10 @@ def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from controlmm.cli.gl import import_mujoco
     from controlmm.errors import ControlMMError
 
-    gl_note = _import_mujoco("egl") if args.render else None
+    gl_note = import_mujoco("egl") if args.render else None
     from controlmm.frames import HumanToWorld
     from controlmm.motion.io import load_motion
     from retarget import retarget_motion, robot_scale

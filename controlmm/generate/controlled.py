@@ -318,6 +318,37 @@ def latent_to_positions(model: MotionModel, latent: torch.Tensor) -> torch.Tenso
     return features_to_joints(torch.cat([positions, rest], dim=-1))
 
 
+def decode_latent(model: MotionModel, latent: torch.Tensor, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """(joints (T, 22, 3), features (T, 263)) numpy of the first ``frames`` frames of a latent (1, N, code_dim)."""
+    with torch.no_grad():
+        features = latent_to_features(model, latent)[:, :frames]
+        joints = features_to_joints(features)
+    return joints[0].cpu().numpy(), features[0].cpu().numpy()
+
+
+def edit_latent(model: MotionModel, latent: torch.Tensor, frames: int, objective: Objective,
+                config: EditingConfig) -> tuple[torch.Tensor, dict[str, Any]]:
+    """Codebook editing of one motion's decoder latent (1, N, code_dim) so that its first ``frames``
+    frames meet ``objective``, outside the decoding loop (the plan's feedback rounds, timeline passes).
+
+    Returns the edited latent and a record: ``steps``, ``converged``, ``max_error_m`` and the final
+    value of every loss term (``losses``).
+    """
+    if not objective.active or config.codebook_steps == 0:
+        return latent, {"steps": 0, "converged": True, "max_error_m": 0.0, "losses": {}}
+
+    def decode(z: torch.Tensor) -> torch.Tensor:
+        return latent_to_positions(model, z)[:, :frames]
+
+    with torch.enable_grad():
+        outcome = codebook_editing(latent, decode, objective, config)
+    with torch.no_grad():
+        values = objective.term_values(decode(outcome.param))
+    return outcome.param.detach(), {"steps": int(outcome.steps[0]), "converged": bool(outcome.done[0]),
+                                    "max_error_m": float(outcome.max_error[0]),
+                                    "losses": {k: float(v[0]) for k, v in values.items()}}
+
+
 # -- inputs -----------------------------------------------------------------------------------------
 def _specs(control, count: int) -> list[ControlSpec | None] | None:
     if control is None:

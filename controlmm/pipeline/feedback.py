@@ -90,7 +90,7 @@ def body_human_joints(body_joints: dict[str, Sequence[str]], body: str | None) -
 
 def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dict[str, Sequence[str]],
                    transform: HumanToWorld, robot_fps: float, round_index: int, sdf=None,
-                   floor_height: float = 0.0, config: FeedbackConfig = FeedbackConfig(),
+                   config: FeedbackConfig = FeedbackConfig(),
                    history: dict | None = None) -> list[LossTerm]:
     """Loss terms that ask the next round to fix ``failures``.
 
@@ -102,7 +102,6 @@ def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dic
         robot_fps: frame rate of the checked trajectory.
         round_index: 0 for the first feedback round (weights grow with it).
         sdf: the scene's SDF (``scene.sdf()``), needed for obstacle penetrations.
-        floor_height: world z of the floor.
         history: a dict kept across rounds by the caller: the extra obstacle clearance asked for each
             robot body so far. A body that still penetrates although its last term was met needs
             that clearance plus the new depth (the human body volume does not cover that robot

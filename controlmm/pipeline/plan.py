@@ -65,12 +65,12 @@ class PlanRound:
         return all(e <= CONSTRAINT_TOLERANCE_M for e in self.constraint_errors_m)
 
     def failing_frames(self) -> int:
-        return sum(f.num_frames for f in blocking_failures(self.report))
+        return sum(f.num_frames for f in self.report.errors)
 
     def to_dict(self) -> dict[str, Any]:
         r = self.report
         kinds: dict[str, int] = {}
-        for f in blocking_failures(r):
+        for f in r.errors:
             kinds[f.kind] = kinds.get(f.kind, 0) + 1
         return {"round": self.index, "passed": self.passed, "constraints_met": self.constraints_met,
                 "failures": len(r.failures), "failure_kinds": kinds,
@@ -132,11 +132,6 @@ class PlanResult:
         return out
 
 
-def blocking_failures(report) -> list:
-    """Failures that make a report fail (errors; warnings, when the checks grade them, do not)."""
-    return [f for f in report.failures if getattr(f, "severity", "error") == "error"]
-
-
 def resolve_inputs(config: PlanConfig):
     """Scene, prompt, control spec and the human -> world placement of a config (or one-line errors)."""
     from retarget import load_robot, robot_scale
@@ -182,7 +177,8 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
     error = start_pose_error(scene)
     if error:
         raise ControlMMError(error)
-    warnings = constraint_warnings(spec, transform, scene.sdf() if scene.obstacle_geom_ids else None) if spec else []
+    sdf = scene.sdf() if scene.obstacle_geom_ids else None
+    warnings = constraint_warnings(spec, transform, sdf) if spec else []
     for w in warnings:
         print(f"controlmm: warning: {w}", file=sys.stderr)
     if model is None:
@@ -221,7 +217,7 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         report = check_trajectory(world, traj, config=config.check)
         timer["check"] = time.perf_counter() - t0
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
-        blocking = blocking_failures(report)
+        blocking = report.errors  # warnings (brief dynamic spikes) do not fail a round
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
         say(f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
             f"in {sum(timer.values()):.1f} s")
@@ -232,8 +228,8 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
             break
         extra = extra + feedback_terms(blocking, motion.joints, body_joints=body_joints, transform=transform,
                                        robot_fps=traj.fps, round_index=index,
-                                       sdf=scene.sdf() if scene.obstacle_geom_ids else None,
-                                       floor_height=scene.floor_height, config=config.feedback, history=history)
+                                       sdf=sdf,
+                                       config=config.feedback, history=history)
     best = min(rounds, key=lambda r: (not r.passed, not r.constraints_met, r.failing_frames(),
                                       max(r.constraint_errors_m, default=0.0))).index
     return PlanResult(config=config, scene=scene, text=text, spec=spec, transform=transform, rounds=rounds,

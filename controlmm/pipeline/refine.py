@@ -16,13 +16,11 @@ import numpy as np
 import torch
 
 from controlmm.control.spec import ControlSpec
-from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
 from controlmm.editing.terms import LossTerm
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
-from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
 
 
@@ -48,36 +46,21 @@ def edit_motion(model, latent: torch.Tensor, frames: int, spec: ControlSpec | No
                 terms: list[LossTerm], config: EditingConfig, text: str, metadata: dict | None = None) -> EditedMotion:
     """Codebook-edit ``latent`` (1, N, code_dim) so the motion's first ``frames`` frames meet the
     spec and the loss terms; returns the edited latent and the decoded :class:`Motion`."""
-    from controlmm.generate.api import latent_to_features
-    from controlmm.generate.controlled import latent_to_positions
+    from controlmm.generate.controlled import decode_latent, edit_latent
 
     targets, mask = control_targets(spec, frames, transform)
     objective = Objective(targets=targets, mask=mask, terms=terms, tolerance=config.tolerance,
                           loss_tolerance=config.loss_tolerance)
-
-    def decode(x: torch.Tensor) -> torch.Tensor:
-        return latent_to_positions(model, x)[:, :frames]
-
-    steps = 0
-    if objective.active and config.codebook_steps > 0:
-        with torch.enable_grad():
-            outcome = codebook_editing(latent, decode, objective, config)
-        latent, steps = outcome.param, int(outcome.steps[0])
-    with torch.no_grad():
-        features = latent_to_features(model, latent)[:, :frames]
-        joints = features_to_joints(features)
-        values = {k: float(v[0]) for k, v in objective.term_values(joints).items()}
-        _, done, max_err = objective.evaluate(joints)
-    joints_np = joints[0].cpu().numpy().astype(np.float32)
+    latent, edit = edit_latent(model, latent, frames, objective, config)
+    joints, features = decode_latent(model, latent, frames)
     errors: list[float] = []
     extras: dict[str, np.ndarray] = {}
     if spec is not None:
         t_np, m_np = targets[0].numpy(), mask[0].numpy()
-        errors = [float(np.linalg.norm(joints_np[c.frame, c.joint] - t_np[c.frame, c.joint]))
-                  for c in spec.constraints]
+        errors = [float(np.linalg.norm(joints[c.frame, c.joint] - t_np[c.frame, c.joint])) for c in spec.constraints]
         extras = {"control_mask": m_np, "control_targets": t_np, "control_errors": np.asarray(errors, np.float32)}
-    record = {"codebook_steps": steps, "codebook_budget": config.codebook_steps, "converged": bool(done[0]),
-              "max_error_m": float(max_err[0]), "losses": values}
-    motion = Motion(joints=joints_np, fps=float(FPS), features=features[0].cpu().numpy().astype(np.float32),
+    record = {"codebook_steps": edit["steps"], "codebook_budget": config.codebook_steps,
+              "converged": edit["converged"], "max_error_m": max(errors, default=0.0), "losses": edit["losses"]}
+    motion = Motion(joints=joints.astype(np.float32), fps=float(FPS), features=features.astype(np.float32),
                     text=text, metadata=dict(metadata or {}), extras=extras)
-    return EditedMotion(latent=latent.detach(), motion=motion, errors=errors, record=record)
+    return EditedMotion(latent=latent, motion=motion, errors=errors, record=record)

@@ -44,14 +44,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
 from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
+from controlmm.generate.controlled import decode_latent, edit_latent
 from controlmm.motion.container import Motion
-from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, MIN_FRAMES, NUM_JOINTS
 from controlmm.timeline.parts import ATTACHMENT, moves_root
 from controlmm.timeline.signals import (
@@ -128,9 +127,9 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
 
     clock = time.perf_counter()
     latent = _generate_latent(model, timeline.base_prompt, num_frames, seed)
-    latent, record = _edit(model, latent, num_frames, Objective(terms=tuple(terms), tolerance=config.tolerance,
+    latent, record = edit_latent(model, latent, num_frames, Objective(terms=tuple(terms), tolerance=config.tolerance,
                                                                 loss_tolerance=config.loss_tolerance), config)
-    joints, features = _decode(model, latent, num_frames)
+    joints, features = decode_latent(model, latent, num_frames)
     passes = [_pass_record(None, timeline.base_prompt, "whole_body", (0, num_frames), record, 0.0, 0,
                            time.perf_counter() - clock)]
     bar.update(1)
@@ -148,7 +147,7 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         signal = build_signal(num_frames, track.joints, span, root_moves=root, tolerance=tol,
                               blend_frames=blend_frames, blend_rate=blend_rate)
         clip_frames = max(span[1] - span[0], MIN_FRAMES)
-        clip, _ = _decode(model, _generate_latent(model, track.prompt, clip_frames, seed + k + 1), clip_frames)
+        clip, _ = decode_latent(model, _generate_latent(model, track.prompt, clip_frames, seed + k + 1), clip_frames)
         prompt = prompt_entries(signal, track.joints, root_moves=root, attachment=ATTACHMENT[track.part],
                                 blend_frames=blend_frames,
                                 blend_rate=blend_rate) if prompt_weight > 0 else None
@@ -157,25 +156,25 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         objective = Objective(targets=torch.as_tensor(reference)[None], mask=torch.as_tensor(signal.mask)[None],
                               terms=tuple(terms) + tuple(pass_terms), tolerance=config.tolerance,
                               loss_tolerance=config.loss_tolerance)
-        latent, first_record = _edit(model, latent, num_frames, objective, config)
+        latent, first_record = edit_latent(model, latent, num_frames, objective, config)
         # the held entries, the blend and the caller's terms get the last word (the prompt target is soft);
         # the part may not leave where the first run took it by more than the prompt target's margins
         hard = replace(objective, terms=tuple(t for t in objective.terms if t.name != "timeline:prompt"))
         keeps = [()]
         if prompt is not None:
-            moved_to, _ = _decode(model, latent, num_frames)
+            moved_to, _ = decode_latent(model, latent, num_frames)
             targets = reference_targets(moved_to, prompt)
             keeps = [(hinge_term("timeline:keep", targets, replace(prompt, margins=prompt.margins + extra),
                                  prompt_weight),) for extra in KEEP_SLACK] + [()]
         steps = first_record["steps"]
         for keep in keeps:  # looser and looser, until the held entries are met
-            latent, record = _edit(model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle)
+            latent, record = edit_latent(model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle)
             steps += record["steps"]
             if record["converged"]:
                 break
         record["steps"] = steps
         record["losses"]["timeline:prompt"] = first_record["losses"].get("timeline:prompt", 0.0)
-        joints, features = _decode(model, latent, num_frames)
+        joints, features = decode_latent(model, latent, num_frames)
         drift = held_drift(joints, reference, signal)
         passes.append(_pass_record(k, track.prompt, track.part, span, record, float(drift.max()),
                                    int(signal.held.sum()), time.perf_counter() - clock))
@@ -201,36 +200,6 @@ def _generate_latent(model, prompt: str, frames: int, seed: int) -> torch.Tensor
     from controlmm.generate.api import generate
 
     return generate(model, prompt, frames=frames, seed=seed).latent.detach()
-
-
-def _decode(model, latent: torch.Tensor, frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """(joints (T, 22, 3), features (T, 263)) of a latent (1, N, code_dim)."""
-    from controlmm.generate.api import latent_to_features
-
-    with torch.no_grad():
-        features = latent_to_features(model, latent)[:, :frames]
-        joints = features_to_joints(features)
-    return joints[0].cpu().numpy(), features[0].cpu().numpy()
-
-
-def _edit(model, latent: torch.Tensor, frames: int, objective: Objective,
-          config: EditingConfig) -> tuple[torch.Tensor, dict[str, Any]]:
-    """Codebook editing of ``latent`` (1, N, code_dim) against ``objective``; the edited latent and a record."""
-    from controlmm.generate.controlled import latent_to_positions
-
-    if not objective.active or config.codebook_steps == 0:
-        return latent, {"steps": 0, "converged": True, "max_error_m": 0.0, "losses": {}}
-
-    def decode(z: torch.Tensor) -> torch.Tensor:
-        return latent_to_positions(model, z)[:, :frames]
-
-    with torch.enable_grad():
-        outcome = codebook_editing(latent, decode, objective, config)
-    with torch.no_grad():
-        values = objective.term_values(decode(outcome.param))
-    return outcome.param.detach(), {"steps": int(outcome.steps[0]), "converged": bool(outcome.done[0]),
-                                    "max_error_m": float(outcome.max_error[0]),
-                                    "losses": {k: float(v[0]) for k, v in values.items()}}
 
 
 def _pass_record(track: int | None, prompt: str, part: str, span: tuple[int, int], record: dict, drift: float,

@@ -8,6 +8,7 @@ distribution, optimisation, checkpoints, resumption, progress and the model dire
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,8 +41,8 @@ class StageContext:
     resume: bool = False
 
 
-class Stage:
-    """One trainable part. Subclasses set ``name`` and ``requires`` and implement the hooks below."""
+class Stage(ABC):
+    """One trainable part. Subclasses set ``name`` and ``requires`` and implement the abstract hooks."""
 
     name: str = ""
     requires: tuple[str, ...] = ()  # parts that must exist in the model directory before training
@@ -51,29 +52,28 @@ class Stage:
         self.ctx = ctx
 
     # -- required hooks ---------------------------------------------------------------------------
+    @abstractmethod
     def build_model(self) -> nn.Module:
         """The freshly initialised module to train (exported as ``<name>.pt``)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def train_dataset(self) -> Dataset:
         """Dataset indexed by ``(index, epoch)`` keys (see :class:`~controlmm.data.StepBatchSampler`)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def loss_module(self, model: nn.Module) -> nn.Module:
         """A module whose ``forward(*inputs) -> (loss, metrics)`` runs the training objective.
 
         Its parameters must be the trained model's (it is what ``DistributedDataParallel`` wraps).
         """
-        raise NotImplementedError
 
+    @abstractmethod
     def prepare(self, batch: Any) -> tuple:
         """Collated batch -> the inputs of :meth:`loss_module` (on the device, frozen parts applied)."""
-        raise NotImplementedError
 
-    @torch.no_grad()
+    @abstractmethod
     def validate(self, model: nn.Module) -> dict[str, float]:
         """Validation metrics (must include :attr:`best_metric`); ``model`` is in eval mode."""
-        raise NotImplementedError
 
     # -- optional hooks ---------------------------------------------------------------------------
     def collate(self, items: list) -> Any:

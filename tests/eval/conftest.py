@@ -7,23 +7,13 @@ a few dozen iterations: enough to exercise every code path and to learn the trai
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 import pytest
-import torch
+
+from torch_threads import one_thread
 
 FAMILIES = ("walk", "jump_in_place", "wave_left", "turn_right")
-
-@contextlib.contextmanager
-def one_thread():
-    """Tiny models run fastest single-threaded (and immune to other processes' load)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 @pytest.fixture(autouse=True, scope="module")

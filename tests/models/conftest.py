@@ -7,7 +7,6 @@ preset for a few dozen iterations per stage: enough to exercise every code path,
 
 from __future__ import annotations
 
-import contextlib
 import shutil
 from pathlib import Path
 
@@ -18,6 +17,8 @@ import torch
 from controlmm.motion import joints_to_features
 from controlmm.motion.container import resample
 from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR
+
+from torch_threads import one_thread
 
 CAPTIONS = [
     "a person bends down and stands back up",
@@ -83,19 +84,6 @@ def tiny_model_dir(tmp_path_factory, tiny_data) -> Path:
             train(stage, TrainOptions(data=tiny_data, out=out, preset="tiny", iters=iters, progress=False,
                                       device="cpu"))
     return out
-
-
-@contextlib.contextmanager
-def one_thread():
-    """Tiny models run fastest single-threaded (and immune to other processes' load)."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 @pytest.fixture(autouse=True, scope="module")
