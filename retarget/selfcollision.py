@@ -25,6 +25,7 @@ where ``d`` is the capsules' signed distance (:func:`capsule_distances`).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mujoco
@@ -67,10 +68,22 @@ class SelfClearance:
         """(C,) radius of a sphere around each capsule's segment midpoint that encloses it."""
         return 0.5 * np.linalg.norm(self.p1 - self.p0, axis=1) + self.radius
 
-    @property
+    @functools.cached_property
     def mid(self) -> np.ndarray:
         """(C, 3) segment midpoints in the node frames."""
         return 0.5 * (self.p0 + self.p1)
+
+    @functools.cached_property
+    def segment(self) -> np.ndarray:
+        """(C, 3) segment vectors p1 - p0 in the node frames."""
+        return self.p1 - self.p0
+
+    @functools.cached_property
+    def reach_squared(self) -> np.ndarray:
+        """(P,) squared distance of the bounding-sphere centres below which a pair may be
+        within its margin (broad phase of :func:`close_pairs`)."""
+        bound = self.bound
+        return (bound[self.first] + bound[self.second] + self.margin) ** 2
 
     @property
     def num_pairs(self) -> int:
@@ -115,11 +128,11 @@ def _segment_distance(p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarr
     """Closest points of segments p + s d1 and q + t d2 (s, t in [0, 1]), arrays (..., 3):
     (distance between the axes (...), point on the first (..., 3), on the second (..., 3))."""
     r = p - q
-    a = (d1 * d1).sum(-1)
-    e = (d2 * d2).sum(-1)
-    f = (d2 * r).sum(-1)
-    c = (d1 * r).sum(-1)
-    b = (d1 * d2).sum(-1)
+
+    def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.einsum("...k,...k->...", u, v)  # several times faster than (u * v).sum(-1)
+
+    a, e, f, c, b = dot(d1, d1), dot(d2, d2), dot(d2, r), dot(d1, r), dot(d1, d2)
     eps = 1e-12
     denom = a * e - b * b
     s = np.where((denom > eps) & (a > eps), np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
@@ -128,7 +141,8 @@ def _segment_distance(p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarr
     s = np.where(t != t_c, np.where(a > eps, np.clip((b * t_c - c) / np.maximum(a, eps), 0.0, 1.0), 0.0), s)
     pa = p + s[..., None] * d1
     pb = q + t_c[..., None] * d2
-    return np.linalg.norm(pa - pb, axis=-1), pa, pb
+    gap = pa - pb
+    return np.sqrt(dot(gap, gap)), pa, pb
 
 
 def capsule_distances(poses: Poses, sc: SelfClearance) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,13 +176,12 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
     mid = pos + np.einsum("tcij,cj->tci", rot, sc.mid)
     diff = mid[:, sc.first] - mid[:, sc.second]
-    reach = sc.bound[sc.first] + sc.bound[sc.second] + sc.margin
-    fr, pr = np.nonzero(np.einsum("tpk,tpk->tp", diff, diff) < (reach * reach)[None, :])
+    fr, pr = np.nonzero(np.einsum("tpk,tpk->tp", diff, diff) < sc.reach_squared)
     i, j = sc.first[pr], sc.second[pr]
 
     def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, o = rot[fr, c], pos[fr, c]
-        return o + np.einsum("eij,ej->ei", r, sc.p0[c]), np.einsum("eij,ej->ei", r, sc.p1[c] - sc.p0[c])
+        return o + np.einsum("eij,ej->ei", r, sc.p0[c]), np.einsum("eij,ej->ei", r, sc.segment[c])
 
     a0, da = ends(i)
     b0, db = ends(j)

@@ -23,6 +23,11 @@ bandwidth to 6 + nj and quarters the factorisation time.
 * Damping is per frame: frames are nearly independent, so each frame keeps the step only
   if its own cost drops, and its damping falls or rises on its own.
 * Coarse to fine (``SolverConfig.levels``): every 3rd frame first, then all frames.
+* Local refinement: frames where the stiff self-clearance / body-floor terms are still
+  violated are solved again in padded spans. The spans form one problem with no temporal
+  term between them (independent blocks of the banded system), each span accepting,
+  stopping and giving up on its own exactly as if solved alone, at the cost of one
+  linearisation and one factorisation per iteration for all of them.
 * Stance feet are finally moved onto their locks with the legs' own joints
   (:mod:`retarget.feet`).
 """
@@ -141,12 +146,41 @@ class _State:
     x: np.ndarray
     cost: float
     frame_cost: np.ndarray
+    span_cost: np.ndarray
+
+    def select(self, use: np.ndarray, other: "_State", spans: np.ndarray) -> "_State":
+        """Frames ``use`` (T,) from this state, the others from ``other``, where ``use`` takes
+        whole independent spans (``spans``: (S,) bool, the spans taken): no re-evaluation,
+        since no term couples frames of different spans (``x`` may then be off by a constant
+        per span, which the temporal terms, acting on differences within spans, never see)."""
+        def pick(a, b):
+            return None if a is None else np.where(use.reshape(-1, *([1] * (a.ndim - 1))), a, b)
+
+        close = None
+        if self.self_close is not None:
+            mine, theirs = use[self.self_close.frame], ~use[other.self_close.frame]
+            close = ClosePairs(*(np.concatenate([getattr(self.self_close, k)[mine], getattr(other.self_close, k)[theirs]])
+                                 for k in ("frame", "pair", "dist", "pa", "pb")))
+        poses = Poses(*(pick(getattr(self.poses, k), getattr(other.poses, k))
+                        for k in ("rot", "pos", "axis", "anchor", "root_pos")))
+        span_cost = np.where(spans, self.span_cost, other.span_cost)
+        return _State(pick(self.root_pos, other.root_pos), pick(self.root_rot, other.root_rot),
+                      pick(self.q, other.q), poses, pick(self.pts, other.pts), pick(self.active, other.active),
+                      pick(self.kp_res, other.kp_res), pick(self.seg_res, other.seg_res),
+                      pick(self.ori_res, other.ori_res), pick(self.floor_res, other.floor_res),
+                      pick(self.body_low, other.body_low), pick(self.body_low_end, other.body_low_end), close,
+                      pick(self.x, other.x), float(span_cost.sum()), pick(self.frame_cost, other.frame_cost),
+                      span_cost)
 
 
 class _Problem:
     """Residuals, Jacobians and the banded normal equations of one retargeting problem."""
 
-    def __init__(self, robot: RobotModel, targets: Targets, config: SolverConfig) -> None:
+    def __init__(self, robot: RobotModel, targets: Targets, config: SolverConfig,
+                 ref_pos: np.ndarray | None = None, span: np.ndarray | None = None) -> None:
+        """``ref_pos`` (T, 3): the root's temporal reference (default: the smoothed pelvis of
+        ``targets``); ``span`` (T,) int: independent spans of frames side by side (no
+        velocity/acceleration term couples frames of different spans; default: one span)."""
         self.robot, self.targets, self.config = robot, targets, config
         tree = robot.tree
         self.tree = tree
@@ -174,15 +208,17 @@ class _Problem:
         # Temporal weights per velocity coordinate, rescaled to the frame rate.
         r = targets.fps / 20.0
         c = config
-        self.w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
-        self.w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
+        w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
+        w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
+        self.span = np.zeros(self.t_len, dtype=int) if span is None else np.asarray(span, dtype=int)
+        self.n_spans = int(self.span.max()) + 1 if self.t_len else 1
+        coupled = self.span[1:] == self.span[:-1]
+        # Weights per frame pair (T - 1, n) and per frame triple (T - 2, n).
+        self.w_vel = coupled[:, None] * w_vel
+        self.w_acc = (coupled[:-1] & coupled[1:])[:, None] * w_acc
         self._banded_indices()
-        # The temporal terms act on the root position's deviation from the human pelvis (the
-        # initial guess, smoothed over REF_SMOOTH_SECONDS against joint noise): the robot's
-        # root may accelerate as the human's does (a jump's arc), but not on its own.
-        ref_pos = initial_guess(robot, targets)[0]
-        if len(ref_pos) > 2:
-            ref_pos = gaussian_filter1d(ref_pos, REF_SMOOTH_SECONDS * targets.fps, axis=0, mode="nearest")
+        if ref_pos is None:
+            ref_pos = reference_root(robot, targets)
         self.ref_x = np.zeros((len(ref_pos), self.n))
         self.ref_x[:, :3] = ref_pos
         # Segment s pulls keypoints child(+) and parent(-): incidence (K, S) and sum_s w_s d d^T.
@@ -191,6 +227,7 @@ class _Problem:
         inc[targets.seg_parent, np.arange(inc.shape[1])] = -1.0
         self._incidence = inc
         self._seg_matrix = (inc * targets.seg_weight) @ inc.T
+        self._kp_matrix = self._seg_matrix + targets.kp_weight[:, :, None] * np.eye(self.k_len)  # (T, K, K)
 
     # -- cost and linearisation ---------------------------------------------------------------
     def evaluate(self, root_pos, root_rot, q) -> "_State":
@@ -221,9 +258,11 @@ class _Problem:
                       + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1))
         x = self.temporal_values(root_pos, root_rot, q)
         d1, d2 = np.diff(x, axis=0), np.diff(x, n=2, axis=0)
-        cost = float(frame_cost.sum() + np.sum(self.w_vel * d1 * d1) + np.sum(self.w_acc * d2 * d2))
+        sp, ns = self.span, self.n_spans
+        span_cost = (np.bincount(sp, frame_cost, ns) + np.bincount(sp[:-1], np.sum(self.w_vel * d1 * d1, axis=1), ns)
+                     + np.bincount(sp[:-2], np.sum(self.w_acc * d2 * d2, axis=1), ns))
         return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, body_low,
-                      body_end, close, x, cost, frame_cost)
+                      body_end, close, x, float(span_cost.sum()), frame_cost, span_cost)
 
     def frame_violation(self, st: "_State") -> np.ndarray:
         """(T,) how deep (m) the enclosing capsules overlap each other, a body's support points
@@ -252,8 +291,7 @@ class _Problem:
         t, n, k = self.t_len, self.n, self.k_len
         jk = tree.point_jacobian(st.poses, self.robot.nodes, st.pts[:, :k])  # (T, K, 3, n)
         flat = jk.reshape(t, 3 * k, n)
-        wk = self._seg_matrix + tg.kp_weight[:, :, None] * np.eye(k)  # (T, K, K)
-        b = (wk @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
+        b = (self._kp_matrix @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
         jt = np.swapaxes(flat, 1, 2)
         h = jt @ b
         u = tg.kp_weight[..., None] * st.kp_res + self._incidence @ (tg.seg_weight[:, None] * st.seg_res)
@@ -390,6 +428,17 @@ def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.n
     return pos, rot, q
 
 
+def reference_root(robot: RobotModel, targets: Targets) -> np.ndarray:
+    """(T, 3) the root reference of the temporal terms: the initial guess's root position
+    (from the human pelvis) smoothed over REF_SMOOTH_SECONDS against joint noise. The terms
+    act on the root's deviation from it, so the robot's root may accelerate as the human's
+    does (a jump's arc), but not on its own."""
+    ref_pos = initial_guess(robot, targets)[0]
+    if len(ref_pos) > 2:
+        ref_pos = gaussian_filter1d(ref_pos, REF_SMOOTH_SECONDS * targets.fps, axis=0, mode="nearest")
+    return ref_pos
+
+
 def _subsample(targets: Targets, step: int) -> tuple[Targets, np.ndarray]:
     """Every ``step``-th frame of the targets (the last frame always kept)."""
     idx = np.unique(np.r_[np.arange(0, len(targets.kp_pos), step), len(targets.kp_pos) - 1])
@@ -442,12 +491,12 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
         last = k == 1
         cfg = replace(config, max_iterations=iters, damping=damping,
                       body_floor_weight=config.body_floor_weight if last else min(W_BODY_FLOOR, config.body_floor_weight))
-        sol = _solve(robot, small, cfg, init)
+        sol, final = _solve(robot, small, cfg, init)
         total += sol.iterations
         damping = max(config.damping, float(np.median(sol.damping)))
         prev = (sol.root_pos, sol.root_rot, sol.q, idx)
     if config.extra_iterations > 0:
-        total += _refine_violations(robot, targets, config, sol, damping)
+        total += _refine_violations(robot, config, sol, damping, *final)
     sol.iterations = total
     if config.pin_iterations > 0:
         from retarget.feet import pin_stance_feet
@@ -459,74 +508,112 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
 
 REFINE_PAD = 3
 """Frames added on each side of a violated span for its local refinement (2 of them pinned)."""
+REFINE_PATIENCE = 2
+"""Refused steps in a row after which a span of the local refinement gives up (a violation
+the other terms hold in place, e.g. legs kept crossed by their targets, would otherwise
+spend every extra iteration on raising the damping)."""
 
 
-def _refine_violations(robot: RobotModel, targets: Targets, config: SolverConfig, sol: Solution,
-                       damping: float) -> int:
-    """More iterations where the stiff terms are still violated, on those frames only.
-
-    Self-clearance and body-floor terms converge more slowly than the rest. Each span of
-    frames violating them by more than CONSTRAINT_TOLERANCE (padded by REFINE_PAD) is solved
-    again as its own small problem for up to ``extra_iterations`` iterations, its two outer
-    frames on each side pinned so the temporal terms join the span to the rest. Updates
-    ``sol`` in place; returns the iterations spent (the largest over spans).
-    """
-    prob = _Problem(robot, targets, config)
-    st = prob.evaluate(sol.root_pos, sol.root_rot, sol.q)
-    bad = prob.frame_violation(st) > CONSTRAINT_TOLERANCE
-    if not bad.any():
-        return 0
+def violation_spans(bad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The spans of the local refinement for violating frames ``bad`` (T,) bool: each run of
+    them padded by REFINE_PAD, plus two pinned frames on each side (within the sequence).
+    Returns (frames (F,), pinned (F,) bool, span id (F,)); empty when nothing is violated."""
     n = len(bad)
     grow = np.convolve(bad, np.ones(2 * REFINE_PAD + 1), mode="same") > 0
-    spent = 0
     padded = np.concatenate([[False], grow, [False]]).astype(int)
     edges = np.flatnonzero(np.diff(padded))
-    for a, b in zip(edges[::2], edges[1::2]):
-        lo, hi = max(a - 2, 0), min(b + 2, n)
-        idx = np.arange(lo, hi)
-        pinned = (idx < a) | (idx >= b)
-        sub = _take(targets, idx, targets.fps)
-        cfg = replace(config, max_iterations=config.extra_iterations, extra_iterations=0, damping=damping)
-        out = _solve(robot, sub, cfg, (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]), pinned=pinned)
-        sol.root_pos[idx], sol.root_rot[idx], sol.q[idx] = out.root_pos, out.root_rot, out.q
-        spent = max(spent, out.iterations)
-    return spent
+    spans = [(max(a - 2, 0), min(b + 2, n), a, b) for a, b in zip(edges[::2], edges[1::2])]
+    if not spans:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0, dtype=int)
+    idx = np.concatenate([np.arange(lo, hi) for lo, hi, _, _ in spans])
+    pinned = np.concatenate([(np.arange(lo, hi) < a) | (np.arange(lo, hi) >= b) for lo, hi, a, b in spans])
+    span = np.repeat(np.arange(len(spans)), [hi - lo for lo, hi, _, _ in spans])
+    return idx, pinned, span
+
+
+def _refine_violations(robot: RobotModel, config: SolverConfig, sol: Solution, damping: float,
+                       prob: _Problem, st: _State) -> int:
+    """More iterations where the stiff terms are still violated, on those frames only.
+
+    Self-clearance and body-floor terms converge more slowly than the rest. The spans of
+    frames violating them by more than CONSTRAINT_TOLERANCE (padded by REFINE_PAD) are solved
+    again for ``extra_iterations`` iterations, as one small problem: the spans side by side
+    with no temporal term between them, the two outer frames of each span pinned so the
+    temporal terms join the span to the rest. ``prob``/``st``: the full-rate problem and its
+    final state. Updates ``sol`` in place; returns the iterations spent.
+    """
+    idx, pinned, span = violation_spans(prob.frame_violation(st) > CONSTRAINT_TOLERANCE)
+    if not len(idx):
+        return 0
+    sub = _take(prob.targets, idx, prob.targets.fps)
+    cfg = replace(config, max_iterations=config.extra_iterations, extra_iterations=0, damping=damping)
+    # Each frame starts from its own damping at the end of the full-rate solve.
+    lam = np.maximum(np.asarray(sol.damping, dtype=float)[idx], damping)
+    out, _ = _solve(robot, sub, cfg, (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]), pinned=pinned,
+                    ref_pos=prob.ref_x[idx, :3], span=span, damping=lam, patience=REFINE_PATIENCE,
+                    until_resolved=True)
+    sol.root_pos[idx], sol.root_rot[idx], sol.q[idx] = out.root_pos, out.root_rot, out.q
+    return out.iterations
 
 
 def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
-           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None, pinned: np.ndarray | None = None) -> Solution:
+           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None, pinned: np.ndarray | None = None,
+           ref_pos: np.ndarray | None = None, span: np.ndarray | None = None,
+           damping: np.ndarray | None = None, patience: int | None = None, until_resolved: bool = False
+           ) -> tuple[Solution, tuple[_Problem, _State]]:
+    """Levenberg-Marquardt on one problem; ``pinned`` (T,) bool: frames held fixed;
+    ``damping`` (T,): each frame's initial damping (default ``config.damping``);
+    ``patience``: refused steps in a row after which a span gives up (default: until its
+    damping explodes); ``until_resolved``: a span also stops once none of its frames
+    violates the stiff terms by more than CONSTRAINT_TOLERANCE (the local refinement's aim).
+
+    ``span`` (T,) int: independent spans side by side (see :class:`_Problem`). Each span
+    accepts or refuses its step, stops and gives up on its own, exactly as if it were solved
+    alone; the spans still running share the linearisations and banded solves, and the
+    problem shrinks to them whenever spans stop. Returns the solution and the final
+    (problem, state) of the spans running at the end (all of them when ``span`` is None).
+    """
     start = time.perf_counter()
-    prob = _Problem(robot, targets, config)
-    tree = robot.tree
+    prob = _Problem(robot, targets, config, ref_pos=ref_pos, span=span)
     root_pos, root_rot, q = init if init is not None else initial_guess(robot, targets)
     lower, upper = robot.lower, robot.upper
     st = prob.evaluate(root_pos, root_rot, np.clip(q, lower, upper))
+    out_pos, out_rot, out_q = st.root_pos.copy(), st.root_rot.copy(), st.q.copy()
+    frames = np.arange(prob.t_len)  # rows of the current problem in the original one
+    settled = 0.0  # cost of the spans that stopped
     history = [st.cost]
     # Levenberg-Marquardt with one damping per frame: frames are nearly independent, so
     # each keeps the step only if its own cost drops, and its damping adapts on its own.
-    lam = np.full(prob.t_len, config.damping)
+    lam = np.full(prob.t_len, config.damping) if damping is None else np.array(damping, dtype=float)
+    out_lam = lam.copy()
+    hold = np.zeros(prob.t_len, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool).copy()
+    refused = np.zeros(prob.n_spans, dtype=int)  # refused steps in a row, per span
     iterations = 0
     need_linearise = True
     while iterations < config.max_iterations:
         iterations += 1
+        sp = prob.span
         if need_linearise:
             h, g = prob.normal_equations(st)
             g += prob.gradient_temporal(st.x)
             g[:, 6:] += prob.posture * (st.q - robot.rest_q)
             frozen = np.zeros_like(g, dtype=bool)
             frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | ((st.q >= upper - 1e-12) & (g[:, 6:] < 0))
-            if pinned is not None:
-                frozen[pinned] = True
+            frozen[hold] = True
         try:
             ab = prob.normal_matrix(h, lam)
             step = prob.solve_step(ab, g, frozen)
             # Joints whose step crosses a limit stop at the limit; the others are solved
-            # again with those steps fixed (skipped when the overshoot is tiny: plain clip).
+            # again with those steps fixed (skipped, per span, when the overshoot is tiny:
+            # plain clip; a span left alone gets the same step again, the spans being
+            # independent blocks of the system).
             qs = st.q + step[:, 6:]
             over = np.maximum(qs - upper, lower - qs)
-            if over.max() > CROSS_TOLERANCE:
+            worst = np.full(prob.n_spans, -np.inf)
+            np.maximum.at(worst, sp, over.max(axis=1))
+            if worst.max() > CROSS_TOLERANCE:
                 cross = np.zeros_like(frozen)
-                cross[:, 6:] = over > 0
+                cross[:, 6:] = (over > 0) & (worst > CROSS_TOLERANCE)[sp][:, None]
                 fixed_step = np.zeros_like(step)
                 fixed_step[:, 6:] = np.clip(qs, lower, upper) - st.q
                 step = prob.solve_step(ab, g, frozen | cross, fixed_step)
@@ -537,28 +624,51 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
         trial = prob.evaluate(st.root_pos + step[:, 0:3], so3_exp(step[:, 3:6]) @ st.root_rot,
                               np.clip(st.q + step[:, 6:], lower, upper))
         better = trial.frame_cost < st.frame_cost
-        if trial.cost >= st.cost and better.any() and not better.all():
-            b3 = better[:, None]
-            trial = prob.evaluate(np.where(b3, trial.root_pos, st.root_pos),
-                                  np.where(better[:, None, None], trial.root_rot, st.root_rot),
-                                  np.where(b3, trial.q, st.q))
-        if trial.cost < st.cost:
-            done = (st.cost - trial.cost) < config.tolerance * st.cost
-            st = trial
-            history.append(st.cost)
-            lam = np.where(better, np.maximum(lam / 3, 1e-9), lam * 10)
+        n_better = np.bincount(sp, better, prob.n_spans)
+        n_frames = np.bincount(sp, minlength=prob.n_spans)
+        # A span whose cost rose although some of its frames improved keeps only those frames.
+        partial = (trial.span_cost >= st.span_cost) & (n_better > 0) & (n_better < n_frames)
+        if partial.any():
+            use = better | ~partial[sp]
+            trial = prob.evaluate(np.where(use[:, None], trial.root_pos, st.root_pos),
+                                  np.where(use[:, None, None], trial.root_rot, st.root_rot),
+                                  np.where(use[:, None], trial.q, st.q))
+        accept = trial.span_cost < st.span_cost
+        done = np.zeros(prob.n_spans, dtype=bool)
+        if accept.any():
+            done = accept & ((st.span_cost - trial.span_cost) < config.tolerance * st.span_cost)
+            st = trial if accept.all() else trial.select(accept[sp], st, accept)
+            history.append(settled + st.cost)
+            lam = np.where(accept[sp], np.where(better, np.maximum(lam / 3, 1e-9), lam * 10), lam * 10)
             need_linearise = True
+            if until_resolved:
+                worst = np.zeros(prob.n_spans)
+                np.maximum.at(worst, sp, prob.frame_violation(st))
+                done |= accept & (worst <= CONSTRAINT_TOLERANCE)
         else:
-            done = False
             lam *= 10
             need_linearise = False
-            if lam.min() > 1e6:
-                break
-        if done:
+        # a span whose every frame's damping exploded, or out of patience, gives up
+        refused = np.where(accept, 0, refused + 1)
+        done |= ~accept & (np.bincount(sp, lam > 1e6, prob.n_spans) == n_frames)
+        if patience is not None:
+            done |= refused >= patience
+        if done.all():
             break
-    root_pos, root_rot, q, cost = st.root_pos, st.root_rot, st.q, st.cost
+        if done.any():  # go on with the spans still running only
+            keep = ~done[sp]
+            rows = np.flatnonzero(keep)
+            out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = st.root_pos, st.root_rot, st.q, lam
+            settled += float(st.span_cost[done].sum())
+            _, new_span = np.unique(sp[keep], return_inverse=True)
+            prob = _Problem(robot, _take(prob.targets, rows, prob.targets.fps), config,
+                            ref_pos=prob.ref_x[rows, :3], span=new_span)
+            st = prob.evaluate(st.root_pos[rows], st.root_rot[rows], st.q[rows])
+            frames, lam, hold, refused = frames[rows], lam[rows], hold[rows], refused[~done]
+            need_linearise = True
+    out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = st.root_pos, st.root_rot, st.q, lam
     # re-orthonormalise the root rotations
-    u, _, vt = np.linalg.svd(root_rot)
-    root_rot = u @ vt
-    return Solution(root_pos=root_pos, root_rot=root_rot, q=q, iterations=iterations, cost=cost,
-                    seconds=time.perf_counter() - start, history=history, damping=lam)
+    u, _, vt = np.linalg.svd(out_rot)
+    sol = Solution(root_pos=out_pos, root_rot=u @ vt, q=out_q, iterations=iterations, cost=settled + st.cost,
+                   seconds=time.perf_counter() - start, history=history, damping=out_lam)
+    return sol, (prob, st)
