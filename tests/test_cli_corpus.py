@@ -23,6 +23,29 @@ def test_corpus_then_probes_end_to_end(tmp_path, capsys):
     assert sorted(json.loads((out / "corpus.json").read_text())["families"]) == ["clap", "squat"]
 
 
+def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
+    """--tokenizer-only probes the ground truth after an encode/decode round trip of the model's
+    tokenizer: the shipped one reproduces walks (their probes pass), and the report says what it ran."""
+    out = tmp_path / "c"
+    assert main(["corpus", "--out", str(out), "--clips", "4", "--seed", "5", "--workers", "1", "--quiet",
+                 "--families", "walk,sidestep_left"]) == 0
+    capsys.readouterr()
+    report = tmp_path / "tok.json"
+    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--model", "default", "--tokenizer-only",
+                 "--quiet", "--json", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert "through the tokenizer" in data["source"] and "all layer" in data["source"]
+    assert data["families"]["walk"]["passed"] == data["families"]["walk"]["total"] > 0
+    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--model", "default", "--tokenizer-only",
+                 "--layers", "1", "--quiet"]) == 0
+    assert "1 layer(s)" in capsys.readouterr().out
+    for argv in (["--layers", "1"], ["--tokenizer-only"], ["--model", "default", "--tokenizer-only", "--layers", "9"],
+                 ["--model", "default", "--layers", "2"]):
+        assert main(["eval", "probes", "--data", str(out), "--quiet", *argv]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "error" in err, (argv, err)
+
+
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
     blocker = tmp_path / "file.txt"
     blocker.write_text("x")

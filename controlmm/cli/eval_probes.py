@@ -15,13 +15,16 @@ from the corpus' meta/<id>.json. Prints the pass rate per family.
 --model M generates a motion from every caption of the split (the clip's length, seeds
 SEED, SEED+1, ... per batch) and checks it: the model's text adherence on captions it has
 not seen (the test split's wording is held out from training). --samples and --families
-keep it quick.
+keep it quick. --model M --tokenizer-only passes each ground-truth clip through the model's
+tokenizer instead (encode, decode; --layers keeps the first quantizer layers): what the token
+space can represent, the ceiling of the generator.
 
 examples:
   controlmm eval probes --data corpus
   controlmm eval probes --data corpus --split all --json probes.json
   controlmm eval probes --data corpus --model MODEL_DIR --samples 20
-  controlmm eval probes --data corpus --model MODEL_DIR --families wave_left,wave_right"""
+  controlmm eval probes --data corpus --model MODEL_DIR --families wave_left,wave_right
+  controlmm eval probes --data corpus --model MODEL_DIR --tokenizer-only --layers 1"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the caption choice and the generation (default 0)")
     p.add_argument("--batch-size", type=int, default=32, help="captions generated together (default 32)")
     p.add_argument("--device", default="cpu", help="cpu or cuda, for --model (default cpu)")
+    p.add_argument("--tokenizer-only", action="store_true",
+                   help="with --model: probe the ground truth reconstructed by the model's tokenizer")
+    p.add_argument("--layers", type=int, default=None,
+                   help="with --tokenizer-only: quantizer layers kept (default all)")
     p.add_argument("--json", default=None, help="also write the report (with failed checks) to this JSON file")
     p.add_argument("--show-failures", type=int, default=10, help="print up to N failed captions (default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -49,9 +56,13 @@ def run(args: argparse.Namespace) -> int:
 
     from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
-    from controlmm.eval.model_probes import generated_motions, select_cases
+    from controlmm.eval.model_probes import generated_motions, select_cases, tokenized_motions
     from controlmm.eval.probes import evaluate, ground_truth, list_cases
 
+    if (args.tokenizer_only or args.layers is not None) and args.model is None:
+        raise ControlMMError("--tokenizer-only and --layers need --model")
+    if args.layers is not None and not args.tokenizer_only:
+        raise ControlMMError("--layers goes with --tokenizer-only")
     cases = list_cases(args.data, args.split)
     families = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
     if args.families is not None and not families:
@@ -66,8 +77,13 @@ def run(args: argparse.Namespace) -> int:
         from controlmm.generate import load_model
 
         model = load_model(None if args.model == "default" else args.model, device=args.device)
-        source = generated_motions(model, cases, seed=args.seed, batch_size=args.batch_size, progress=not args.quiet)
-        what = f"model {model.directory}, seed {args.seed}"
+        if args.tokenizer_only:
+            source = tokenized_motions(model, args.data, args.layers)
+            what = f"ground truth through the tokenizer of {model.directory}, {args.layers or 'all'} layer(s)"
+        else:
+            source = generated_motions(model, cases, seed=args.seed, batch_size=args.batch_size,
+                                       progress=not args.quiet)
+            what = f"model {model.directory}, seed {args.seed}"
         report = evaluate(cases, source, split=args.split, progress=not args.quiet)
     print(f"probes on {args.data} ({args.split} split, {what})")
     print(report.table())

@@ -79,3 +79,34 @@ def generated_motions(model, cases: Sequence[ProbeCase], seed: int = 0, batch_si
         return motions[(case.clip_id, case.caption)]
 
     return motion_for
+
+
+def tokenized_motions(model, data_dir: str, layers: int | None = None) -> Callable[[ProbeCase], object]:
+    """The ground truth of each case passed through the model's tokenizer (encode, keep the first
+    ``layers`` quantizer layers, default all, decode): what the token space can represent at all,
+    the ceiling of any generator on top of it. Returns a ``motion_for`` for
+    :func:`controlmm.eval.probes.evaluate`; clips are cropped to a multiple of 4 frames."""
+    import torch
+
+    from controlmm.eval.probes import ground_truth
+    from controlmm.motion import Motion
+
+    tokenizer = model.parts.get("tokenizer")
+    if tokenizer is None:
+        raise ControlMMError("this model directory has no tokenizer")
+    total = tokenizer.cfg.num_quantizers
+    if layers is not None and not 1 <= layers <= total:
+        raise ControlMMError(f"layers must be between 1 and {total} for this tokenizer; got {layers}")
+    source = ground_truth(data_dir)
+
+    def motion_for(case: ProbeCase):
+        features = source(case).features
+        n = len(features) // 4 * 4
+        x = torch.as_tensor(model.normalizer.normalize(features[:n]), dtype=torch.float32, device=model.device)
+        dtype = next(tokenizer.parameters()).dtype
+        with torch.no_grad():
+            ids = tokenizer.encode(x[None].to(dtype))
+            out = tokenizer.decode(ids[..., :layers] if layers else ids)[0].float().cpu().numpy()
+        return Motion.from_features(model.normalizer.denormalize(out))
+
+    return motion_for
