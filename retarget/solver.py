@@ -212,6 +212,7 @@ class _Problem:
         w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
         self.span = np.zeros(self.t_len, dtype=int) if span is None else np.asarray(span, dtype=int)
         self.n_spans = int(self.span.max()) + 1 if self.t_len else 1
+        self.span_frames = np.bincount(self.span, minlength=self.n_spans)  # (S,) frames per span
         coupled = self.span[1:] == self.span[:-1]
         # Weights per frame pair (T - 1, n) and per frame triple (T - 2, n).
         self.w_vel = coupled[:, None] * w_vel
@@ -263,6 +264,12 @@ class _Problem:
                      + np.bincount(sp[:-2], np.sum(self.w_acc * d2 * d2, axis=1), ns))
         return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, body_low,
                       body_end, close, x, float(span_cost.sum()), frame_cost, span_cost)
+
+    def span_max(self, values: np.ndarray, floor: float = -np.inf) -> np.ndarray:
+        """(S,) the largest of per-frame ``values`` (T,) in each span (``floor`` if none is larger)."""
+        out = np.full(self.n_spans, floor)
+        np.maximum.at(out, self.span, values)
+        return out
 
     def frame_violation(self, st: "_State") -> np.ndarray:
         """(T,) how deep (m) the enclosing capsules overlap each other, a body's support points
@@ -609,8 +616,7 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             # independent blocks of the system).
             qs = st.q + step[:, 6:]
             over = np.maximum(qs - upper, lower - qs)
-            worst = np.full(prob.n_spans, -np.inf)
-            np.maximum.at(worst, sp, over.max(axis=1))
+            worst = prob.span_max(over.max(axis=1))
             if worst.max() > CROSS_TOLERANCE:
                 cross = np.zeros_like(frozen)
                 cross[:, 6:] = (over > 0) & (worst > CROSS_TOLERANCE)[sp][:, None]
@@ -625,7 +631,7 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
                               np.clip(st.q + step[:, 6:], lower, upper))
         better = trial.frame_cost < st.frame_cost
         n_better = np.bincount(sp, better, prob.n_spans)
-        n_frames = np.bincount(sp, minlength=prob.n_spans)
+        n_frames = prob.span_frames
         # A span whose cost rose although some of its frames improved keeps only those frames.
         partial = (trial.span_cost >= st.span_cost) & (n_better > 0) & (n_better < n_frames)
         if partial.any():
@@ -642,9 +648,7 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             lam = np.where(accept[sp], np.where(better, np.maximum(lam / 3, 1e-9), lam * 10), lam * 10)
             need_linearise = True
             if until_resolved:
-                worst = np.zeros(prob.n_spans)
-                np.maximum.at(worst, sp, prob.frame_violation(st))
-                done |= accept & (worst <= CONSTRAINT_TOLERANCE)
+                done |= accept & (prob.span_max(prob.frame_violation(st), 0.0) <= CONSTRAINT_TOLERANCE)
         else:
             lam *= 10
             need_linearise = False

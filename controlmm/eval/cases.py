@@ -107,21 +107,23 @@ class ProbeReport:
         }
 
 
+def clip_features(data_dir: str | Path, clip_id: str) -> np.ndarray:
+    """The features (T, 263) of corpus clip ``clip_id`` (``new_joint_vecs``); one-line errors."""
+    path = Path(data_dir) / "new_joint_vecs" / f"{clip_id}.npy"
+    if not path.is_file():
+        raise InputFileError(f"clip '{clip_id}' has no features file {path}")
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - a corrupt file is a user error
+        raise InputFileError(f"cannot read {path}: {type(exc).__name__}") from None
+
+
 def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
     """Motion source for :func:`evaluate`: the corpus' own features (``new_joint_vecs``)."""
     from controlmm.motion import Motion
 
-    root = Path(data_dir)
-
     def load(case: ProbeCase):
-        path = root / "new_joint_vecs" / f"{case.clip_id}.npy"
-        if not path.is_file():
-            raise InputFileError(f"clip '{case.clip_id}' has no features file {path}")
-        try:
-            features = np.load(path, allow_pickle=False)
-        except Exception as exc:  # noqa: BLE001 - a corrupt file is a user error
-            raise InputFileError(f"cannot read {path}: {type(exc).__name__}") from None
-        return Motion.from_features(features)
+        return Motion.from_features(clip_features(data_dir, case.clip_id))
 
     return load
 

@@ -88,7 +88,7 @@ def tokenized_motions(model, data_dir: str, layers: int | None = None) -> Callab
     :func:`controlmm.eval.probes.evaluate`; clips are cropped to a multiple of 4 frames."""
     import torch
 
-    from controlmm.eval.probes import ground_truth
+    from controlmm.eval.cases import clip_features
     from controlmm.motion import Motion
 
     tokenizer = model.parts.get("tokenizer")
@@ -97,13 +97,12 @@ def tokenized_motions(model, data_dir: str, layers: int | None = None) -> Callab
     total = tokenizer.cfg.num_quantizers
     if layers is not None and not 1 <= layers <= total:
         raise ControlMMError(f"layers must be between 1 and {total} for this tokenizer; got {layers}")
-    source = ground_truth(data_dir)
+    dtype = next(tokenizer.parameters()).dtype
 
     def motion_for(case: ProbeCase):
-        features = source(case).features
+        features = clip_features(data_dir, case.clip_id)
         n = len(features) // 4 * 4
         x = torch.as_tensor(model.normalizer.normalize(features[:n]), dtype=torch.float32, device=model.device)
-        dtype = next(tokenizer.parameters()).dtype
         with torch.no_grad():
             ids = tokenizer.encode(x[None].to(dtype))
             out = tokenizer.decode(ids[..., :layers] if layers else ids)[0].float().cpu().numpy()
