@@ -28,7 +28,7 @@ creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages ad
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
-EPILOG = """presets: demo (CPU-sized, MiniLM text; about 45 min for the three stages on 2 cores), paper
+EPILOG = """presets: demo (CPU-sized, MiniLM text; about 60 min for the three stages on 2 cores), paper
 (the released MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
 
 
@@ -72,6 +72,10 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     if creates:
         p.add_argument("--text-encoder", default=None,
                        help="minilm or clip (default: the preset's; fixed for the model directory)")
+        p.add_argument("--text-tokens", type=int, default=None, metavar="N",
+                       help="MiniLM only: condition the masked transformer on the text's token states "
+                            "(at most N) instead of one sentence vector; 0 = sentence vector (default: "
+                            "the preset's; fixed for the model directory)")
     p.add_argument("--clip-weights", default=None, metavar="PATH",
                    help="CLIP ViT-B/32 folder saved by transformers (CLIP-conditioned models)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -91,6 +95,7 @@ def run_stage(name: str, args: argparse.Namespace, stage_options: dict | None = 
         batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every, resume=args.resume,
         force=args.force, seed=args.seed, device=args.device, workers=args.workers,
         text_encoder=getattr(args, "text_encoder", None), clip_weights=args.clip_weights,
+        text_tokens=getattr(args, "text_tokens", None),
         progress=not args.no_progress, command="controlmm " + " ".join(sys.argv[1:]),
         precision=args.precision, threads=args.threads, stage_options=dict(stage_options or {}),
     )

@@ -54,7 +54,13 @@ class TokenizerConfig:
 
 @dataclass(frozen=True)
 class TransformerConfig:
-    """Text-conditioned masked (base-layer) transformer (MoMask ``MaskTransformer``)."""
+    """Text-conditioned masked (base-layer) transformer (MoMask ``MaskTransformer``).
+
+    ``text_norm`` (not in MoMask): a LayerNorm on the text vector before ``cond_emb``. MiniLM sentence
+    vectors are L2-normalised (components ~0.05) where MoMask feeds CLIP's unnormalised, so with the
+    same N(0, 0.02) init the MiniLM condition token starts much weaker than MoMask's; the LayerNorm
+    gives every text vector unit variance (components ~1). Off for the ``paper`` preset and official checkpoints.
+    """
 
     nb_code: int = 512
     code_dim: int = 512  # width of token_emb (ids and soft embeddings live in this space)
@@ -66,6 +72,7 @@ class TransformerConfig:
     cond_drop_prob: float = 0.1
     text_dim: int = 512  # 512 for CLIP ViT-B/32, 384 for MiniLM
     max_len: int = 5000  # rows of the sinusoidal table (official 5000)
+    text_norm: bool = False
 
     @property
     def mask_id(self) -> int:
@@ -91,10 +98,12 @@ class ResidualConfig:
     cond_drop_prob: float = 0.2
     text_dim: int = 512
     max_len: int = 5000
+    text_norm: bool = False  # as TransformerConfig.text_norm
 
     @property
     def pad_id(self) -> int:
         return self.nb_code
+
 
 
 CONTROL_JOINT_SETS: dict[str, tuple[int, ...]] = {"pelvis": (0,), "all": (0, 10, 11, 15, 20, 21)}
@@ -132,12 +141,16 @@ class TextEncoderConfig:
     ``"clip"`` (CLIP ViT-B/32 ``encode_text``: projected end-of-text token, 512-d, not normalised).
     ``weights``: for CLIP, a folder saved by ``transformers`` (``CLIPModel.save_pretrained``) or a
     Hugging Face model id looked up in the local cache only; ignored by MiniLM.
+    ``tokens`` (MiniLM only, not in MoMask): 0 = one sentence vector per text (B, dim); N > 0 = the
+    text's token states, at most N, zero-padded (B, L, dim): the masked transformer attends to every
+    word instead of one pooled vector; the residual transformer pools them back into the sentence vector.
     """
 
     name: str = "minilm"
     weights: str | None = None
     precision: str = "float32"  # "float16" reproduces the official GPU CLIP features
     size: int | None = None  # vector size when it differs from the encoder's usual one (other CLIP weights)
+    tokens: int = 0
 
     @property
     def dim(self) -> int:
@@ -240,6 +253,9 @@ def check_consistent(cfg: ModelConfig) -> None:
                              f"allowed: {', '.join(TEXT_ENCODER_DIMS)}")
     if cfg.control.joints not in CONTROL_JOINT_SETS:
         raise ControlMMError(f"unknown control joint set '{cfg.control.joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}")
+    if cfg.text_encoder.tokens and (cfg.text_encoder.name != "minilm" or not 1 <= cfg.text_encoder.tokens <= 128):
+        raise ControlMMError(f"text encoder tokens must be 0 (sentence vectors) or 1..128 with minilm; got "
+                             f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
     if cfg.text_encoder.precision not in ("float32", "float16"):
         raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
     checks = [
@@ -288,15 +304,15 @@ def _demo() -> ModelConfig:
     common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
                   text_dim=384, max_len=64)
     # Measured on the corpus (benchmarks/model.py, fp32, 2 threads on 2 cores): tokenizer 5.8 it/s,
-    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 9 + 24 + 12 = 45 min (70 min on one core),
-    # leaving the rest of the two-hour budget to the control branch and the evaluator.
+    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 10 + 37 + 12 = 59 min (about 95 min on one
+    # core), leaving the rest of the two-hour budget to the control branch and the evaluator.
     schedules = {
-        "tokenizer": StageSchedule(iters=3000, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
+        "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
-        "transformer": StageSchedule(iters=2500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
-                                     milestones=(2000,), gamma=0.2, checkpoint_every=250),
-        "residual": StageSchedule(iters=1500, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
-                                  milestones=(1200,), gamma=0.2, checkpoint_every=250),
+        "transformer": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
+                                     milestones=(3200,), gamma=0.2, checkpoint_every=250),
+        "residual": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
+                                  milestones=(3200,), gamma=0.2, checkpoint_every=250),
         # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
         "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
                                  milestones=(1200,), gamma=0.2, checkpoint_every=100),
@@ -304,8 +320,8 @@ def _demo() -> ModelConfig:
     return ModelConfig(
         preset="demo",
         tokenizer=tok,
-        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, **common),
-        residual=ResidualConfig(num_layers=3, num_quantizers=6, cond_drop_prob=0.2, **common),
+        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, text_norm=True, **common),
+        residual=ResidualConfig(num_layers=3, num_quantizers=6, cond_drop_prob=0.2, text_norm=True, **common),
         text_encoder=TextEncoderConfig(name="minilm"),
         storage_dtype="float16",
         schedules=schedules,

@@ -114,3 +114,28 @@ def run_layers(layers: nn.ModuleList, x: torch.Tensor, padding_mask: torch.Tenso
         if hook is not None:
             x = hook(i, x)
     return x
+
+
+def text_token_padding(states: torch.Tensor) -> torch.Tensor:
+    """Token states (B, L, dim), all-zero rows padding -> (B, L) bool, True at padding."""
+    return states.abs().amax(dim=-1) == 0
+
+
+def trim_text_tokens(states: torch.Tensor) -> torch.Tensor:
+    """Drop the trailing columns that are padding in every row of (B, L, dim) (at least one is kept)."""
+    used = int((~text_token_padding(states)).sum(dim=1).max().clamp(min=1))
+    return states[:, :used]
+
+
+def pool_text_tokens(states: torch.Tensor) -> torch.Tensor:
+    """Token states (B, L, dim) -> sentence vectors (B, dim): mean over non-padding rows, L2-normalised
+    (MiniLM's own pooling, so the result equals its sentence vector); all-padding rows give 0."""
+    keep = (~text_token_padding(states)).to(states.dtype)[..., None]
+    mean = (states * keep).sum(dim=1) / keep.sum(dim=1).clamp(min=1)
+    return F.normalize(mean, dim=-1)
+
+
+def keep_per_sample(keep: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """A per-sample factor (B,) or (B, 1) shaped to broadcast over ``like`` (B, ...)."""
+    return keep.reshape(like.shape[0], *([1] * (like.ndim - 1)))
+

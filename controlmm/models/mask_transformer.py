@@ -6,10 +6,12 @@ Forward pass (one condition, sequence-first inside, as the official module)::
 
     e      = token_emb(ids)                 (B, N, code_dim)   or given soft embeddings
     x      = PE(poseEmbedding(e))           (N, B, D)
-    c      = cond_emb(text or 0)            (1, B, D)          text zeroed for the unconditional pass
-    h_0    = [c ; x]                        (N+1, B, D)
+    c      = cond_emb(LN(text or 0))        (1, B, D)          text zeroed for the unconditional pass;
+                                                                LN only with cfg.text_norm; with text
+                                                                token states (B, L, text_dim): (C, B, D)
+    h_0    = [c ; x]                        (C+N, B, D)        C = 1 for a sentence vector
     h_L    = layers(h_0)                    8 post-LN GELU TransformerEncoderLayers (paper preset)
-    logits = output_process(h_L[1:])        (B, N, nb_code)    no logits for mask/pad
+    logits = output_process(h_L[C:])        (B, N, nb_code)    no logits for mask/pad
 
 Training (``masked_loss``): cosine mask ratio, BERT corruption (10% random code, then 88% of the
 rest [MASK]), cross-entropy on masked positions, 10% condition dropout (classifier-free guidance).
@@ -32,9 +34,12 @@ from controlmm.models.layers import (
     PositionalEncoding,
     cosine_schedule,
     init_weights,
+    keep_per_sample,
     lengths_to_mask,
     run_layers,
+    text_token_padding,
     transformer_trunk,
+    trim_text_tokens,
 )
 
 
@@ -47,6 +52,7 @@ class MaskTransformer(nn.Module):
         self.position_enc = PositionalEncoding(cfg.latent_dim, cfg.dropout, cfg.max_len)
         self.seqTransEncoder = transformer_trunk(cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout,
                                                  cfg.num_layers)
+        self.text_norm = nn.LayerNorm(cfg.text_dim) if cfg.text_norm else nn.Identity()
         self.cond_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
         self.output_process = OutputProcess(cfg.nb_code, cfg.latent_dim)
         self.token_emb = nn.Embedding(cfg.nb_code + 2, cfg.code_dim)
@@ -58,9 +64,8 @@ class MaskTransformer(nn.Module):
         if force_mask:
             return torch.zeros_like(cond)
         if self.training and self.cfg.cond_drop_prob > 0:
-            keep = torch.bernoulli(torch.full((cond.shape[0], 1), 1.0 - self.cfg.cond_drop_prob,
-                                              device=cond.device))
-            return cond * keep
+            keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - self.cfg.cond_drop_prob, device=cond.device))
+            return cond * keep_per_sample(keep, cond)
         return cond
 
     def token_embeddings(self, tokens: torch.Tensor) -> torch.Tensor:
@@ -69,32 +74,41 @@ class MaskTransformer(nn.Module):
 
     def embed(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
               force_mask: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
-        """h_0 = [cond token ; PE(poseEmbedding(tokens))] (N+1, B, D) and its key-padding mask (B, N+1).
+        """h_0 = [condition rows ; PE(poseEmbedding(tokens))] (C+N, B, D) and its key-padding mask (B, C+N).
 
         Args:
             tokens: ids (B, N) or soft embeddings (B, N, code_dim).
-            cond: text vectors (B, text_dim).
+            cond: text vectors (B, text_dim): one condition row (C = 1, MoMask); or text token states
+                (B, L, text_dim) with all-zero rows as padding: one row per token (C <= L, padding
+                masked; a dropped or unconditional text is all padding).
             padding_mask: (B, N) True at padded positions.
         """
         x = self.position_enc(self.input_process(self.token_embeddings(tokens)))
-        c = self.cond_emb(self.mask_cond(cond, force_mask))[None]
-        mask = torch.cat([torch.zeros_like(padding_mask[:, :1]), padding_mask], dim=1)
-        return torch.cat([c, x], dim=0), mask
+        cond = self.mask_cond(cond, force_mask)
+        if cond.ndim == 2:
+            c = self.cond_emb(self.text_norm(cond))[None]
+            c_pad = torch.zeros_like(padding_mask[:, :1])
+        else:
+            cond = trim_text_tokens(cond)
+            c = self.cond_emb(self.text_norm(cond)).transpose(0, 1)
+            c_pad = text_token_padding(cond)
+        return torch.cat([c, x], dim=0), torch.cat([c_pad, padding_mask], dim=1)
 
     def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None) -> torch.Tensor:
         """The encoder layers on (N+1, B, D); ``hook(i, h) -> h`` runs after layer i."""
         return run_layers(self.seqTransEncoder.layers, h, mask, hook)
 
-    def head(self, h: torch.Tensor) -> torch.Tensor:
-        """Final hidden states (N+1, B, D) -> logits (B, N, nb_code) (condition token dropped)."""
-        return self.output_process(h[1:])
+    def head(self, h: torch.Tensor, num_tokens: int) -> torch.Tensor:
+        """Final hidden states (C+N, B, D) -> logits (B, N, nb_code) of the last ``num_tokens`` = N rows
+        (the condition rows dropped)."""
+        return self.output_process(h[h.shape[0] - num_tokens:])
 
     # -- passes -----------------------------------------------------------------------------------
     def forward(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
                 force_mask: bool = False) -> torch.Tensor:
         """Logits (B, N, nb_code) for ids or soft embeddings ``tokens``; see :meth:`embed`."""
         h, mask = self.embed(tokens, cond, padding_mask, force_mask)
-        return self.head(self.run_layers(h, mask))
+        return self.head(self.run_layers(h, mask), padding_mask.shape[1])
 
     def cfg_logits(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
                    scale: float) -> torch.Tensor:

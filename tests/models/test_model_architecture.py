@@ -172,7 +172,7 @@ def test_mask_transformer_ids_soft_embeddings_hooks_and_cfg():
     ref = model.seqTransEncoder(h, src_key_padding_mask=mask)
     assert torch.allclose(model.run_layers(h, mask)[:, 0], ref[:, 0], atol=1e-5)
     calls = []
-    out = model.head(model.run_layers(h, mask, hook=lambda i, x: (calls.append(i), x + 1.0)[1]))
+    out = model.head(model.run_layers(h, mask, hook=lambda i, x: (calls.append(i), x + 1.0)[1]), 7)
     assert calls == list(range(cfg.num_layers)) and not torch.allclose(out, logits)
     # CFG: l_u + s (l_c - l_u), with the unconditional pass on a zero text vector.
     uncond = model(ids, torch.zeros_like(cond), pad)
@@ -206,3 +206,73 @@ def test_residual_transformer_layer_logits_and_loss():
     assert logits.shape == (2, 6, cfg.nb_code + 1)
     loss, acc = model.residual_loss(ids, cond, torch.tensor([6, 4]))
     assert loss.ndim == 0 and torch.isfinite(loss) and 0 <= float(acc) <= 1
+
+
+def test_text_norm_lifts_unit_length_text_vectors_to_unit_variance():
+    demo, paper = preset_config("demo"), preset_config("paper")
+    assert demo.transformer.text_norm and demo.residual.text_norm
+    assert not paper.transformer.text_norm and not paper.residual.text_norm  # MoMask has no such layer
+    plain_cfg = preset_config("tiny").transformer
+    normed_cfg = ModelConfig.from_dict({**preset_config("tiny").to_dict(),
+                                        "transformer": {**plain_cfg.__dict__, "text_norm": True}}).transformer
+    torch.manual_seed(0)
+    plain = MaskTransformer(plain_cfg).eval()
+    normed = MaskTransformer(normed_cfg).eval()
+    assert "text_norm.weight" in normed.state_dict() and not any("text_norm" in k for k in plain.state_dict())
+    # A model without the layer still loads its own weights strictly; the new one has the layer on top.
+    missing = normed.load_state_dict(plain.state_dict(), strict=False).missing_keys
+    assert sorted(missing) == ["text_norm.bias", "text_norm.weight"]
+    text = torch.nn.functional.normalize(torch.randn(3, plain_cfg.text_dim), dim=-1)  # as MiniLM's vectors
+    ids = torch.randint(0, plain_cfg.nb_code, (3, 5))
+    pad = torch.zeros(3, 5, dtype=torch.bool)
+    with torch.no_grad():
+        c_plain = plain.embed(ids, text, pad)[0][0]
+        c_normed = normed.embed(ids, text, pad)[0][0]
+    # Same cond_emb weights: only the LayerNorm differs, and it scales the unit vector by ~sqrt(text_dim).
+    ratio = float(c_normed.norm() / c_plain.norm())
+    assert 0.5 * plain_cfg.text_dim**0.5 < ratio < 2 * plain_cfg.text_dim**0.5
+    # The unconditional pass does not depend on the text.
+    assert torch.allclose(normed(ids, text, pad, force_mask=True), normed(ids, text.flip(0), pad, force_mask=True))
+    res_cfg = ModelConfig.from_dict({**preset_config("tiny").to_dict(),
+                                     "residual": {**preset_config("tiny").residual.__dict__, "text_norm": True}}).residual
+    assert "text_norm.weight" in ResidualTransformer(res_cfg).state_dict()
+
+
+def test_text_token_states_are_condition_rows_and_padding_is_ignored():
+    cfg = preset_config("tiny").transformer
+    torch.manual_seed(0)
+    model = MaskTransformer(cfg).eval()
+    ids = torch.randint(0, cfg.nb_code, (2, 6))
+    pad = torch.zeros(2, 6, dtype=torch.bool)
+    states = torch.randn(2, 5, cfg.text_dim)
+    states[1, 3:] = 0  # the second text has 3 token states
+    logits = model(ids, states, pad)
+    assert logits.shape == (2, 6, cfg.nb_code)
+    h, mask = model.embed(ids, states, pad)
+    assert h.shape[0] == 5 + 6 and mask[1, 3:5].all() and not mask[0, :5].any()
+    # Extra zero columns (longer padding) change nothing; dropping the second text's padding neither.
+    longer = torch.cat([states, torch.zeros(2, 4, cfg.text_dim)], dim=1)
+    assert torch.allclose(model(ids, longer, pad), logits, atol=1e-5)
+    assert torch.allclose(model(ids[1:], states[1:, :3], pad[1:]), logits[1:], atol=1e-5)
+    # The words matter, and an all-zero text is the unconditional pass.
+    other = states.clone()
+    other[0, 1] += 1.0
+    assert not torch.allclose(model(ids, other, pad)[0], logits[0])
+    assert torch.allclose(model(ids, torch.zeros_like(states), pad), model(ids, states, pad, force_mask=True))
+    # The residual transformer pools token states into the sentence vector.
+    from controlmm.models.layers import pool_text_tokens
+
+    res = ResidualTransformer(preset_config("tiny").residual).eval()
+    q_ids = torch.randint(0, cfg.nb_code, (2, 6, 3))
+    history = res.history(q_ids, 1)
+    q = torch.ones(2, dtype=torch.long)
+    assert torch.allclose(res(history, q, states, pad), res(history, q, pool_text_tokens(states), pad), atol=1e-6)
+
+
+def test_text_tokens_need_minilm():
+    cfg = preset_config("tiny").to_dict()
+    cfg["text_encoder"]["tokens"] = 16
+    assert ModelConfig.from_dict(cfg).text_encoder.tokens == 16
+    cfg["text_encoder"]["tokens"] = 500
+    with pytest.raises(ControlMMError, match="tokens must be 0 .* got 500"):
+        ModelConfig.from_dict(cfg)

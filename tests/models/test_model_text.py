@@ -75,3 +75,20 @@ def test_caption_cache_is_one_file_per_caption_set_and_encoder(minilm, tmp_path)
     assert torch.allclose(fixed.vectors, first.vectors)
     embed_captions(minilm, ["another set"], cache_dir=tmp_path, progress=False)
     assert len(list(tmp_path.glob("text-minilm-*.pt"))) == 2
+
+
+def test_minilm_token_states_pool_to_the_sentence_vector(minilm, tmp_path):
+    from controlmm.models.layers import pool_text_tokens, text_token_padding
+
+    texts = ["a person walks forward 4 meters and stops.", "someone claps 3 times"]
+    states = minilm.encode_tokens(texts, max_tokens=64)
+    lengths = (~text_token_padding(states)).sum(dim=1)
+    # [CLS] + word pieces + [SEP]; the shorter text is zero-padded to the longer one.
+    assert states.shape == (2, int(lengths.max()), 384) and int(lengths[1]) < int(lengths[0])
+    assert torch.allclose(pool_text_tokens(states), minilm.encode(texts), atol=1e-5)
+    assert torch.equal(minilm.encode_tokens(texts, max_tokens=4), states[:, :4])  # truncation keeps the first
+    cached = embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64)
+    assert cached.vectors.shape == states.shape and len(list(tmp_path.glob("text-minilm-tok64-*.pt"))) == 1
+    assert torch.allclose(cached.vectors, states, atol=2e-3 * float(states.abs().max()))  # float16 on disk
+    assert torch.equal(embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64).vectors,
+                       cached.vectors)

@@ -161,3 +161,31 @@ def test_clip_conditioned_model_trains_and_generates(tiny_data, tiny_clip_dir, t
     model = load_model(out)
     result = generate(model, "a person squats slowly", frames=48, seed=0)
     assert result.motion.joints.shape == (48, 22, 3) and model.residual is None
+
+
+def test_text_token_model_trains_every_stage_and_generates(tiny_data, tmp_path):
+    from controlmm.generate import generate, load_model
+
+    out = tmp_path / "token-model"
+    train("tokenizer", TrainOptions(data=tiny_data, out=out, preset="tiny", iters=4, progress=False, text_tokens=12))
+    assert json.loads((out / "model.json").read_text())["config"]["text_encoder"]["tokens"] == 12
+    with pytest.raises(ControlMMError, match="uses text tokens 12; --text-tokens 0 does not match"):
+        train("transformer", TrainOptions(data=tiny_data, out=out, iters=2, progress=False, text_tokens=0))
+    for stage in ("transformer", "residual", "control"):
+        train(stage, TrainOptions(data=tiny_data, out=out, iters=2, progress=False))
+    assert len(list((out / "cache").glob("text-minilm-tok12-*.pt"))) == 1
+    model = load_model(out)
+    cond = model.encode_text(["a person squats slowly", "a person walks forward and then turns around"])
+    assert cond.ndim == 3 and cond.shape[0] == 2 and cond.shape[1] <= 12
+    result = generate(model, ["a person squats slowly", "someone jumps"], frames=[48, 40], seed=0)
+    assert [m.joints.shape for m in result.motions] == [(48, 22, 3), (40, 22, 3)]
+    # Control model, logits and codebook editing on the token states (loose target: 2 training steps).
+    from controlmm.control import ControlSpec
+    from controlmm.generate import generate_controlled
+
+    target = result.motions[0].joints[20, 0].tolist()
+    spec = ControlSpec.from_dict({"coords": "human", "constraints": [{"joint": "pelvis", "frame": 20,
+                                                                      "position": target}]})
+    out = generate_controlled(model, "a person squats slowly", control=spec, frames=48, preset="fast", seed=1)
+    assert out.motion.joints.shape == (48, 22, 3) and out.records[0].control_model
+    assert float(out.errors[0].max()) < 0.05
