@@ -28,7 +28,7 @@ creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages ad
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
-EPILOG = """presets: demo (CPU-sized, MiniLM text; about 60 min for the three stages on 2 cores), paper
+EPILOG = """presets: demo (CPU-sized, MiniLM text; about 80 min for the three stages on 2 cores), paper
 (the released MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
 
 

@@ -304,8 +304,7 @@ def _demo() -> ModelConfig:
     common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
                   text_dim=384, max_len=64)
     # Measured on the corpus (benchmarks/model.py, fp32, 2 threads on 2 cores): tokenizer 5.8 it/s,
-    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 10 + 37 + 12 = 59 min (about 95 min on one
-    # core), leaving the rest of the two-hour budget to the control branch and the evaluator.
+    # transformer 1.8 it/s, residual 2.1 it/s, i.e. about 10 + 37 + 32 = 79 min on 2 cores.
     schedules = {
         "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
