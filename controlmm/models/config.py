@@ -59,7 +59,8 @@ class TransformerConfig:
     ``text_norm`` (not in MoMask): a LayerNorm on the text vector before ``cond_emb``. MiniLM sentence
     vectors are L2-normalised (components ~0.05) where MoMask feeds CLIP's unnormalised, so with the
     same N(0, 0.02) init the MiniLM condition token starts much weaker than MoMask's; the LayerNorm
-    gives every text vector unit variance (components ~1). Off for the ``paper`` preset and official checkpoints.
+    gives every text vector unit variance (components ~1). Off for the ``paper`` preset and official
+    checkpoints.
     """
 
     nb_code: int = 512
@@ -103,7 +104,6 @@ class ResidualConfig:
     @property
     def pad_id(self) -> int:
         return self.nb_code
-
 
 
 CONTROL_JOINT_SETS: dict[str, tuple[int, ...]] = {"pelvis": (0,), "all": (0, 10, 11, 15, 20, 21)}

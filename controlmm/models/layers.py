@@ -138,4 +138,3 @@ def pool_text_tokens(states: torch.Tensor) -> torch.Tensor:
 def keep_per_sample(keep: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
     """A per-sample factor (B,) or (B, 1) shaped to broadcast over ``like`` (B, ...)."""
     return keep.reshape(like.shape[0], *([1] * (like.ndim - 1)))
-

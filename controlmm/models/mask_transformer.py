@@ -95,7 +95,7 @@ class MaskTransformer(nn.Module):
         return torch.cat([c, x], dim=0), torch.cat([c_pad, padding_mask], dim=1)
 
     def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None) -> torch.Tensor:
-        """The encoder layers on (N+1, B, D); ``hook(i, h) -> h`` runs after layer i."""
+        """The encoder layers on (C+N, B, D); ``hook(i, h) -> h`` runs after layer i."""
         return run_layers(self.seqTransEncoder.layers, h, mask, hook)
 
     def head(self, h: torch.Tensor, num_tokens: int) -> torch.Tensor:

@@ -87,4 +87,3 @@ class MiniLMTextEncoder:
             k = min(length, len(x))
             out[i, :k] = x[:k].float().cpu()
         return out
-

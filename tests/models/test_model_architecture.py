@@ -233,8 +233,8 @@ def test_text_norm_lifts_unit_length_text_vectors_to_unit_variance():
     assert 0.5 * plain_cfg.text_dim**0.5 < ratio < 2 * plain_cfg.text_dim**0.5
     # The unconditional pass does not depend on the text.
     assert torch.allclose(normed(ids, text, pad, force_mask=True), normed(ids, text.flip(0), pad, force_mask=True))
-    res_cfg = ModelConfig.from_dict({**preset_config("tiny").to_dict(),
-                                     "residual": {**preset_config("tiny").residual.__dict__, "text_norm": True}}).residual
+    tiny = preset_config("tiny")
+    res_cfg = ModelConfig.from_dict({**tiny.to_dict(), "residual": {**tiny.residual.__dict__, "text_norm": True}}).residual
     assert "text_norm.weight" in ResidualTransformer(res_cfg).state_dict()
 
 
