@@ -121,10 +121,12 @@ def text_token_padding(states: torch.Tensor) -> torch.Tensor:
     return states.abs().amax(dim=-1) == 0
 
 
-def trim_text_tokens(states: torch.Tensor) -> torch.Tensor:
-    """Drop the trailing columns that are padding in every row of (B, L, dim) (at least one is kept)."""
-    used = int((~text_token_padding(states)).sum(dim=1).max().clamp(min=1))
-    return states[:, :used]
+def trim_text_tokens(states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Drop the trailing columns that are padding in every row of (B, L, dim) (at least one is kept);
+    returns the trimmed states (B, L', dim) and their padding (B, L') (True at padding)."""
+    padding = text_token_padding(states)
+    used = int((~padding).sum(dim=1).max().clamp(min=1))
+    return states[:, :used], padding[:, :used]
 
 
 def pool_text_tokens(states: torch.Tensor) -> torch.Tensor:
@@ -135,6 +137,12 @@ def pool_text_tokens(states: torch.Tensor) -> torch.Tensor:
     return F.normalize(mean, dim=-1)
 
 
-def keep_per_sample(keep: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
-    """A per-sample factor (B,) or (B, 1) shaped to broadcast over ``like`` (B, ...)."""
-    return keep.reshape(like.shape[0], *([1] * (like.ndim - 1)))
+def zero_samples(x: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
+    """``x`` (B, ...) with the samples where ``keep`` (B,) is 0 / False set to zero."""
+    return x * keep.to(x.dtype).reshape(x.shape[0], *([1] * (x.ndim - 1)))
+
+
+def drop_condition(cond: torch.Tensor, drop_prob: float) -> torch.Tensor:
+    """Classifier-free-guidance training: zero each sample's text (B, ...) with probability ``drop_prob``."""
+    keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - drop_prob, device=cond.device))
+    return zero_samples(cond, keep)

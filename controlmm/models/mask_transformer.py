@@ -33,11 +33,10 @@ from controlmm.models.layers import (
     OutputProcess,
     PositionalEncoding,
     cosine_schedule,
+    drop_condition,
     init_weights,
-    keep_per_sample,
     lengths_to_mask,
     run_layers,
-    text_token_padding,
     transformer_trunk,
     trim_text_tokens,
 )
@@ -64,8 +63,7 @@ class MaskTransformer(nn.Module):
         if force_mask:
             return torch.zeros_like(cond)
         if self.training and self.cfg.cond_drop_prob > 0:
-            keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - self.cfg.cond_drop_prob, device=cond.device))
-            return cond * keep_per_sample(keep, cond)
+            return drop_condition(cond, self.cfg.cond_drop_prob)
         return cond
 
     def token_embeddings(self, tokens: torch.Tensor) -> torch.Tensor:
@@ -89,9 +87,8 @@ class MaskTransformer(nn.Module):
             c = self.cond_emb(self.text_norm(cond))[None]
             c_pad = torch.zeros_like(padding_mask[:, :1])
         else:
-            cond = trim_text_tokens(cond)
+            cond, c_pad = trim_text_tokens(cond)
             c = self.cond_emb(self.text_norm(cond)).transpose(0, 1)
-            c_pad = text_token_padding(cond)
         return torch.cat([c, x], dim=0), torch.cat([c_pad, padding_mask], dim=1)
 
     def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None) -> torch.Tensor:

@@ -31,8 +31,8 @@ from controlmm.models.layers import (
     InputProcess,
     OutputProcess,
     PositionalEncoding,
+    drop_condition,
     init_weights,
-    keep_per_sample,
     lengths_to_mask,
     pool_text_tokens,
     run_layers,
@@ -74,8 +74,7 @@ class ResidualTransformer(nn.Module):
         if force_mask:
             return torch.zeros_like(cond)
         if self.training and self.cfg.cond_drop_prob > 0:
-            keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - self.cfg.cond_drop_prob, device=cond.device))
-            return cond * keep_per_sample(keep, cond)
+            return drop_condition(cond, self.cfg.cond_drop_prob)
         return cond
 
     def history(self, ids: torch.Tensor, q: int) -> torch.Tensor:

@@ -34,7 +34,7 @@ from torch import nn
 
 from controlmm.errors import ControlMMError
 from controlmm.models.config import CONTROL_JOINT_SETS, ControlConfig
-from controlmm.models.layers import cosine_schedule, gumbel_noise, keep_per_sample, lengths_to_mask
+from controlmm.models.layers import cosine_schedule, gumbel_noise, lengths_to_mask, zero_samples
 from controlmm.models.mask_transformer import token_loss_and_accuracy
 from controlmm.models.model_dir import read_manifest, write_manifest
 from controlmm.models.motion_control_model import MotionControlModel, control_input, estimate_latent
@@ -162,7 +162,7 @@ class ControlLoss(nn.Module):
         ctrl_in = control_input(targets, sigma, current, self.control.joint_ids)
         if self.training and s.cond_drop > 0:
             keep = torch.rand(b, device=device, generator=generator) >= s.cond_drop
-            cond = cond * keep_per_sample(keep, cond)
+            cond = zero_samples(cond, keep)
         logits = self.control(base, x_ids, cond, ~valid, ctrl_in)
         labels = torch.where(valid, ids, base.mask_id)  # every non-pad position; mask_id = ignore
         ce, acc = token_loss_and_accuracy(logits, labels, ignore_index=base.mask_id)
