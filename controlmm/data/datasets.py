@@ -57,6 +57,7 @@ class TextMotionDataset(Dataset):
         self.samples = list(samples)
         self.normalizer, self.caption_index = normalizer, caption_index
         self.unit, self.max_frames, self.seed = unit, max_frames, seed
+        self.lengths = [min(s.length, max_frames) for s in self.samples]  # frames, for length bucketing
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -82,24 +83,46 @@ class StepBatchSampler(Sampler):
     The epoch's order is a permutation seeded by (seed, epoch); step s takes items
     [s*B, (s+1)*B) of it (incomplete last batch dropped) and process ``rank`` of ``world`` takes every
     world-th of those. Items are ``(index, epoch)`` keys for the datasets above.
+
+    Length bucketing (``bucket`` > 0 with ``lengths``, one per item): each run of ``bucket`` consecutive
+    batches of that order is sorted by length and cut into batches again, and the epoch's batches are
+    shuffled (seeded by (seed, epoch)). Every item is still seen once per epoch, but a batch holds clips
+    of similar length, so trimming it to its longest clip saves the padded positions' compute.
     """
 
     def __init__(self, num_items: int, batch_size: int, seed: int, epoch: int, start_step: int = 0,
-                 end_step: int | None = None, rank: int = 0, world: int = 1, shuffle: bool = True) -> None:
+                 end_step: int | None = None, rank: int = 0, world: int = 1, shuffle: bool = True,
+                 lengths: Sequence[int] | None = None, bucket: int = 0) -> None:
         self.num_items, self.batch_size, self.seed, self.epoch = num_items, batch_size, seed, epoch
         self.rank, self.world, self.shuffle = rank, world, shuffle
         self.steps_per_epoch = num_items // batch_size
         self.start_step = start_step
         self.end_step = self.steps_per_epoch if end_step is None else min(end_step, self.steps_per_epoch)
+        if bucket > 0 and (lengths is None or len(lengths) != num_items):
+            raise ValueError(f"length bucketing needs one length per item ({num_items}); got "
+                             f"{'none' if lengths is None else len(lengths)}")
+        self.lengths, self.bucket = lengths, bucket
 
     def __len__(self) -> int:
         return max(0, self.end_step - self.start_step)
 
+    def batches(self) -> list[np.ndarray]:
+        """The epoch's batches of item indices, in step order (all processes' shares)."""
+        rng = np.random.default_rng([self.seed, self.epoch, 7919])
+        order = rng.permutation(self.num_items) if self.shuffle else np.arange(self.num_items)
+        b = self.batch_size
+        order = order[:self.steps_per_epoch * b]
+        if self.bucket <= 0:
+            return [order[s * b:(s + 1) * b] for s in range(self.steps_per_epoch)]
+        lengths = np.asarray(self.lengths)
+        batches = []
+        for start in range(0, len(order), self.bucket * b):
+            group = order[start:start + self.bucket * b]
+            group = group[np.argsort(lengths[group], kind="stable")]
+            batches += [group[i:i + b] for i in range(0, len(group), b)]
+        return [batches[i] for i in rng.permutation(len(batches))] if self.shuffle else batches
+
     def __iter__(self) -> Iterator[list[Key]]:
-        if self.shuffle:
-            order = np.random.default_rng([self.seed, self.epoch, 7919]).permutation(self.num_items)
-        else:
-            order = np.arange(self.num_items)
+        batches = self.batches()
         for step in range(self.start_step, self.end_step):
-            batch = order[step * self.batch_size:(step + 1) * self.batch_size]
-            yield [(int(i), self.epoch) for i in batch[self.rank::self.world]]
+            yield [(int(i), self.epoch) for i in batches[step][self.rank::self.world]]

@@ -164,6 +164,10 @@ TEXT_ENCODER_DIMS: dict[str, int] = {"minilm": 384, "clip": 512}
 CLIP_MODEL_ID = "openai/clip-vit-base-patch32"
 
 
+BUCKETED_STAGES = ("transformer", "residual")
+"""Stages whose batches are trimmed to their longest clip, where length bucketing saves compute."""
+
+
 @dataclass(frozen=True)
 class StageSchedule:
     """Optimisation of one training stage (AdamW, linear warm-up, step decay).
@@ -181,6 +185,7 @@ class StageSchedule:
     gamma: float = 0.1
     checkpoint_every: int = 500
     window: int = 64  # tokenizer only: training window in frames
+    bucket: int = 0  # transformer/residual: length bucketing over this many batches (0 = random batches)
 
 
 @dataclass(frozen=True)
@@ -256,6 +261,10 @@ def check_consistent(cfg: ModelConfig) -> None:
     if cfg.text_encoder.tokens and (cfg.text_encoder.name != "minilm" or not 1 <= cfg.text_encoder.tokens <= 128):
         raise ControlMMError(f"text encoder tokens must be 0 (sentence vectors) or 1..128 with minilm; got "
                              f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
+    for name, schedule in cfg.schedules.items():
+        if schedule.bucket < 0 or (schedule.bucket and name not in BUCKETED_STAGES):
+            raise ControlMMError(f"schedule '{name}': bucket must be 0, or a positive number of batches for "
+                                 f"{' and '.join(BUCKETED_STAGES)}; got {schedule.bucket}")
     if cfg.text_encoder.precision not in ("float32", "float16"):
         raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
     checks = [
@@ -309,9 +318,9 @@ def _demo() -> ModelConfig:
         "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
         "transformer": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
-                                     milestones=(3200,), gamma=0.2, checkpoint_every=250),
+                                     milestones=(3200,), gamma=0.2, checkpoint_every=250, bucket=16),
         "residual": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
-                                  milestones=(3200,), gamma=0.2, checkpoint_every=250),
+                                  milestones=(3200,), gamma=0.2, checkpoint_every=250, bucket=16),
         # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
         "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
                                  milestones=(1200,), gamma=0.2, checkpoint_every=100),
@@ -332,7 +341,8 @@ def _tiny() -> ModelConfig:
     common = dict(nb_code=32, code_dim=16, latent_dim=32, ff_size=64, num_layers=2, num_heads=2,
                   dropout=0.0, text_dim=384, max_len=64)
     schedules = {
-        name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32)
+        name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32,
+                            bucket=2 if name in BUCKETED_STAGES else 0)
         for name in ("tokenizer", "transformer", "residual", "control")
     }
     return ModelConfig(

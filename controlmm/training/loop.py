@@ -315,7 +315,8 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
         epoch, in_epoch = divmod(step, steps_per_epoch)
         end = min(steps_per_epoch, in_epoch + schedule.iters - step)
         sampler = StepBatchSampler(len(dataset), schedule.batch_size, opts.seed, epoch, start_step=in_epoch,
-                                   end_step=end, rank=ctx.rank, world=ctx.world)
+                                   end_step=end, rank=ctx.rank, world=ctx.world,
+                                   lengths=getattr(dataset, "lengths", None), bucket=schedule.bucket)
         # Its own generator: creating a loader must not draw from the global RNG (exact resumption).
         loader = DataLoader(dataset, batch_sampler=sampler, num_workers=opts.workers, collate_fn=stage.collate,
                             generator=torch.Generator().manual_seed(opts.seed + epoch))

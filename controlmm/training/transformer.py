@@ -1,8 +1,8 @@
 """Stage ``transformer``: the masked transformer on base-layer tokens of the frozen tokenizer.
 
 Batches come from the text-to-motion loader (random caption, length rounding and crop, 196-frame
-padding); tokens are the frozen RVQ-VAE's deterministic base-layer ids of each batch, and text vectors
-come from the cached caption embeddings. Validation: masked-token cross-entropy and accuracy on the val
+padding, trimmed to the batch's longest clip; optionally length-bucketed, ``StageSchedule.bucket``);
+tokens are the frozen RVQ-VAE's deterministic base-layer ids of each batch, and text vectors come from the cached caption embeddings. Validation: masked-token cross-entropy and accuracy on the val
 split with fixed crops and masks.
 """
 
@@ -48,13 +48,16 @@ class TextConditionedStage(Stage):
                                  seed=self.ctx.seed)
 
     def tokens(self, motion: torch.Tensor) -> torch.Tensor:
-        """(B, 196, 263) normalised motions -> (B, 49, Q) ids of the frozen tokenizer."""
+        """(B, T, 263) normalised motions (T a multiple of 4) -> (B, T/4, Q) ids of the frozen tokenizer."""
         with torch.no_grad():
             return self.tokenizer.encode(motion)
 
     def prepare(self, batch: Any) -> tuple:
         motion, lengths, caption = batch
-        motion = motion.to(self.ctx.device, non_blocking=True)
+        # Trimmed to the longest clip: the frames beyond it are zero padding in every clip. Only the last
+        # few tokens of the longest clip change: they are encoded as the clip alone (the convolutions' own
+        # zero padding) instead of next to padded frames, whose activations are not zero.
+        motion = motion[:, :int(lengths.max())].to(self.ctx.device, non_blocking=True)
         ids = self.tokens(motion)
         return ids, self.text_vectors[caption.to(self.ctx.device)], (lengths // self.unit).to(self.ctx.device)
 

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from controlmm.data import HumanML3D, StepBatchSampler, TextMotionDataset, WindowDataset
-from controlmm.errors import InputFileError
+from controlmm.errors import ControlMMError, InputFileError
+from controlmm.models.config import preset_config
 
 
 def _write(root, motion_id, frames, lines, source):
@@ -89,6 +91,36 @@ def test_window_dataset_and_sampler(quirky):
         assert sorted(shards[0][step] + shards[1][step]) == sorted(full[step])
     assert list(StepBatchSampler(10, 4, seed=1, epoch=2, start_step=1)) == full[1:]
     assert full != list(StepBatchSampler(10, 4, seed=1, epoch=3))
+
+
+def test_length_bucketing_keeps_the_epoch_and_groups_similar_lengths():
+    lengths = np.random.default_rng(3).integers(40, 197, size=200)
+    plain = StepBatchSampler(200, 8, seed=1, epoch=2).batches()
+    bucketed = StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5).batches()
+    # the same items once each (the incomplete last batch is dropped either way), in other batches
+    assert sorted(np.concatenate(bucketed).tolist()) == sorted(np.concatenate(plain).tolist())
+    assert len(bucketed) == len(plain) == 25 and all(len(b) == 8 for b in bucketed)
+    spread = [np.ptp(lengths[b]) for b in bucketed]
+    assert np.mean(spread) < 0.5 * np.mean([np.ptp(lengths[b]) for b in plain])
+    # a pure function of (seed, epoch): resumption, several processes and later epochs
+    again = list(StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5, start_step=3))
+    assert again == [[(int(i), 2) for i in b] for b in bucketed[3:]]
+    shards = [list(StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5, rank=r, world=2))
+              for r in range(2)]
+    assert sorted(shards[0][0] + shards[1][0]) == sorted((int(i), 2) for i in bucketed[0])
+    other = StepBatchSampler(200, 8, seed=1, epoch=3, lengths=lengths, bucket=5).batches()
+    assert any(not np.array_equal(a, b) for a, b in zip(bucketed, other))
+    with pytest.raises(ValueError, match="one length per item"):
+        StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths[:10], bucket=5)
+
+
+def test_bucketing_only_where_batches_are_trimmed():
+    cfg = preset_config("tiny")
+    assert cfg.schedules["transformer"].bucket > 0 and cfg.schedules["tokenizer"].bucket == 0
+    with pytest.raises(ControlMMError, match="schedule 'tokenizer': bucket must be 0"):
+        replace(cfg, schedules={**cfg.schedules, "tokenizer": replace(cfg.schedules["tokenizer"], bucket=4)})
+    with pytest.raises(ControlMMError, match="got -1"):
+        replace(cfg, schedules={**cfg.schedules, "residual": replace(cfg.schedules["residual"], bucket=-1)})
 
 
 @pytest.mark.parametrize("breakage,needle", [
