@@ -2,8 +2,9 @@
 
 Batches come from the text-to-motion loader (random caption, length rounding and crop, 196-frame
 padding, trimmed to the batch's longest clip; optionally length-bucketed, ``StageSchedule.bucket``);
-tokens are the frozen RVQ-VAE's deterministic base-layer ids of each batch, and text vectors come from the cached caption embeddings. Validation: masked-token cross-entropy and accuracy on the val
-split with fixed crops and masks.
+tokens are the frozen RVQ-VAE's deterministic base-layer ids of each batch, and text vectors come from
+the cached caption embeddings. Validation: masked-token cross-entropy and accuracy on the val split with
+fixed crops and masks.
 """
 
 from __future__ import annotations
