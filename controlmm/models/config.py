@@ -314,8 +314,9 @@ def _demo() -> ModelConfig:
                   text_dim=384, max_len=64)
     # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
     # trimmed batches the transformer 2.8 it/s (the residual, measured only beside other jobs, 2.0-2.4
-    # it/s): about 10 + 38 + 24-33 = 72-81 min on 2 cores, plus the control stage. 9,600 transformer iterations lowered the val. loss (1.41 -> 1.17)
-    # but not the probes (75.7 % both): docs/BENCHMARKS.md, "Length-bucketed batches".
+    # it/s): about 10 + 38 + 24-33 = 72-81 min on 2 cores, plus the control stage. 9,600 transformer
+    # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
+    # "Length-bucketed batches".
     schedules = {
         "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
