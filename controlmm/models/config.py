@@ -313,8 +313,8 @@ def _demo() -> ModelConfig:
     common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
                   text_dim=384, max_len=64)
     # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
-    # trimmed batches the transformer 2.8 it/s (the residual, measured only beside other jobs, 2.0-2.4
-    # it/s): about 10 + 38 + 24-33 = 72-81 min on 2 cores, plus the control stage. 9,600 transformer
+    # trimmed batches the transformer 2.8 it/s and the residual 2.7 it/s: about 10 + 38 + 25 = 73 min on
+    # 2 cores, plus the control stage. 9,600 transformer
     # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
     # "Length-bucketed batches".
     schedules = {
