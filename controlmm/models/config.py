@@ -314,7 +314,7 @@ def _demo() -> ModelConfig:
                   text_dim=384, max_len=64)
     # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
     # trimmed batches the transformer 2.8 it/s and the residual 2.7 it/s: about 10 + 38 + 25 = 73 min on
-    # 2 cores, plus the control stage. 9,600 transformer
+    # 2 cores, plus the control stage at 1.32 it/s (19 min): 92 min in all. 9,600 transformer
     # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
     # "Length-bucketed batches".
     schedules = {
