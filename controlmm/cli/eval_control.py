@@ -53,6 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-control-model", action="store_true", help="editing only, without the control model")
     p.add_argument("--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps")
+    p.add_argument("--contact-steps", type=int, default=None, metavar="N",
+                   help="steps of the foot-contact run after codebook editing (default 0: off)")
     p.add_argument("--repeats", type=int, default=1,
                    help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)")
     p.add_argument("--evaluator", default=None, metavar="E",
@@ -141,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     config = editing_preset(args.preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
         control_model=False if args.no_control_model else None,
-        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps)
+        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps, contact_steps=args.contact_steps)
     from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table
 
     evaluator = None

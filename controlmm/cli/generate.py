@@ -57,6 +57,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="logits-editing steps per decoding iteration (default: the preset's)")
     ctrl.add_argument("--codebook-steps", type=int, default=None, metavar="N",
                       help="codebook-editing steps (default: the preset's)")
+    ctrl.add_argument("--contact-steps", type=int, default=None, metavar="N",
+                      help="after codebook editing, up to N more steps that stop planted feet sliding, kept only "
+                           "where every constraint stays met (default 0: off)")
     ctrl.add_argument("--no-control-model", action="store_true",
                       help="do not use the motion control model (editing only)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
@@ -108,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
             raise ControlMMError(f"control spec '{args.control}' has no constraints")
     else:
         for flag, value in (("--preset", args.preset), ("--tolerance", args.tolerance),
-                            ("--logits-steps", args.logits_steps), ("--codebook-steps", args.codebook_steps)):
+                            ("--logits-steps", args.logits_steps), ("--codebook-steps", args.codebook_steps),
+                            ("--contact-steps", args.contact_steps)):
             if value is not None:
                 raise ControlMMError(f"{flag} needs --control SPEC.json")
     model = load_model(args.model, device=args.device, clip_weights=args.clip_weights)
@@ -145,7 +149,7 @@ def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
     preset = args.preset or "accurate"
     config = editing_preset(preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
-        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps,
+        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps, contact_steps=args.contact_steps,
         control_model=False if args.no_control_model else None)
     for warning in spec.pinned_frame0_warnings():
         print(f"controlmm: warning: {warning}", file=sys.stderr)

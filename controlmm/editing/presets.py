@@ -4,7 +4,7 @@
 |---|---|---|---|
 | ``fast`` | on | 0 | 100 |
 | ``medium`` | on | 0 | 600 |
-| ``accurate`` | on | 100 | 600 |
+| ``accurate`` | on | 100 | 600 (+ up to 200 in the foot-contact run) |
 
 Step counts are maxima: every editor stops as soon as every constraint is within ``tolerance``
 (default 1 cm) and every other loss term is at most ``loss_tolerance``; the steps actually used are
@@ -39,9 +39,11 @@ class EditingConfig:
     hinge_weight: float = 10.0  # codebook editing: weight of the hinge on lagging constraints (Objective)
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
+    contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
+    contact_weight: float = 0.3  # weight of the foot-contact term in that run ((m/s)^2)
 
     def __post_init__(self) -> None:
-        for name in ("logits_steps", "codebook_steps"):
+        for name in ("logits_steps", "codebook_steps", "contact_steps"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ControlMMError(f"{name} must be a whole number >= 0; got {value!r}")
@@ -49,7 +51,7 @@ class EditingConfig:
             raise ControlMMError(f"codebook_optimizer must be adam or lbfgs; got '{self.codebook_optimizer}'")
         if self.logits_patience < 0:
             raise ControlMMError(f"logits_patience must be >= 0; got {self.logits_patience}")
-        for name in ("lr", "logits_lr", "temperature"):
+        for name in ("lr", "logits_lr", "temperature", "contact_weight"):
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
         if not self.tolerance > 0 or not self.logits_tolerance > 0:
@@ -65,7 +67,9 @@ class EditingConfig:
 PRESETS: dict[str, EditingConfig] = {
     "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
     "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
-    "accurate": EditingConfig(name="accurate", control_model=True, logits_steps=100, codebook_steps=600),
+    # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding
+    "accurate": EditingConfig(name="accurate", control_model=True, logits_steps=100, codebook_steps=600,
+                              contact_steps=200),
 }
 """The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""
 

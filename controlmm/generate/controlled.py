@@ -44,6 +44,7 @@ import torch.nn.functional as F
 
 from controlmm.control.spec import ControlSpec
 from controlmm.editing.codebook_editing import codebook_editing
+from controlmm.editing.foot_contact import foot_contact_run
 from controlmm.editing.logits_editing import logits_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
@@ -72,6 +73,7 @@ class EditingRecord:
     budget: dict[str, Any] = field(default_factory=dict)  # step budgets, optimiser and tolerances of the preset
     logits_steps: list[int] = field(default_factory=list)  # per decoding iteration
     codebook_steps: int = 0
+    contact_kept: bool = False  # the foot-contact run's latent was kept (EditingConfig.contact_steps > 0)
     converged: bool = False  # every constraint within tolerance and every other term ~0 at the end
     max_error: float = 0.0  # worst constraint error (m) of the final motion
     losses: dict[str, float] = field(default_factory=dict)  # final value of every loss term
@@ -85,7 +87,8 @@ class EditingRecord:
     def to_json(self) -> dict[str, Any]:
         return {"preset": self.preset, "control_model": self.control_model, "budget": dict(self.budget),
                 "logits_steps": list(self.logits_steps),
-                "codebook_steps": int(self.codebook_steps), "converged": bool(self.converged),
+                "codebook_steps": int(self.codebook_steps), "contact_kept": bool(self.contact_kept),
+                "converged": bool(self.converged),
                 "max_error_m": float(self.max_error), "losses": dict(self.losses), "seconds": round(self.seconds, 3),
                 "cpu_seconds": round(self.cpu_seconds, 3)}
 
@@ -268,10 +271,13 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
     with torch.no_grad():
         latent = tokenizer.ids_to_latent(ids)
     codebook_steps = torch.zeros(b, dtype=torch.long)
+    contact_kept = torch.zeros(b, dtype=torch.bool)
     if editing and config.codebook_steps > 0:
         with torch.enable_grad():
             outcome = codebook_editing(latent, decode, objective, config)
         latent, codebook_steps = outcome.param, outcome.steps.cpu()
+        latent, kept = foot_contact_run(latent, decode, objective, config)
+        contact_kept = kept.cpu()
     with torch.no_grad():
         features = latent_to_features(model, latent)
         joints = features_to_joints(features)
@@ -281,12 +287,13 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
     cpu_seconds = (time.process_time() - cpu_started) / b
     budget = {"logits_steps": config.logits_steps, "codebook_steps": config.codebook_steps,
               "codebook_optimizer": config.codebook_optimizer, "tolerance_m": config.tolerance,
-              "logits_tolerance_m": config.logits_tolerance}
+              "logits_tolerance_m": config.logits_tolerance, "contact_steps": config.contact_steps}
     records = []
     for i in range(b):
         records.append(EditingRecord(
             preset=preset_name, control_model=use_control, budget=budget,
             logits_steps=[int(s[i]) for s in logit_steps], codebook_steps=int(codebook_steps[i]),
+            contact_kept=bool(contact_kept[i]),
             converged=bool(done[i]) if editing else True, max_error=float(max_err[i]),
             losses={k: float(v[i]) for k, v in values.items()}, seconds=seconds,
             cpu_seconds=cpu_seconds))
@@ -331,8 +338,9 @@ def edit_latent(model: MotionModel, latent: torch.Tensor, frames: int, objective
     """Codebook editing of one motion's decoder latent (1, N, code_dim) so that its first ``frames``
     frames meet ``objective``, outside the decoding loop (the plan's feedback rounds, timeline passes).
 
-    Returns the edited latent and a record: ``steps``, ``converged``, ``max_error_m`` and the final
-    value of every loss term (``losses``).
+    Returns the edited latent and a record: ``steps``, ``converged``, ``max_error_m``, ``contact_kept``
+    (the foot-contact run's latent was kept, :mod:`controlmm.editing.foot_contact`) and the final value
+    of every loss term (``losses``).
     """
     if not objective.active or config.codebook_steps == 0:
         return latent, {"steps": 0, "converged": True, "max_error_m": 0.0, "losses": {}}
@@ -342,11 +350,13 @@ def edit_latent(model: MotionModel, latent: torch.Tensor, frames: int, objective
 
     with torch.enable_grad():
         outcome = codebook_editing(latent, decode, objective, config)
+    edited, kept = foot_contact_run(outcome.param.detach(), decode, objective, config)
     with torch.no_grad():
-        values = objective.term_values(decode(outcome.param))
-    return outcome.param.detach(), {"steps": int(outcome.steps[0]), "converged": bool(outcome.done[0]),
-                                    "max_error_m": float(outcome.max_error[0]),
-                                    "losses": {k: float(v[0]) for k, v in values.items()}}
+        joints = decode(edited)
+        values = objective.term_values(joints)
+        _, done, max_err = objective.evaluate(joints)
+    return edited, {"steps": int(outcome.steps[0]), "converged": bool(done[0]), "max_error_m": float(max_err[0]),
+                    "contact_kept": bool(kept[0]), "losses": {k: float(v[0]) for k, v in values.items()}}
 
 
 # -- inputs -----------------------------------------------------------------------------------------

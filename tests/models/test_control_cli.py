@@ -82,6 +82,9 @@ def test_control_flags_need_a_spec_and_sane_values(tiny_control_dir, spec_path, 
     base = ["generate", "--text", "a person squats", "--out", str(tmp_path / "x.npz"), "--model", str(tiny_control_dir)]
     _one_line_error(capsys, base + ["--preset", "fast"], "--preset needs --control SPEC.json")
     _one_line_error(capsys, base + ["--control", str(spec_path), "--tolerance", "0"], "--tolerance must be positive")
+    _one_line_error(capsys, base + ["--contact-steps", "50"], "--contact-steps needs --control SPEC.json")
+    _one_line_error(capsys, base + ["--control", str(spec_path), "--contact-steps", "-1"],
+                    "contact_steps must be a whole number >= 0; got -1")
     _one_line_error(capsys, base + ["--control", str(tmp_path / "none.json")], "does not exist")
     _one_line_error(capsys, base + ["--control", str(spec_path), "--preset", "slow"], "invalid choice: 'slow'")
     _one_line_error(capsys, ["train", "control", "--data", "x", "--out", "y", "--joints", "hands"],

@@ -41,3 +41,31 @@ def model_free_preset():
     from controlmm.editing import EditingConfig
 
     return EditingConfig(name="none", control_model=False, logits_steps=0, codebook_steps=0)
+
+
+def test_foot_contact_run_stops_planted_feet_sliding_and_keeps_the_spec():
+    import torch
+
+    from controlmm.editing import PRESETS
+    from controlmm.editing.foot_contact import foot_contact_term
+    from controlmm.eval.geometry import foot_skating_ratio
+    from controlmm.generate import generate, generate_controlled, load_model
+
+    torch.set_num_threads(1)
+    model = load_model()
+    text = "a person walks forward"
+    walk = generate(model, text, frames=120, seed=0).motion.joints
+    # the model's own walk, its pelvis moved 15 cm sideways at three frames: editing makes the feet slide
+    spec = ControlSpec.from_dict({"coords": "human", "constraints": [
+        {"joint": "pelvis", "frame": f, "position": (walk[f, 0] + np.array([0.15, 0.0, 0.0])).tolist()}
+        for f in (30, 60, 90)]})
+    without = generate_controlled(model, text, control=spec, frames=120, seed=0,
+                                  preset=PRESETS["accurate"].with_overrides(contact_steps=0))
+    with_run = generate_controlled(model, text, control=spec, frames=120, seed=0, preset="accurate")
+    assert not without.records[0].contact_kept and with_run.records[0].contact_kept
+    assert float(without.errors[0].max()) <= 0.01 and float(with_run.errors[0].max()) <= 0.01
+    slide = foot_contact_term(weight=1.0)
+    before = float(slide(torch.as_tensor(without.motion.joints)[None]))
+    after = float(slide(torch.as_tensor(with_run.motion.joints)[None]))
+    assert after < 0.5 * before
+    assert foot_skating_ratio(with_run.motion.joints) < foot_skating_ratio(without.motion.joints)
