@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps")
     p.add_argument("--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps")
     p.add_argument("--contact-steps", type=int, default=None, metavar="N",
-                   help="steps of the foot-contact run after codebook editing (default 0: off)")
+                   help="override the preset's foot-contact steps after codebook editing (accurate: 200)")
     p.add_argument("--repeats", type=int, default=1,
                    help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)")
     p.add_argument("--evaluator", default=None, metavar="E",

@@ -59,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="codebook-editing steps (default: the preset's)")
     ctrl.add_argument("--contact-steps", type=int, default=None, metavar="N",
                       help="after codebook editing, up to N more steps that stop planted feet sliding, kept only "
-                           "where every constraint stays met (default 0: off)")
+                           "where every constraint stays met (default: the preset's, 200 for accurate, else 0)")
     ctrl.add_argument("--no-control-model", action="store_true",
                       help="do not use the motion control model (editing only)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
