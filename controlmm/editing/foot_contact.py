@@ -19,21 +19,21 @@ from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
 from controlmm.editing.terms import LossTerm
+from controlmm.eval.geometry import FOOT_JOINTS, SKATE_HEIGHT, SKATE_SPEED
 from controlmm.motion.skeleton import FPS
 
-FEET = (10, 11)  # left_foot, right_foot
-CONTACT_HEIGHT = 0.05  # m: a foot this low at t and t+1 is in contact (the foot-skating ratio's rule)
-SLIDE_SPEED = 0.5  # m/s: planar speed above which a foot in contact slides
+# Contact and sliding follow the foot-skating ratio's rule (controlmm.eval.geometry.foot_skating_ratio):
+# a foot (joints 10, 11) below SKATE_HEIGHT (m) at t and t+1 is in contact; above SKATE_SPEED (m/s) it slides.
 
 
-def foot_contact_term(weight: float, height: float = CONTACT_HEIGHT, speed: float = SLIDE_SPEED,
+def foot_contact_term(weight: float, height: float = SKATE_HEIGHT, speed: float = SKATE_SPEED,
                       fps: float = FPS) -> LossTerm:
     """Feet in contact do not slide: sum over frames and feet of relu(planar speed - ``speed``)^2 / T.
 
     Contact (a foot below ``height`` metres at t and t+1, human frame, Y up) is read from the joints
     being edited but not differentiated, so the term cannot be met by lifting a foot. Units: (m/s)^2.
     """
-    feet = list(FEET)
+    feet = list(FOOT_JOINTS)
 
     def fn(joints: torch.Tensor) -> torch.Tensor:
         f = joints[:, :, feet]
