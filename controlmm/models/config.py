@@ -61,6 +61,11 @@ class TransformerConfig:
     same N(0, 0.02) init the MiniLM condition token starts much weaker than MoMask's; the LayerNorm
     gives every text vector unit variance (components ~1). Off for the ``paper`` preset and official
     checkpoints.
+
+    ``pooled_row`` (not in MoMask; models on MiniLM token states only): besides one row per token
+    state, one condition row for the states' pooled sentence vector (MiniLM's own pooling) through its
+    own LayerNorm and Linear. The two views of a caption fail on different held-out wordings
+    (docs/BENCHMARKS.md, "Sentence vector and token states").
     """
 
     nb_code: int = 512
@@ -74,6 +79,7 @@ class TransformerConfig:
     text_dim: int = 512  # 512 for CLIP ViT-B/32, 384 for MiniLM
     max_len: int = 5000  # rows of the sinusoidal table (official 5000)
     text_norm: bool = False
+    pooled_row: bool = False  # with text token states: one more condition row for their pooled sentence vector
 
     @property
     def mask_id(self) -> int:
@@ -261,6 +267,8 @@ def check_consistent(cfg: ModelConfig) -> None:
     if cfg.text_encoder.tokens and (cfg.text_encoder.name != "minilm" or not 1 <= cfg.text_encoder.tokens <= 128):
         raise ControlMMError(f"text encoder tokens must be 0 (sentence vectors) or 1..128 with minilm; got "
                              f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
+    if tr.pooled_row and not cfg.text_encoder.tokens:
+        raise ControlMMError("transformer pooled_row needs text token states (text encoder tokens > 0)")
     for name, schedule in cfg.schedules.items():
         if schedule.bucket < 0 or (schedule.bucket and name not in BUCKETED_STAGES):
             raise ControlMMError(f"schedule '{name}': bucket must be 0, or a positive number of batches for "

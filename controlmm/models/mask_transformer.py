@@ -8,7 +8,9 @@ Forward pass (one condition, sequence-first inside, as the official module)::
     x      = PE(poseEmbedding(e))           (N, B, D)
     c      = cond_emb(LN(text or 0))        (1, B, D)          text zeroed for the unconditional pass;
                                                                 LN only with cfg.text_norm; with text
-                                                                token states (B, L, text_dim): (C, B, D)
+                                                                token states (B, L, text_dim): (C, B, D),
+                                                                with cfg.pooled_row one more row first:
+                                                                pooled_emb(LN(pooled states))
     h_0    = [c ; x]                        (C+N, B, D)        C = 1 for a sentence vector
     h_L    = layers(h_0)                    8 post-LN GELU TransformerEncoderLayers (paper preset)
     logits = output_process(h_L[C:])        (B, N, nb_code)    no logits for mask/pad
@@ -36,6 +38,7 @@ from controlmm.models.layers import (
     drop_condition,
     init_weights,
     lengths_to_mask,
+    pool_text_tokens,
     run_layers,
     transformer_trunk,
     trim_text_tokens,
@@ -53,6 +56,9 @@ class MaskTransformer(nn.Module):
                                                  cfg.num_layers)
         self.text_norm = nn.LayerNorm(cfg.text_dim) if cfg.text_norm else nn.Identity()
         self.cond_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
+        if cfg.pooled_row:
+            self.pooled_norm = nn.LayerNorm(cfg.text_dim)
+            self.pooled_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
         self.output_process = OutputProcess(cfg.nb_code, cfg.latent_dim)
         self.token_emb = nn.Embedding(cfg.nb_code + 2, cfg.code_dim)
         self.apply(init_weights)
@@ -78,7 +84,8 @@ class MaskTransformer(nn.Module):
             tokens: ids (B, N) or soft embeddings (B, N, code_dim).
             cond: text vectors (B, text_dim): one condition row (C = 1, MoMask); or text token states
                 (B, L, text_dim) with all-zero rows as padding: one row per token (C <= L, padding
-                masked; a dropped or unconditional text is all padding).
+                masked; a dropped or unconditional text is all padding), plus with ``cfg.pooled_row``
+                a first row for the pooled sentence vector (zero for a dropped text, never masked).
             padding_mask: (B, N) True at padded positions.
         """
         x = self.position_enc(self.input_process(self.token_embeddings(tokens)))
@@ -87,8 +94,12 @@ class MaskTransformer(nn.Module):
             c = self.cond_emb(self.text_norm(cond))[None]
             c_pad = torch.zeros_like(padding_mask[:, :1])
         else:
+            pooled = pool_text_tokens(cond) if self.cfg.pooled_row else None
             cond, c_pad = trim_text_tokens(cond)
             c = self.cond_emb(self.text_norm(cond)).transpose(0, 1)
+            if pooled is not None:
+                c = torch.cat([self.pooled_emb(self.pooled_norm(pooled))[None], c], dim=0)
+                c_pad = torch.cat([torch.zeros_like(c_pad[:, :1]), c_pad], dim=1)
         return torch.cat([c, x], dim=0), torch.cat([c_pad, padding_mask], dim=1)
 
     def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None) -> torch.Tensor:

@@ -269,6 +269,41 @@ def test_text_token_states_are_condition_rows_and_padding_is_ignored():
     assert torch.allclose(res(history, q, states, pad), res(history, q, pool_text_tokens(states), pad), atol=1e-6)
 
 
+def test_pooled_row_adds_the_sentence_vector_of_the_token_states():
+    from dataclasses import replace
+
+    from controlmm.models.layers import pool_text_tokens
+
+    cfg = replace(preset_config("tiny").transformer, pooled_row=True)
+    torch.manual_seed(0)
+    model = MaskTransformer(cfg).eval()
+    assert {"pooled_norm.weight", "pooled_emb.weight"} <= set(model.state_dict())
+    ids = torch.randint(0, cfg.nb_code, (2, 6))
+    pad = torch.zeros(2, 6, dtype=torch.bool)
+    states = torch.randn(2, 5, cfg.text_dim)
+    states[1, 3:] = 0
+    h, mask = model.embed(ids, states, pad)
+    # One pooled row first (never masked), then the 5 token rows (the second text's padding masked).
+    assert h.shape[0] == 1 + 5 + 6 and not mask[:, 0].any() and mask[1, 4:6].all() and not mask[0, :6].any()
+    pooled = model.pooled_emb(model.pooled_norm(pool_text_tokens(states)))
+    assert torch.allclose(h[0], pooled, atol=1e-6)
+    # Scaling every state of a text changes its token rows but not the pooled (normalised) row.
+    assert torch.allclose(model.embed(ids, 3 * states, pad)[0][0], h[0], atol=1e-5)
+    # The unconditional pass is still an all-zero text.
+    logits = model(ids, states, pad)
+    assert torch.allclose(model(ids, torch.zeros_like(states), pad), model(ids, states, pad, force_mask=True))
+    assert not torch.allclose(model(ids, torch.zeros_like(states), pad), logits)
+
+
+def test_pooled_row_needs_token_states():
+    cfg = preset_config("tiny").to_dict()
+    cfg["transformer"]["pooled_row"] = True
+    with pytest.raises(ControlMMError, match="pooled_row needs text token states"):
+        ModelConfig.from_dict(cfg)
+    cfg["text_encoder"]["tokens"] = 16
+    assert ModelConfig.from_dict(cfg).transformer.pooled_row
+
+
 def test_text_tokens_need_minilm():
     cfg = preset_config("tiny").to_dict()
     cfg["text_encoder"]["tokens"] = 16
