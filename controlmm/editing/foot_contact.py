@@ -59,6 +59,8 @@ def foot_contact_run(latent: torch.Tensor, decode: Callable[[torch.Tensor], torc
         return latent, kept
     with torch.no_grad():
         _, done_before, _ = objective.evaluate(decode(latent))
+    if not bool(done_before.any()):  # no sample could keep the run's result
+        return latent, kept
     contact = replace(objective, terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),))
     with torch.enable_grad():
         outcome = codebook_editing(latent, decode, contact, replace(config, codebook_steps=config.contact_steps))
