@@ -76,14 +76,14 @@ def random_model(preset: str):
     from controlmm.motion.normalization import Normalizer
 
     cfg = preset_config(preset)
-    parts = {name: PARTS[name].build(cfg).eval().requires_grad_(False)
-             for name in ("tokenizer", "transformer", "residual")}
+    names = ("tokenizer", "transformer", "residual") + (("token_transformer",) if cfg.token_view else ())
+    parts = {name: PARTS[name].build(cfg).eval().requires_grad_(False) for name in names}
     normalizer = Normalizer.load(SHARED / "Mean.npy", SHARED / "Std.npy").with_feat_bias()
     return MotionModel(config=cfg, normalizer=normalizer, parts=parts, manifest=new_manifest(cfg, {}))
 
 
 def time_generation(model, repeats: int) -> dict[str, float]:
-    from controlmm.generate import DecodeOptions, masked_decode, residual_decode
+    from controlmm.generate import DecodeOptions, masked_decode, residual_decode, token_view_logits_fn
     from controlmm.generate.api import generate, latent_to_features
     from controlmm.motion.recover import features_to_joints
 
@@ -97,11 +97,12 @@ def time_generation(model, repeats: int) -> dict[str, float]:
         with torch.no_grad():
             t = time.perf_counter()
             cond = model.encode_text([PROMPT])
+            views = token_view_logits_fn(model, [PROMPT], DecodeOptions().cfg_scale)  # token states, if any
             parts["text"].append(time.perf_counter() - t)
             lengths = torch.tensor([49])
             gen = torch.Generator().manual_seed(r)
             t = time.perf_counter()
-            base = masked_decode(model.transformer, cond, lengths, DecodeOptions(), gen)
+            base = masked_decode(model.transformer, cond, lengths, DecodeOptions(), gen, logits_fn=views)
             parts["base"].append(time.perf_counter() - t)
             t = time.perf_counter()
             ids, _ = residual_decode(model.residual, base.ids, cond, lengths, generator=gen)
@@ -109,17 +110,21 @@ def time_generation(model, repeats: int) -> dict[str, float]:
             t = time.perf_counter()
             features_to_joints(latent_to_features(model, model.tokenizer.ids_to_latent(ids)))
             parts["decode"].append(time.perf_counter() - t)
-    out = {"median": statistics.median(totals), "best": min(totals), "cpu": statistics.median(cpu)}
+    out = {"median": statistics.median(totals), "best": min(totals), "cpu": statistics.median(cpu),
+           "views": 2 if model.token_transformer is not None else 1}
     out.update({k: statistics.median(v) for k, v in parts.items()})
     return out
 
 
 def time_training(data: Path, preset: str, iters: int, workdir: Path, precision: str) -> dict[str, dict]:
+    from controlmm.models import preset_config
     from controlmm.training import TrainOptions, train
 
     out = workdir / f"model-{precision}"
     results = {}
-    for stage in ("tokenizer", "transformer", "residual"):
+    stages = ("tokenizer", "transformer") + (("token_transformer",) if preset_config(preset).token_view else ()) \
+        + ("residual",)
+    for stage in stages:
         train(stage, TrainOptions(data=data, out=out, preset=preset, iters=iters, progress=False, device="cpu",
                                   checkpoint_every=10**9, precision=precision, threads=torch.get_num_threads()))
         record = json.loads((out / "model.json").read_text())["training"][stage]
@@ -156,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
             ("generation 196 frames, wall (median / best)", f"{lat['median']:.3f} s / {lat['best']:.3f} s"),
             ("generation 196 frames, CPU time (median)", f"{lat['cpu']:.3f} s"),
             ("  text encoding (MiniLM)", f"{lat['text'] * 1000:.0f} ms"),
-            ("  base layer, 10 iterations, CFG 4", f"{lat['base'] * 1000:.0f} ms"),
+            ("  base layer, 10 iterations, CFG 4" + (", both text views" if lat["views"] == 2 else ""),
+             f"{lat['base'] * 1000:.0f} ms"),
             ("  residual layers 1-5, CFG 5", f"{lat['residual'] * 1000:.0f} ms"),
             ("  RVQ-VAE decoding + joints", f"{lat['decode'] * 1000:.0f} ms"),
         ]
@@ -184,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                     rows.append((f"train {stage} ({precision}, batch {rec['schedule']['batch_size']})",
                                  f"{rate:.2f} it/s wall, {cpu_s:.2f} CPU-s/it; plan {schedule.iters} it = "
                                  f"{wall_min:.0f} min at this rate"))
-                rows.append((f"planned training, 3 stages ({precision})",
+                rows.append((f"planned training, {len(records)} stages ({precision})",
                              f"{total_wall:.0f} min wall at these rates, {total_cpu:.0f} CPU-min "
                              "(without validation)"))
     width = max(len(k) for k, _ in rows)

@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-residual", action="store_true", help="decode the base layer only")
     p.add_argument("--residual-layers", type=int, default=None, metavar="N",
                    help="predict only the first N residual layers (default: all)")
+    p.add_argument("--no-token-view", action="store_true",
+                   help="decode with the sentence-vector transformer alone (default: when the model has a "
+                        "token-state transformer, both text views are mixed; not used with --control)")
     p.add_argument("--clip-weights", default=None, metavar="PATH", help="CLIP weights for CLIP-conditioned models")
     ctrl = p.add_argument_group("spatial control")
     ctrl.add_argument("--control", default=None, metavar="SPEC.json",
@@ -122,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_controlled(args, model, texts, spec, options, outs, plots)
     result = generate(model, texts, seconds=args.seconds, frames=args.frames, seed=args.seed, options=options,
                       use_residual=not args.no_residual, residual_cfg_scale=args.residual_cfg_scale,
-                      residual_layers=args.residual_layers)
+                      residual_layers=args.residual_layers, token_view=not args.no_token_view)
     for i, motion in enumerate(result.motions):
         save_motion(motion, outs[i])
         print(f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): "

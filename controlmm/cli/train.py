@@ -11,13 +11,15 @@ import argparse
 import importlib
 import sys
 
-TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "residual", "control", "evaluator")
+TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "token_transformer", "residual", "control",
+                                      "evaluator")
 """Modules ``controlmm.cli.train_<name>`` that register a training stage, in ``--help`` order."""
 
 HELP = """Train a model directory stage by stage (the same commands for the demo and the paper preset):
 
   controlmm train tokenizer   --data DIR --preset demo --out MODEL_DIR
   controlmm train transformer --data DIR --out MODEL_DIR
+  controlmm train token-transformer --data DIR --out MODEL_DIR   (optional; second text view)
   controlmm train residual    --data DIR --out MODEL_DIR
   controlmm train control     --data DIR --out MODEL_DIR [--joints all|pelvis]
   controlmm train evaluator   --data DIR --out EVAL_DIR   (text-motion evaluator for eval quality)
@@ -28,7 +30,7 @@ creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages ad
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
-EPILOG = """presets: demo (CPU-sized, MiniLM text; about 80 min for the three stages on 2 cores), paper
+EPILOG = """presets: demo (CPU-sized, MiniLM text; about 114 min for every stage on 2 cores), paper
 (the released MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
 
 
@@ -42,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _no_stage(parser: argparse.ArgumentParser) -> int:
-    print(f"controlmm train: error: choose a stage: {', '.join(TRAIN_SUBCOMMANDS)} "
+    print(f"controlmm train: error: choose a stage: {', '.join(n.replace('_', '-') for n in TRAIN_SUBCOMMANDS)} "
           "(see 'controlmm train --help')", file=sys.stderr)
     return 2
 

@@ -13,6 +13,7 @@ from controlmm.generate.api import GenerationResult, frames_for, generate, laten
 from controlmm.generate.controlled import ControlledGeneration, EditingRecord, generate_controlled, latent_to_positions
 from controlmm.generate.masked_decoding import BaseDecoding, DecodeOptions, DecodeState, mask_counts, masked_decode
 from controlmm.generate.residual_decoding import residual_decode
+from controlmm.generate.token_view import token_view_logits_fn
 from controlmm.models.model_dir import MotionModel, load_model
 
 __all__ = [
@@ -33,4 +34,5 @@ __all__ = [
     "mask_counts",
     "masked_decode",
     "residual_decode",
+    "token_view_logits_fn",
 ]

@@ -13,6 +13,7 @@ import torch
 from controlmm.errors import ControlMMError
 from controlmm.generate.masked_decoding import DecodeOptions, masked_decode
 from controlmm.generate.residual_decoding import residual_decode
+from controlmm.generate.token_view import token_view_logits_fn
 from controlmm.models.model_dir import MotionModel
 from controlmm.motion.container import Motion
 from controlmm.motion.recover import features_to_joints
@@ -88,7 +89,7 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
              options: DecodeOptions = DecodeOptions(), use_residual: bool = True,
              residual_cfg_scale: float = 5.0, residual_temperature: float = 1.0,
              residual_topk: float | None = 0.9, residual_layers: int | None = None,
-             batch_size: int = 64) -> GenerationResult:
+             batch_size: int = 64, token_view: bool = True) -> GenerationResult:
     """Generate one motion per prompt.
 
     Args:
@@ -100,6 +101,9 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
         use_residual: add the residual layers when the model has a residual transformer.
         residual_layers: how many residual layers to predict (default all, Q - 1).
         batch_size: prompts decoded together.
+        token_view: when the model has a token-state transformer (``config.token_view``), mix its
+            log-probabilities with the sentence-vector transformer's (:mod:`controlmm.generate.token_view`);
+            False: the sentence-vector transformer alone.
     """
     texts = check_texts(text)
     if not texts:
@@ -122,7 +126,8 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
         chunk_frames = lengths[start:start + batch_size]
         cond = model.encode_text(chunk_texts)
         token_lengths = torch.tensor([math.ceil(f / unit) for f in chunk_frames], device=device)
-        base = masked_decode(model.transformer, cond, token_lengths, options, generator)
+        views = token_view_logits_fn(model, chunk_texts, options.cfg_scale) if token_view else None
+        base = masked_decode(model.transformer, cond, token_lengths, options, generator, logits_fn=views)
         res_logits: list[torch.Tensor] = []
         if residual is not None:
             ids, res_logits = residual_decode(residual, base.ids, cond, token_lengths, residual_cfg_scale,
@@ -136,7 +141,8 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
             meta = {"seed": int(seed), "index": start + i, "model": str(model.directory or ""),
                     "preset": model.config.preset, "cfg_scale": options.cfg_scale,
                     "temperature": options.temperature, "topk": options.topk, "iterations": options.iterations,
-                    "residual": residual is not None, "residual_layers": residual_layers, "frames": f}
+                    "residual": residual is not None, "residual_layers": residual_layers, "frames": f,
+                    "token_view": views is not None}
             motions.append(Motion(joints=joints[i, :f].cpu().numpy(), fps=float(FPS),
                                   features=features[i, :f].cpu().numpy(), text=prompt, metadata=meta))
         id_chunks.append(ids)

@@ -13,6 +13,7 @@ from controlmm.models.config import (
     StageSchedule,
     TextEncoderConfig,
     TokenizerConfig,
+    TokenViewConfig,
     TransformerConfig,
     preset_config,
 )
@@ -35,6 +36,7 @@ __all__ = [
     "StageSchedule",
     "TextEncoderConfig",
     "TokenizerConfig",
+    "TokenViewConfig",
     "TransformerConfig",
     "control_input",
     "load_model",

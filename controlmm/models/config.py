@@ -164,13 +164,32 @@ class TextEncoderConfig:
         return self.size if self.size is not None else TEXT_ENCODER_DIMS[self.name]
 
 
+@dataclass(frozen=True)
+class TokenViewConfig:
+    """A second masked transformer on MiniLM's token states, ensembled with the sentence-vector one.
+
+    Not in MoMask. MiniLM gives two views of a caption: the pooled sentence vector (what ``transformer``
+    reads) and the token states (what this transformer reads, at most ``tokens`` per caption). The two
+    fail on different held-out wordings, so text-only decoding (``generate``) averages their
+    classifier-free-guided log-probabilities at every iteration:
+    ``(1 - weight) * log p_sentence + weight * log p_tokens`` (docs/BENCHMARKS.md, "Sentence vector and
+    token states"). The part (``token_transformer.pt``, ``controlmm train token-transformer``) is
+    optional: without it decoding uses ``transformer`` alone. The motion control model extends
+    ``transformer`` only, so ``generate_controlled`` (whatever its settings) does not use it.
+    """
+
+    transformer: TransformerConfig
+    tokens: int = 32
+    weight: float = 0.5
+
+
 TEXT_ENCODER_DIMS: dict[str, int] = {"minilm": 384, "clip": 512}
 """Embedding size of each supported text encoder."""
 
 CLIP_MODEL_ID = "openai/clip-vit-base-patch32"
 
 
-BUCKETED_STAGES = ("transformer", "residual")
+BUCKETED_STAGES = ("transformer", "token_transformer", "residual")
 """Stages whose batches are trimmed to their longest clip, where length bucketing saves compute."""
 
 
@@ -208,6 +227,7 @@ class ModelConfig:
     feat_bias: float = 5.0  # std of dims 0-3 and 259-262 divided by feat_bias ** feat_bias_times
     feat_bias_times: int = 2  # the official code applies feat_bias twice (Std/25)
     schedules: dict[str, StageSchedule] = field(default_factory=dict)
+    token_view: TokenViewConfig | None = None  # optional token-state transformer (TokenViewConfig)
 
     def __post_init__(self) -> None:
         check_consistent(self)
@@ -215,9 +235,12 @@ class ModelConfig:
     def with_text_encoder(self, text: TextEncoderConfig) -> "ModelConfig":
         """This config conditioned on another text encoder (text_dim follows)."""
         dim = text.dim
+        view = self.token_view
+        if view is not None:  # token states are MiniLM's
+            view = replace(view, transformer=replace(view.transformer, text_dim=dim)) if text.name == "minilm" else None
         return replace(self, text_encoder=text,
                        transformer=replace(self.transformer, text_dim=dim),
-                       residual=replace(self.residual, text_dim=dim))
+                       residual=replace(self.residual, text_dim=dim), token_view=view)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -236,6 +259,7 @@ class ModelConfig:
                 feat_bias=float(data.get("feat_bias", 5.0)),
                 feat_bias_times=int(data.get("feat_bias_times", 2)),
                 schedules={k: _schedule_from_dict(v) for k, v in data.get("schedules", {}).items()},
+                token_view=_token_view_from_dict(data.get("token_view")),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ControlMMError(f"invalid model configuration: {type(exc).__name__}: {exc}") from exc
@@ -247,6 +271,14 @@ def _from_dict(cls: type[T], data: dict[str, Any]) -> T:
     if unknown:
         raise ValueError(f"unknown {cls.__name__} fields: {', '.join(sorted(unknown))}")
     return cls(**data)
+
+
+def _token_view_from_dict(data: dict[str, Any] | None) -> TokenViewConfig | None:
+    if data is None:
+        return None
+    data = dict(data)
+    data["transformer"] = _from_dict(TransformerConfig, data["transformer"])
+    return _from_dict(TokenViewConfig, data)
 
 
 def _schedule_from_dict(data: dict[str, Any]) -> StageSchedule:
@@ -269,10 +301,21 @@ def check_consistent(cfg: ModelConfig) -> None:
                              f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
     if tr.pooled_row and not cfg.text_encoder.tokens:
         raise ControlMMError("transformer pooled_row needs text token states (text encoder tokens > 0)")
+    if cfg.token_view is not None:
+        view = cfg.token_view
+        if cfg.text_encoder.name != "minilm" or not 1 <= view.tokens <= 128:
+            raise ControlMMError(f"token_view needs the minilm text encoder and 1..128 tokens; got {view.tokens} "
+                                 f"with {cfg.text_encoder.name}")
+        if not 0.0 < view.weight < 1.0:
+            raise ControlMMError(f"token_view weight must be between 0 and 1 (exclusive); got {view.weight}")
+        if (view.transformer.nb_code, view.transformer.code_dim, view.transformer.text_dim) != \
+                (tok.nb_code, tok.code_dim, cfg.text_encoder.dim):
+            raise ControlMMError("inconsistent model configuration: the token_view transformer's nb_code, code_dim "
+                                 "and text_dim must match the tokenizer and the text encoder")
     for name, schedule in cfg.schedules.items():
         if schedule.bucket < 0 or (schedule.bucket and name not in BUCKETED_STAGES):
             raise ControlMMError(f"schedule '{name}': bucket must be 0, or a positive number of batches for "
-                                 f"{' and '.join(BUCKETED_STAGES)}; got {schedule.bucket}")
+                                 f"{', '.join(BUCKETED_STAGES)}; got {schedule.bucket}")
     if cfg.text_encoder.precision not in ("float32", "float16"):
         raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
     checks = [
@@ -322,7 +365,8 @@ def _demo() -> ModelConfig:
                   text_dim=384, max_len=64)
     # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
     # trimmed batches the transformer 2.8 it/s and the residual 2.7 it/s: about 10 + 38 + 25 = 73 min on
-    # 2 cores, plus the control stage at 1.32 it/s (19 min): 92 min in all. 9,600 transformer
+    # 2 cores, plus the token-state transformer at 1.9 it/s (22 min) and the control stage at 1.32 it/s
+    # (19 min): 114 min in all. 9,600 transformer
     # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
     # "Length-bucketed batches".
     schedules = {
@@ -332,6 +376,9 @@ def _demo() -> ModelConfig:
                                      milestones=(5120,), gamma=0.2, checkpoint_every=250, bucket=16),
         "residual": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
                                   milestones=(3200,), gamma=0.2, checkpoint_every=250, bucket=16),
+        # The optional token-state transformer (token_view), warm-started from the transformer.
+        "token_transformer": StageSchedule(iters=2400, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
+                                           milestones=(1920,), gamma=0.2, checkpoint_every=250, bucket=16),
         # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
         "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
                                  milestones=(1200,), gamma=0.2, checkpoint_every=100),
@@ -344,6 +391,8 @@ def _demo() -> ModelConfig:
         text_encoder=TextEncoderConfig(name="minilm"),
         storage_dtype="float16",
         schedules=schedules,
+        token_view=TokenViewConfig(TransformerConfig(num_layers=3, cond_drop_prob=0.1, text_norm=True, **common),
+                                   tokens=32, weight=0.5),
     )
 
 
@@ -354,7 +403,7 @@ def _tiny() -> ModelConfig:
     schedules = {
         name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32,
                             bucket=2 if name in BUCKETED_STAGES else 0)
-        for name in ("tokenizer", "transformer", "residual", "control")
+        for name in ("tokenizer", "transformer", "token_transformer", "residual", "control")
     }
     return ModelConfig(
         preset="tiny",
@@ -364,6 +413,7 @@ def _tiny() -> ModelConfig:
         text_encoder=TextEncoderConfig(name="minilm"),
         storage_dtype="float32",
         schedules=schedules,
+        token_view=TokenViewConfig(TransformerConfig(cond_drop_prob=0.1, **common), tokens=16),
     )
 
 

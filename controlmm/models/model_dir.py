@@ -10,6 +10,7 @@ Layout::
     MODEL_DIR/tokenizer.pt     RVQ-VAE weights
     MODEL_DIR/transformer.pt   masked transformer weights
     MODEL_DIR/residual.pt      residual transformer weights
+    MODEL_DIR/token_transformer.pt  optional masked transformer on MiniLM token states (config.token_view)
     (control.pt, evaluator.pt  added by the control and evaluation stages)
     MODEL_DIR/checkpoints/     training checkpoints (optimizer, RNG, step); not needed to generate
     MODEL_DIR/cache/           cached caption embeddings; not needed to generate
@@ -74,6 +75,14 @@ def _build_transformer(cfg: ModelConfig) -> nn.Module:
     return MaskTransformer(cfg.transformer)
 
 
+def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
+    from controlmm.models.mask_transformer import MaskTransformer
+
+    if cfg.token_view is None:
+        raise ControlMMError("the model configuration has no token_view (the token-state transformer's config)")
+    return MaskTransformer(cfg.token_view.transformer)
+
+
 def _build_residual(cfg: ModelConfig) -> nn.Module:
     from controlmm.models.residual_transformer import ResidualTransformer
 
@@ -83,6 +92,7 @@ def _build_residual(cfg: ModelConfig) -> nn.Module:
 register_part("tokenizer", _build_tokenizer)
 register_part("transformer", _build_transformer, requires=("tokenizer",))
 register_part("residual", _build_residual, requires=("tokenizer",))
+register_part("token_transformer", _build_token_transformer, requires=("tokenizer",))
 
 
 # -- model.json -----------------------------------------------------------------------------------
@@ -167,7 +177,7 @@ def load_part_state(model_dir: Path, name: str, entry: dict[str, Any] | None = N
     path = model_dir / f"{name}.pt"
     if not path.is_file():
         raise InputFileError(f"model directory '{model_dir}' has no {name}.pt "
-                             f"(train it with: controlmm train {name} --out {model_dir})")
+                             f"(train it with: controlmm train {name.replace('_', '-')} --out {model_dir})")
     if entry and entry.get("sha256") and sha256_file(path) != entry["sha256"]:
         raise InputFileError(f"checkpoint '{path}' is corrupt: its checksum differs from model.json")
     try:
@@ -221,11 +231,16 @@ class MotionModel:
     def residual(self):
         return self.parts.get("residual")
 
+    @property
+    def token_transformer(self):
+        """The token-state masked transformer of ``config.token_view``, or None (not trained)."""
+        return self.parts.get("token_transformer")
+
     def require(self, name: str) -> nn.Module:
         if name not in self.parts:
             where = self.directory or "this model"
             raise ControlMMError(f"model directory '{where}' has no trained {name} "
-                                 f"(train it with: controlmm train {name} --out {where})")
+                                 f"(train it with: controlmm train {name.replace('_', '-')} --out {where})")
         return self.parts[name]
 
     @property
@@ -248,6 +263,12 @@ class MotionModel:
             raise ControlMMError(f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "
                                  f"the model expects {expected}-d (wrong CLIP weights?)")
         return vectors.to(self.device)
+
+    def encode_token_states(self, texts: list[str]) -> torch.Tensor:
+        """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer (``config.token_view``)."""
+        if self.config.token_view is None:
+            raise ControlMMError(f"model '{self.directory or 'this model'}' has no token_view configuration")
+        return self.text_encoder.encode_tokens(texts, self.config.token_view.tokens).to(self.device)
 
     def to(self, device: str | torch.device) -> "MotionModel":
         self.device = torch.device(device)

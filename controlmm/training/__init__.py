@@ -9,11 +9,12 @@ from controlmm.training.loop import TrainOptions, TrainResult, lr_factor, train
 from controlmm.training.residual import ResidualStage
 from controlmm.training.stage import Stage, StageContext
 from controlmm.training.tokenizer import TokenizerStage
-from controlmm.training.transformer import TransformerStage
+from controlmm.training.transformer import TokenTransformerStage, TransformerStage
 
 STAGES: dict[str, type[Stage]] = {
     "tokenizer": TokenizerStage,
     "transformer": TransformerStage,
+    "token_transformer": TokenTransformerStage,
     "residual": ResidualStage,
     "control": ControlStage,
 }

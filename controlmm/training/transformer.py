@@ -9,6 +9,7 @@ fixed crops and masks.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import torch
@@ -103,3 +104,41 @@ class TransformerStage(TextConditionedStage):
             acc_sum += float(acc) * len(ids)
             n += len(ids)
         return {"val_loss": total / n, "val_acc": acc_sum / n}
+
+
+class TokenTransformerStage(TransformerStage):
+    """Stage ``token_transformer``: the masked transformer of ``config.token_view`` on MiniLM token states.
+
+    The same objective, data and validation as ``transformer``; only the module (``token_view.transformer``)
+    and the text input (at most ``token_view.tokens`` token states per caption) differ. Generation mixes
+    the two transformers' log-probabilities (:mod:`controlmm.generate.token_view`).
+
+    Warm start: every tensor of the trained sentence-vector transformer that the token-state transformer
+    also has (token and position embeddings, text LayerNorm and projection, its first ``num_layers``
+    layers, output head) is copied before training, so the stage only has to learn the new text view.
+    """
+
+    name = "token_transformer"
+    requires = ("tokenizer", "transformer")
+
+    def __init__(self, ctx) -> None:
+        view = ctx.config.token_view
+        if view is None:
+            raise ControlMMError(f"model directory '{ctx.model_dir}' has no token_view in its configuration "
+                                 "(model directories made with --preset demo or tiny have one)")
+        text = replace(ctx.config.text_encoder, tokens=view.tokens)
+        super().__init__(replace(ctx, config=replace(ctx.config, transformer=view.transformer, text_encoder=text)))
+
+    def build_model(self) -> nn.Module:
+        model = super().build_model()
+        return warm_start(model, self.ctx.base.transformer)
+
+
+def warm_start(model: nn.Module, source: nn.Module) -> nn.Module:
+    """Copy into ``model`` every tensor of ``source`` with the same name and shape; returns ``model``."""
+    own, theirs = model.state_dict(), source.state_dict()
+    shared = {k: v for k, v in theirs.items() if k in own and own[k].shape == v.shape}
+    if not shared:
+        raise ControlMMError("warm start: the trained transformer shares no tensor with the token-state transformer")
+    model.load_state_dict({**own, **shared})
+    return model

@@ -65,10 +65,10 @@ def test_generate_bad_input(tiny_model_dir, tmp_path, capsys):
 
 
 def test_train_help_and_bad_input(tiny_data, tmp_path, capsys):
-    assert TRAIN_SUBCOMMANDS == ("tokenizer", "transformer", "residual", "control", "evaluator")
+    assert TRAIN_SUBCOMMANDS == ("tokenizer", "transformer", "token_transformer", "residual", "control", "evaluator")
     for stage in TRAIN_SUBCOMMANDS:
         with pytest.raises(SystemExit) as info:
-            main(["train", stage, "--help"])
+            main(["train", stage.replace("_", "-"), "--help"])
         assert info.value.code == 0
         assert "--resume" in capsys.readouterr().out
     _one_line_error(capsys, ["train"], "choose a stage")

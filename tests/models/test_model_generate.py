@@ -189,3 +189,11 @@ def test_default_model_is_found_without_configuration():
     else:
         with pytest.raises(InputFileError, match="no embedded default model"):
             load_model()
+
+
+def test_embedded_checkpoints_fit_the_size_budget():
+    """Everything under controlmm/checkpoints (default model, evaluator) stays within 25 MiB."""
+    from controlmm.assets import CHECKPOINT_ROOT
+
+    size = sum(p.stat().st_size for p in CHECKPOINT_ROOT.rglob("*") if p.is_file())
+    assert 0 < size <= 25 * 2**20, size
