@@ -4,15 +4,19 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import pytest
 import torch
 
 from controlmm.cli.main import main
 from controlmm.errors import ControlMMError
-from controlmm.generate import DecodeOptions, generate, load_model, masked_decode, token_view_logits_fn
-from controlmm.models.config import ModelConfig, preset_config
+from controlmm.generate import DecodeOptions, DecodeState, generate, load_model, masked_decode, token_view_logits_fn
+from controlmm.models.config import ModelConfig, TextEncoderConfig, preset_config
+from controlmm.models.mask_transformer import MaskTransformer
+from controlmm.motion import load_motion
 from controlmm.training import TrainOptions, train
+from controlmm.training.transformer import warm_start
 
 
 @pytest.fixture(scope="module")
@@ -36,8 +40,6 @@ def test_config_round_trip_and_errors():
         with pytest.raises(ControlMMError, match=needle):
             ModelConfig.from_dict({**data, "token_view": {**data["token_view"], **change}})
     # switching to CLIP drops the view (token states are MiniLM's); old model.json files have none
-    from controlmm.models.config import TextEncoderConfig
-
     assert cfg.with_text_encoder(TextEncoderConfig(name="clip")).token_view is None
     assert ModelConfig.from_dict({k: v for k, v in data.items() if k != "token_view"}).token_view is None
 
@@ -64,12 +66,11 @@ def test_decoding_mixes_both_views(view_dir):
     padding = torch.zeros(2, 10, dtype=torch.bool)
     padding[1, 7:] = True
     ids[1, 7:] = model.transformer.pad_id
-    from controlmm.generate import DecodeState
-
     state = DecodeState(step=0, ids=ids, is_mask=~padding, padding_mask=padding, cond=cond)
     mixed = fn(ids, state)
     sentence = torch.log_softmax(model.transformer.cfg_logits(ids, cond, padding, 4.0), -1)
-    tokens = torch.log_softmax(model.token_transformer.cfg_logits(ids, model.encode_token_states(texts), padding, 4.0), -1)
+    states = model.encode_token_states(texts)
+    tokens = torch.log_softmax(model.token_transformer.cfg_logits(ids, states, padding, 4.0), -1)
     w = model.config.token_view.weight
     assert torch.allclose(mixed, (1 - w) * sentence + w * tokens, atol=1e-5)
     assert not torch.allclose(mixed, sentence, atol=1e-3)  # the second view changes the table
@@ -81,8 +82,8 @@ def test_decoding_mixes_both_views(view_dir):
                        frames=[60, 48], seed=3)
     assert both.motion.metadata["token_view"] and not alone.motion.metadata["token_view"]
     assert torch.equal(alone.ids, without.ids) and not torch.equal(both.ids, alone.ids)
-    base = masked_decode(model.transformer, cond, torch.tensor([15, 12]), DecodeOptions(), torch.Generator().manual_seed(3),
-                         logits_fn=fn)
+    base = masked_decode(model.transformer, cond, torch.tensor([15, 12]), DecodeOptions(),
+                         torch.Generator().manual_seed(3), logits_fn=fn)
     assert torch.equal(base.ids, both.ids[..., 0])  # generate() decodes the base layer exactly so
 
 
@@ -101,10 +102,6 @@ def test_cli_stage_and_missing_view(view_dir, tiny_data, tmp_path, capsys):
 def test_warm_start_copies_the_trained_transformer(view_dir, tiny_model_dir):
     """The stage starts from the sentence-vector transformer: every shared tensor (embeddings, text
     projection, the first layers, head) is copied; a layer the source lacks keeps its initialisation."""
-    from dataclasses import replace
-
-    from controlmm.models.mask_transformer import MaskTransformer
-    from controlmm.training.transformer import warm_start
 
     source = load_model(tiny_model_dir).transformer
     cfg = load_model(view_dir).config.token_view.transformer
@@ -127,8 +124,6 @@ def test_warm_start_copies_the_trained_transformer(view_dir, tiny_model_dir):
 
 
 def test_cli_generate_uses_the_view_unless_told_not_to(view_dir, tmp_path, capsys):
-    from controlmm.motion import load_motion
-
     for flag, used in (([], True), (["--no-token-view"], False)):
         out = tmp_path / f"m{used}.npz"
         code = main(["generate", "--text", "a person squats slowly", "--frames", "48", "--seed", "1",
