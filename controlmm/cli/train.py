@@ -44,7 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _no_stage(parser: argparse.ArgumentParser) -> int:
-    print(f"controlmm train: error: choose a stage: {', '.join(n.replace('_', '-') for n in TRAIN_SUBCOMMANDS)} "
+    from controlmm.models.model_dir import train_command
+
+    print(f"controlmm train: error: choose a stage: {', '.join(map(train_command, TRAIN_SUBCOMMANDS))} "
           "(see 'controlmm train --help')", file=sys.stderr)
     return 2
 

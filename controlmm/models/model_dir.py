@@ -58,6 +58,11 @@ PARTS: dict[str, PartSpec] = {}
 """Registered parts by name (``tokenizer``, ``transformer``, ``residual``, ...)."""
 
 
+def train_command(part: str) -> str:
+    """The ``controlmm train`` subcommand that trains ``part`` (``token_transformer`` -> ``token-transformer``)."""
+    return part.replace("_", "-")
+
+
 def register_part(name: str, build: Callable[[ModelConfig], nn.Module], requires: tuple[str, ...] = ()) -> None:
     """Make a part loadable from model directories (``<name>.pt``)."""
     PARTS[name] = PartSpec(name, build, requires)
@@ -177,7 +182,7 @@ def load_part_state(model_dir: Path, name: str, entry: dict[str, Any] | None = N
     path = model_dir / f"{name}.pt"
     if not path.is_file():
         raise InputFileError(f"model directory '{model_dir}' has no {name}.pt "
-                             f"(train it with: controlmm train {name.replace('_', '-')} --out {model_dir})")
+                             f"(train it with: controlmm train {train_command(name)} --out {model_dir})")
     if entry and entry.get("sha256") and sha256_file(path) != entry["sha256"]:
         raise InputFileError(f"checkpoint '{path}' is corrupt: its checksum differs from model.json")
     try:
@@ -240,7 +245,7 @@ class MotionModel:
         if name not in self.parts:
             where = self.directory or "this model"
             raise ControlMMError(f"model directory '{where}' has no trained {name} "
-                                 f"(train it with: controlmm train {name.replace('_', '-')} --out {where})")
+                                 f"(train it with: controlmm train {train_command(name)} --out {where})")
         return self.parts[name]
 
     @property
