@@ -44,12 +44,15 @@ def load_avg() -> str:
 
 
 def uncontrolled_skate(model, cases, frames: list[int], seed: int) -> float:
+    """Mean foot-skating ratio of the same prompts generated without control by the generator the
+    controlled rows extend: the sentence-vector transformer (``token_view=False``; the text-view
+    ensemble is a different generator, which ``generate_controlled`` does not use)."""
     from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate
 
     values = []
     for i, (case, f) in enumerate(zip(cases, frames)):
-        motion = generate(model, case.text, frames=f, seed=seed + i).motion
+        motion = generate(model, case.text, frames=f, seed=seed + i, token_view=False).motion
         values.append(foot_skating_ratio(motion.joints))
     return float(np.mean(values))
 
@@ -86,7 +89,8 @@ def print_table(title: str, rows: list[dict], skate_base: float, columns: list[s
               f"| {100 * r['max']:.2f} | {100 * r['within_1cm']:.0f} % | {100 * r['within_2cm']:.0f} % "
               f"| {r['skate']:.4f} | {r['steps']:.0f} | {r['seconds']:.2f}, {r['seconds_max']:.2f} "
               f"| {r['cpu_seconds']:.2f} |")
-    print(f"uncontrolled generation of the same prompts and lengths: foot skating {skate_base:.4f}")
+    print(f"uncontrolled generation of the same prompts and lengths (sentence-vector transformer): "
+          f"foot skating {skate_base:.4f}")
 
 
 def check_targets(accurate: dict, unedited: list[tuple[str, dict]], skate_base: float) -> None:

@@ -30,7 +30,7 @@ creates MODEL_DIR (model.json, mean.npy, std.npy, tokenizer.pt); later stages ad
 Checkpoints go to MODEL_DIR/checkpoints/ every few hundred steps; --resume continues a killed run.
 Several GPUs (or CPU processes): torchrun --nproc_per_node N -m controlmm train STAGE ..."""
 
-EPILOG = """presets: demo (CPU-sized, MiniLM text; about 114 min for every stage on 2 cores), paper
+EPILOG = """presets: demo (CPU-sized, MiniLM text; about 2 h (112-118 min) for every stage on 2 cores), paper
 (the released MoMask sizes, CLIP ViT-B/32 text, GPU-scale schedules), tiny (tests)."""
 
 

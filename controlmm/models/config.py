@@ -365,8 +365,8 @@ def _demo() -> ModelConfig:
                   text_dim=384, max_len=64)
     # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
     # trimmed batches the transformer 2.8 it/s and the residual 2.7 it/s: about 10 + 38 + 25 = 73 min on
-    # 2 cores, plus the token-state transformer at 1.9 it/s (22 min) and the control stage at 1.32 it/s
-    # (19 min): 114 min in all. 9,600 transformer
+    # 2 cores, plus the token-state transformer at 2.5 it/s (20 min; 26 min at the 1.9 it/s of a slower
+    # day) and the control stage at 1.32 it/s (19 min): 112 min in all (118). 9,600 transformer
     # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
     # "Length-bucketed batches".
     schedules = {
@@ -376,9 +376,9 @@ def _demo() -> ModelConfig:
                                      milestones=(5120,), gamma=0.2, checkpoint_every=250, bucket=16),
         "residual": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
                                   milestones=(3200,), gamma=0.2, checkpoint_every=250, bucket=16),
-        # The optional token-state transformer (token_view), warm-started from the transformer.
-        "token_transformer": StageSchedule(iters=2400, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
-                                           milestones=(1920,), gamma=0.2, checkpoint_every=250, bucket=16),
+        # The optional token-state transformer (token_view), partly warm-started from the transformer.
+        "token_transformer": StageSchedule(iters=3000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
+                                           milestones=(2400,), gamma=0.2, checkpoint_every=250, bucket=16),
         # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
         "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
                                  milestones=(1200,), gamma=0.2, checkpoint_every=100),

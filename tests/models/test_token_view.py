@@ -13,10 +13,12 @@ from controlmm.cli.main import main
 from controlmm.errors import ControlMMError
 from controlmm.generate import DecodeOptions, DecodeState, generate, load_model, masked_decode, token_view_logits_fn
 from controlmm.models.config import ModelConfig, TextEncoderConfig, preset_config
+from controlmm.data import HumanML3D
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.motion import load_motion
 from controlmm.training import TrainOptions, train
-from controlmm.training.transformer import warm_start
+from controlmm.training.stage import StageContext
+from controlmm.training.transformer import WARM_START_SKIP, TokenTransformerStage, warm_start
 
 
 @pytest.fixture(scope="module")
@@ -99,26 +101,38 @@ def test_cli_stage_and_missing_view(view_dir, tiny_data, tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and "has no token_view in its configuration" in err, err
 
 
-def test_warm_start_copies_the_trained_transformer(view_dir, tiny_model_dir):
-    """The stage starts from the sentence-vector transformer: every shared tensor (embeddings, text
-    projection, the first layers, head) is copied; a layer the source lacks keeps its initialisation."""
+def test_warm_start_copies_all_but_the_attention_layers(view_dir, tiny_model_dir, tiny_data):
+    """The stage starts from the sentence-vector transformer's embeddings, text projection and head; its
+    attention layers start fresh. ``warm_start`` without ``skip`` copies every shared tensor."""
 
     source = load_model(tiny_model_dir).transformer
+    theirs = source.state_dict()
     cfg = load_model(view_dir).config.token_view.transformer
     deeper = MaskTransformer(replace(cfg, num_layers=cfg.num_layers + 1))
     fresh = {k: v.clone() for k, v in deeper.state_dict().items()}
     warm = warm_start(deeper, source).state_dict()
-    theirs = source.state_dict()
     extra = f"seqTransEncoder.layers.{cfg.num_layers}."
     for k, v in warm.items():
         assert torch.equal(v, theirs[k] if not k.startswith(extra) else fresh[k]), k
     assert any(k.startswith(extra) for k in warm)
-    # the trained member moved away from its starting point, and records both parts it was trained on
+    member = MaskTransformer(cfg)
+    fresh = {k: v.clone() for k, v in member.state_dict().items()}
+    partial = warm_start(member, source, skip=WARM_START_SKIP).state_dict()
+    layers = [k for k in partial if k.startswith(WARM_START_SKIP)]
+    assert layers and "token_emb.weight" not in layers and "output_process.poseFinal.weight" not in layers
+    for k, v in partial.items():
+        assert torch.equal(v, fresh[k] if k in layers else theirs[k]), k
+    assert not torch.equal(partial[layers[0]], theirs[layers[0]])
+    # the stage builds its member that way from the model directory's trained transformer
+    model = load_model(view_dir)
+    ctx = StageContext(config=model.config, data=HumanML3D(tiny_data), normalizer=model.normalizer,
+                       model_dir=view_dir, device=torch.device("cpu"), seed=0, progress=False,
+                       base=load_model(view_dir, parts=TokenTransformerStage.requires))
+    built = TokenTransformerStage(ctx).build_model().state_dict()
+    for k, v in built.items():
+        assert torch.equal(v, theirs[k]) != k.startswith(WARM_START_SKIP), k
     manifest = json.loads((view_dir / "model.json").read_text())
     assert set(manifest["parts"]["token_transformer"]["trained_on"]) == {"tokenizer", "transformer"}
-    trained = load_model(view_dir).token_transformer.state_dict()
-    assert not torch.equal(trained["seqTransEncoder.layers.0.linear1.weight"],
-                           theirs["seqTransEncoder.layers.0.linear1.weight"])
     with pytest.raises(ControlMMError, match="shares no tensor"):
         warm_start(torch.nn.Linear(2, 2), source)
 
