@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -118,3 +119,16 @@ def test_eval_probes_model_mode(eval_corpus, tiny_model_dir, tmp_path, capsys):
     _one_line_error(capsys, ["eval", "probes", "--data", str(eval_corpus), "--model", str(tiny_model_dir),
                              "--families", "walk"], "no captions of walk in this split")
     _one_line_error(capsys, ["eval", "probes", "--data", str(eval_corpus), "--samples", "0"], "at least 1")
+
+
+def test_eval_probes_do_not_load_the_control_model(eval_corpus, tiny_model_dir, tmp_path, capsys):
+    """Probes generate without control, so a listed but absent control.pt does not stop them."""
+    model_dir = tmp_path / "no-control"
+    shutil.copytree(tiny_model_dir, model_dir)
+    manifest = json.loads((model_dir / "model.json").read_text())
+    manifest["parts"]["control"] = {**manifest["parts"]["transformer"], "sha256": "0" * 64}
+    (model_dir / "model.json").write_text(json.dumps(manifest))
+    assert not (model_dir / "control.pt").exists()
+    code = main(["eval", "probes", "--data", str(eval_corpus), "--split", "all", "--model", str(model_dir),
+                 "--samples", "1", "--families", "walk", "--quiet"])
+    assert code == 0, capsys.readouterr().err
