@@ -74,14 +74,10 @@ def run(args: argparse.Namespace) -> int:
         source, what = ground_truth(args.data), "ground truth"
         report = evaluate(cases, source, split=args.split, per_clip=True, progress=not args.quiet)
     else:
-        from controlmm.assets import default_model_dir
         from controlmm.generate import load_model
-        from controlmm.models.model_dir import read_manifest
 
-        model_dir = default_model_dir() if args.model == "default" else args.model
         # generation without control: every listed part but the motion control model
-        parts = tuple(p for p in read_manifest(model_dir).get("parts", {}) if p != "control")
-        model = load_model(model_dir, device=args.device, parts=parts)
+        model = load_model(None if args.model == "default" else args.model, device=args.device, skip=("control",))
         if args.tokenizer_only:
             source = tokenized_motions(model, args.data, args.layers)
             what = f"ground truth through the tokenizer of {model.directory}, {args.layers or 'all'} layer(s)"

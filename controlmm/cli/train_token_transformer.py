@@ -6,8 +6,8 @@ import argparse
 
 DESCRIPTION = """Train the second masked transformer of MODEL_DIR's token_view: the same objective as
 'controlmm train transformer', conditioned on MiniLM's token states (one row per word piece) instead of
-the pooled sentence vector, starting from the trained transformer's weights (every tensor the two
-share: embeddings, text projection, the first layers, the head). Optional: when MODEL_DIR has
+the pooled sentence vector, starting from part of the trained transformer's weights (embeddings, text
+projection and head copied; the attention layers start fresh). Optional: when MODEL_DIR has
 token_transformer.pt, text-to-motion decoding averages the two transformers' log-probabilities each
 iteration (the two text views fail on different wordings); controlled generation (--control, editing,
 plan) keeps the sentence-vector transformer and the motion control model.

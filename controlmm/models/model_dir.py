@@ -295,13 +295,15 @@ def resolve_device(device: str | torch.device | None) -> torch.device:
 
 
 def load_model(model_dir: str | Path | None = None, device: str | torch.device | None = "cpu",
-               parts: tuple[str, ...] | None = None, clip_weights: str | None = None) -> MotionModel:
+               parts: tuple[str, ...] | None = None, clip_weights: str | None = None,
+               skip: tuple[str, ...] = ()) -> MotionModel:
     """Load a model directory (``None``: the embedded default, ``controlmm.assets.default_model_dir()``).
 
     Args:
         model_dir: the directory written by ``controlmm train`` (or ``import-official``).
         device: "cpu", "cuda" or None/"auto".
         parts: parts to load; default every part listed in model.json.
+        skip: parts not to load even if listed (e.g. ``("control",)`` for generation without control).
         clip_weights: for CLIP-conditioned models, where the CLIP weights are (overrides model.json).
     """
     if model_dir is None:
@@ -316,7 +318,7 @@ def load_model(model_dir: str | Path | None = None, device: str | torch.device |
     config = ModelConfig.from_dict(manifest["config"])
     normalizer = read_statistics(model_dir)
     listed = manifest.get("parts", {})
-    wanted = tuple(listed) if parts is None else parts
+    wanted = tuple(p for p in (tuple(listed) if parts is None else parts) if p not in skip)
     loaded: dict[str, nn.Module] = {}
     for name in wanted:
         if name not in PARTS:
