@@ -66,6 +66,9 @@ class TransformerConfig:
     state, one condition row for the states' pooled sentence vector (MiniLM's own pooling) through its
     own LayerNorm and Linear. The two views of a caption fail on different held-out wordings
     (docs/BENCHMARKS.md, "Sentence vector and token states").
+
+    ``relative_positions`` (not in MoMask): K > 0 adds a learned per-head attention bias for the offset
+    between two motion tokens, clipped at K tokens (:mod:`controlmm.models.relative_position`); 0 = off.
     """
 
     nb_code: int = 512
@@ -80,6 +83,7 @@ class TransformerConfig:
     max_len: int = 5000  # rows of the sinusoidal table (official 5000)
     text_norm: bool = False
     pooled_row: bool = False  # with text token states: one more condition row for their pooled sentence vector
+    relative_positions: int = 0  # K > 0: learned attention bias per token offset, clipped at K tokens
 
     @property
     def mask_id(self) -> int:
@@ -326,6 +330,8 @@ def check_consistent(cfg: ModelConfig) -> None:
         (tr.text_dim == res.text_dim == cfg.text_encoder.dim,
          f"text_dim must equal the text encoder's size ({cfg.text_encoder.dim})"),
         (tr.latent_dim % tr.num_heads == 0, "transformer latent_dim must be divisible by num_heads"),
+        (tr.relative_positions >= 0 and (cfg.token_view is None or cfg.token_view.transformer.relative_positions >= 0),
+         "relative_positions must be 0 (off) or a positive number of tokens"),
         (res.latent_dim % res.num_heads == 0, "residual latent_dim must be divisible by num_heads"),
         (cfg.storage_dtype in ("float32", "float16"), "storage_dtype must be float32 or float16"),
     ]

@@ -103,14 +103,16 @@ def gumbel_noise(like: torch.Tensor, generator: torch.Generator | None = None) -
 
 
 def run_layers(layers: nn.ModuleList, x: torch.Tensor, padding_mask: torch.Tensor,
-               hook=None) -> torch.Tensor:
+               hook=None, attn_mask: torch.Tensor | None = None) -> torch.Tensor:
     """Run encoder layers one by one on (S, B, D) ``x``.
 
     ``padding_mask`` (B, S) is True at padded positions. ``hook(i, x) -> x``, when given, is called
-    after layer ``i`` (the motion control model adds its zero-linear residuals there).
+    after layer ``i`` (the motion control model adds its zero-linear residuals there). ``attn_mask``
+    (B * heads, S, S), when given, is an additive mask that already holds the padding
+    (:class:`~controlmm.models.relative_position.RelativePositionBias`); ``padding_mask`` is then unused.
     """
     for i, layer in enumerate(layers):
-        x = layer(x, src_key_padding_mask=padding_mask)
+        x = layer(x, src_key_padding_mask=padding_mask) if attn_mask is None else layer(x, src_mask=attn_mask)
         if hook is not None:
             x = hook(i, x)
     return x

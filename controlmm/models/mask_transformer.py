@@ -12,7 +12,9 @@ Forward pass (one condition, sequence-first inside, as the official module)::
                                                                 with cfg.pooled_row one more row first:
                                                                 pooled_emb(LN(pooled states))
     h_0    = [c ; x]                        (C+N, B, D)        C = 1 for a sentence vector
-    h_L    = layers(h_0)                    8 post-LN GELU TransformerEncoderLayers (paper preset)
+    h_L    = layers(h_0)                    8 post-LN GELU TransformerEncoderLayers (paper preset);
+                                                                with cfg.relative_positions a learned
+                                                                bias per token offset on the attention
     logits = output_process(h_L[C:])        (B, N, nb_code)    no logits for mask/pad
 
 Training (``masked_loss``): cosine mask ratio, BERT corruption (10% random code, then 88% of the
@@ -30,6 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from controlmm.models.config import TransformerConfig
+from controlmm.models.relative_position import RelativePositionBias
 from controlmm.models.layers import (
     InputProcess,
     OutputProcess,
@@ -62,6 +65,8 @@ class MaskTransformer(nn.Module):
         self.output_process = OutputProcess(cfg.nb_code, cfg.latent_dim)
         self.token_emb = nn.Embedding(cfg.nb_code + 2, cfg.code_dim)
         self.apply(init_weights)
+        self.relative_bias = (RelativePositionBias(cfg.num_heads, cfg.relative_positions)
+                              if cfg.relative_positions else None)  # zero table: starts as MoMask
 
     # -- pieces -----------------------------------------------------------------------------------
     def mask_cond(self, cond: torch.Tensor, force_mask: bool = False) -> torch.Tensor:
@@ -102,9 +107,21 @@ class MaskTransformer(nn.Module):
                 c_pad = torch.cat([torch.zeros_like(c_pad[:, :1]), c_pad], dim=1)
         return torch.cat([c, x], dim=0), torch.cat([c_pad, padding_mask], dim=1)
 
-    def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None) -> torch.Tensor:
-        """The encoder layers on (C+N, B, D); ``hook(i, h) -> h`` runs after layer i."""
-        return run_layers(self.seqTransEncoder.layers, h, mask, hook)
+    def attention_mask(self, mask: torch.Tensor, num_tokens: int, dtype: torch.dtype) -> torch.Tensor | None:
+        """The additive attention mask (B * heads, C+N, C+N) of the relative position bias for the
+        key-padding mask (B, C+N) of :meth:`embed` and N = ``num_tokens``; None without the bias."""
+        if self.relative_bias is None:
+            return None
+        return self.relative_bias.attention_mask(mask, num_tokens, dtype)
+
+    def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None, num_tokens: int | None = None
+                   ) -> torch.Tensor:
+        """The encoder layers on (C+N, B, D); ``hook(i, h) -> h`` runs after layer i. ``num_tokens`` = N
+        (the motion rows) is needed with the relative position bias."""
+        if self.relative_bias is not None and num_tokens is None:
+            raise ValueError("run_layers needs num_tokens with the relative position bias")
+        attn = self.attention_mask(mask, num_tokens, h.dtype) if num_tokens is not None else None
+        return run_layers(self.seqTransEncoder.layers, h, mask, hook, attn)
 
     def head(self, h: torch.Tensor, num_tokens: int) -> torch.Tensor:
         """Final hidden states (C+N, B, D) -> logits (B, N, nb_code) of the last ``num_tokens`` = N rows
@@ -116,7 +133,8 @@ class MaskTransformer(nn.Module):
                 force_mask: bool = False) -> torch.Tensor:
         """Logits (B, N, nb_code) for ids or soft embeddings ``tokens``; see :meth:`embed`."""
         h, mask = self.embed(tokens, cond, padding_mask, force_mask)
-        return self.head(self.run_layers(h, mask), padding_mask.shape[1])
+        n = padding_mask.shape[1]
+        return self.head(self.run_layers(h, mask, num_tokens=n), n)
 
     def cfg_logits(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
                    scale: float) -> torch.Tensor:

@@ -80,10 +80,12 @@ class MotionControlModel(nn.Module):
         h = h + torch.cat([torch.zeros_like(h[:h.shape[0] - c.shape[0]]), c], dim=0)  # not on condition rows
         residuals = []
         g = h
+        n = c.shape[0]
+        attn = base.attention_mask(mask, n, h.dtype)  # the base's relative position bias, if any
         for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear):
-            g = layer(g, src_key_padding_mask=mask)
+            g = layer(g, src_key_padding_mask=mask) if attn is None else layer(g, src_mask=attn)
             residuals.append(zero(g))
-        out = base.run_layers(h, mask, hook=lambda i, x: x + residuals[i])
+        out = base.run_layers(h, mask, hook=lambda i, x: x + residuals[i], num_tokens=n)
         return base.head(out, c.shape[0])
 
     def cfg_logits(self, base: MaskTransformer, tokens: torch.Tensor, cond: torch.Tensor,
