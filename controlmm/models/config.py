@@ -295,6 +295,7 @@ def _schedule_from_dict(data: dict[str, Any]) -> StageSchedule:
 def check_consistent(cfg: ModelConfig) -> None:
     """Raise a one-line error when the parts of a config do not fit together."""
     tok, tr, res = cfg.tokenizer, cfg.transformer, cfg.residual
+    transformers = [tr] if cfg.token_view is None else [tr, cfg.token_view.transformer]
     if cfg.text_encoder.name not in TEXT_ENCODER_DIMS:
         raise ControlMMError(f"unknown text encoder '{cfg.text_encoder.name}'; "
                              f"allowed: {', '.join(TEXT_ENCODER_DIMS)}")
@@ -330,7 +331,7 @@ def check_consistent(cfg: ModelConfig) -> None:
         (tr.text_dim == res.text_dim == cfg.text_encoder.dim,
          f"text_dim must equal the text encoder's size ({cfg.text_encoder.dim})"),
         (tr.latent_dim % tr.num_heads == 0, "transformer latent_dim must be divisible by num_heads"),
-        (tr.relative_positions >= 0 and (cfg.token_view is None or cfg.token_view.transformer.relative_positions >= 0),
+        (min(t.relative_positions for t in transformers) >= 0,
          "relative_positions must be 0 (off) or a positive number of tokens"),
         (res.latent_dim % res.num_heads == 0, "residual latent_dim must be divisible by num_heads"),
         (cfg.storage_dtype in ("float32", "float16"), "storage_dtype must be float32 or float16"),

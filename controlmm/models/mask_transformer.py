@@ -32,7 +32,6 @@ import torch.nn.functional as F
 from torch import nn
 
 from controlmm.models.config import TransformerConfig
-from controlmm.models.relative_position import RelativePositionBias
 from controlmm.models.layers import (
     InputProcess,
     OutputProcess,
@@ -46,6 +45,7 @@ from controlmm.models.layers import (
     transformer_trunk,
     trim_text_tokens,
 )
+from controlmm.models.relative_position import RelativePositionBias
 
 
 class MaskTransformer(nn.Module):

@@ -1,14 +1,16 @@
 """Learned relative position bias of the masked transformer's attention (not in MoMask).
 
-MoMask's masked transformer only has absolute sinusoidal positions. Periodic motions (claps, punches,
-waves) repeat a short cycle of codes, so predicting a masked code means looking one period back or ahead;
-with absolute positions a small model has to learn that offset for every position. A per-head bias on
-the attention logits that depends only on the offset between two motion tokens (T5-style, clipped at
-``max_distance`` tokens) makes such look-ups position independent::
+MoMask's masked transformer only has absolute sinusoidal positions, so a small model has to learn "look
+one step (or one motion cycle) back" separately at every position. A per-head bias on the attention
+logits that depends only on the offset between two motion tokens (T5-style, clipped at ``max_distance``
+tokens) makes such look-ups position independent::
 
     logits_h(i, j) += b_h[clamp(j - i, -K, K)]      for motion tokens i, j (K = max_distance)
 
 Condition rows (text) get no bias. The table starts at zero, so a new model starts exactly as MoMask's.
+Measured on the default corpus (docs/BENCHMARKS.md, "Relative positions"): the demo transformer's val.
+loss 1.411 -> 1.288 and +1.1 points of the held-out probes; the periodic arm families (claps, punches,
+waves) unchanged.
 """
 
 from __future__ import annotations
