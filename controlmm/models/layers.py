@@ -102,17 +102,23 @@ def gumbel_noise(like: torch.Tensor, generator: torch.Generator | None = None) -
     return -torch.log((-torch.log(u.clamp(min=1e-20))).clamp(min=1e-20))
 
 
+def apply_layer(layer: nn.Module, x: torch.Tensor, padding_mask: torch.Tensor,
+                attn_mask: torch.Tensor | None = None) -> torch.Tensor:
+    """One encoder layer on (S, B, D) ``x``: with the key-padding mask (B, S), or with ``attn_mask``
+    (B * heads, S, S), an additive mask that already holds the padding."""
+    return layer(x, src_key_padding_mask=padding_mask) if attn_mask is None else layer(x, src_mask=attn_mask)
+
+
 def run_layers(layers: nn.ModuleList, x: torch.Tensor, padding_mask: torch.Tensor,
                hook=None, attn_mask: torch.Tensor | None = None) -> torch.Tensor:
     """Run encoder layers one by one on (S, B, D) ``x``.
 
     ``padding_mask`` (B, S) is True at padded positions. ``hook(i, x) -> x``, when given, is called
-    after layer ``i`` (the motion control model adds its zero-linear residuals there). ``attn_mask``
-    (B * heads, S, S), when given, is an additive mask that already holds the padding
-    (:class:`~controlmm.models.relative_position.RelativePositionBias`); ``padding_mask`` is then unused.
+    after layer ``i`` (the motion control model adds its zero-linear residuals there). ``attn_mask``:
+    see :func:`apply_layer` (:class:`~controlmm.models.relative_position.RelativePositionBias`).
     """
     for i, layer in enumerate(layers):
-        x = layer(x, src_key_padding_mask=padding_mask) if attn_mask is None else layer(x, src_mask=attn_mask)
+        x = apply_layer(layer, x, padding_mask, attn_mask)
         if hook is not None:
             x = hook(i, x)
     return x

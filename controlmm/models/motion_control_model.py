@@ -35,7 +35,7 @@ import torch
 from torch import nn
 
 from controlmm.models.config import ModelConfig
-from controlmm.models.layers import transformer_trunk
+from controlmm.models.layers import apply_layer, run_layers, transformer_trunk
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.models.rvqvae import Encoder
 
@@ -80,12 +80,11 @@ class MotionControlModel(nn.Module):
         h = h + torch.cat([torch.zeros_like(h[:h.shape[0] - c.shape[0]]), c], dim=0)  # not on condition rows
         residuals = []
         g = h
-        n = c.shape[0]
-        attn = base.attention_mask(mask, n, h.dtype)  # the base's relative position bias, if any
+        attn = base.attention_mask(mask, c.shape[0], h.dtype)  # the base's relative position bias, if any
         for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear):
-            g = layer(g, src_key_padding_mask=mask) if attn is None else layer(g, src_mask=attn)
+            g = apply_layer(layer, g, mask, attn)
             residuals.append(zero(g))
-        out = base.run_layers(h, mask, hook=lambda i, x: x + residuals[i], num_tokens=n)
+        out = run_layers(base.seqTransEncoder.layers, h, mask, lambda i, x: x + residuals[i], attn)
         return base.head(out, c.shape[0])
 
     def cfg_logits(self, base: MaskTransformer, tokens: torch.Tensor, cond: torch.Tensor,
