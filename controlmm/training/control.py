@@ -89,7 +89,9 @@ def sample_control_mask(lengths: torch.Tensor, num_frames: int, joint_ids: tuple
     """
     b = len(lengths)
     mask = torch.zeros(b, num_frames, 22, dtype=torch.bool)
-    seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
+    # the draw happens on the generator's device (a CUDA generator cannot fill a CPU tensor)
+    seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator,
+                             device=generator.device if generator is not None else "cpu"))
     rng = np.random.default_rng(seed)
     for i, m in enumerate(int(x) for x in lengths):
         m = max(1, min(m, num_frames))

@@ -118,6 +118,15 @@ def test_control_masks_follow_the_modes():
     assert int(frames.min()) >= 1 and int(frames.max()) > 150  # from one frame to (nearly) every frame
 
 
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+def test_control_masks_take_a_cuda_generator():
+    """The control stage validates with a generator on its device; on CUDA that once crashed here."""
+    lengths = torch.tensor([40, 196], device="cuda")
+    first = sample_control_mask(lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0))
+    again = sample_control_mask(lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0))
+    assert first.device.type == "cuda" and torch.equal(first, again) and bool(first.any())
+
+
 def test_straight_through_gumbel_is_one_hot_forward_and_soft_backward():
     logits = torch.randn(2, 5, 7, requires_grad=True)
     p = token_probabilities(logits, "gumbel", 1.0, torch.Generator().manual_seed(0))
