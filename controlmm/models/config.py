@@ -69,6 +69,10 @@ class TransformerConfig:
 
     ``relative_positions`` (not in MoMask): K > 0 adds a learned per-head attention bias for the offset
     between two motion tokens, clipped at K tokens (:mod:`controlmm.models.relative_position`); 0 = off.
+
+    ``token_drop_prob`` (not in MoMask; models on MiniLM token states only): word dropout while
+    training: each token state of a caption is zeroed (so masked as padding) with this probability,
+    so the model cannot lean on one word of the training wording; 0 = off.
     """
 
     nb_code: int = 512
@@ -84,6 +88,7 @@ class TransformerConfig:
     text_norm: bool = False
     pooled_row: bool = False  # with text token states: one more condition row for their pooled sentence vector
     relative_positions: int = 0  # K > 0: learned attention bias per token offset, clipped at K tokens
+    token_drop_prob: float = 0.0  # with text token states: training-time dropout of single token states
 
     @property
     def mask_id(self) -> int:
@@ -306,6 +311,9 @@ def check_consistent(cfg: ModelConfig) -> None:
                              f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
     if tr.pooled_row and not cfg.text_encoder.tokens:
         raise ControlMMError("transformer pooled_row needs text token states (text encoder tokens > 0)")
+    for t in transformers:
+        if not 0.0 <= t.token_drop_prob < 1.0:
+            raise ControlMMError(f"transformer token_drop_prob must be in [0, 1); got {t.token_drop_prob}")
     if cfg.token_view is not None:
         view = cfg.token_view
         if cfg.text_encoder.name != "minilm" or not 1 <= view.tokens <= 128:

@@ -150,6 +150,13 @@ def zero_samples(x: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
     return x * keep.to(x.dtype).reshape(x.shape[0], *([1] * (x.ndim - 1)))
 
 
+def drop_text_tokens(states: torch.Tensor, drop_prob: float) -> torch.Tensor:
+    """Word dropout on text token states (B, L, dim): each row zeroed with probability ``drop_prob`` (a
+    zero row is padding, see :func:`text_token_padding`)."""
+    keep = torch.bernoulli(torch.full(states.shape[:2], 1.0 - drop_prob, device=states.device))
+    return states * keep.to(states.dtype)[..., None]
+
+
 def drop_condition(cond: torch.Tensor, drop_prob: float) -> torch.Tensor:
     """Classifier-free-guidance training: zero each sample's text (B, ...) with probability ``drop_prob``."""
     keep = torch.bernoulli(torch.full((cond.shape[0],), 1.0 - drop_prob, device=cond.device))

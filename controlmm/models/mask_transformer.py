@@ -18,7 +18,8 @@ Forward pass (one condition, sequence-first inside, as the official module)::
     logits = output_process(h_L[C:])        (B, N, nb_code)    no logits for mask/pad
 
 Training (``masked_loss``): cosine mask ratio, BERT corruption (10% random code, then 88% of the
-rest [MASK]), cross-entropy on masked positions, 10% condition dropout (classifier-free guidance).
+rest [MASK]), cross-entropy on masked positions, 10% condition dropout (classifier-free guidance);
+with token states and ``cfg.token_drop_prob``, word dropout of single token states first.
 
 The pieces are separate methods so that the motion control model can reuse them: ``embed`` (h_0 and the
 key-padding mask), ``run_layers`` with a per-layer hook, ``head`` (logits), ``forward`` and
@@ -38,6 +39,7 @@ from controlmm.models.layers import (
     PositionalEncoding,
     cosine_schedule,
     drop_condition,
+    drop_text_tokens,
     init_weights,
     lengths_to_mask,
     pool_text_tokens,
@@ -73,6 +75,8 @@ class MaskTransformer(nn.Module):
         """Zero the text vector for the unconditional pass; drop it at random while training."""
         if force_mask:
             return torch.zeros_like(cond)
+        if self.training and cond.ndim == 3 and self.cfg.token_drop_prob > 0:
+            cond = drop_text_tokens(cond, self.cfg.token_drop_prob)
         if self.training and self.cfg.cond_drop_prob > 0:
             return drop_condition(cond, self.cfg.cond_drop_prob)
         return cond

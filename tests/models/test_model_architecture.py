@@ -295,6 +295,40 @@ def test_pooled_row_adds_the_sentence_vector_of_the_token_states():
     assert not torch.allclose(model(ids, torch.zeros_like(states), pad), logits)
 
 
+def test_word_dropout_zeroes_whole_token_states_only_while_training():
+    from dataclasses import replace
+
+    from controlmm.models.layers import text_token_padding
+
+    cfg = replace(preset_config("tiny").transformer, cond_drop_prob=0.0, token_drop_prob=0.5)
+    torch.manual_seed(0)
+    model = MaskTransformer(cfg).train()
+    states = torch.randn(64, 12, cfg.text_dim)
+    dropped = model.mask_cond(states)
+    gone = text_token_padding(dropped)
+    # Whole rows are zeroed (they become padding), the others pass unchanged, about half of them.
+    assert torch.equal(dropped[~gone], states[~gone])
+    assert 0.4 < gone.float().mean() < 0.6
+    assert len({tuple(r.tolist()) for r in gone}) > 1  # per caption, not one pattern for the batch
+    # Sentence vectors, evaluation and token_drop_prob = 0 are left alone (and draw no random numbers).
+    vectors = torch.randn(64, cfg.text_dim)
+    assert torch.equal(model.mask_cond(vectors), vectors)
+    assert torch.equal(model.eval().mask_cond(states), states)
+    plain = MaskTransformer(replace(cfg, token_drop_prob=0.0)).train()
+    before = torch.get_rng_state()
+    assert torch.equal(plain.mask_cond(states), states)
+    assert torch.equal(torch.get_rng_state(), before)
+
+
+def test_token_drop_prob_must_be_a_probability():
+    cfg = preset_config("demo").to_dict()
+    cfg["token_view"]["transformer"]["token_drop_prob"] = 1.0
+    with pytest.raises(ControlMMError, match="token_drop_prob must be in \\[0, 1\\); got 1.0"):
+        ModelConfig.from_dict(cfg)
+    cfg["token_view"]["transformer"]["token_drop_prob"] = 0.2
+    assert ModelConfig.from_dict(cfg).token_view.transformer.token_drop_prob == 0.2
+
+
 def test_pooled_row_needs_token_states():
     cfg = preset_config("tiny").to_dict()
     cfg["transformer"]["pooled_row"] = True
