@@ -72,7 +72,8 @@ class MaskTransformer(nn.Module):
 
     # -- pieces -----------------------------------------------------------------------------------
     def mask_cond(self, cond: torch.Tensor, force_mask: bool = False) -> torch.Tensor:
-        """Zero the text vector for the unconditional pass; drop it at random while training."""
+        """Zero the text vector for the unconditional pass; while training, drop single token states
+        (``cfg.token_drop_prob``, token states only), then whole texts (``cfg.cond_drop_prob``) at random."""
         if force_mask:
             return torch.zeros_like(cond)
         if self.training and cond.ndim == 3 and self.cfg.token_drop_prob > 0:
