@@ -146,15 +146,16 @@ def pool_text_tokens(states: torch.Tensor) -> torch.Tensor:
 
 
 def zero_samples(x: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
-    """``x`` (B, ...) with the samples where ``keep`` (B,) is 0 / False set to zero."""
-    return x * keep.to(x.dtype).reshape(x.shape[0], *([1] * (x.ndim - 1)))
+    """``x`` (B, ...) with the entries where ``keep`` (its leading dims, e.g. (B,) or (B, L)) is 0 / False
+    set to zero."""
+    return x * keep.to(x.dtype).reshape(*keep.shape, *([1] * (x.ndim - keep.ndim)))
 
 
 def drop_text_tokens(states: torch.Tensor, drop_prob: float) -> torch.Tensor:
     """Word dropout on text token states (B, L, dim): each row zeroed with probability ``drop_prob`` (a
     zero row is padding, see :func:`text_token_padding`)."""
     keep = torch.bernoulli(torch.full(states.shape[:2], 1.0 - drop_prob, device=states.device))
-    return states * keep.to(states.dtype)[..., None]
+    return zero_samples(states, keep)
 
 
 def drop_condition(cond: torch.Tensor, drop_prob: float) -> torch.Tensor:
