@@ -96,8 +96,8 @@ def time_generation(model, repeats: int) -> dict[str, float]:
         cpu.append(time.process_time() - c0)
         with torch.no_grad():
             t = time.perf_counter()
-            cond = model.encode_text([PROMPT])
-            views = token_view_logits_fn(model, [PROMPT], DecodeOptions().cfg_scale)  # token states, if any
+            cond, states = model.encode_text_views([PROMPT])  # one MiniLM pass for both views
+            views = token_view_logits_fn(model, [PROMPT], DecodeOptions().cfg_scale, states)
             parts["text"].append(time.perf_counter() - t)
             lengths = torch.tensor([49])
             gen = torch.Generator().manual_seed(r)

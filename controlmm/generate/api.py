@@ -124,9 +124,9 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
     for start in range(0, len(texts), batch_size):
         chunk_texts = texts[start:start + batch_size]
         chunk_frames = lengths[start:start + batch_size]
-        cond = model.encode_text(chunk_texts)
+        cond, states = model.encode_text_views(chunk_texts) if token_view else (model.encode_text(chunk_texts), None)
         token_lengths = torch.tensor([math.ceil(f / unit) for f in chunk_frames], device=device)
-        views = token_view_logits_fn(model, chunk_texts, options.cfg_scale) if token_view else None
+        views = token_view_logits_fn(model, chunk_texts, options.cfg_scale, states) if token_view else None
         base = masked_decode(model.transformer, cond, token_lengths, options, generator, logits_fn=views)
         res_logits: list[torch.Tensor] = []
         if residual is not None:

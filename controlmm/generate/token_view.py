@@ -22,13 +22,16 @@ from controlmm.generate.masked_decoding import DecodeState, LogitsFn
 from controlmm.models.model_dir import MotionModel
 
 
-def token_view_logits_fn(model: MotionModel, texts: Sequence[str], cfg_scale: float) -> LogitsFn | None:
+def token_view_logits_fn(model: MotionModel, texts: Sequence[str], cfg_scale: float,
+                         states: torch.Tensor | None = None) -> LogitsFn | None:
     """A ``logits_fn`` for :func:`masked_decode` mixing both text views of ``texts``; None when the model
-    has no token-state transformer (decoding then uses ``model.transformer`` alone)."""
+    has no token-state transformer (decoding then uses ``model.transformer`` alone). ``states``: the
+    texts' (B, L, 384) token states when already encoded (:meth:`MotionModel.encode_text_views`)."""
     member = model.token_transformer
     if member is None:
         return None
-    states = model.encode_token_states(list(texts))  # (B, L, 384)
+    if states is None:
+        states = model.encode_token_states(list(texts))  # (B, L, 384)
     weight = model.config.token_view.weight
     sentence = model.transformer
 

@@ -275,6 +275,17 @@ class MotionModel:
             raise ControlMMError(f"model '{self.directory or 'this model'}' has no token_view configuration")
         return self.text_encoder.encode_tokens(texts, self.config.token_view.tokens).to(self.device)
 
+    def encode_text_views(self, texts: list[str]) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """:meth:`encode_text` and, when the model has a token-state transformer, :meth:`encode_token_states`
+        of the same texts; one MiniLM pass gives both where the encoder can (the same values)."""
+        if self.token_transformer is None:
+            return self.encode_text(texts), None
+        both = getattr(self.text_encoder, "encode_with_tokens", None)
+        if both is None or self.config.text_encoder.tokens:
+            return self.encode_text(texts), self.encode_token_states(texts)
+        vectors, states = both(texts, self.config.token_view.tokens)
+        return vectors.to(self.device), states.to(self.device)
+
     def to(self, device: str | torch.device) -> "MotionModel":
         self.device = torch.device(device)
         for module in self.parts.values():

@@ -81,9 +81,28 @@ class MiniLMTextEncoder:
 
         texts = check_texts(texts)
         states = self.model.encode(texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False)
-        length = min(max_tokens, max(len(x) for x in states))
-        out = torch.zeros(len(texts), length, self.dim)
-        for i, x in enumerate(states):
-            k = min(length, len(x))
-            out[i, :k] = x[:k].float().cpu()
-        return out
+        return _pad_states(states, max_tokens, self.dim)
+
+    @torch.no_grad()
+    def encode_with_tokens(self, texts: Sequence[str], max_tokens: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`encode` and :meth:`encode_tokens` of the same texts from one MiniLM pass (the same
+        values bit for bit): (B, 384) sentence vectors and (B, L, 384) token states."""
+        from controlmm.text.base import check_texts
+
+        texts = check_texts(texts)
+        outputs = self.model.encode(texts, batch_size=128, output_value=None, show_progress_bar=False)
+        vectors = torch.stack([o["sentence_embedding"] for o in outputs]).float().cpu()
+        # Rows past a sentence's attention mask are the batch's padding; token_embeddings drops them.
+        states = [o["token_embeddings"][: int(o["attention_mask"].sum())] for o in outputs]
+        return vectors, _pad_states(states, max_tokens, self.dim)
+
+
+def _pad_states(states: Sequence[torch.Tensor], max_tokens: int, dim: int) -> torch.Tensor:
+    """Per-sentence (n_i, dim) token states -> (B, L, dim) float32, zero rows padding,
+    L = min(max_tokens, longest); longer sentences keep their first ``max_tokens`` states."""
+    length = min(max_tokens, max(len(x) for x in states))
+    out = torch.zeros(len(states), length, dim)
+    for i, x in enumerate(states):
+        k = min(length, len(x))
+        out[i, :k] = x[:k].float().cpu()
+    return out

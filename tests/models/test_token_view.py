@@ -59,6 +59,19 @@ def test_stage_writes_part_trained_on_the_tokenizer(view_dir):
     assert load_model(view_dir, parts=("tokenizer", "transformer")).token_transformer is None
 
 
+def test_one_text_pass_gives_both_views_exactly(view_dir):
+    model = load_model(view_dir)
+    texts = ["jump", "a person squats slowly",
+             "someone walks forward a few steps, turns around to the left, waves the right hand twice "
+             "and then walks back to where they started from before sitting down on the floor"]  # > 32 tokens
+    cond, states = model.encode_text_views(texts)
+    assert torch.equal(cond, model.encode_text(texts))
+    assert torch.equal(states, model.encode_token_states(texts))
+    assert states.shape[1] == model.config.token_view.tokens and not states[0, 3:].any()  # [CLS] jump [SEP]
+    alone, none = load_model(view_dir, parts=("tokenizer", "transformer")).encode_text_views(texts)
+    assert none is None and torch.equal(alone, cond)
+
+
 def test_decoding_mixes_both_views(view_dir):
     model = load_model(view_dir)
     texts = ["a person squats slowly", "someone bends over and comes back"]
