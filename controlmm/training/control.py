@@ -39,6 +39,7 @@ from controlmm.models.mask_transformer import token_loss_and_accuracy
 from controlmm.models.model_dir import read_manifest, write_manifest
 from controlmm.models.motion_control_model import MotionControlModel, control_input, estimate_latent
 from controlmm.motion.recover import features_to_joints
+from controlmm.training.stage import VALIDATION_SEED
 from controlmm.training.transformer import TextConditionedStage
 
 CONTROL_MODES = ("trajectory", "random", "cross", "mixed")
@@ -261,7 +262,7 @@ class ControlStage(TextConditionedStage):
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
-        gen = torch.Generator(self.ctx.device).manual_seed(self.ctx.seed + 4)
+        gen = torch.Generator(self.ctx.device).manual_seed(VALIDATION_SEED + 4)
         loss_module = self.loss_module(model).eval()
         sums: dict[str, float] = {}
         n = 0

@@ -46,6 +46,7 @@ from controlmm.models.config import StageSchedule
 from controlmm.models.model_dir import resolve_device, save_part, write_statistics
 from controlmm.training.checkpoint import load_checkpoint, rng_state, save_checkpoint, seed_everything, set_rng_state
 from controlmm.training.loop import lr_factor
+from controlmm.training.stage import VALIDATION_SEED
 
 TEMPERATURE = 0.1
 WORD_DROPOUT = 0.1  # training: share of caption words replaced by <unk> (robustness to unseen wording)
@@ -201,7 +202,7 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
         if ckpt_path.exists():
             ckpt_path.unlink()
 
-    val_set = TextMotionDataset(val_samples, data.normalizer, captions.index, unit=4, seed=opts.seed + 1)
+    val_set = TextMotionDataset(val_samples, data.normalizer, captions.index, unit=4, seed=VALIDATION_SEED + 1)
     val_items = [val_set[(i, 0)] for i in range(len(val_set))]
     ids_all, len_all = captions.ids.to(device), captions.lengths
 
@@ -224,7 +225,7 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
             t.append(a), m.append(b), c.append(cap)
         t, m, c = torch.cat(t), torch.cat(m), torch.cat(c)
         model.train()
-        order = torch.from_numpy(np.random.default_rng(opts.seed + 2).permutation(len(t))).to(t.device)
+        order = torch.from_numpy(np.random.default_rng(VALIDATION_SEED + 2).permutation(len(t))).to(t.device)
         group = min(32, len(t))
         t, m, c = t[order], m[order], c[order]
         match = matching_metrics(t.double().cpu().numpy(), m.double().cpu().numpy(), group=group)

@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from controlmm.models.residual_transformer import ResidualTransformer
+from controlmm.training.stage import VALIDATION_SEED
 from controlmm.training.transformer import TextConditionedStage
 
 
@@ -30,7 +31,7 @@ class ResidualStage(TextConditionedStage):
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
-        gen = torch.Generator(self.ctx.device).manual_seed(self.ctx.seed + 3)
+        gen = torch.Generator(self.ctx.device).manual_seed(VALIDATION_SEED + 3)
         total, acc_sum, n = 0.0, 0.0, 0
         for ids, cond, lengths in self.val_batches():
             loss, acc = model.residual_loss(ids, cond, lengths, generator=gen)

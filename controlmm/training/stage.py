@@ -23,6 +23,12 @@ from controlmm.models.model_dir import MotionModel
 from controlmm.motion.normalization import Normalizer
 
 
+VALIDATION_SEED = 0
+"""Seed of every stage's validation draws (crops, captions, masks), whatever the training seed: the
+validation metrics of runs with different ``--seed`` are measured on the same draws and comparable.
+(0: seed-0 runs validate exactly as when the draws followed the training seed.)"""
+
+
 @dataclass
 class StageContext:
     """What a stage may use: config, data, the normaliser, the already trained parts, the device."""

@@ -18,7 +18,7 @@ from torch import nn
 from controlmm.data.datasets import WindowDataset
 from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.recover import features_to_joints
-from controlmm.training.stage import Stage
+from controlmm.training.stage import VALIDATION_SEED, Stage
 
 RIC = slice(4, 67)
 
@@ -75,7 +75,7 @@ class TokenizerStage(Stage):
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
-        val = WindowDataset(self.val_motions, self.ctx.normalizer, self.window, seed=self.ctx.seed + 1)
+        val = WindowDataset(self.val_motions, self.ctx.normalizer, self.window, seed=VALIDATION_SEED + 1)
         losses, errors, global_errors = [], [], []
         used = torch.zeros(self.ctx.config.tokenizer.nb_code, dtype=torch.bool)
         device = self.ctx.device

@@ -19,7 +19,7 @@ from controlmm.data.datasets import TextMotionDataset
 from controlmm.errors import ControlMMError
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.text import embed_captions
-from controlmm.training.stage import Stage
+from controlmm.training.stage import VALIDATION_SEED, Stage
 
 
 class TextConditionedStage(Stage):
@@ -65,7 +65,7 @@ class TextConditionedStage(Stage):
 
     def val_batches(self, batch_size: int = 64):
         val = TextMotionDataset(self.val_samples, self.ctx.normalizer, self.caption_index, unit=self.unit,
-                                seed=self.ctx.seed + 1)
+                                seed=VALIDATION_SEED + 1)
         for start in range(0, len(val), batch_size):
             items = [val[(i, 0)] for i in range(start, min(len(val), start + batch_size))]
             yield self.prepare(torch.utils.data.default_collate(items))
@@ -96,7 +96,7 @@ class TransformerStage(TextConditionedStage):
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
-        gen = torch.Generator(self.ctx.device).manual_seed(self.ctx.seed + 2)
+        gen = torch.Generator(self.ctx.device).manual_seed(VALIDATION_SEED + 2)
         total, acc_sum, n = 0.0, 0.0, 0
         for ids, cond, lengths in self.val_batches():
             loss, acc = model.masked_loss(ids[..., 0], cond, lengths, generator=gen)
