@@ -263,6 +263,9 @@ class MotionModel:
         states when the model was trained on them (``config.text_encoder.tokens``)."""
         tokens = self.config.text_encoder.tokens
         vectors = self.text_encoder.encode_tokens(texts, tokens) if tokens else self.text_encoder.encode(texts)
+        return self._checked_condition(vectors)
+
+    def _checked_condition(self, vectors: torch.Tensor) -> torch.Tensor:
         expected = self.config.transformer.text_dim
         if vectors.shape[-1] != expected:
             raise ControlMMError(f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "
@@ -284,7 +287,7 @@ class MotionModel:
         if both is None or self.config.text_encoder.tokens:
             return self.encode_text(texts), self.encode_token_states(texts)
         vectors, states = both(texts, self.config.token_view.tokens)
-        return vectors.to(self.device), states.to(self.device)
+        return self._checked_condition(vectors), states.to(self.device)
 
     def to(self, device: str | torch.device) -> "MotionModel":
         self.device = torch.device(device)

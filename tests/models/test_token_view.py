@@ -63,7 +63,7 @@ def test_one_text_pass_gives_both_views_exactly(view_dir):
     model = load_model(view_dir)
     texts = ["jump", "a person squats slowly",
              "someone walks forward a few steps, turns around to the left, waves the right hand twice "
-             "and then walks back to where they started from before sitting down on the floor"]  # > 32 tokens
+             "and then walks back to where they started from before sitting down on the floor"]  # > the token limit
     cond, states = model.encode_text_views(texts)
     assert torch.equal(cond, model.encode_text(texts))
     assert torch.equal(states, model.encode_token_states(texts))
