@@ -197,3 +197,20 @@ def test_embedded_checkpoints_fit_the_size_budget():
 
     size = sum(p.stat().st_size for p in CHECKPOINT_ROOT.rglob("*") if p.is_file())
     assert 0 < size <= 25 * 2**20, size
+
+
+def test_embedded_default_has_the_demo_preset_architecture():
+    """The shipped model is what `controlmm train ... --preset demo` builds (its schedules included)."""
+    from dataclasses import fields
+
+    from controlmm.assets import default_model_dir
+    from controlmm.models.config import ModelConfig, preset_config
+
+    manifest = json.loads((default_model_dir() / "model.json").read_text())
+    shipped, demo = ModelConfig.from_dict(manifest["config"]), preset_config("demo")
+    for f in fields(demo):
+        if f.name != "schedules":
+            assert getattr(shipped, f.name) == getattr(demo, f.name), f.name
+    for stage, schedule in shipped.schedules.items():
+        assert schedule == demo.schedules[stage], stage
+    assert set(manifest["parts"]) == {"tokenizer", "transformer", "token_transformer", "residual", "control"}
