@@ -196,7 +196,6 @@ def test_validation_draws_do_not_depend_on_the_training_seed(tiny_data, tiny_mod
     # validation losses (and which checkpoint each exports) are comparable.
     from controlmm.data.humanml3d import HumanML3D
     from controlmm.generate import load_model
-    from controlmm.models.model_dir import read_statistics
     from controlmm.training.residual import ResidualStage
     from controlmm.training.stage import StageContext
     from controlmm.training.transformer import TransformerStage
@@ -204,7 +203,7 @@ def test_validation_draws_do_not_depend_on_the_training_seed(tiny_data, tiny_mod
     model = load_model(tiny_model_dir)
     metrics = {}
     for seed in (0, 5):
-        ctx = StageContext(config=model.config, data=HumanML3D(tiny_data), normalizer=read_statistics(tiny_model_dir),
+        ctx = StageContext(config=model.config, data=HumanML3D(tiny_data), normalizer=model.normalizer,
                            model_dir=tiny_model_dir, device=torch.device("cpu"), seed=seed, progress=False,
                            base=load_model(tiny_model_dir, parts=("tokenizer",)))
         torch.manual_seed(seed)  # the global generator must not matter either
