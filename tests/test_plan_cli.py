@@ -9,7 +9,7 @@ import pytest
 from controlmm.cli.main import main
 from controlmm.frames import HumanToWorld
 from controlmm.control.spec import ControlSpec
-from controlmm.pipeline.inputs import constraint_warnings, start_pose_error
+from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from scenes import load_scene
 
 BLOCKED_START = """<mujoco model="blocked">
@@ -81,6 +81,22 @@ def test_unreachable_and_buried_targets_warn_with_the_distance():
     assert "right_wrist" in buried and "inside an obstacle" in buried
     assert "head" in high and "above" in high
     assert constraint_warnings(ControlSpec.from_dict(scene.suggested_control), transform, scene.sdf()) == []
+
+
+def _spec(*frames: int) -> ControlSpec:
+    return ControlSpec.from_dict({"coords": "world", "constraints": [
+        {"joint": "pelvis", "frame": f, "position": [0.5, 0.0, 0.74]} for f in frames]})
+
+
+def test_a_plan_ends_half_a_second_after_its_last_constraint():
+    assert plan_seconds(None, _spec(20, 80)) == pytest.approx(91 / 20)  # frames 0..90
+    assert plan_seconds(None, _spec(5)) == pytest.approx(40 / 20)  # never shorter than 2 s
+    assert plan_seconds(None, _spec(115)) == pytest.approx(120 / 20)  # never longer than the 6 s default
+    assert plan_seconds(None, _spec(150)) == pytest.approx(151 / 20)  # ... unless a constraint is later
+    assert plan_seconds(None, None) is None and plan_seconds(3.0, _spec(80)) == 3.0
+    assert plan_seconds(None, _spec(196)) is None  # the generator names the out-of-range frame
+    # the bundled example: a reach at frame 80
+    assert plan_seconds(None, ControlSpec.from_dict(load_scene("table").suggested_control)) == pytest.approx(4.55)
 
 
 def test_plan_help_explains_outputs(capsys):

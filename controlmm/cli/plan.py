@@ -45,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="body-part timeline spec instead of --text (see docs/timeline.md)")
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
     p.add_argument("--seconds", type=float, default=None,
-                   help="motion length, 2 to 9.8 s (default: 6 s, or long enough for the last constraint)")
+                   help="motion length, 2 to 9.8 s (default: 6 s; with constraints, 0.5 s past the last one, "
+                        "at least 2 s and at most 6 s unless a constraint comes later)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--rounds", type=int, default=3, help="feedback rounds after the first try (default 3)")
     p.add_argument("--preset", default="accurate", help="editing preset: fast, medium, accurate (default)")

@@ -26,7 +26,8 @@ class PlanConfig:
             ``control`` given, the scene's suggested control is used (the bundled example);
             with a ``text`` of your own, no control unless you give one.
         robot: packaged robot (``g1``, ``h1``) or a mapping ``.json``.
-        seconds: motion length (2..9.8 s); None: 6 s or long enough for the last constraint.
+        seconds: motion length (2..9.8 s); None: 6 s without a control spec, with one 0.5 s past
+            its last constraint (at least 2 s, at most 6 s unless a constraint comes later).
         seed: reproducibility (generation sampling).
         rounds: feedback rounds after the first generation (0 = check only).
         preset: editing preset (``fast``, ``medium``, ``accurate``).

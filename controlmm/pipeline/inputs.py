@@ -1,10 +1,14 @@
-"""Input checks before planning: a start pose clear of obstacles, reachable and free targets.
+"""Input checks before planning (a start pose clear of obstacles, reachable and free targets) and
+the plan's default motion length.
 
 * :func:`start_pose_error` - the robot standing at the scene's start must not overlap an obstacle
   (an error: nothing the generator does can fix it).
 * :func:`constraint_warnings` - a target too far to reach in its time, at a height the joint cannot
   have, or inside an obstacle (warnings with the distance: the plan still runs and the report
   shows the error achieved).
+* :func:`plan_seconds` - with a control spec and no length given, the motion ends 0.5 s after the
+  last constraint (the generator's 6 s would leave the motion free to walk on into what the
+  constraint stopped it at, e.g. the table it reaches across).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import numpy as np
 
 from controlmm.control.spec import ControlSpec
 from controlmm.frames import HumanToWorld
-from controlmm.motion.skeleton import FPS, JOINT_NAMES
+from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, MIN_FRAMES
 
 MAX_SPEED_MPS = 3.0
 """Fastest pelvis travel assumed reachable (human m/s): a run; the corpus' runs stay below it."""
@@ -27,6 +31,25 @@ REACH_M = {"pelvis": 0.0, "left_wrist": 0.85, "right_wrist": 0.85, "left_elbow":
 HEIGHT_M = {"pelvis": (0.25, 1.45), "head": (0.35, 2.1), "neck": (0.3, 1.95), "left_wrist": (0.0, 2.35),
             "right_wrist": (0.0, 2.35), "left_elbow": (0.05, 2.1), "right_elbow": (0.05, 2.1)}
 """Heights (human m, Y) a joint can have; joints not listed: 0 to 1.9 m."""
+
+
+FRAMES_AFTER_LAST_CONSTRAINT = 10
+"""How long a plan's motion runs on after its last constraint when no length is given (0.5 s)."""
+
+
+def plan_seconds(seconds: float | None, spec: ControlSpec | None) -> float | None:
+    """Motion length (s) a plan generates: ``seconds`` when given; None (the generator's default,
+    6 s) without a spec; with one, the motion ends ``FRAMES_AFTER_LAST_CONSTRAINT`` frames after the
+    last constrained frame, but never later than the generator's default would (6 s, or just long
+    enough for a constraint after that) and never shorter than 2 s.
+    """
+    if seconds is not None or spec is None or not spec.constraints or spec.last_frame >= MAX_FRAMES:
+        return seconds  # (a constraint past the longest motion fails in the generator, with its frame)
+    from controlmm.generate.api import frames_for
+
+    default = max(frames_for(1)[0], spec.last_frame + 1)
+    frames = max(MIN_FRAMES, min(default, spec.last_frame + 1 + FRAMES_AFTER_LAST_CONSTRAINT))
+    return frames / FPS
 
 
 def start_pose_error(scene) -> str | None:

@@ -36,7 +36,7 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
 from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
-from controlmm.pipeline.inputs import constraint_warnings, start_pose_error
+from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from controlmm.pipeline.refine import edit_motion
 
 CONSTRAINT_TOLERANCE_M = 0.02
@@ -245,7 +245,8 @@ def _generate(model, config: PlanConfig, text: str, spec: ControlSpec | None, te
     from controlmm.generate import generate_controlled
 
     out = generate_controlled(model, text, control=spec, terms=terms, preset=replace(editing, codebook_steps=0),
-                              seconds=config.seconds, seed=config.seed, transform=transform, progress=False)
+                              seconds=plan_seconds(config.seconds, spec), seed=config.seed, transform=transform,
+                              progress=False)
     ids = out.ids[0].to(model.device)
     with torch.no_grad():
         latent = model.tokenizer.ids_to_latent(ids.reshape(1, ids.shape[0], -1))

@@ -35,6 +35,11 @@ def test_failures_become_feedback_terms_and_every_round_is_recorded(strict_plan)
     assert strict_plan.best in (0, 1)
 
 
+def test_the_bundled_example_ends_half_a_second_after_the_reach(strict_plan):
+    assert strict_plan.spec.last_frame == 80
+    assert all(r.motion.num_frames == 91 for r in strict_plan.rounds)
+
+
 def test_outputs_are_complete_and_consistent(strict_plan, tmp_path):
     out = tmp_path / "nested" / "plan"
     backend = write_plan(strict_plan, out, progress=False)
