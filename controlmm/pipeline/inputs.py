@@ -47,9 +47,8 @@ def plan_seconds(seconds: float | None, spec: ControlSpec | None) -> float | Non
         return seconds  # (a constraint past the longest motion fails in the generator, with its frame)
     from controlmm.generate.api import frames_for
 
-    default = max(frames_for(1)[0], spec.last_frame + 1)
-    frames = max(MIN_FRAMES, min(default, spec.last_frame + 1 + FRAMES_AFTER_LAST_CONSTRAINT))
-    return frames / FPS
+    end = spec.last_frame + 1  # frames needed to reach the last constraint
+    return max(MIN_FRAMES, end, min(frames_for(1)[0], end + FRAMES_AFTER_LAST_CONSTRAINT)) / FPS
 
 
 def start_pose_error(scene) -> str | None:
