@@ -378,12 +378,11 @@ def _demo() -> ModelConfig:
     tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
     common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
                   text_dim=384, max_len=64)
-    # Measured on the corpus (fp32, 2 threads on 2 cores): tokenizer 5.8 it/s; with length-bucketed,
-    # trimmed batches the transformer 2.8 it/s and the residual 2.7 it/s: about 10 + 38 + 25 = 73 min on
-    # 2 cores, plus the token-state transformer at 2.5 it/s (20 min; 26 min at the 1.9 it/s of a slower
-    # day) and the control stage at 1.32 it/s (19 min): 112 min in all (118). 9,600 transformer
-    # iterations lowered the val. loss (1.41 -> 1.17) but not the probes (75.7 % both): docs/BENCHMARKS.md,
-    # "Length-bucketed batches".
+    # Measured on the corpus when the shipped default was trained (fp32, 2 threads on 2 cores, one stage
+    # at a time): tokenizer 6.9 it/s (8.6 min), transformer 3.2 it/s (34.5 min), residual 3.6 it/s
+    # (19.0 min), token-state transformer 2.6 it/s (20.1 min), control 1.8 it/s (14.5 min): 97 min in
+    # all (docs/model-card.md). Both masked transformers use a relative position bias of 16 tokens
+    # (docs/BENCHMARKS.md, "Relative positions"); the residual transformer does not.
     schedules = {
         "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
                                    gamma=0.2, checkpoint_every=250),
@@ -401,12 +400,14 @@ def _demo() -> ModelConfig:
     return ModelConfig(
         preset="demo",
         tokenizer=tok,
-        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, text_norm=True, **common),
+        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, text_norm=True, relative_positions=16,
+                                      **common),
         residual=ResidualConfig(num_layers=3, num_quantizers=6, cond_drop_prob=0.2, text_norm=True, **common),
         text_encoder=TextEncoderConfig(name="minilm"),
         storage_dtype="float16",
         schedules=schedules,
-        token_view=TokenViewConfig(TransformerConfig(num_layers=3, cond_drop_prob=0.1, text_norm=True, **common),
+        token_view=TokenViewConfig(TransformerConfig(num_layers=3, cond_drop_prob=0.1, text_norm=True,
+                                                     relative_positions=16, **common),
                                    tokens=32, weight=0.5),
     )
 
