@@ -114,10 +114,11 @@ class TokenTransformerStage(TransformerStage):
     the two transformers' log-probabilities (:mod:`controlmm.generate.token_view`).
 
     Partial warm start: the trained sentence-vector transformer's token and position embeddings, input
-    projection, text LayerNorm and projection and output head are copied before training; the
-    attention layers start fresh (:data:`WARM_START_SKIP`). Layers of their own keep more of the second
-    view's own errors, which is what the ensemble gains from (held-out probes: 77.2 % with fresh layers,
-    76.5 % with every layer copied; docs/BENCHMARKS.md).
+    projection, text LayerNorm and projection, output head and relative position bias (when the
+    configuration has one) are copied before training; the attention layers start fresh
+    (:data:`WARM_START_SKIP`). Layers of their own keep more of the second view's own errors, which is
+    what the ensemble gains from (held-out probes: 77.2 % with fresh layers, 76.5 % with every layer
+    copied; docs/BENCHMARKS.md).
     """
 
     name = "token_transformer"
