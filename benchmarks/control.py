@@ -31,8 +31,14 @@ import numpy as np
 import torch
 
 ROWS = [  # (logits editing, codebook editing, motion control model): the paper's Table 3 order
-    (False, False, False), (True, False, False), (False, True, False), (True, True, False),
-    (False, False, True), (True, False, True), (False, True, True), (True, True, True),
+    (False, False, False),
+    (True, False, False),
+    (False, True, False),
+    (True, True, False),
+    (False, False, True),
+    (True, False, True),
+    (False, True, True),
+    (True, True, True),
 ]
 
 
@@ -73,51 +79,78 @@ def run_rows(model, cases, configs: list[tuple[str, object]], seed: int) -> list
         s["within_2cm"] = float(np.mean([r["max"] <= 0.02 for r in result.rows]))
         s["load"] = load_avg()
         out.append(s)
-        print(f"  {label}: Traj {s['traj']:.4f} Loc {s['loc']:.4f} Avg {100 * s['avg']:.3f} cm, "
-              f"max {100 * s['max']:.2f} cm, skate {s['skate']:.4f}, {s['seconds']:.2f} s/motion wall, "
-              f"{s['cpu_seconds']:.2f} s CPU (load {s['load']})", flush=True)
+        print(
+            f"  {label}: Traj {s['traj']:.4f} Loc {s['loc']:.4f} Avg {100 * s['avg']:.3f} cm, "
+            f"max {100 * s['max']:.2f} cm, skate {s['skate']:.4f}, {s['seconds']:.2f} s/motion wall, "
+            f"{s['cpu_seconds']:.2f} s CPU (load {s['load']})",
+            flush=True,
+        )
     return out
 
 
 def print_table(title: str, rows: list[dict], skate_base: float, columns: list[str]) -> None:
     print(f"\n{title}")
-    print("| " + " | ".join(columns) + " | Traj. err | Loc. err | Avg. err (cm) | max err (cm) | all within 1 cm "
-          "| all within 2 cm | foot skating | steps | s / motion wall (mean, max) | CPU s / motion |")
+    print(
+        "| "
+        + " | ".join(columns)
+        + " | Traj. err | Loc. err | Avg. err (cm) | max err (cm) | all within 1 cm "
+        "| all within 2 cm | foot skating | steps | s / motion wall (mean, max) | CPU s / motion |"
+    )
     print("|" + "---|" * (len(columns) + 10))
     for r in rows:
-        print("| " + " | ".join(r["label"].split("|")) + f" | {r['traj']:.4f} | {r['loc']:.4f} | {100 * r['avg']:.3f} "
-              f"| {100 * r['max']:.2f} | {100 * r['within_1cm']:.0f} % | {100 * r['within_2cm']:.0f} % "
-              f"| {r['skate']:.4f} | {r['steps']:.0f} | {r['seconds']:.2f}, {r['seconds_max']:.2f} "
-              f"| {r['cpu_seconds']:.2f} |")
-    print(f"uncontrolled generation of the same prompts and lengths (sentence-vector transformer): "
-          f"foot skating {skate_base:.4f}")
+        print(
+            "| "
+            + " | ".join(r["label"].split("|"))
+            + f" | {r['traj']:.4f} | {r['loc']:.4f} | {100 * r['avg']:.3f} "
+            f"| {100 * r['max']:.2f} | {100 * r['within_1cm']:.0f} % | {100 * r['within_2cm']:.0f} % "
+            f"| {r['skate']:.4f} | {r['steps']:.0f} | {r['seconds']:.2f}, {r['seconds_max']:.2f} "
+            f"| {r['cpu_seconds']:.2f} |"
+        )
+    print(
+        f"uncontrolled generation of the same prompts and lengths (sentence-vector transformer): "
+        f"foot skating {skate_base:.4f}"
+    )
 
 
 def check_targets(accurate: dict, unedited: list[tuple[str, dict]], skate_base: float) -> None:
     """Print issue 5's targets against the measured figures."""
     print("\ntargets (issue 5):")
     ok = accurate["avg"] <= 0.01 and accurate["traj"] == 0 and accurate["loc"] == 0
-    print(f"  accurate Avg. err {100 * accurate['avg']:.3f} cm <= 1.0, Traj. {accurate['traj']:.4f} = 0, "
-          f"Loc. {accurate['loc']:.4f} = 0: {'met' if ok else 'MISSED'}")
+    print(
+        f"  accurate Avg. err {100 * accurate['avg']:.3f} cm <= 1.0, Traj. {accurate['traj']:.4f} = 0, "
+        f"Loc. {accurate['loc']:.4f} = 0: {'met' if ok else 'MISSED'}"
+    )
     fast = accurate["seconds"] <= 10.0
-    print(f"  accurate {accurate['seconds']:.2f} s per motion wall ({accurate['cpu_seconds']:.2f} s CPU) <= 10 s: "
-          f"{'met' if fast else 'MISSED'} (load {accurate['load']})")
+    print(
+        f"  accurate {accurate['seconds']:.2f} s per motion wall ({accurate['cpu_seconds']:.2f} s CPU) <= 10 s: "
+        f"{'met' if fast else 'MISSED'} (load {accurate['load']})"
+    )
     for label, row in unedited:
         ratio = row["avg"] / max(accurate["avg"], 1e-9)
-        print(f"  editing cuts Avg. err {100 * row['avg']:.2f} cm ({label}) -> {100 * accurate['avg']:.3f} cm: "
-              f"{ratio:.0f}x >= 10x: {'met' if ratio >= 10 else 'MISSED'}")
+        print(
+            f"  editing cuts Avg. err {100 * row['avg']:.2f} cm ({label}) -> {100 * accurate['avg']:.3f} cm: "
+            f"{ratio:.0f}x >= 10x: {'met' if ratio >= 10 else 'MISSED'}"
+        )
     skate = accurate["skate"] <= skate_base + 0.01
-    print(f"  foot skating {accurate['skate']:.4f} <= uncontrolled {skate_base:.4f} + 0.01: "
-          f"{'met' if skate else 'MISSED'}")
+    print(
+        f"  foot skating {accurate['skate']:.4f} <= uncontrolled {skate_base:.4f} + 0.01: "
+        f"{'met' if skate else 'MISSED'}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--table", default="both", choices=("ablation", "speed", "both"))
     parser.add_argument("--model", default=None, help="model directory (default: the embedded default)")
-    parser.add_argument("--data", default=None, help="HumanML3D-format directory (default: the model's training data)")
+    parser.add_argument(
+        "--data", default=None, help="HumanML3D-format directory (default: the model's training data)"
+    )
     parser.add_argument("--samples", type=int, default=15, help="cases per row (default 15: 3 per density)")
-    parser.add_argument("--speed-samples", type=int, default=None, help="cases of the speed table (default --samples)")
+    parser.add_argument(
+        "--speed-samples", type=int, default=None, help="cases of the speed table (default --samples)"
+    )
     parser.add_argument("--joints", default="pelvis")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
@@ -128,15 +161,23 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     from controlmm.cli.eval_control import default_data
     from controlmm.control.evaluation import build_cases
-    from controlmm.editing import PRESETS, EditingConfig
+    from controlmm.editing import PRESETS
     from controlmm.generate import generate_controlled, load_model
 
     model = load_model(args.model)
     data = args.data or default_data(model)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
-          f"{args.threads} threads, load average at start {load_avg()}; model {model.directory}; data {data}")
-    report: dict = {"threads": args.threads, "samples": args.samples, "joints": args.joints, "data": str(data),
-                    "model": str(model.directory), "command": "python benchmarks/control.py " + " ".join(sys.argv[1:])}
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+        f"{args.threads} threads, load average at start {load_avg()}; model {model.directory}; data {data}"
+    )
+    report: dict = {
+        "threads": args.threads,
+        "samples": args.samples,
+        "joints": args.joints,
+        "data": str(data),
+        "model": str(model.directory),
+        "command": "python benchmarks/control.py " + " ".join(sys.argv[1:]),
+    }
     cases = build_cases(data, args.joints, samples=args.samples, seed=args.seed)
     warm = cases[0]
     generate_controlled(model, warm.text, targets=warm.targets, mask=warm.mask, preset="fast", seed=args.seed)
@@ -147,25 +188,41 @@ def main(argv: list[str] | None = None) -> int:
         configs = []
         for k in chosen:
             logits, codebook, control = ROWS[k - 1]
-            config = replace(PRESETS["accurate"], name=f"row{k}", control_model=control,
-                             logits_steps=100 if logits else 0, codebook_steps=600 if codebook else 0)
+            config = replace(
+                PRESETS["accurate"],
+                name=f"row{k}",
+                control_model=control,
+                logits_steps=100 if logits else 0,
+                codebook_steps=600 if codebook else 0,
+            )
             mark = lambda flag: "x" if flag else "-"  # noqa: E731
             configs.append((f"{k}|{mark(logits)}|{mark(codebook)}|{mark(control)}", config))
         print(f"ablation ({len(cases)} cases x {len(configs)} rows)")
         rows = run_rows(model, cases, configs, args.seed)
         ablation = dict(zip(chosen, rows))
         skate_base = uncontrolled_skate(model, cases, [c.frames for c in cases], args.seed)
-        print_table("Table 3 analogue (L = logits editing, E = codebook editing, M = motion control model)", rows,
-                    skate_base, ["#", "L", "E", "M"])
+        print_table(
+            "Table 3 analogue (L = logits editing, E = codebook editing, M = motion control model)",
+            rows,
+            skate_base,
+            ["#", "L", "E", "M"],
+        )
         report["ablation"] = {"rows": rows, "uncontrolled_skate": skate_base}
         if 8 in ablation:
-            check_targets(ablation[8], [(f"row {k}", ablation[k]) for k in (1, 5) if k in ablation], skate_base)
+            check_targets(
+                ablation[8], [(f"row {k}", ablation[k]) for k in (1, 5) if k in ablation], skate_base
+            )
     if args.table in ("speed", "both"):
         speed_cases = cases[: args.speed_samples] if args.speed_samples else cases
-        long_cases = [replace(c, frames=196,
-                              targets=np.concatenate([c.targets, np.zeros((196 - c.frames, 22, 3), np.float32)]),
-                              mask=np.concatenate([c.mask, np.zeros((196 - c.frames, 22), bool)]))
-                      for c in speed_cases]
+        long_cases = [
+            replace(
+                c,
+                frames=196,
+                targets=np.concatenate([c.targets, np.zeros((196 - c.frames, 22, 3), np.float32)]),
+                mask=np.concatenate([c.mask, np.zeros((196 - c.frames, 22), bool)]),
+            )
+            for c in speed_cases
+        ]
         configs = [(name, PRESETS[name]) for name in ("fast", "medium", "accurate")]
         print(f"speed ({len(long_cases)} cases of 196 frames x {len(configs)} presets)")
         rows = run_rows(model, long_cases, configs, args.seed)
@@ -173,8 +230,10 @@ def main(argv: list[str] | None = None) -> int:
         print_table("Table 5 analogue (196-frame motions, batch 1)", rows, base, ["preset"])
         report["speed"] = {"rows": rows, "uncontrolled_skate": base}
         accurate = rows[-1]
-        print(f"\naccurate on 196-frame motions: {accurate['seconds']:.2f} s per motion wall, "
-              f"{accurate['cpu_seconds']:.2f} s CPU: {'met' if accurate['seconds'] <= 10 else 'MISSED'} (<= 10 s)")
+        print(
+            f"\naccurate on 196-frame motions: {accurate['seconds']:.2f} s per motion wall, "
+            f"{accurate['cpu_seconds']:.2f} s CPU: {'met' if accurate['seconds'] <= 10 else 'MISSED'} (<= 10 s)"
+        )
     print(f"load average at the end {load_avg()}")
     if args.json:
         with open(args.json, "w") as fh:

@@ -75,9 +75,18 @@ def measure(root: Path) -> dict:
         speeds.append((np.linalg.norm(np.diff(j, axis=0), axis=-1) * FPS).ravel())
     speeds = np.concatenate(speeds)
     report = evaluate(list_cases(root, "all"), ground_truth(root), split="all", per_clip=True)
-    return {"families": families, "lengths": np.array(lengths), "skate": np.array(skate), "pen": np.array(pen),
-            "lowest_body": np.array(lowest_body), "hyper": np.array(hyper), "bone_err": bone_err,
-            "speeds": speeds, "probes": report, "clips": len(ids)}
+    return {
+        "families": families,
+        "lengths": np.array(lengths),
+        "skate": np.array(skate),
+        "pen": np.array(pen),
+        "lowest_body": np.array(lowest_body),
+        "hyper": np.array(hyper),
+        "bone_err": bone_err,
+        "speeds": speeds,
+        "probes": report,
+        "clips": len(ids),
+    }
 
 
 def write_histogram(lengths: np.ndarray, path: Path) -> None:
@@ -112,22 +121,31 @@ def main(argv: list[str] | None = None) -> int:
         root = Path(args.data) if args.data else Path(args.out or Path(tmp) / "corpus")
         if args.generate:
             t0 = time.perf_counter()
-            summary = write_corpus(root, CorpusConfig(clips=args.generate, seed=args.seed), workers=args.workers,
-                                   progress=False)
+            summary = write_corpus(
+                root, CorpusConfig(clips=args.generate, seed=args.seed), workers=args.workers, progress=False
+            )
             gen = time.perf_counter() - t0
-            print(f"generation: {args.generate} clips, seed {args.seed}, {summary['workers']} workers: {gen:.1f} s "
-                  f"({args.generate / gen:.1f} clips/s), {summary['retries']} retried clips")
+            print(
+                f"generation: {args.generate} clips, seed {args.seed}, {summary['workers']} workers: {gen:.1f} s "
+                f"({args.generate / gen:.1f} clips/s), {summary['retries']} retried clips"
+            )
         m = measure(root)
     lengths = m["lengths"]
-    print(f"\nclips {m['clips']}, frames {lengths.sum()} ({lengths.sum() / FPS / 3600:.2f} h), "
-          f"families {len(m['families'])}")
+    print(
+        f"\nclips {m['clips']}, frames {lengths.sum()} ({lengths.sum() / FPS / 3600:.2f} h), "
+        f"families {len(m['families'])}"
+    )
     print("\n| family | clips |\n|---|---|")
     from controlmm.corpus import family_names
 
     for name in sorted(m["families"], key=lambda f: family_names().index(f)):
         print(f"| {name} | {m['families'][name]} |")
     hist, _ = np.histogram(lengths, bins=LENGTH_BINS)
-    print("\n| length (frames) | " + " | ".join(f"{a}-{b - 1}" for a, b in zip(LENGTH_BINS[:-1], LENGTH_BINS[1:])) + " |")
+    print(
+        "\n| length (frames) | "
+        + " | ".join(f"{a}-{b - 1}" for a, b in zip(LENGTH_BINS[:-1], LENGTH_BINS[1:]))
+        + " |"
+    )
     print("|---" * (len(hist) + 1) + "|")
     print("| clips | " + " | ".join(str(h) for h in hist) + " |")
     print(f"\nlength: min {lengths.min()}, median {int(np.median(lengths))}, max {lengths.max()} frames")
@@ -143,8 +161,10 @@ def main(argv: list[str] | None = None) -> int:
         ("joint speed max (m/s)", f"{sp.max():.2f}"),
         ("max bone-length deviation (m)", f"{m['bone_err']:.2e}"),
         ("worst knee offset along the foot (m, < 0 = hyper-extended)", f"{m['hyper'].min():.3f}"),
-        ("probe pass rate on ground truth (all splits)",
-         f"{100 * m['probes'].rate:.2f}% ({m['probes'].passed}/{m['probes'].total} captions)"),
+        (
+            "probe pass rate on ground truth (all splits)",
+            f"{100 * m['probes'].rate:.2f}% ({m['probes'].passed}/{m['probes'].total} captions)",
+        ),
     ]
     print("\n| measure | value |\n|---|---|")
     for k, v in rows:

@@ -56,7 +56,7 @@ def synthetic_dataset(root: Path, clips: int = 200) -> Path:
         length = int(rng.integers(60, min(len(src), 196)))
         start = int(rng.integers(0, len(src) - length + 1))
         motion_id = f"{k:06d}"
-        np.save(root / "new_joint_vecs" / f"{motion_id}.npy", src[start:start + length].astype(np.float32))
+        np.save(root / "new_joint_vecs" / f"{motion_id}.npy", src[start : start + length].astype(np.float32))
         lines = [f"a person {words[(k + j) % 8]} slowly#a/DET person/NOUN#0.0#0.0" for j in range(3)]
         (root / "texts" / f"{motion_id}.txt").write_text("\n".join(lines) + "\n")
         ids.append(motion_id)
@@ -121,25 +121,44 @@ def time_training(data: Path, preset: str, iters: int, workdir: Path, precision:
 
     out = workdir / f"model-{precision}"
     results = {}
-    stages = ("tokenizer", "transformer") + (("token_transformer",) if preset_config(preset).token_view else ()) \
+    stages = (
+        ("tokenizer", "transformer")
+        + (("token_transformer",) if preset_config(preset).token_view else ())
         + ("residual",)
+    )
     for stage in stages:
-        train(stage, TrainOptions(data=data, out=out, preset=preset, iters=iters, progress=False, device="cpu",
-                                  checkpoint_every=10**9, precision=precision, threads=torch.get_num_threads()))
+        train(
+            stage,
+            TrainOptions(
+                data=data,
+                out=out,
+                preset=preset,
+                iters=iters,
+                progress=False,
+                device="cpu",
+                checkpoint_every=10**9,
+                precision=precision,
+                threads=torch.get_num_threads(),
+            ),
+        )
         record = json.loads((out / "model.json").read_text())["training"][stage]
         results[stage] = record
     return results
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--preset", default="demo")
     parser.add_argument("--model", default=None, help="trained model directory for the latency figure")
     parser.add_argument("--data", default=None, help="HumanML3D-format directory for the throughput figures")
     parser.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--iters", type=int, default=20, help="training iterations timed per stage")
-    parser.add_argument("--precision", default="fp32,bf16", help="training precisions to time (default fp32,bf16)")
+    parser.add_argument(
+        "--precision", default="fp32,bf16", help="training precisions to time (default fp32,bf16)"
+    )
     parser.add_argument("--skip-training", action="store_true")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -151,8 +170,11 @@ def main(argv: list[str] | None = None) -> int:
     complete = "transformer" in model.parts and "residual" in model.parts
     lat = time_generation(model, args.repeats) if complete else {}
     rows = [
-        ("machine", f"{platform.machine()}, {os.cpu_count()} CPU cores, torch {torch.__version__}, "
-                    f"{args.threads} threads, load average {os.getloadavg()[0]:.1f}"),
+        (
+            "machine",
+            f"{platform.machine()}, {os.cpu_count()} CPU cores, torch {torch.__version__}, "
+            f"{args.threads} threads, load average {os.getloadavg()[0]:.1f}",
+        ),
         ("model", f"{args.model or 'random ' + args.preset + ' weights'}"),
     ]
     if lat:
@@ -170,9 +192,13 @@ def main(argv: list[str] | None = None) -> int:
         from controlmm.training.tokenizer import reconstruction_metrics
 
         rec = reconstruction_metrics(model, HumanML3D(args.data), "test")
-        rows.append((f"tokenizer reconstruction, test split ({rec['motions']} motions)",
-                     f"MPJPE {rec.get('mpjpe_mm', float('nan')):.1f} mm (pelvis-aligned, MoMask), "
-                     f"global {rec.get('global_mpjpe_mm', float('nan')):.1f} mm"))
+        rows.append(
+            (
+                f"tokenizer reconstruction, test split ({rec['motions']} motions)",
+                f"MPJPE {rec.get('mpjpe_mm', float('nan')):.1f} mm (pelvis-aligned, MoMask), "
+                f"global {rec.get('global_mpjpe_mm', float('nan')):.1f} mm",
+            )
+        )
     if not args.skip_training:
         cfg = preset_config(args.preset)
         with tempfile.TemporaryDirectory() as tmp:
@@ -186,12 +212,20 @@ def main(argv: list[str] | None = None) -> int:
                     wall_min = schedule.iters / rate / 60 if rate else float("nan")
                     total_wall += wall_min
                     total_cpu += schedule.iters * cpu_s / 60
-                    rows.append((f"train {stage} ({precision}, batch {rec['schedule']['batch_size']})",
-                                 f"{rate:.2f} it/s wall, {cpu_s:.2f} CPU-s/it; plan {schedule.iters} it = "
-                                 f"{wall_min:.0f} min at this rate"))
-                rows.append((f"planned training, {len(records)} stages ({precision})",
-                             f"{total_wall:.0f} min wall at these rates, {total_cpu:.0f} CPU-min "
-                             "(without validation)"))
+                    rows.append(
+                        (
+                            f"train {stage} ({precision}, batch {rec['schedule']['batch_size']})",
+                            f"{rate:.2f} it/s wall, {cpu_s:.2f} CPU-s/it; plan {schedule.iters} it = "
+                            f"{wall_min:.0f} min at this rate",
+                        )
+                    )
+                rows.append(
+                    (
+                        f"planned training, {len(records)} stages ({precision})",
+                        f"{total_wall:.0f} min wall at these rates, {total_cpu:.0f} CPU-min "
+                        "(without validation)",
+                    )
+                )
     width = max(len(k) for k, _ in rows)
     print(f"| {'measurement':<{width}} | value |")
     print(f"|{'-' * (width + 2)}|-------|")

@@ -73,17 +73,31 @@ def _run(args: tuple[str, int, int, str | None, str, str]) -> dict:
     if model is None:
         model = _MODELS[model_dir] = load_model(model_dir)
     t0 = time.perf_counter()
-    result = plan(PlanConfig(scene=scene, seed=seed, rounds=rounds, preset=preset, model=model_dir, robot=robot,
-                             render=False), model=model, progress=False)
+    result = plan(
+        PlanConfig(
+            scene=scene, seed=seed, rounds=rounds, preset=preset, model=model_dir, robot=robot, render=False
+        ),
+        model=model,
+        progress=False,
+    )
     seconds = time.perf_counter() - t0
     report = result.report
     obstacle, floor, limits = _independent_check(scene, robot, result.trajectory.qpos, result.trajectory.fps)
-    return {"scene": scene, "seed": seed, "before": result.rounds[0].passed, "after": result.passed,
-            "rounds": len(result.rounds) - 1, "penetration": report.max_penetration_m,
-            "floor": report.floor_penetration_m, "constraint": max(result.final.constraint_errors_m, default=0.0),
-            "seconds": seconds, "gen_s": [r.seconds["generate"] for r in result.rounds],
-            "verified": (not result.passed) or (obstacle <= 0.01 and floor <= 0.01 and limits == 0),
-            "indep_obstacle": obstacle, "indep_floor": floor}
+    return {
+        "scene": scene,
+        "seed": seed,
+        "before": result.rounds[0].passed,
+        "after": result.passed,
+        "rounds": len(result.rounds) - 1,
+        "penetration": report.max_penetration_m,
+        "floor": report.floor_penetration_m,
+        "constraint": max(result.final.constraint_errors_m, default=0.0),
+        "seconds": seconds,
+        "gen_s": [r.seconds["generate"] for r in result.rounds],
+        "verified": (not result.passed) or (obstacle <= 0.01 and floor <= 0.01 and limits == 0),
+        "indep_obstacle": obstacle,
+        "indep_floor": floor,
+    }
 
 
 _MODELS: dict = {}
@@ -92,8 +106,12 @@ _MODELS: dict = {}
 def main() -> None:
     from scenes import list_scenes
 
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", nargs="*", default=None, help="scene names (default: every bundled scene)")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--scenes", nargs="*", default=None, help="scene names (default: every bundled scene)"
+    )
     parser.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 per scene (default 5)")
     parser.add_argument("--rounds", type=int, default=3, help="feedback rounds allowed (default 3)")
     parser.add_argument("--model", default=None, help="model directory (default: the embedded default)")
@@ -103,20 +121,32 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     scenes = args.scenes or [s if isinstance(s, str) else s.name for s in list_scenes()]
-    jobs = [(s, seed, args.rounds, args.model, args.preset, args.robot) for s in scenes for seed in range(args.seeds)]
+    jobs = [
+        (s, seed, args.rounds, args.model, args.preset, args.robot)
+        for s in scenes
+        for seed in range(args.seeds)
+    ]
     t0 = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         for row in pool.map(_run, jobs):
             rows.append(row)
-            print(f"  {row['scene']:16s} seed {row['seed']}: {'pass' if row['after'] else 'FAIL'} "
-                  f"(round 0 {'pass' if row['before'] else 'fail'}, {row['rounds']} feedback rounds) "
-                  f"{row['seconds']:.1f} s", file=sys.stderr, flush=True)
+            print(
+                f"  {row['scene']:16s} seed {row['seed']}: {'pass' if row['after'] else 'FAIL'} "
+                f"(round 0 {'pass' if row['before'] else 'fail'}, {row['rounds']} feedback rounds) "
+                f"{row['seconds']:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     wall = time.perf_counter() - t0
-    print(f"\nplan benchmark: {len(rows)} runs, {args.rounds} feedback rounds allowed, preset {args.preset}, "
-          f"robot {args.robot}, {args.workers} workers, {wall:.0f} s wall\n")
-    header = ("| scene | runs | pass before feedback | pass after | mean feedback rounds | max penetration (mm) | "
-              "max floor pen. (mm) | worst constraint (cm) | plan s (mean / max) | verified |")
+    print(
+        f"\nplan benchmark: {len(rows)} runs, {args.rounds} feedback rounds allowed, preset {args.preset}, "
+        f"robot {args.robot}, {args.workers} workers, {wall:.0f} s wall\n"
+    )
+    header = (
+        "| scene | runs | pass before feedback | pass after | mean feedback rounds | max penetration (mm) | "
+        "max floor pen. (mm) | worst constraint (cm) | plan s (mean / max) | verified |"
+    )
     print(header)
     print("|---" * (header.count("|") - 1) + "|")
     groups = {s: [r for r in rows if r["scene"] == s] for s in scenes}
@@ -125,19 +155,25 @@ def main() -> None:
         if not rs:
             continue
         n = len(rs)
-        print(f"| {name} | {n} | {sum(r['before'] for r in rs) / n:.0%} | {sum(r['after'] for r in rs) / n:.0%} | "
-              f"{np.mean([r['rounds'] for r in rs]):.1f} | {max(r['penetration'] for r in rs) * 1000:.1f} | "
-              f"{max(r['floor'] for r in rs) * 1000:.1f} | {max(r['constraint'] for r in rs) * 100:.1f} | "
-              f"{np.mean([r['seconds'] for r in rs]):.1f} / {max(r['seconds'] for r in rs):.1f} | "
-              f"{sum(r['verified'] for r in rs)}/{n} |")
+        print(
+            f"| {name} | {n} | {sum(r['before'] for r in rs) / n:.0%} | {sum(r['after'] for r in rs) / n:.0%} | "
+            f"{np.mean([r['rounds'] for r in rs]):.1f} | {max(r['penetration'] for r in rs) * 1000:.1f} | "
+            f"{max(r['floor'] for r in rs) * 1000:.1f} | {max(r['constraint'] for r in rs) * 100:.1f} | "
+            f"{np.mean([r['seconds'] for r in rs]):.1f} / {max(r['seconds'] for r in rs):.1f} | "
+            f"{sum(r['verified'] for r in rs)}/{n} |"
+        )
     one = [r for r in rows if r["rounds"] == 1]
     if one:
-        print(f"\nruns with exactly one feedback round: {len(one)}, plan time mean {np.mean([r['seconds'] for r in one]):.1f} s, "
-              f"max {max(r['seconds'] for r in one):.1f} s")
+        print(
+            f"\nruns with exactly one feedback round: {len(one)}, plan time mean {np.mean([r['seconds'] for r in one]):.1f} s, "
+            f"max {max(r['seconds'] for r in one):.1f} s"
+        )
     gen0 = [r["gen_s"][0] for r in rows]
     fb = [g for r in rows for g in r["gen_s"][1:]]
-    print(f"generation: round 0 mean {np.mean(gen0):.1f} s; feedback rounds (codebook editing) "
-          f"mean {np.mean(fb) if fb else float('nan'):.1f} s over {len(fb)}")
+    print(
+        f"generation: round 0 mean {np.mean(gen0):.1f} s; feedback rounds (codebook editing) "
+        f"mean {np.mean(fb) if fb else float('nan'):.1f} s over {len(fb)}"
+    )
 
 
 if __name__ == "__main__":

@@ -33,8 +33,14 @@ import numpy as np
 import torch
 
 ABLATION = [  # (logits editing, codebook editing, motion control model): the paper's Table 3 order
-    (False, False, False), (True, False, False), (False, True, False), (True, True, False),
-    (False, False, True), (True, False, True), (False, True, True), (True, True, True),
+    (False, False, False),
+    (True, False, False),
+    (False, True, False),
+    (True, True, False),
+    (False, False, True),
+    (True, False, True),
+    (False, True, True),
+    (True, True, True),
 ]
 QUALITY = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "diversity", "mm_dist")
 CONTROL = ("skate", "traj", "loc", "avg")
@@ -51,11 +57,23 @@ def cell(values: dict, key: str) -> str:
 
 
 def markdown(summary: dict, lead: list[str], labels: dict[str, list[str]]) -> str:
-    head = lead + ["R@1", "R@2", "R@3", "FID", "Diversity", "MM-Dist", "Foot skating", "Traj. err", "Loc. err",
-                   "Avg. err (cm)"]
+    head = lead + [
+        "R@1",
+        "R@2",
+        "R@3",
+        "FID",
+        "Diversity",
+        "MM-Dist",
+        "Foot skating",
+        "Traj. err",
+        "Loc. err",
+        "Avg. err (cm)",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, values in summary.items():
-        lines.append("| " + " | ".join(labels.get(name, [name]) + [cell(values, k) for k in QUALITY + CONTROL]) + " |")
+        lines.append(
+            "| " + " | ".join(labels.get(name, [name]) + [cell(values, k) for k in QUALITY + CONTROL]) + " |"
+        )
     return "\n".join(lines)
 
 
@@ -79,13 +97,21 @@ def sanity(evaluator, data: str, repeats: int, seed: int) -> dict:
         texts = evaluator.embed_texts(run.captions)
         gt = evaluator.embed_motions(run.motions)
         add("ground truth vs itself", columns_from_embeddings(texts, gt, gt, seed=seed + r))
-        add("ground truth vs independent pass",
-            columns_from_embeddings(texts, gt, evaluator.embed_motions(other.motions), seed=seed + r))
+        add(
+            "ground truth vs independent pass",
+            columns_from_embeddings(texts, gt, evaluator.embed_motions(other.motions), seed=seed + r),
+        )
         shuffled = [m[rng.permutation(len(m))] for m in run.motions]
-        add("frames shuffled", columns_from_embeddings(texts, evaluator.embed_motions(shuffled), gt, seed=seed + r))
+        add(
+            "frames shuffled",
+            columns_from_embeddings(texts, evaluator.embed_motions(shuffled), gt, seed=seed + r),
+        )
         for sigma in (1.0, 2.0):
             noised = [m + rng.normal(size=m.shape).astype(np.float32) * sigma * std for m in run.motions]
-            add(f"noise {sigma} std", columns_from_embeddings(texts, evaluator.embed_motions(noised), gt, seed=seed + r))
+            add(
+                f"noise {sigma} std",
+                columns_from_embeddings(texts, evaluator.embed_motions(noised), gt, seed=seed + r),
+            )
         rotated = np.concatenate([gt[1:], gt[:1]])
         add("captions rotated by one", columns_from_embeddings(texts, rotated, gt, seed=seed + r))
     summary = {name: {k: M.mean_ci(v) for k, v in cols.items()} for name, cols in rows.items()}
@@ -93,19 +119,30 @@ def sanity(evaluator, data: str, repeats: int, seed: int) -> dict:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, values in summary.items():
         lines.append("| " + " | ".join([name] + [cell(values, k) for k in QUALITY]) + " |")
-    print(f"\nevaluator sanity: {evaluator.name}; test split {len(evalset)} samples, passes of {len(run.samples)} "
-          f"(groups of 32), {repeats} passes; chance R@1/2/3 = {1 / 32:.3f} / {2 / 32:.3f} / {3 / 32:.3f}")
+    print(
+        f"\nevaluator sanity: {evaluator.name}; test split {len(evalset)} samples, passes of {len(run.samples)} "
+        f"(groups of 32), {repeats} passes; chance R@1/2/3 = {1 / 32:.3f} / {2 / 32:.3f} / {3 / 32:.3f}"
+    )
     print("\n".join(lines), flush=True)
-    return {"samples_per_pass": len(run.samples), "split_samples": len(evalset), "repeats": repeats,
-            "rows": {n: {k: {"mean": m, "ci95": c} for k, (m, c) in v.items()} for n, v in summary.items()}}
+    return {
+        "samples_per_pass": len(run.samples),
+        "split_samples": len(evalset),
+        "repeats": repeats,
+        "rows": {n: {k: {"mean": m, "ci95": c} for k, (m, c) in v.items()} for n, v in summary.items()},
+    }
 
 
 def ablation_config(k: int):
     from controlmm.editing import PRESETS
 
     logits, codebook, control = ABLATION[k - 1]
-    return replace(PRESETS["accurate"], name=f"row{k}", control_model=control,
-                   logits_steps=100 if logits else 0, codebook_steps=600 if codebook else 0)
+    return replace(
+        PRESETS["accurate"],
+        name=f"row{k}",
+        control_model=control,
+        logits_steps=100 if logits else 0,
+        codebook_steps=600 if codebook else 0,
+    )
 
 
 def run_rows(model, evaluator, data, rows, args, real: bool):
@@ -115,22 +152,36 @@ def run_rows(model, evaluator, data, rows, args, real: bool):
     summary, record = {}, {}
     for i, row in enumerate(rows):
         started, cpu = time.perf_counter(), time.process_time()
-        table = evaluate_control_table(model, data, [row], evaluator=evaluator, samples=args.samples,
-                                       repeats=args.repeats, seed=args.seed, batch_size=args.batch_size,
-                                       real=real and i == 0)
+        table = evaluate_control_table(
+            model,
+            data,
+            [row],
+            evaluator=evaluator,
+            samples=args.samples,
+            repeats=args.repeats,
+            seed=args.seed,
+            batch_size=args.batch_size,
+            real=real and i == 0,
+        )
         summary |= table.summary()
         record |= table.to_json()["rows"]
-        print(f"  {row.name}: {time.perf_counter() - started:.0f} s wall, {time.process_time() - cpu:.0f} s CPU",
-              flush=True)
+        print(
+            f"  {row.name}: {time.perf_counter() - started:.0f} s wall, {time.process_time() - cpu:.0f} s CPU",
+            flush=True,
+        )
         print(table.table(), flush=True)
     return summary, record
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--part", default="all", choices=("sanity", "table1", "table3", "all"))
     parser.add_argument("--model", default=None, help="model directory (default: the embedded default)")
-    parser.add_argument("--data", default=None, help="HumanML3D-format directory (default: the model's training data)")
+    parser.add_argument(
+        "--data", default=None, help="HumanML3D-format directory (default: the model's training data)"
+    )
     parser.add_argument("--evaluator", default=None, help="evaluator directory (default: the shipped one)")
     parser.add_argument("--samples", type=int, default=64, help="test cases per repeat (default 64)")
     parser.add_argument("--repeats", type=int, default=3, help="repeats of the tables (default 3)")
@@ -147,9 +198,12 @@ def main(argv: list[str] | None = None) -> int:
     from controlmm.eval.evaluator import load_evaluator
 
     evaluator = load_evaluator(args.evaluator)
-    report: dict = {"command": "python benchmarks/quality.py " + " ".join(sys.argv[1:] if argv is None else argv),
-                    "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
-                               f"{args.threads} thread(s)", "evaluator": evaluator.name}
+    report: dict = {
+        "command": "python benchmarks/quality.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+        f"{args.threads} thread(s)",
+        "evaluator": evaluator.name,
+    }
     print(report["machine"])
     started, cpu = time.perf_counter(), time.process_time()
     model = data = None
@@ -159,9 +213,16 @@ def main(argv: list[str] | None = None) -> int:
 
         model = load_model(args.model)
         data = args.data or default_data(model)
-        report |= {"model": str(model.directory), "data": str(data), "samples": args.samples, "repeats": args.repeats}
-        print(f"model {model.directory}; data {data}; {args.samples} cases x {args.repeats} repeats per row, "
-              f"batch {args.batch_size}")
+        report |= {
+            "model": str(model.directory),
+            "data": str(data),
+            "samples": args.samples,
+            "repeats": args.repeats,
+        }
+        print(
+            f"model {model.directory}; data {data}; {args.samples} cases x {args.repeats} repeats per row, "
+            f"batch {args.batch_size}"
+        )
     if args.part in ("sanity", "all"):
         if data is None:
             from controlmm.cli.eval_control import default_data
@@ -170,8 +231,11 @@ def main(argv: list[str] | None = None) -> int:
             data = args.data or default_data(load_model(args.model))
         report["sanity"] = sanity(evaluator, data, args.sanity_repeats, args.seed)
     if args.part in ("table1", "all"):
-        rows = [TableRow("uncontrolled", "pelvis", UNCONTROLLED), TableRow("pelvis", "pelvis", "accurate"),
-                TableRow("all joints (avg)", "each", "accurate")]
+        rows = [
+            TableRow("uncontrolled", "pelvis", UNCONTROLLED),
+            TableRow("pelvis", "pelvis", "accurate"),
+            TableRow("all joints (avg)", "each", "accurate"),
+        ]
         summary, record = run_rows(model, evaluator, data, rows, args, real=True)
         print("\nTable 1 analogue (accurate preset)")
         print(markdown(summary, ["Method"], {}), flush=True)
@@ -182,7 +246,9 @@ def main(argv: list[str] | None = None) -> int:
         summary, record = run_rows(model, evaluator, data, rows, args, real=False)
         mark = lambda flag: "✓" if flag else "×"  # noqa: E731
         labels = {f"#{k}": [str(k)] + [mark(f) for f in ABLATION[k - 1]] for k in chosen}
-        print("\nTable 3 analogue (pelvis control; L = logits editing, E = codebook editing, M = motion control model)")
+        print(
+            "\nTable 3 analogue (pelvis control; L = logits editing, E = codebook editing, M = motion control model)"
+        )
         print(markdown(summary, ["#", "L", "E", "M"], labels), flush=True)
         report["table3"] = record
     report["seconds"] = {"wall": time.perf_counter() - started, "cpu": time.process_time() - cpu}

@@ -26,16 +26,22 @@ CLIP = "012314"
 
 def real_spec(joints: np.ndarray) -> dict:
     """The spec of this benchmark from the clip's joints (T >= 170, 22, 3), human frame, metres."""
+
     def key(name: str, index: int, frame: int) -> dict:
         return {"joint": name, "frame": frame, "position": joints[frame, index].tolist()}
 
-    return {"coords": "human", "constraints": [
-        {"joint": "pelvis", "frame_range": [0, 59], "positions": joints[0:60, 0].tolist()},
-        {"joint": "left_wrist", "frame_range": [120, 139], "positions": joints[120:140, 20].tolist()},
-        key("right_wrist", 21, 80), key("right_wrist", 21, 150),
-        key("left_foot", 10, 100), key("left_foot", 10, 160),
-        key("head", 15, 169),
-    ]}
+    return {
+        "coords": "human",
+        "constraints": [
+            {"joint": "pelvis", "frame_range": [0, 59], "positions": joints[0:60, 0].tolist()},
+            {"joint": "left_wrist", "frame_range": [120, 139], "positions": joints[120:140, 20].tolist()},
+            key("right_wrist", 21, 80),
+            key("right_wrist", 21, 150),
+            key("left_foot", 10, 100),
+            key("left_foot", 10, 160),
+            key("head", 15, 169),
+        ],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -59,18 +65,26 @@ def main(argv: list[str] | None = None) -> int:
     text = args.text
     spec = ControlSpec.from_dict(real_spec(joints))
     model = load_model(args.model)
-    print(f"real spec: clip {CLIP}, {len(joints)} frames, prompt '{text}', preset {args.preset}, "
-          f"{args.threads} thread(s)")
-    print("| seed | constraints | max err (cm) | mean err (cm) | within 1 cm | logits steps | codebook steps | s |")
+    print(
+        f"real spec: clip {CLIP}, {len(joints)} frames, prompt '{text}', preset {args.preset}, "
+        f"{args.threads} thread(s)"
+    )
+    print(
+        "| seed | constraints | max err (cm) | mean err (cm) | within 1 cm | logits steps | codebook steps | s |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for seed in range(args.seeds):
         start = time.perf_counter()
-        out = generate_controlled(model, text, control=spec, frames=len(joints), preset=args.preset, seed=seed)
+        out = generate_controlled(
+            model, text, control=spec, frames=len(joints), preset=args.preset, seed=seed
+        )
         seconds = time.perf_counter() - start
         err = np.asarray(out.errors[0]) * 100
         rec = out.records[0]
-        print(f"| {seed} | {len(err)} | {err.max():.2f} | {err.mean():.2f} | {int((err <= 1.0 + 1e-6).sum())} | "
-              f"{sum(rec.logits_steps)} | {rec.codebook_steps} | {seconds:.1f} |")
+        print(
+            f"| {seed} | {len(err)} | {err.max():.2f} | {err.mean():.2f} | {int((err <= 1.0 + 1e-6).sum())} | "
+            f"{sum(rec.logits_steps)} | {rec.codebook_steps} | {seconds:.1f} |"
+        )
     return 0
 
 

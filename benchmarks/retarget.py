@@ -79,29 +79,42 @@ def timed(fn, repeats: int) -> tuple[float, float]:
 def row(name: str, robot: str, solver: str, n: int, wall: float, cpu: float, m: dict) -> dict:
     ke = m["keypoint_error_mm"]
     return {
-        "motion": name, "robot": robot, "solver": solver, "frames": n,
-        "fps_wall": n / wall, "fps_cpu": n / cpu,
+        "motion": name,
+        "robot": robot,
+        "solver": solver,
+        "frames": n,
+        "fps_wall": n / wall,
+        "fps_cpu": n / cpu,
         **{f"{g}_mean": ke[g]["mean"] for g in ("feet", "hands", "pelvis", "head", "all") if g in ke},
         **{f"{g}_max": ke[g]["max"] for g in ("feet", "hands", "pelvis", "head", "all") if g in ke},
-        "limit_violations": m["joint_limit_violations"], "penetration_mm": m["floor_penetration_max_mm"],
-        "slide_mean": m["foot_sliding_mm_per_stance"]["mean"], "slide_max": m["foot_sliding_mm_per_stance"]["max"],
-        "stances": m["stances"], "jerk": m.get("joint_jerk_rms_rad_s3", float("nan")),
+        "limit_violations": m["joint_limit_violations"],
+        "penetration_mm": m["floor_penetration_max_mm"],
+        "slide_mean": m["foot_sliding_mm_per_stance"]["mean"],
+        "slide_max": m["foot_sliding_mm_per_stance"]["max"],
+        "stances": m["stances"],
+        "jerk": m.get("joint_jerk_rms_rad_s3", float("nan")),
     }
 
 
 def print_table(rows: list[dict]) -> None:
-    head = (f"{'motion':<15} {'robot':<5} {'solver':<7} {'frames':>6} {'fps wall':>9} {'fps cpu':>8} "
-            f"{'feet':>11} {'hands':>11} {'pelvis':>11} {'head':>11} {'lim':>4} {'pen mm':>6} "
-            f"{'slide mm':>11} {'jerk':>7}")
+    head = (
+        f"{'motion':<15} {'robot':<5} {'solver':<7} {'frames':>6} {'fps wall':>9} {'fps cpu':>8} "
+        f"{'feet':>11} {'hands':>11} {'pelvis':>11} {'head':>11} {'lim':>4} {'pen mm':>6} "
+        f"{'slide mm':>11} {'jerk':>7}"
+    )
     print(head)
     print("-" * len(head))
     for r in rows:
+
         def pair(g):
             return f"{r.get(g + '_mean', float('nan')):5.0f}/{r.get(g + '_max', float('nan')):<5.0f}"
-        print(f"{r['motion']:<15} {r['robot']:<5} {r['solver']:<7} {r['frames']:>6} {r['fps_wall']:>9.0f} "
-              f"{r['fps_cpu']:>8.0f} {pair('feet'):>11} {pair('hands'):>11} {pair('pelvis'):>11} "
-              f"{pair('head'):>11} {r['limit_violations']:>4} {r['penetration_mm']:>6.2f} "
-              f"{r['slide_mean']:>5.1f}/{r['slide_max']:<5.1f} {r['jerk']:>7.0f}")
+
+        print(
+            f"{r['motion']:<15} {r['robot']:<5} {r['solver']:<7} {r['frames']:>6} {r['fps_wall']:>9.0f} "
+            f"{r['fps_cpu']:>8.0f} {pair('feet'):>11} {pair('hands'):>11} {pair('pelvis'):>11} "
+            f"{pair('head'):>11} {r['limit_violations']:>4} {r['penetration_mm']:>6.2f} "
+            f"{r['slide_mean']:>5.1f}/{r['slide_max']:<5.1f} {r['jerk']:>7.0f}"
+        )
 
 
 ABLATION = {
@@ -128,9 +141,11 @@ def ablation(motion: Motion, robot: str, repeats: int) -> None:
         _, cpu = timed(lambda: retarget_motion(motion, robot, config=cfg, metrics=False), repeats)
         traj = retarget_motion(motion, robot, config=cfg)
         m = traj.metrics
-        print(f"{name:<28} {motion.num_frames / cpu:>8.0f} {traj.solver['cost']:>8.3f} "
-              f"{m['keypoint_error_mm']['all']['mean']:>7.1f} {m['foot_sliding_mm_per_stance']['mean']:>5.1f}/"
-              f"{m['foot_sliding_mm_per_stance']['max']:<5.1f} {m['joint_jerk_rms_rad_s3']:>6.0f}")
+        print(
+            f"{name:<28} {motion.num_frames / cpu:>8.0f} {traj.solver['cost']:>8.3f} "
+            f"{m['keypoint_error_mm']['all']['mean']:>7.1f} {m['foot_sliding_mm_per_stance']['mean']:>5.1f}/"
+            f"{m['foot_sliding_mm_per_stance']['max']:<5.1f} {m['joint_jerk_rms_rad_s3']:>6.0f}"
+        )
 
 
 def main() -> int:
@@ -144,14 +159,19 @@ def main() -> int:
     args = ap.parse_args()
     try:
         import mink  # noqa: F401
+
         have_mink = not args.no_mink
     except ImportError:
         have_mink = False
         print("mink not installed (pip install -e '.[bench]'): baseline skipped", file=sys.stderr)
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores, "
-          f"python {platform.python_version()}, load average at start {os.getloadavg()[0]:.2f}")
-    print("keypoint errors: mean/max mm against the uniformly scaled human; speed: input frames (20 fps) "
-          "per second, best of the timed runs, output 50 Hz, metrics excluded\n")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores, "
+        f"python {platform.python_version()}, load average at start {os.getloadavg()[0]:.2f}"
+    )
+    print(
+        "keypoint errors: mean/max mm against the uniformly scaled human; speed: input frames (20 fps) "
+        "per second, best of the timed runs, output 50 Hz, metrics excluded\n"
+    )
     rows = []
     all_motions = motions(args.corpus)
     for name, motion in all_motions.items():
@@ -168,12 +188,16 @@ def main() -> int:
     print()
     for robot in args.robots:
         b = [r for r in rows if r["robot"] == robot and r["solver"] == "batched"]
-        line = (f"{robot}: batched {np.mean([r['fps_wall'] for r in b]):.0f} frames/s wall "
-                f"({np.mean([r['fps_cpu'] for r in b]):.0f} CPU) averaged over {len(b)} motions")
+        line = (
+            f"{robot}: batched {np.mean([r['fps_wall'] for r in b]):.0f} frames/s wall "
+            f"({np.mean([r['fps_cpu'] for r in b]):.0f} CPU) averaged over {len(b)} motions"
+        )
         k = [r for r in rows if r["robot"] == robot and r["solver"] == "mink"]
         if k:
             ratio = np.mean([x["fps_wall"] / y["fps_wall"] for x, y in zip(b, k)])
-            line += f"; mink {np.mean([r['fps_wall'] for r in k]):.0f} frames/s -> batched is {ratio:.1f}x faster"
+            line += (
+                f"; mink {np.mean([r['fps_wall'] for r in k]):.0f} frames/s -> batched is {ratio:.1f}x faster"
+            )
         print(line)
     if not args.no_ablation:
         for robot in args.robots:

@@ -49,8 +49,8 @@ def _world_meshes(scene) -> list[trimesh.Trimesh]:
     meshes = []
     for g in scene.obstacle_geom_ids:
         mid = m.geom_dataid[g]
-        v = m.mesh_vert[m.mesh_vertadr[mid]: m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
-        f = m.mesh_face[m.mesh_faceadr[mid]: m.mesh_faceadr[mid] + m.mesh_facenum[mid]]
+        v = m.mesh_vert[m.mesh_vertadr[mid] : m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+        f = m.mesh_face[m.mesh_faceadr[mid] : m.mesh_faceadr[mid] + m.mesh_facenum[mid]]
         rot = d.geom_xmat[g].reshape(3, 3)
         meshes.append(trimesh.Trimesh(v @ rot.T + d.geom_xpos[g], f, process=True))
     return meshes
@@ -70,7 +70,9 @@ def accuracy(n: int, seed: int = 0) -> list[tuple]:
         if not scene.obstacle_geom_ids:
             continue
         rng = np.random.default_rng(seed)
-        has_mesh = any(scene.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH for g in scene.obstacle_geom_ids)
+        has_mesh = any(
+            scene.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH for g in scene.obstacle_geom_ids
+        )
         pts = _points(scene, n, rng)
         times = rng.uniform(0.0, 6.0, n) if scene.tracks else np.zeros(n)
         t0 = time.perf_counter()
@@ -85,15 +87,35 @@ def accuracy(n: int, seed: int = 0) -> list[tuple]:
             ref = np.empty(n)
             for i in range(n):
                 scene.set_time(data, times[i])
-                ref[i] = probe_distances(scene.model, scene.obstacle_geom_ids, pts[i:i + 1], data).min()
+                ref[i] = probe_distances(scene.model, scene.obstacle_geom_ids, pts[i : i + 1], data).min()
             reference = "mj_geomDistance"
-        rows.append((name, len(scene.obstacle_geom_ids), reference, n, int((ref < 0).sum()), np.abs(out - ref).max(),
-                     int((np.sign(out) != np.sign(ref)).sum()), build))
+        rows.append(
+            (
+                name,
+                len(scene.obstacle_geom_ids),
+                reference,
+                n,
+                int((ref < 0).sum()),
+                np.abs(out - ref).max(),
+                int((np.sign(out) != np.sign(ref)).sum()),
+                build,
+            )
+        )
         if has_mesh:
             hull = SceneSDF(scene, convex_hull_meshes=True)(torch.as_tensor(pts)).numpy()
             mj = probe_distances(scene.model, scene.obstacle_geom_ids, pts, data).min(1)
-            rows.append((f"{name} (hull)", len(scene.obstacle_geom_ids), "mj_geomDistance", n, int((mj < 0).sum()),
-                         np.abs(hull - mj).max(), int((np.sign(hull) != np.sign(mj)).sum()), float("nan")))
+            rows.append(
+                (
+                    f"{name} (hull)",
+                    len(scene.obstacle_geom_ids),
+                    "mj_geomDistance",
+                    n,
+                    int((mj < 0).sum()),
+                    np.abs(hull - mj).max(),
+                    int((np.sign(hull) != np.sign(mj)).sum()),
+                    float("nan"),
+                )
+            )
     return rows
 
 
@@ -114,19 +136,30 @@ def far_field(name: str = "mesh_rock", per_band: int = 1000, seed: int = 0) -> l
         err = np.abs(out - ref)
         for lo, hi in [(-1.0, 0.0), (0.0, 0.1), (0.1, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 4.0)]:
             k = (ref >= lo) & (ref < hi)
-            rows.append((str(dtype).removeprefix("torch."), "inside" if hi <= 0 else f"{lo:g}-{hi:g} m",
-                         int(k.sum()), float(err[k].max()), float(np.median(err[k])),
-                         int((np.sign(out[k]) != np.sign(ref[k])).sum())))
+            rows.append(
+                (
+                    str(dtype).removeprefix("torch."),
+                    "inside" if hi <= 0 else f"{lo:g}-{hi:g} m",
+                    int(k.sum()),
+                    float(err[k].max()),
+                    float(np.median(err[k])),
+                    int((np.sign(out[k]) != np.sign(ref[k])).sum()),
+                )
+            )
     return rows
 
 
-def speed(name: str, dtype: torch.dtype, repeats: int, points_per_frame: int = 22, moving_t: bool = False) -> tuple:
+def speed(
+    name: str, dtype: torch.dtype, repeats: int, points_per_frame: int = 22, moving_t: bool = False
+) -> tuple:
     scene = load_scene(name, robot=None)
     sdf = scene.sdf()
     lo, hi = scene_bounds(scene)
     gen = torch.Generator().manual_seed(0)
-    pts = (torch.rand(196, points_per_frame, 3, generator=gen, dtype=torch.float64)
-           * torch.as_tensor(hi - lo) + torch.as_tensor(lo)).to(dtype)
+    pts = (
+        torch.rand(196, points_per_frame, 3, generator=gen, dtype=torch.float64) * torch.as_tensor(hi - lo)
+        + torch.as_tensor(lo)
+    ).to(dtype)
     times = torch.arange(196, dtype=dtype) / 20 if moving_t else None
     samples = []
     for k in range(repeats + 5):
@@ -136,8 +169,14 @@ def speed(name: str, dtype: torch.dtype, repeats: int, points_per_frame: int = 2
         value.sum().backward()
         if k >= 5:
             samples.append(time.perf_counter() - t0)
-    return name, len(scene.obstacle_geom_ids), str(dtype).removeprefix("torch."), \
-        f"196x{points_per_frame}", 1e3 * min(samples), 1e3 * float(np.median(samples))
+    return (
+        name,
+        len(scene.obstacle_geom_ids),
+        str(dtype).removeprefix("torch."),
+        f"196x{points_per_frame}",
+        1e3 * min(samples),
+        1e3 * float(np.median(samples)),
+    )
 
 
 def main() -> None:
@@ -148,23 +187,32 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, {torch.get_num_threads()} torch threads, "
-          f"torch {torch.__version__}, mujoco {mujoco.__version__}, trimesh {trimesh.__version__}")
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} CPUs, {torch.get_num_threads()} torch threads, "
+        f"torch {torch.__version__}, mujoco {mujoco.__version__}, trimesh {trimesh.__version__}"
+    )
     print("\naccuracy (metres)")
-    print(f"{'scene':24s} {'geoms':>5s}  {'reference':16s} {'points':>6s} {'inside':>6s} {'max |err|':>10s} "
-          f"{'sign errs':>9s} {'build s':>7s}")
+    print(
+        f"{'scene':24s} {'geoms':>5s}  {'reference':16s} {'points':>6s} {'inside':>6s} {'max |err|':>10s} "
+        f"{'sign errs':>9s} {'build s':>7s}"
+    )
     for row in accuracy(args.points):
-        print(f"{row[0]:24s} {row[1]:5d}  {row[2]:16s} {row[3]:6d} {row[4]:6d} {row[5]:10.2e} {row[6]:9d} {row[7]:7.2f}")
+        print(
+            f"{row[0]:24s} {row[1]:5d}  {row[2]:16s} {row[3]:6d} {row[4]:6d} {row[5]:10.2e} {row[6]:9d} {row[7]:7.2f}"
+        )
     print("\nmesh far field (mesh_rock, trimesh exact; by true distance from the mesh)")
     print(f"{'dtype':8s} {'band':>10s} {'points':>6s} {'max |err|':>10s} {'median':>10s} {'sign errs':>9s}")
     for row in far_field():
         print(f"{row[0]:8s} {row[1]:>10s} {row[2]:6d} {row[3]:10.2e} {row[4]:10.2e} {row[5]:9d}")
     print(f"\nspeed: SDF + gradient per call (ms); load average before: {_load()}")
     print(f"{'scene':16s} {'geoms':>5s} {'dtype':>8s} {'points':>8s} {'min':>7s} {'median':>7s}")
-    for name, dtype, ppf, moving in [("room", torch.float32, 22, False), ("room", torch.float64, 22, False),
-                                     ("moving_obstacle", torch.float32, 22, True),
-                                     ("mesh_rock", torch.float32, 22, False),
-                                     ("room", torch.float32, 100, False)]:
+    for name, dtype, ppf, moving in [
+        ("room", torch.float32, 22, False),
+        ("room", torch.float64, 22, False),
+        ("moving_obstacle", torch.float32, 22, True),
+        ("mesh_rock", torch.float32, 22, False),
+        ("room", torch.float32, 100, False),
+    ]:
         row = speed(name, dtype, args.repeats, ppf, moving)
         print(f"{row[0]:16s} {row[1]:5d} {row[2]:>8s} {row[3]:>8s} {row[4]:7.2f} {row[5]:7.2f}")
     print(f"load average after: {_load()}")

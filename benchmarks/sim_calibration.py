@@ -53,7 +53,13 @@ MEASURES = [
     ("flight frames", 1, "", "flight_frames", None),
     ("residual force p95", 100, "% mg", "residual_force_p95", None),
     ("residual force max", 100, "% mg", "residual_force_max", "max_residual_force_ratio"),
-    ("residual force sustained", 100, "% mg", "residual_force_sustained", "max_sustained_residual_force_ratio"),
+    (
+        "residual force sustained",
+        100,
+        "% mg",
+        "residual_force_sustained",
+        "max_sustained_residual_force_ratio",
+    ),
     ("residual moment max", 1000, "mm", "residual_moment_max", "max_residual_moment_m"),
     ("residual moment sustained", 1000, "mm", "residual_moment_sustained", "max_sustained_residual_moment_m"),
     ("torque / limit max", 1, "", "max_torque_ratio", "max_torque_ratio"),
@@ -61,7 +67,9 @@ MEASURES = [
 ]
 
 
-def _clip_list(corpus: Path, split: str, per_family: int, families: list[str] | None) -> list[tuple[str, str, Path]]:
+def _clip_list(
+    corpus: Path, split: str, per_family: int, families: list[str] | None
+) -> list[tuple[str, str, Path]]:
     """(family, id, joints path) of the first ``per_family`` clips of each family in ``split``."""
     ids = (corpus / f"{split}.txt").read_text().split()
     chosen: dict[str, list[str]] = defaultdict(list)
@@ -95,8 +103,11 @@ def _run(job: tuple[str, str, str, str]) -> dict:
 
     family, cid, path, robot = job
     world = _world(robot)
-    motion = load_motion(path) if path.endswith("new_joint_vecs/" + Path(path).name) else \
-        Motion(joints=np.load(path).astype(np.float32), fps=20.0)
+    motion = (
+        load_motion(path)
+        if path.endswith("new_joint_vecs/" + Path(path).name)
+        else Motion(joints=np.load(path).astype(np.float32), fps=20.0)
+    )
     cpu0 = time.process_time()
     traj = retarget_motion(motion, robot, fps=50.0, metrics=False)
     cpu1 = time.process_time()
@@ -109,23 +120,37 @@ def _run(job: tuple[str, str, str, str]) -> dict:
         sev = getattr(f, "severity", "error")
         key = f"{f.kind}|{sev}"
         if key not in worst or f.depth > worst[key]["depth"]:
-            worst[key] = {"depth": f.depth, "where": f.joint or f.robot_body or "robot",
-                          "other": f.obstacle_geom, "frames": [f.frame_start, f.frame_end]}
+            worst[key] = {
+                "depth": f.depth,
+                "where": f.joint or f.robot_body or "robot",
+                "other": f.obstacle_geom,
+                "frames": [f.frame_start, f.frame_end],
+            }
     return {
-        "family": family, "id": cid, "robot": robot, "passed": bool(report.passed),
-        "input_frames": int(len(motion.joints)), "frames": int(report.num_frames),
-        "retarget_cpu_s": cpu1 - cpu0, "check_cpu_s": cpu2 - cpu1,
+        "family": family,
+        "id": cid,
+        "robot": robot,
+        "passed": bool(report.passed),
+        "input_frames": int(len(motion.joints)),
+        "frames": int(report.num_frames),
+        "retarget_cpu_s": cpu1 - cpu0,
+        "check_cpu_s": cpu2 - cpu1,
         "failures": worst,
         "stats": {
-            "floor_penetration_m": s["floor_penetration_m"], "max_penetration_m": s["max_penetration_m"],
+            "floor_penetration_m": s["floor_penetration_m"],
+            "max_penetration_m": s["max_penetration_m"],
             "max_self_collision_m": s["max_self_collision_m"],
             "max_joint_limit_violation_rad": s["max_joint_limit_violation_rad"],
             "joint_limit_violations": s["joint_limit_violations"],
             "max_joint_velocity_ratio": s["max_joint_velocity_ratio"],
-            "max_foot_slide_speed_mps": s["max_foot_slide_speed_mps"], "foot_sliding_m": s["foot_sliding_m"],
-            "floating_frames": s["floating_frames"], "flight_frames": s["flight_frames"],
-            "residual_force_p95": rf.get("p95_ratio", 0.0), "residual_force_max": rf.get("max_ratio", 0.0),
-            "residual_moment_max": rm.get("max_m", 0.0), "max_torque_ratio": s["max_torque_ratio"] or 0.0,
+            "max_foot_slide_speed_mps": s["max_foot_slide_speed_mps"],
+            "foot_sliding_m": s["foot_sliding_m"],
+            "floating_frames": s["floating_frames"],
+            "flight_frames": s["flight_frames"],
+            "residual_force_p95": rf.get("p95_ratio", 0.0),
+            "residual_force_max": rf.get("max_ratio", 0.0),
+            "residual_moment_max": rm.get("max_m", 0.0),
+            "max_torque_ratio": s["max_torque_ratio"] or 0.0,
             "residual_force_sustained": rf.get("sustained_max_ratio", 0.0),
             "residual_moment_sustained": rm.get("sustained_max_m", 0.0),
             "max_sustained_torque_ratio": s.get("max_sustained_torque_ratio") or 0.0,
@@ -148,7 +173,11 @@ def print_tables(rows: list[dict], robots: list[str]) -> None:
     cfg = CheckConfig()
     fams = sorted({r["family"] for r in rows}, key=lambda f: (f != "real", f))
     print("\n## Pass rate per family (empty scene, default CheckConfig)\n")
-    head = "| family | clips | " + " | ".join(f"{r} pass" for r in robots) + " | failing kinds (worst value) | warnings (worst) |"
+    head = (
+        "| family | clips | "
+        + " | ".join(f"{r} pass" for r in robots)
+        + " | failing kinds (worst value) | warnings (worst) |"
+    )
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for fam in fams + ["ALL"]:
@@ -157,8 +186,11 @@ def print_tables(rows: list[dict], robots: list[str]) -> None:
         rates = []
         for rb in robots:
             rs = [r for r in sel if r["robot"] == rb]
-            rates.append(f"{100 * np.mean([r['passed'] for r in rs]):.0f}% ({sum(r['passed'] for r in rs)}/{len(rs)})"
-                         if rs else "-")
+            rates.append(
+                f"{100 * np.mean([r['passed'] for r in rs]):.0f}% ({sum(r['passed'] for r in rs)}/{len(rs)})"
+                if rs
+                else "-"
+            )
         errs: dict[str, tuple[float, str]] = {}
         warns: dict[str, tuple[float, str]] = {}
         for r in sel:
@@ -182,19 +214,26 @@ def print_tables(rows: list[dict], robots: list[str]) -> None:
             v = np.array([r["stats"][key] for r in rs], dtype=float)
             t = getattr(cfg, thr) if thr else None
             t_txt = _fmt(t, scale) if t is not None else "-"
-            print(f"| {label} | {unit} | " + " | ".join(_fmt(_pct(v, q), scale) for q in (50, 90, 95, 99, 100))
-                  + f" | {t_txt} |")
+            print(
+                f"| {label} | {unit} | "
+                + " | ".join(_fmt(_pct(v, q), scale) for q in (50, 90, 95, 99, 100))
+                + f" | {t_txt} |"
+            )
         passing = [r for r in rs if r["passed"]]
-        bad_pen = sum(r["stats"]["floor_penetration_m"] > 0.01 or r["stats"]["max_penetration_m"] > 0.01
-                      for r in passing)
+        bad_pen = sum(
+            r["stats"]["floor_penetration_m"] > 0.01 or r["stats"]["max_penetration_m"] > 0.01
+            for r in passing
+        )
         bad_lim = sum(r["stats"]["joint_limit_violations"] > 0 for r in passing)
         frames_in = sum(r["input_frames"] for r in rs)
         frames_out = sum(r["frames"] for r in rs)
         rt = sum(r["retarget_cpu_s"] for r in rs)
         ck = sum(r["check_cpu_s"] for r in rs)
-        print(f"\n{rb}: passing clips with penetration > 1 cm: {bad_pen}; with joint-limit violations: {bad_lim}. "
-              f"Retarget {frames_in / rt:,.0f} input frames/s CPU (metrics off); check {frames_out / ck:,.0f} "
-              f"frames/s CPU (all checks, 50 fps).")
+        print(
+            f"\n{rb}: passing clips with penetration > 1 cm: {bad_pen}; with joint-limit violations: {bad_lim}. "
+            f"Retarget {frames_in / rt:,.0f} input frames/s CPU (metrics off); check {frames_out / ck:,.0f} "
+            f"frames/s CPU (all checks, 50 fps)."
+        )
 
 
 def main() -> None:
@@ -218,8 +257,10 @@ def main() -> None:
     else:
         print(f"corpus {args.corpus} not found: real clip only", file=sys.stderr)
     jobs = [(fam, cid, str(p), rb) for rb in robots for fam, cid, p in clips]
-    print(f"# sim calibration: {len(clips)} clips x {len(robots)} robots, {platform.machine()}, "
-          f"{os.cpu_count()} CPUs, {args.workers} workers")
+    print(
+        f"# sim calibration: {len(clips)} clips x {len(robots)} robots, {platform.machine()}, "
+        f"{os.cpu_count()} CPUs, {args.workers} workers"
+    )
     start = time.perf_counter()
     if args.workers > 1:
         import multiprocessing as mp

@@ -40,10 +40,24 @@ OBSTACLES = [
     Obstacle("ball", "sphere", (0.1,), (0.0, 2.0, 0.3), mocap=True),
 ]
 MOTION_JOINTS = {
-    "g1": dict(hip="hip_pitch_joint", knee="knee_joint", ankle="ankle_pitch_joint", sh_pitch="shoulder_pitch_joint",
-               sh_roll="shoulder_roll_joint", elbow="elbow_joint", waist="waist_yaw_joint"),
-    "h1": dict(hip="hip_pitch", knee="knee", ankle="ankle", sh_pitch="shoulder_pitch", sh_roll="shoulder_roll",
-               elbow="elbow", waist="torso"),
+    "g1": dict(
+        hip="hip_pitch_joint",
+        knee="knee_joint",
+        ankle="ankle_pitch_joint",
+        sh_pitch="shoulder_pitch_joint",
+        sh_roll="shoulder_roll_joint",
+        elbow="elbow_joint",
+        waist="waist_yaw_joint",
+    ),
+    "h1": dict(
+        hip="hip_pitch",
+        knee="knee",
+        ankle="ankle",
+        sh_pitch="shoulder_pitch",
+        sh_roll="shoulder_roll",
+        elbow="elbow",
+        waist="torso",
+    ),
 }
 
 
@@ -68,7 +82,7 @@ def motion(world, robot: str, frames: int, heavy: bool) -> np.ndarray:
         q[:, adr(f"{side}_{names['knee']}")] += 1.2 * squat
         q[:, adr(f"{side}_{names['ankle']}")] += -0.6 * squat
         q[:, adr(f"{side}_{names['sh_pitch']}")] += -0.8 * np.sin(2 * np.pi * t / 3.0 + sign)
-        roll = (0.5 - 0.5 * np.cos(2 * np.pi * t / 5.0))
+        roll = 0.5 - 0.5 * np.cos(2 * np.pi * t / 5.0)
         q[:, adr(f"{side}_{names['sh_roll']}")] += sign * (-1.2 if heavy else 0.4) * roll
         q[:, adr(f"{side}_{names['elbow']}")] += 0.3 * np.sin(2 * np.pi * t / 2.0)
     q[:, adr(names["waist"])] += 0.3 * np.sin(2 * np.pi * t / 6.0)
@@ -91,8 +105,15 @@ def _keep_feet_down(world, q: np.ndarray, q0: np.ndarray) -> np.ndarray:
     def lowest(pose: np.ndarray) -> float:
         d.qpos[:] = pose
         mujoco.mj_kinematics(m, d)
-        h = support_heights(m, feet, d.geom_xpos[feet][None], d.geom_xmat[feet][None], np.zeros((1, 3)), up,
-                            world.hull_vertices)
+        h = support_heights(
+            m,
+            feet,
+            d.geom_xpos[feet][None],
+            d.geom_xmat[feet][None],
+            np.zeros((1, 3)),
+            up,
+            world.hull_vertices,
+        )
         return float(np.nanmin(h))
 
     target = lowest(q0)
@@ -116,7 +137,9 @@ def run(fn, repeat: int) -> tuple[float, float, dict, dict]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--frames", type=int, default=3000, help="trajectory length at 50 fps (default 3000 = 60 s)")
+    parser.add_argument(
+        "--frames", type=int, default=3000, help="trajectory length at 50 fps (default 3000 = 60 s)"
+    )
     parser.add_argument("--repeat", type=int, default=3, help="timed repetitions, best kept (default 3)")
     args = parser.parse_args()
     load = os.getloadavg()[0]
@@ -143,31 +166,51 @@ def main() -> int:
                 check_trajectory(world, q[:10], FPS, config)  # warm-up: builds the collision copies once
                 if not heavy:
                     setup += time.perf_counter() - start
-                wall, cpu, _, _ = run(lambda c=config, w=world, q=q: check_trajectory(w, q, FPS, c), args.repeat)
+                wall, cpu, _, _ = run(
+                    lambda c=config, w=world, q=q: check_trajectory(w, q, FPS, c), args.repeat
+                )
                 rows.append((robot, f"kinematic, {label}, self: {mode}", n, wall, cpu))
             full = CheckConfig()
             check_trajectory(world, q[:10], FPS, full)
-            _, _, stage, stage_cpu = run(lambda w=world, q=q, c=full: check_trajectory(w, q, FPS, c), args.repeat)
+            _, _, stage, stage_cpu = run(
+                lambda w=world, q=q, c=full: check_trajectory(w, q, FPS, c), args.repeat
+            )
             rows.append((robot, f"dynamic, {label}", n, stage["dynamics_s"], stage_cpu["dynamics_s"]))
             report = check_trajectory(world, q, FPS, full)
-            print(f"# {robot} {label}: {len(report.failures)} failures "
-                  f"({', '.join(sorted({f.kind for f in report.failures})) or 'none'})", file=sys.stderr)
+            print(
+                f"# {robot} {label}: {len(report.failures)} failures "
+                f"({', '.join(sorted({f.kind for f in report.failures})) or 'none'})",
+                file=sys.stderr,
+            )
         short = q[: min(n, 500)]
         tracking = CheckConfig(dynamics=False, tracking=True)
         _, _, stage, stage_cpu = run(lambda w=world, q=short, c=tracking: check_trajectory(w, q, FPS, c), 1)
-        rows.append((robot, "PD-tracking replay (mj_step)", short.shape[0], stage["tracking_s"],
-                     stage_cpu["tracking_s"]))
+        rows.append(
+            (
+                robot,
+                "PD-tracking replay (mj_step)",
+                short.shape[0],
+                stage["tracking_s"],
+                stage_cpu["tracking_s"],
+            )
+        )
         print(f"# {robot}: world setup incl. collision copies {setup:.2f} s", file=sys.stderr)
 
-    print(f"machine: {platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}, "
-          f"MuJoCo {__import__('mujoco').__version__}; load average at start {load:.1f}; "
-          f"trajectory {args.frames} frames at {FPS:g} fps")
-    print(f"| {'robot':5} | {'check':40} | {'frames':>6} | {'wall s':>7} | {'frames/s':>8} | "
-          f"{'CPU s':>7} | {'frames/CPU-s':>12} |")
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}, "
+        f"MuJoCo {__import__('mujoco').__version__}; load average at start {load:.1f}; "
+        f"trajectory {args.frames} frames at {FPS:g} fps"
+    )
+    print(
+        f"| {'robot':5} | {'check':40} | {'frames':>6} | {'wall s':>7} | {'frames/s':>8} | "
+        f"{'CPU s':>7} | {'frames/CPU-s':>12} |"
+    )
     print(f"|{'-' * 7}|{'-' * 42}|{'-' * 8}|{'-' * 9}|{'-' * 10}|{'-' * 9}|{'-' * 14}|")
     for robot, what, n, wall, cpu in rows:
-        print(f"| {robot:5} | {what:40} | {n:6d} | {wall:7.3f} | {n / wall:8.0f} | {cpu:7.3f} | "
-              f"{n / max(cpu, 1e-9):12.0f} |")
+        print(
+            f"| {robot:5} | {what:40} | {n:6d} | {wall:7.3f} | {n / wall:8.0f} | {cpu:7.3f} | "
+            f"{n / max(cpu, 1e-9):12.0f} |"
+        )
     return 0
 
 

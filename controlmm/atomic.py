@@ -38,8 +38,11 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     path = Path(path)
     _check_parent(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f"{path.suffix}.tmp{path.suffix}",
-                               dir=path.parent if str(path.parent) else ".")
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.stem}.",
+        suffix=f"{path.suffix}.tmp{path.suffix}",
+        dir=path.parent if str(path.parent) else ".",
+    )
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())
@@ -77,8 +80,9 @@ def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
 
     path = Path(path)
     _check_parent(path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp",
-                                dir=path.parent if str(path.parent) else "."))
+    tmp = Path(
+        tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+    )
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp

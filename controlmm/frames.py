@@ -86,6 +86,8 @@ class HumanToWorld:
         rot = self.rotation
         trans = np.asarray(self.translation)
         if isinstance(like, torch.Tensor):
-            return (torch.as_tensor(rot, dtype=like.dtype, device=like.device),
-                    torch.as_tensor(trans, dtype=like.dtype, device=like.device))
+            return (
+                torch.as_tensor(rot, dtype=like.dtype, device=like.device),
+                torch.as_tensor(trans, dtype=like.dtype, device=like.device),
+            )
         return rot, trans

@@ -24,8 +24,16 @@ def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> i
     count = 0
     with atomic_path(path) as tmp:
         if suffix == ".mp4":
-            writer = imageio.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-                                        quality=7, macro_block_size=8, pixelformat="yuv420p")
+            writer = imageio.get_writer(
+                tmp,
+                format="FFMPEG",
+                mode="I",
+                fps=fps,
+                codec="libx264",
+                quality=7,
+                macro_block_size=8,
+                pixelformat="yuv420p",
+            )
         else:
             writer = imageio.get_writer(tmp, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
         try:

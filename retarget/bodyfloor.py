@@ -42,7 +42,7 @@ def fibonacci_sphere(n: int) -> np.ndarray:
     i = np.arange(n) + 0.5
     z = 1 - 2 * i / n
     r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * i
+    phi = np.pi * (1 + 5**0.5) * i
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 

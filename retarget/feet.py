@@ -23,8 +23,14 @@ PIN_L_ROT = 0.05
 """Metres per radian of foot orientation error when pinning (position first)."""
 
 
-def pin_stance_feet(robot: RobotModel, targets: Targets, root_pos: np.ndarray, root_rot: np.ndarray,
-                    q: np.ndarray, iterations: int = 2) -> np.ndarray:
+def pin_stance_feet(
+    robot: RobotModel,
+    targets: Targets,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    q: np.ndarray,
+    iterations: int = 2,
+) -> np.ndarray:
     """Joint angles (T, nj) with stance feet moved onto their locked targets."""
     tree = robot.tree
     q = q.copy()
@@ -95,8 +101,14 @@ SKIM_SPEED = 0.1
 """Horizontal speed (m/s) of a foot's sole points above which it counts as moving."""
 
 
-def lift_swing_feet(robot: RobotModel, root_pos: np.ndarray, root_rot: np.ndarray, q: np.ndarray,
-                    clearance: dict[str, np.ndarray], fps: float) -> tuple[np.ndarray, float]:
+def lift_swing_feet(
+    robot: RobotModel,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    q: np.ndarray,
+    clearance: dict[str, np.ndarray],
+    fps: float,
+) -> tuple[np.ndarray, float]:
     """Joint angles (T, nj) with moving feet kept off the floor at the output rate.
 
     The solver keeps a swing foot ``clearance`` high at the motion's frames; between them the
@@ -131,7 +143,11 @@ def lift_swing_feet(robot: RobotModel, root_pos: np.ndarray, root_rot: np.ndarra
         lo, hi = robot.lower[leg], robot.upper[leg]
         h, _ = _lowest(poses, f)
         pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
-        step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps if t_len > 1 else np.zeros(0)
+        step = (
+            np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps
+            if t_len > 1
+            else np.zeros(0)
+        )
         moving = np.zeros(t_len, dtype=bool)
         moving[1:] |= step > SKIM_SPEED
         moving[:-1] |= step > SKIM_SPEED

@@ -35,11 +35,14 @@ def quat_to_mat(quat: np.ndarray) -> np.ndarray:
     q = np.asarray(quat, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -56,11 +59,14 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrices (..., 3, 3) of vectors (..., 3)."""
     z = np.zeros_like(v[..., 0])
-    return np.stack([
-        np.stack([z, -v[..., 2], v[..., 1]], -1),
-        np.stack([v[..., 2], z, -v[..., 0]], -1),
-        np.stack([-v[..., 1], v[..., 0], z], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], -1),
+            np.stack([v[..., 2], z, -v[..., 0]], -1),
+            np.stack([-v[..., 1], v[..., 0], z], -1),
+        ],
+        -2,
+    )
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
@@ -122,11 +128,14 @@ class KinematicTree:
         self.model = model
         free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
         if len(free) != 1:
-            raise ControlMMError(f"a retargeting robot needs exactly one free joint (floating base); "
-                                 f"the model has {len(free)}")
+            raise ControlMMError(
+                f"a retargeting robot needs exactly one free joint (floating base); the model has {len(free)}"
+            )
         self.root_body = int(model.jnt_bodyid[free[0]])
         if model.body_parentid[self.root_body] != 0 or model.jnt_qposadr[free[0]] != 0:
-            raise ControlMMError("the free joint must be the first joint and sit on a child of the world body")
+            raise ControlMMError(
+                "the free joint must be the first joint and sit on a child of the world body"
+            )
         # Nodes: one per (body, joint) plus one per joint-less body; node 0 is the root body.
         node_parent, node_fpos, node_fquat, node_joint, node_body = [], [], [], [], []
         body_last_node = {self.root_body: 0}
@@ -151,8 +160,10 @@ class KinematicTree:
             for k, j in enumerate(joints):
                 if j >= 0 and int(model.jnt_type[j]) not in (_HINGE, _SLIDE):
                     kind = mujoco.mjtJoint(model.jnt_type[j]).name
-                    raise ControlMMError(f"joint '{model.joint(j).name}' is a {kind} joint; the retargeter "
-                                         "supports hinge and slide joints below the floating base")
+                    raise ControlMMError(
+                        f"joint '{model.joint(j).name}' is a {kind} joint; the retargeter "
+                        "supports hinge and slide joints below the floating base"
+                    )
                 node_parent.append(prev)
                 node_fpos.append(model.body_pos[b].copy() if k == 0 else np.zeros(3))
                 node_fquat.append(model.body_quat[b].copy() if k == 0 else np.array([1.0, 0, 0, 0]))
@@ -170,8 +181,10 @@ class KinematicTree:
         self.nj = len(hinge_ids)
         self.nv = 6 + self.nj
         if model.nq != 7 + self.nj:
-            raise ControlMMError(f"the robot's qpos has {model.nq} entries; expected 7 + {self.nj} "
-                                 "(free joint + hinge/slide joints)")
+            raise ControlMMError(
+                f"the robot's qpos has {model.nq} entries; expected 7 + {self.nj} "
+                "(free joint + hinge/slide joints)"
+            )
         self.node_parent = np.array(node_parent)
         self.node_joint = np.array(node_joint)
         self.node_body = np.array(node_body)
@@ -205,7 +218,9 @@ class KinematicTree:
         self._any_jpos = bool(np.any(self.jnt_pos != 0))
         self._any_slide = bool(np.any(self.is_slide))
         self._level_pairs = [(idx, self.node_parent[idx]) for idx in self.levels]
-        self._joint_node = np.array([int(np.flatnonzero(self.node_joint == j)[0]) for j in range(self.nj)], dtype=int)
+        self._joint_node = np.array(
+            [int(np.flatnonzero(self.node_joint == j)[0]) for j in range(self.nj)], dtype=int
+        )
         # ancestor[node, joint]: the joint moves the node.
         anc = np.zeros((n, self.nj), dtype=bool)
         for i in range(1, n):
@@ -261,15 +276,21 @@ class KinematicTree:
             anchor = pos[jp] + np.einsum("jtab,jb->jta", rot[jp], self._fixed_jpos[jn])
         else:
             anchor = pos[jn]  # no joint offset, no slide: the anchor is the node's origin
-        return Poses(rot=rot.transpose(1, 0, 2, 3), pos=pos.transpose(1, 0, 2), axis=axis.transpose(1, 0, 2),
-                     anchor=anchor.transpose(1, 0, 2), root_pos=np.asarray(root_pos))
+        return Poses(
+            rot=rot.transpose(1, 0, 2, 3),
+            pos=pos.transpose(1, 0, 2),
+            axis=axis.transpose(1, 0, 2),
+            anchor=anchor.transpose(1, 0, 2),
+            root_pos=np.asarray(root_pos),
+        )
 
     def points(self, poses: Poses, nodes: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         """World positions (T, K, 3) of points fixed in node frames (offsets (K, 3), metres)."""
         return poses.pos[:, nodes] + np.einsum("tkij,kj->tki", poses.rot[:, nodes], offsets)
 
-    def point_jacobian(self, poses: Poses, nodes: np.ndarray, points: np.ndarray,
-                       rows: tuple[int, ...] = (0, 1, 2)) -> np.ndarray:
+    def point_jacobian(
+        self, poses: Poses, nodes: np.ndarray, points: np.ndarray, rows: tuple[int, ...] = (0, 1, 2)
+    ) -> np.ndarray:
         """d(points)/d(velocity coords): (T, K, len(rows), 6 + nj) for world points (T, K, 3) on ``nodes``.
 
         ``rows`` picks the world axes (x, y, z = 0, 1, 2) to differentiate.
@@ -291,8 +312,9 @@ class KinematicTree:
             jac[:, kk, i, 6 + jj] = col[..., row]
         return jac
 
-    def directional_jacobian(self, poses: Poses, frames: np.ndarray, nodes: np.ndarray, points: np.ndarray,
-                             direction: np.ndarray) -> np.ndarray:
+    def directional_jacobian(
+        self, poses: Poses, frames: np.ndarray, nodes: np.ndarray, points: np.ndarray, direction: np.ndarray
+    ) -> np.ndarray:
         """d(direction . point)/d(velocity coords), (E, 6 + nj), for E scattered entries.
 
         Entry e is the world point ``points[e]`` (3,) fixed on node ``nodes[e]`` at frame

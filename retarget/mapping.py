@@ -48,20 +48,38 @@ REQUIRED_JOINTS = ("pelvis", "left_ankle", "right_ankle")
 DEFAULT_WEIGHTS: dict[str, tuple[float, float, float]] = {
     # joint: (position_weight, segment_weight, orientation_weight)
     "pelvis": (3.0, 0.0, 2.0),
-    "left_hip": (0.3, 1.0, 0.0), "right_hip": (0.3, 1.0, 0.0),
-    "left_knee": (1.0, 2.0, 0.0), "right_knee": (1.0, 2.0, 0.0),
-    "left_ankle": (3.0, 2.0, 1.0), "right_ankle": (3.0, 2.0, 1.0),
-    "left_foot": (2.0, 1.0, 0.0), "right_foot": (2.0, 1.0, 0.0),
-    "spine3": (0.5, 1.0, 1.0), "head": (0.3, 0.5, 0.0),
-    "left_shoulder": (0.5, 1.0, 0.0), "right_shoulder": (0.5, 1.0, 0.0),
-    "left_elbow": (1.0, 2.0, 0.0), "right_elbow": (1.0, 2.0, 0.0),
-    "left_wrist": (1.5, 2.0, 0.0), "right_wrist": (1.5, 2.0, 0.0),
+    "left_hip": (0.3, 1.0, 0.0),
+    "right_hip": (0.3, 1.0, 0.0),
+    "left_knee": (1.0, 2.0, 0.0),
+    "right_knee": (1.0, 2.0, 0.0),
+    "left_ankle": (3.0, 2.0, 1.0),
+    "right_ankle": (3.0, 2.0, 1.0),
+    "left_foot": (2.0, 1.0, 0.0),
+    "right_foot": (2.0, 1.0, 0.0),
+    "spine3": (0.5, 1.0, 1.0),
+    "head": (0.3, 0.5, 0.0),
+    "left_shoulder": (0.5, 1.0, 0.0),
+    "right_shoulder": (0.5, 1.0, 0.0),
+    "left_elbow": (1.0, 2.0, 0.0),
+    "right_elbow": (1.0, 2.0, 0.0),
+    "left_wrist": (1.5, 2.0, 0.0),
+    "right_wrist": (1.5, 2.0, 0.0),
 }
 """Weights used when a keypoint entry leaves them out (unlisted joints: 0.5, 1.0, 0.0)."""
 
 _KEYPOINT_FIELDS = {"body", "site", "offset", "position_weight", "segment_weight", "orientation_weight"}
-_TOP_FIELDS = {"format", "description", "robot", "scale", "keypoints", "posture_weights", "ranges", "arm_abduction",
-               "body_joints", "solver"}
+_TOP_FIELDS = {
+    "format",
+    "description",
+    "robot",
+    "scale",
+    "keypoints",
+    "posture_weights",
+    "ranges",
+    "arm_abduction",
+    "body_joints",
+    "solver",
+}
 
 
 @dataclass(frozen=True)
@@ -137,27 +155,37 @@ def _number(value, what: str, minimum: float = 0.0) -> float:
 
 def _parse_keypoint(joint: str, spec: dict, where: str) -> Keypoint:
     if joint not in JOINT_NAMES:
-        raise ControlMMError(f"{where}: unknown human joint '{joint}'; valid joints: {', '.join(JOINT_NAMES)}")
+        raise ControlMMError(
+            f"{where}: unknown human joint '{joint}'; valid joints: {', '.join(JOINT_NAMES)}"
+        )
     if not isinstance(spec, dict):
         raise ControlMMError(f"{where}: keypoint '{joint}' must be an object with 'body' or 'site'")
     extra = set(spec) - _KEYPOINT_FIELDS
     if extra:
-        raise ControlMMError(f"{where}: keypoint '{joint}' has unknown field(s) {sorted(extra)}; "
-                             f"allowed: {sorted(_KEYPOINT_FIELDS)}")
+        raise ControlMMError(
+            f"{where}: keypoint '{joint}' has unknown field(s) {sorted(extra)}; "
+            f"allowed: {sorted(_KEYPOINT_FIELDS)}"
+        )
     if ("body" in spec) == ("site" in spec):
         raise ControlMMError(f"{where}: keypoint '{joint}' needs exactly one of 'body' or 'site'")
     offset = spec.get("offset", [0.0, 0.0, 0.0])
     if not (isinstance(offset, (list, tuple)) and len(offset) == 3):
-        raise ControlMMError(f"{where}: keypoint '{joint}' offset must be [x, y, z] in metres; got {offset!r}")
+        raise ControlMMError(
+            f"{where}: keypoint '{joint}' offset must be [x, y, z] in metres; got {offset!r}"
+        )
     offset = tuple(_number(v, f"{where}: offset of '{joint}'", minimum=-10.0) for v in offset)
     pw, sw, ow = DEFAULT_WEIGHTS.get(joint, (0.5, 1.0, 0.0))
     pw = _number(spec.get("position_weight", pw), f"{where}: position_weight of '{joint}'")
     sw = _number(spec.get("segment_weight", sw), f"{where}: segment_weight of '{joint}'")
-    ow = _number(spec.get("orientation_weight", ow if joint in ORIENTED_JOINTS else 0.0),
-                 f"{where}: orientation_weight of '{joint}'")
+    ow = _number(
+        spec.get("orientation_weight", ow if joint in ORIENTED_JOINTS else 0.0),
+        f"{where}: orientation_weight of '{joint}'",
+    )
     if ow > 0 and joint not in ORIENTED_JOINTS:
-        raise ControlMMError(f"{where}: the human motion gives no orientation for '{joint}'; "
-                             f"orientation_weight is allowed for: {', '.join(ORIENTED_JOINTS)}")
+        raise ControlMMError(
+            f"{where}: the human motion gives no orientation for '{joint}'; "
+            f"orientation_weight is allowed for: {', '.join(ORIENTED_JOINTS)}"
+        )
     body, site = spec.get("body"), spec.get("site")
     for name, val in (("body", body), ("site", site)):
         if val is not None and (not isinstance(val, str) or not val):
@@ -194,8 +222,9 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
     keypoints = [_parse_keypoint(j, s, source) for j, s in kps.items()]
     missing = [j for j in REQUIRED_JOINTS if j not in kps]
     if missing:
-        raise ControlMMError(f"{source}: the mapping must map {', '.join(missing)} (required: "
-                             f"{', '.join(REQUIRED_JOINTS)})")
+        raise ControlMMError(
+            f"{source}: the mapping must map {', '.join(missing)} (required: {', '.join(REQUIRED_JOINTS)})"
+        )
     keypoints.sort(key=lambda k: JOINT_NAMES.index(k.joint))
     posture = data.get("posture_weights", {})
     if not isinstance(posture, dict):
@@ -227,14 +256,25 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
             raise ControlMMError(f"{source}: body_joints['{body}'] must be a list of human joint names")
         for j in joints:
             if j not in JOINT_NAMES:
-                raise ControlMMError(f"{source}: body_joints['{body}'] names unknown human joint '{j}'; "
-                                     f"valid joints: {', '.join(JOINT_NAMES)}")
+                raise ControlMMError(
+                    f"{source}: body_joints['{body}'] names unknown human joint '{j}'; "
+                    f"valid joints: {', '.join(JOINT_NAMES)}"
+                )
         body_joints[str(body)] = tuple(joints)
     solver = _parse_solver(data.get("solver", {}), source)
     name = robot if not robot.endswith(".xml") else Path(robot).stem
-    return Mapping(robot=robot, keypoints=tuple(keypoints), scale=scale, posture_weights=posture, ranges=ranges,
-                   arm_abduction=arm_abduction,
-                   body_joints=body_joints, solver=solver, source=source, name=name)
+    return Mapping(
+        robot=robot,
+        keypoints=tuple(keypoints),
+        scale=scale,
+        posture_weights=posture,
+        ranges=ranges,
+        arm_abduction=arm_abduction,
+        body_joints=body_joints,
+        solver=solver,
+        source=source,
+        name=name,
+    )
 
 
 def _parse_solver(spec, source: str) -> dict:
@@ -249,14 +289,20 @@ def _parse_solver(spec, source: str) -> dict:
     out: dict = {}
     for key, value in spec.items():
         if key not in allowed:
-            raise ControlMMError(f"{source}: unknown solver setting '{key}'; allowed: {', '.join(sorted(allowed))}")
+            raise ControlMMError(
+                f"{source}: unknown solver setting '{key}'; allowed: {', '.join(sorted(allowed))}"
+            )
         if key == "levels":
             try:
                 levels = tuple((int(k), int(n)) for k, n in value)
             except (TypeError, ValueError):
-                raise ControlMMError(f"{source}: solver levels must be [[every_kth_frame, iterations], ...]") from None
+                raise ControlMMError(
+                    f"{source}: solver levels must be [[every_kth_frame, iterations], ...]"
+                ) from None
             if not levels or any(k < 1 or n < 1 for k, n in levels) or levels[-1][0] != 1:
-                raise ControlMMError(f"{source}: solver levels must be positive and end with every frame ([1, n])")
+                raise ControlMMError(
+                    f"{source}: solver levels must be positive and end with every frame ([1, n])"
+                )
             out[key] = levels
         elif key == "exact_acceleration":
             out[key] = bool(value)
@@ -280,8 +326,10 @@ def load_mapping(name_or_path: str | Path) -> Mapping:
             hint = ""
             if key in PACKAGED_ROBOTS:
                 hint = f" (robot '{key}' is packaged but has no shipped mapping; pass a mapping file)"
-            raise ControlMMError(f"unknown robot '{text}'{hint}; known robots: {', '.join(known)}; "
-                                 "or pass a mapping .json file")
+            raise ControlMMError(
+                f"unknown robot '{text}'{hint}; known robots: {', '.join(known)}; "
+                "or pass a mapping .json file"
+            )
         source = f"packaged:{key}"
     else:
         path = Path(text).expanduser()
@@ -291,5 +339,7 @@ def load_mapping(name_or_path: str | Path) -> Mapping:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
-        raise InputFileError(f"mapping file '{path}' is not valid JSON: {exc.msg} (line {exc.lineno})") from None
+        raise InputFileError(
+            f"mapping file '{path}' is not valid JSON: {exc.msg} (line {exc.lineno})"
+        ) from None
     return parse_mapping(data, source=source, base_dir=path.parent)

@@ -24,7 +24,6 @@ import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull
 
-
 KEYPOINT_GROUPS: dict[str, tuple[str, ...]] = {
     "feet": ("left_ankle", "right_ankle", "left_foot", "right_foot"),
     "hands": ("left_wrist", "right_wrist"),
@@ -109,7 +108,9 @@ def geom_lowest_z(model: mujoco.MjModel, rep: Replay, geoms: list[int] | tuple[i
             low = z - np.sqrt(((r2 * size[:3]) ** 2).sum(axis=1))
         elif kind == int(t.mjGEOM_MESH):
             mid = model.geom_dataid[g]
-            verts = model.mesh_vert[model.mesh_vertadr[mid]: model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
+            verts = model.mesh_vert[
+                model.mesh_vertadr[mid] : model.mesh_vertadr[mid] + model.mesh_vertnum[mid]
+            ]
             low = z + (r2 @ hull_vertices(verts).T).min(axis=1)
         else:
             low = np.full(len(z), np.inf)
@@ -123,8 +124,14 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2], edges[1::2]))
 
 
-def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndarray | None = None,
-                       human_fps: float | None = None, rep: Replay | None = None) -> dict:
+def trajectory_metrics(
+    robot,
+    qpos: np.ndarray,
+    fps: float,
+    human_world: np.ndarray | None = None,
+    human_fps: float | None = None,
+    rep: Replay | None = None,
+) -> dict:
     """Quality figures of ``qpos`` (T, nq) at ``fps`` for a :class:`retarget.robot_model.RobotModel`.
 
     ``human_world``: the scaled human (T_h, 22, 3) in the world at ``human_fps``; keypoint
@@ -150,7 +157,10 @@ def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndar
             idx = [robot.keypoint_names.index(j) for j in joints if j in robot.keypoint_names]
             if idx:
                 e = err[:, idx]
-                out["keypoint_error_mm"][name] = {"mean": round(float(e.mean()), 1), "max": round(float(e.max()), 1)}
+                out["keypoint_error_mm"][name] = {
+                    "mean": round(float(e.mean()), 1),
+                    "max": round(float(e.max()), 1),
+                }
     # Joint limits (exact comparison with the model's ranges).
     tree = robot.tree
     q = qpos[:, 7:]
@@ -179,7 +189,7 @@ def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndar
             worst = 0.0  # each geom, from where it touched down, while it stays down
             for i, g in enumerate(f.geoms):
                 for a, b in _runs(down[s:e, i]):
-                    p = rep.geom_xpos[s + a:s + b + 1, g, :2]
+                    p = rep.geom_xpos[s + a : s + b + 1, g, :2]
                     worst = max(worst, float(np.linalg.norm(p - p[0], axis=1).max()))
             drift.append(worst * 1000.0)
             path.append(float(body_step[s:e].sum()))
@@ -187,7 +197,10 @@ def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndar
     out["stances"] = len(drift)
 
     def stat(v: list[float]) -> dict:
-        return {"mean": round(float(np.mean(v)), 2) if v else 0.0, "max": round(float(np.max(v)), 2) if v else 0.0}
+        return {
+            "mean": round(float(np.mean(v)), 2) if v else 0.0,
+            "max": round(float(np.max(v)), 2) if v else 0.0,
+        }
 
     out["foot_sliding_mm_per_stance"] = stat(drift)
     out["foot_path_mm_per_stance"] = stat(path)
@@ -195,9 +208,9 @@ def trajectory_metrics(robot, qpos: np.ndarray, fps: float, human_world: np.ndar
     # Smoothness.
     if len(q) > 3:
         vel = np.diff(q, axis=0) * fps
-        jerk = np.diff(q, n=3, axis=0) * fps ** 3
-        root_jerk = np.diff(qpos[:, :3], n=3, axis=0) * fps ** 3
+        jerk = np.diff(q, n=3, axis=0) * fps**3
+        root_jerk = np.diff(qpos[:, :3], n=3, axis=0) * fps**3
         out["joint_velocity_max_rad_s"] = round(float(np.abs(vel).max()), 3)
-        out["joint_jerk_rms_rad_s3"] = round(float(np.sqrt(np.mean(jerk ** 2))), 2)
-        out["root_jerk_rms_m_s3"] = round(float(np.sqrt(np.mean(root_jerk ** 2))), 3)
+        out["joint_jerk_rms_rad_s3"] = round(float(np.sqrt(np.mean(jerk**2))), 2)
+        out["root_jerk_rms_m_s3"] = round(float(np.sqrt(np.mean(root_jerk**2))), 3)
     return out

@@ -27,8 +27,9 @@ def _mink():
     try:
         import mink  # noqa: F401
     except ImportError:
-        raise ControlMMError("the mink solver needs the packages 'mink' and 'daqp' "
-                             "(pip install -e \".[bench]\")") from None
+        raise ControlMMError(
+            "the mink solver needs the packages 'mink' and 'daqp' (pip install -e \".[bench]\")"
+        ) from None
     return mink
 
 
@@ -41,8 +42,14 @@ def _model_with_sites(robot: RobotModel) -> mujoco.MjModel:
     return spec.compile()
 
 
-def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, tolerance: float = 1e-4,
-               damping: float = 1e-3, solver: str = "daqp") -> Solution:
+def solve_mink(
+    robot: RobotModel,
+    targets: Targets,
+    max_iterations: int = 10,
+    tolerance: float = 1e-4,
+    damping: float = 1e-3,
+    solver: str = "daqp",
+) -> Solution:
     """Per-frame mink IK on ``targets``; returns a :class:`Solution` like the batched solver."""
     mink = _mink()
     start = time.perf_counter()
@@ -50,11 +57,15 @@ def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, to
     config = mink.Configuration(model)
     tasks, frame_tasks = [], []
     for k, kp in enumerate(robot.mapping.keypoints):
-        task = mink.FrameTask(f"kp_{kp.joint}", "site", position_cost=1.0, orientation_cost=0.0, lm_damping=1.0)
+        task = mink.FrameTask(
+            f"kp_{kp.joint}", "site", position_cost=1.0, orientation_cost=0.0, lm_damping=1.0
+        )
         frame_tasks.append(task)
         tasks.append(task)
     ori_of = {int(k): i for i, k in enumerate(targets.ori_kp)}
-    posture = mink.PostureTask(model, cost=np.concatenate([np.zeros(6), np.sqrt(robot.posture_weights) * L_POSTURE]))
+    posture = mink.PostureTask(
+        model, cost=np.concatenate([np.zeros(6), np.sqrt(robot.posture_weights) * L_POSTURE])
+    )
     rest = np.concatenate([np.zeros(3), [1.0, 0, 0, 0], robot.rest_q])
     posture.set_target(rest)
     tasks.append(posture)
@@ -77,7 +88,9 @@ def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, to
                 ocost = L_ROT * np.sqrt(targets.ori_weight[t, o] * targets.ori_axis_weight[o])
             task.set_position_cost(np.sqrt(w))
             task.set_orientation_cost(ocost)
-            task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), targets.kp_pos[t, k]))
+            task.set_target(
+                mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), targets.kp_pos[t, k])
+            )
         for _ in range(max_iterations):
             vel = mink.solve_ik(config, tasks, dt=1.0, solver=solver, damping=damping, limits=limits)
             config.integrate_inplace(vel, 1.0)
@@ -91,5 +104,11 @@ def solve_mink(robot: RobotModel, targets: Targets, max_iterations: int = 10, to
         m9 = np.empty(9)
         mujoco.mju_quat2Mat(m9, out_q[t, 3:7] / np.linalg.norm(out_q[t, 3:7]))
         rot[t] = m9.reshape(3, 3)
-    return Solution(root_pos=out_q[:, 0:3].copy(), root_rot=rot, q=joints, iterations=solves, cost=float("nan"),
-                    seconds=time.perf_counter() - start)
+    return Solution(
+        root_pos=out_q[:, 0:3].copy(),
+        root_rot=rot,
+        q=joints,
+        iterations=solves,
+        cost=float("nan"),
+        seconds=time.perf_counter() - start,
+    )

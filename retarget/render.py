@@ -33,11 +33,18 @@ def _scene_model(traj) -> mujoco.MjModel:
     else:
         spec = mujoco.MjSpec.from_file(str(robot.mjcf))
         spec.worldbody.add_light(pos=[0, 0, 3.0], dir=[0, 0, -1], directional=True)
-        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.6, 0.65, 0.7, 1],
-                                contype=0, conaffinity=0)
+        spec.worldbody.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[0, 0, 0.05],
+            rgba=[0.6, 0.65, 0.7, 1],
+            contype=0,
+            conaffinity=0,
+        )
         model = spec.compile()
     if model.nq != traj.qpos.shape[1]:
-        raise ControlMMError(f"the render scene has nq={model.nq} but the trajectory has {traj.qpos.shape[1]}")
+        raise ControlMMError(
+            f"the render scene has nq={model.nq} but the trajectory has {traj.qpos.shape[1]}"
+        )
     return model
 
 
@@ -46,15 +53,19 @@ def _frame_indices(traj, fps: float) -> np.ndarray:
     return np.clip(np.rint(np.arange(count) / fps * traj.fps).astype(int), 0, traj.num_frames - 1)
 
 
-def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0, scene=None) -> Iterator[np.ndarray]:
+def mujoco_frames(
+    traj, width: int = 640, height: int = 480, fps: float = 25.0, scene=None
+) -> Iterator[np.ndarray]:
     """RGB frames (H, W, 3) from MuJoCo's offscreen renderer, a camera following the root.
 
     ``scene``: a ``scenes.Scene`` with this robot attached (same qpos layout) to render the robot
     among its obstacles, moving ones at each frame's time; default: the robot's own floor scene.
     """
     if scene is not None and scene.model.nq != traj.qpos.shape[1]:
-        raise ControlMMError(f"scene '{scene.name}' has nq={scene.model.nq} but the trajectory has "
-                             f"{traj.qpos.shape[1]}; load the scene with the trajectory's robot")
+        raise ControlMMError(
+            f"scene '{scene.name}' has nq={scene.model.nq} but the trajectory has "
+            f"{traj.qpos.shape[1]}; load the scene with the trajectory's robot"
+        )
     model = _scene_model(traj) if scene is None else scene.model
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
     model.vis.global_.offheight = max(model.vis.global_.offheight, height)
@@ -69,7 +80,9 @@ def mujoco_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0, 
     root = traj.qpos[idx, 0:3]
     # A smoothed look-at point so that the camera does not shake with the pelvis.
     kernel = np.ones(9) / 9
-    look = np.stack([np.convolve(np.pad(root[:, c], 4, mode="edge"), kernel, mode="valid") for c in range(3)], 1)
+    look = np.stack(
+        [np.convolve(np.pad(root[:, c], 4, mode="edge"), kernel, mode="valid") for c in range(3)], 1
+    )
     try:
         for i, t in enumerate(idx):
             data.qpos[:] = traj.qpos[t]
@@ -127,8 +140,16 @@ def stick_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) -
         plt.close(fig)
 
 
-def render_trajectory(traj, path: str | Path, width: int = 640, height: int = 480, fps: float = 25.0,
-                      backend: str = "auto", progress: bool = True, scene=None) -> str:
+def render_trajectory(
+    traj,
+    path: str | Path,
+    width: int = 640,
+    height: int = 480,
+    fps: float = 25.0,
+    backend: str = "auto",
+    progress: bool = True,
+    scene=None,
+) -> str:
     """Write a video of ``traj`` to ``path`` (.mp4 or .gif); returns the backend used.
 
     ``backend``: ``"mujoco"``, ``"stick"`` or ``"auto"`` (MuJoCo, falling back to the stick
@@ -137,7 +158,11 @@ def render_trajectory(traj, path: str | Path, width: int = 640, height: int = 48
     """
     if backend not in ("auto", "mujoco", "stick"):
         raise ControlMMError(f"unknown render backend '{backend}'; allowed: auto, mujoco, stick")
-    for name, value, lo, hi in (("width", width, 16, 3840), ("height", height, 16, 2160), ("render fps", fps, 1, 120)):
+    for name, value, lo, hi in (
+        ("width", width, 16, 3840),
+        ("height", height, 16, 2160),
+        ("render fps", fps, 1, 120),
+    ):
         if not (lo <= value <= hi):
             raise ControlMMError(f"{name} {value} is out of range; allowed {lo} to {hi}")
     count = len(_frame_indices(traj, fps))
@@ -150,15 +175,22 @@ def render_trajectory(traj, path: str | Path, width: int = 640, height: int = 48
             reason = " ".join(str(exc).split()) or type(exc).__name__
             if backend == "mujoco":
                 raise ControlMMError(f"MuJoCo rendering failed (MUJOCO_GL={gl}): {reason}") from None
-            print(f"controlmm: MuJoCo rendering unavailable (MUJOCO_GL={gl}: {reason[:160]}); "
-                  "drawing a matplotlib stick figure instead", file=sys.stderr)
+            print(
+                f"controlmm: MuJoCo rendering unavailable (MUJOCO_GL={gl}: {reason[:160]}); "
+                "drawing a matplotlib stick figure instead",
+                file=sys.stderr,
+            )
         else:
+
             def frames() -> Iterator[np.ndarray]:
                 yield first
                 yield from gen
+
             write_video(path, _progress(frames(), count, progress, "render (mujoco)"), fps)
             return "mujoco"
-    write_video(path, _progress(stick_frames(traj, width, height, fps), count, progress, "render (stick)"), fps)
+    write_video(
+        path, _progress(stick_frames(traj, width, height, fps), count, progress, "render (stick)"), fps
+    )
     return "stick"
 
 

@@ -55,8 +55,9 @@ def continuous_quaternions(quat_wxyz: np.ndarray) -> np.ndarray:
     return q
 
 
-def resample_qpos(qpos: np.ndarray, src_fps: float, dst_fps: float,
-                  lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def resample_qpos(
+    qpos: np.ndarray, src_fps: float, dst_fps: float, lower: np.ndarray, upper: np.ndarray
+) -> np.ndarray:
     """Resample a free-base qpos trajectory (T, 7 + nj) from ``src_fps`` to ``dst_fps``.
 
     Root position and joints: cubic splines; root quaternion (wxyz): SLERP; joints clipped

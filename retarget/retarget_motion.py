@@ -103,9 +103,14 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
     # Every other collision geom whose bounding sphere reaches below the floor in some frame
     # (a kneeling knee, a hand on the ground): the solver keeps them BODY_CLEARANCE above it
     # with a stiff but finite weight, and the spline resampling may dip between frames.
-    others = [g for g in range(m.ngeom) if g not in geoms and (m.geom_contype[g] or m.geom_conaffinity[g])
-              and m.body_rootid[m.geom_bodyid[g]] == m.body_rootid[robot.tree.node_body[robot.feet["left"].node]]
-              and np.any(rep.geom_xpos[:, g, 2] - m.geom_rbound[g] < 0.0)]
+    others = [
+        g
+        for g in range(m.ngeom)
+        if g not in geoms
+        and (m.geom_contype[g] or m.geom_conaffinity[g])
+        and m.body_rootid[m.geom_bodyid[g]] == m.body_rootid[robot.tree.node_body[robot.feet["left"].node]]
+        and np.any(rep.geom_xpos[:, g, 2] - m.geom_rbound[g] < 0.0)
+    ]
     need = np.maximum(-geom_lowest_z(m, rep, list(geoms) + others).min(axis=1), 0.0)
     if not np.any(need > 0):
         return qpos, rep, 0.0
@@ -121,9 +126,15 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
     return out, rep, float(lift.max())
 
 
-def retarget_motion(motion: Motion | np.ndarray | str | Path, robot: RobotSpec = "g1", fps: float = 50.0,
-                    transform: HumanToWorld | None = None, config: SolverConfig | None = None,
-                    metrics: bool = True, solver: str = "batched") -> RobotTrajectory:
+def retarget_motion(
+    motion: Motion | np.ndarray | str | Path,
+    robot: RobotSpec = "g1",
+    fps: float = 50.0,
+    transform: HumanToWorld | None = None,
+    config: SolverConfig | None = None,
+    metrics: bool = True,
+    solver: str = "batched",
+) -> RobotTrajectory:
     """Retarget a human motion to a robot.
 
     Args:
@@ -177,16 +188,30 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
-    method = {"batched": "whole-sequence Levenberg-Marquardt (banded)", "mink": "mink per-frame differential IK"}
-    solver_info = {"method": method[solver], "iterations": sol.iterations,
-                   "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
-                   "solve_seconds": round(sol.seconds, 4),
-                   "floor_lift_max_mm": round(lift * 1000, 3),
-                   "swing_lift_max_mm": round(swing_lift * 1000, 3)}
-    traj = RobotTrajectory(robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:")
-                                     else rm.mapping.source),
-                           fps=fps, qpos=qpos, joint_names=list(rm.tree.joint_names), scale=transform.scale,
-                           transform=transform, stance=stance, source=info, solver=solver_info, model=rm)
+    method = {
+        "batched": "whole-sequence Levenberg-Marquardt (banded)",
+        "mink": "mink per-frame differential IK",
+    }
+    solver_info = {
+        "method": method[solver],
+        "iterations": sol.iterations,
+        "cost": round(sol.cost, 6) if np.isfinite(sol.cost) else None,
+        "solve_seconds": round(sol.seconds, 4),
+        "floor_lift_max_mm": round(lift * 1000, 3),
+        "swing_lift_max_mm": round(swing_lift * 1000, 3),
+    }
+    traj = RobotTrajectory(
+        robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:") else rm.mapping.source),
+        fps=fps,
+        qpos=qpos,
+        joint_names=list(rm.tree.joint_names),
+        scale=transform.scale,
+        transform=transform,
+        stance=stance,
+        source=info,
+        solver=solver_info,
+        model=rm,
+    )
     if metrics:
         traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, src_fps, rep=rep)
     traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)

@@ -24,8 +24,9 @@ from retarget.robots import robot_mjcf
 HUMAN_ANKLE_HEIGHT = 0.055
 """Height (m) of the HumanML3D ankle joint above the floor in stance (median of the real clip 012314)."""
 
-HUMAN_HIP_HEIGHT = float((BONE_LENGTHS[4] + BONE_LENGTHS[7] + BONE_LENGTHS[5] + BONE_LENGTHS[8]) / 2
-                         + HUMAN_ANKLE_HEIGHT)
+HUMAN_HIP_HEIGHT = float(
+    (BONE_LENGTHS[4] + BONE_LENGTHS[7] + BONE_LENGTHS[5] + BONE_LENGTHS[8]) / 2 + HUMAN_ANKLE_HEIGHT
+)
 """Hip-joint height (m) of the HumanML3D reference skeleton standing straight (thigh + shank + ankle)."""
 
 HUMAN_PELVIS_HEIGHT = HUMAN_HIP_HEIGHT + 0.084
@@ -70,7 +71,7 @@ def _geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]
         rad = np.zeros(6)
     elif gtype == int(t.mjGEOM_MESH):
         mid = model.geom_dataid[g]
-        verts = model.mesh_vert[model.mesh_vertadr[mid]: model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
+        verts = model.mesh_vert[model.mesh_vertadr[mid] : model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
         try:
             from scipy.spatial import ConvexHull
 
@@ -85,8 +86,11 @@ def _geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]
 
 def collision_geoms(model: mujoco.MjModel, body: int) -> list[int]:
     """Collision geoms (contype or conaffinity set) of a body."""
-    return [g for g in range(model.ngeom)
-            if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])]
+    return [
+        g
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
 
 
 class RobotModel:
@@ -129,14 +133,18 @@ class RobotModel:
         for kp in mapping.keypoints:
             if kp.body is not None:
                 if kp.body not in body_names:
-                    raise ControlMMError(f"{where}: body '{kp.body}' (for '{kp.joint}') is not in {path.name}; "
-                                         f"bodies: {', '.join(n for n in body_names if n and n != 'world')}")
+                    raise ControlMMError(
+                        f"{where}: body '{kp.body}' (for '{kp.joint}') is not in {path.name}; "
+                        f"bodies: {', '.join(n for n in body_names if n and n != 'world')}"
+                    )
                 node = tree.node_of_body(body_names[kp.body])
                 off = np.asarray(kp.offset, dtype=float)
             else:
                 if kp.site not in site_names:
-                    raise ControlMMError(f"{where}: site '{kp.site}' (for '{kp.joint}') is not in {path.name}; "
-                                         f"sites: {', '.join(site_names) or 'none'}")
+                    raise ControlMMError(
+                        f"{where}: site '{kp.site}' (for '{kp.joint}') is not in {path.name}; "
+                        f"sites: {', '.join(site_names) or 'none'}"
+                    )
                 s = site_names[kp.site]
                 node = tree.node_of_body(int(m.site_bodyid[s]))
                 off = m.site_pos[s] + quat_to_mat(m.site_quat[s]) @ np.asarray(kp.offset, dtype=float)
@@ -149,8 +157,10 @@ class RobotModel:
         self.keypoint_names = [JOINT_NAMES[j] for j in joints]
         for name in mapping.posture_weights:
             if name != "default" and name not in tree.joint_names:
-                raise ControlMMError(f"{where}: posture weight for unknown joint '{name}'; joints: "
-                                     f"{', '.join(tree.joint_names)}")
+                raise ControlMMError(
+                    f"{where}: posture weight for unknown joint '{name}'; joints: "
+                    f"{', '.join(tree.joint_names)}"
+                )
         default = mapping.posture_weights.get("default", 0.02)
         self.posture_weights = np.array([mapping.posture_weights.get(n, default) for n in tree.joint_names])
         # Feet: the bodies of the ankle keypoints and their collision geometry.
@@ -166,19 +176,25 @@ class RobotModel:
                 pts.append(p)
                 rad.append(r)
             if not geoms or sum(len(p) for p in pts) == 0:
-                raise ControlMMError(f"{where}: the {side} foot body '{m.body(body).name}' (body of "
-                                     f"'{side}_ankle') has no collision geometry to stand on")
+                raise ControlMMError(
+                    f"{where}: the {side} foot body '{m.body(body).name}' (body of "
+                    f"'{side}_ankle') has no collision geometry to stand on"
+                )
             self.feet[side] = FloorPoints(node, np.concatenate(pts), np.concatenate(rad), tuple(geoms))
         # Retargeting ranges: the MJCF's, narrowed by the mapping's human-like ranges.
         self.lower, self.upper = tree.lower.copy(), tree.upper.copy()
         for name, (lo, hi) in mapping.ranges.items():
             if name not in tree.joint_names:
-                raise ControlMMError(f"{where}: range for unknown joint '{name}'; joints: {', '.join(tree.joint_names)}")
+                raise ControlMMError(
+                    f"{where}: range for unknown joint '{name}'; joints: {', '.join(tree.joint_names)}"
+                )
             j = tree.joint_names.index(name)
             self.lower[j], self.upper[j] = max(self.lower[j], lo), min(self.upper[j], hi)
             if self.lower[j] >= self.upper[j]:
-                raise ControlMMError(f"{where}: range {[lo, hi]} of '{name}' does not overlap its MJCF range "
-                                     f"[{tree.lower[j]:.4g}, {tree.upper[j]:.4g}]")
+                raise ControlMMError(
+                    f"{where}: range {[lo, hi]} of '{name}' does not overlap its MJCF range "
+                    f"[{tree.lower[j]:.4g}, {tree.upper[j]:.4g}]"
+                )
         # Rest pose: qpos0, root at the origin; the floor is its lowest foot point.
         self.rest_q = np.clip(tree.qpos0, self.lower, self.upper)
         self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
@@ -250,8 +266,10 @@ class RobotModel:
         names = {m.body(b).name: b for b in range(1, m.nbody)}
         for body in self.mapping.body_joints:
             if body not in names:
-                raise ControlMMError(f"mapping {self.mapping.source}: body_joints names body '{body}', "
-                                     f"which is not in {self.mjcf.name}")
+                raise ControlMMError(
+                    f"mapping {self.mapping.source}: body_joints names body '{body}', "
+                    f"which is not in {self.mjcf.name}"
+                )
         own: dict[int, list[str]] = {}
         for kp, node in zip(self.keypoint_names, self.nodes):
             own.setdefault(int(self.tree.node_body[node]), []).append(kp)
@@ -308,8 +326,9 @@ def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:
             return _load_cached_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
         return _load_cached(text)  # raises the one-line error
     if text.lower().endswith(".xml"):
-        raise ControlMMError(f"'{text}' is an MJCF file; pass a mapping .json that names it "
-                             "(see docs/retargeting.md)")
+        raise ControlMMError(
+            f"'{text}' is an MJCF file; pass a mapping .json that names it (see docs/retargeting.md)"
+        )
     return _load_cached(text.lower())
 
 

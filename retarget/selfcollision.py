@@ -105,7 +105,7 @@ def enclosing_capsule(points: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray
     along = spread @ axis
     radial = np.linalg.norm(spread - np.outer(along, axis), axis=1)
     r = float(np.max(radial + radii))
-    slack = np.sqrt(np.maximum((r - radii) ** 2 - radial ** 2, 0.0))
+    slack = np.sqrt(np.maximum((r - radii) ** 2 - radial**2, 0.0))
     hi = float(np.max(along - slack))
     lo = float(np.min(along + slack))
     if lo > hi:
@@ -123,8 +123,9 @@ def _geom_balls(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
     return _geom_points(model, g)
 
 
-def _segment_distance(p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _segment_distance(
+    p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest points of segments p + s d1 and q + t d2 (s, t in [0, 1]), arrays (..., 3):
     (distance between the axes (...), point on the first (..., 3), on the second (..., 3))."""
     r = p - q
@@ -150,8 +151,12 @@ def capsule_distances(poses: Poses, sc: SelfClearance) -> tuple[np.ndarray, np.n
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
     a0 = pos + np.einsum("tcij,cj->tci", rot, sc.p0)
     a1 = pos + np.einsum("tcij,cj->tci", rot, sc.p1)
-    axis, pa, pb = _segment_distance(a0[:, sc.first], a1[:, sc.first] - a0[:, sc.first], a0[:, sc.second],
-                                     a1[:, sc.second] - a0[:, sc.second])
+    axis, pa, pb = _segment_distance(
+        a0[:, sc.first],
+        a1[:, sc.first] - a0[:, sc.first],
+        a0[:, sc.second],
+        a1[:, sc.second] - a0[:, sc.second],
+    )
     return axis - sc.radius[sc.first] - sc.radius[sc.second], pa, pb
 
 
@@ -232,13 +237,18 @@ def robot_capsules(robot) -> Capsules:
             radius.append(r)
             geom.append(g)
             body.append(b)
-    return Capsules(np.array(node, dtype=int), np.array(p0).reshape(-1, 3), np.array(p1).reshape(-1, 3),
-                    np.array(radius), np.array(geom, dtype=int), np.array(body, dtype=int))
+    return Capsules(
+        np.array(node, dtype=int),
+        np.array(p0).reshape(-1, 3),
+        np.array(p1).reshape(-1, 3),
+        np.array(radius),
+        np.array(geom, dtype=int),
+        np.array(body, dtype=int),
+    )
 
 
 def build_self_clearance(robot) -> SelfClearance | None:
     """Capsules and arm pairs of a :class:`~retarget.robot_model.RobotModel` (None: no arms mapped)."""
-    from retarget.robot_model import collision_geoms
 
     m, tree = robot.model, robot.tree
     names = robot.keypoint_names
@@ -261,9 +271,9 @@ def build_self_clearance(robot) -> SelfClearance | None:
         chain = ancestors(wrist)
         if shoulder not in chain:
             continue
-        for b in chain[:chain.index(shoulder)]:
+        for b in chain[: chain.index(shoulder)]:
             arm[b] = side_i
-        above = set(chain[chain.index(shoulder) + 1:])
+        above = set(chain[chain.index(shoulder) + 1 :])
         trunk = above if trunk is None else trunk & above
         for b in range(1, m.nbody):  # the wrist body's descendants (hands)
             if wrist in ancestors(b):
@@ -276,7 +286,8 @@ def build_self_clearance(robot) -> SelfClearance | None:
         for b in ancestors(ankle)[1:]:
             leg[b] = side_i
     shared = set(ancestors(int(tree.node_body[robot.feet["left"].node]))) & set(
-        ancestors(int(tree.node_body[robot.feet["right"].node])))
+        ancestors(int(tree.node_body[robot.feet["right"].node]))
+    )
     leg = {b: s_ for b, s_ in leg.items() if b not in shared}
     if not arm and not leg:
         return None
@@ -286,7 +297,14 @@ def build_self_clearance(robot) -> SelfClearance | None:
     for side in ("left", "right"):
         fb = int(tree.node_body[robot.feet[side].node])
         feet |= {b for b in range(1, m.nbody) if fb in ancestors(b) or int(parent[fb]) == b}
-    node, p0, p1, radius, geom, body_of = caps.node, caps.p0, caps.p1, caps.radius, caps.geom, caps.body.tolist()
+    node, p0, p1, radius, geom, body_of = (
+        caps.node,
+        caps.p0,
+        caps.p1,
+        caps.radius,
+        caps.geom,
+        caps.body.tolist(),
+    )
     first, second = [], []
     for i, bi in enumerate(body_of):
         if bi not in arm:
@@ -308,16 +326,25 @@ def build_self_clearance(robot) -> SelfClearance | None:
                 second.append(j)
     if not first:
         return None
-    sc = SelfClearance(np.array(node), np.array(p0), np.array(p1), np.array(radius), np.array(first),
-                       np.array(second), np.array(geom), np.zeros(len(first)))
+    sc = SelfClearance(
+        np.array(node),
+        np.array(p0),
+        np.array(p1),
+        np.array(radius),
+        np.array(first),
+        np.array(second),
+        np.array(geom),
+        np.zeros(len(first)),
+    )
     rest, _, _ = capsule_distances(robot.rest, sc)
     # The rest pose is collision free: pairs closer than the margin there may come that close.
     margin = np.minimum(SELF_MARGIN, rest[0] - REST_SLACK)
     return SelfClearance(sc.node, sc.p0, sc.p1, sc.radius, sc.first, sc.second, sc.geom, margin)
 
 
-def clearance_normal_equations(tree, poses: Poses, sc: SelfClearance, close: ClosePairs, weight: float
-                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def clearance_normal_equations(
+    tree, poses: Poses, sc: SelfClearance, close: ClosePairs, weight: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gauss-Newton rows of ``weight * (d - margin)^2`` for the close entries.
 
     Returns (frames (E,), Jacobian rows (E, n) scaled by sqrt(weight), residuals (E,) scaled

@@ -148,36 +148,63 @@ class _State:
     frame_cost: np.ndarray
     span_cost: np.ndarray
 
-    def select(self, use: np.ndarray, other: "_State", spans: np.ndarray) -> "_State":
+    def select(self, use: np.ndarray, other: _State, spans: np.ndarray) -> _State:
         """Frames ``use`` (T,) from this state, the others from ``other``, where ``use`` takes
         whole independent spans (``spans``: (S,) bool, the spans taken): no re-evaluation,
         since no term couples frames of different spans (``x`` may then be off by a constant
         per span, which the temporal terms, acting on differences within spans, never see)."""
+
         def pick(a, b):
             return None if a is None else np.where(use.reshape(-1, *([1] * (a.ndim - 1))), a, b)
 
         close = None
         if self.self_close is not None:
             mine, theirs = use[self.self_close.frame], ~use[other.self_close.frame]
-            close = ClosePairs(*(np.concatenate([getattr(self.self_close, k)[mine], getattr(other.self_close, k)[theirs]])
-                                 for k in ("frame", "pair", "dist", "pa", "pb")))
-        poses = Poses(*(pick(getattr(self.poses, k), getattr(other.poses, k))
-                        for k in ("rot", "pos", "axis", "anchor", "root_pos")))
+            close = ClosePairs(
+                *(
+                    np.concatenate([getattr(self.self_close, k)[mine], getattr(other.self_close, k)[theirs]])
+                    for k in ("frame", "pair", "dist", "pa", "pb")
+                )
+            )
+        poses = Poses(
+            *(
+                pick(getattr(self.poses, k), getattr(other.poses, k))
+                for k in ("rot", "pos", "axis", "anchor", "root_pos")
+            )
+        )
         span_cost = np.where(spans, self.span_cost, other.span_cost)
-        return _State(pick(self.root_pos, other.root_pos), pick(self.root_rot, other.root_rot),
-                      pick(self.q, other.q), poses, pick(self.pts, other.pts), pick(self.active, other.active),
-                      pick(self.kp_res, other.kp_res), pick(self.seg_res, other.seg_res),
-                      pick(self.ori_res, other.ori_res), pick(self.floor_res, other.floor_res),
-                      pick(self.body_low, other.body_low), pick(self.body_low_end, other.body_low_end), close,
-                      pick(self.x, other.x), float(span_cost.sum()), pick(self.frame_cost, other.frame_cost),
-                      span_cost)
+        return _State(
+            pick(self.root_pos, other.root_pos),
+            pick(self.root_rot, other.root_rot),
+            pick(self.q, other.q),
+            poses,
+            pick(self.pts, other.pts),
+            pick(self.active, other.active),
+            pick(self.kp_res, other.kp_res),
+            pick(self.seg_res, other.seg_res),
+            pick(self.ori_res, other.ori_res),
+            pick(self.floor_res, other.floor_res),
+            pick(self.body_low, other.body_low),
+            pick(self.body_low_end, other.body_low_end),
+            close,
+            pick(self.x, other.x),
+            float(span_cost.sum()),
+            pick(self.frame_cost, other.frame_cost),
+            span_cost,
+        )
 
 
 class _Problem:
     """Residuals, Jacobians and the banded normal equations of one retargeting problem."""
 
-    def __init__(self, robot: RobotModel, targets: Targets, config: SolverConfig,
-                 ref_pos: np.ndarray | None = None, span: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        targets: Targets,
+        config: SolverConfig,
+        ref_pos: np.ndarray | None = None,
+        span: np.ndarray | None = None,
+    ) -> None:
         """``ref_pos`` (T, 3): the root's temporal reference (default: the smoothed pelvis of
         ``targets``); ``span`` (T,) int: independent spans of frames side by side (no
         velocity/acceleration term couples frames of different spans; default: one span)."""
@@ -191,25 +218,30 @@ class _Problem:
         self.foot_points = np.concatenate([f.points for f in feet])
         self.foot_radius = np.concatenate([f.radius for f in feet])
         self.foot_clearance = np.concatenate(
-            [np.repeat(targets.clearance[side][:, None], len(f.points), axis=1)
-             for side, f in zip(("left", "right"), feet)], axis=1)  # (T, P)
+            [
+                np.repeat(targets.clearance[side][:, None], len(f.points), axis=1)
+                for side, f in zip(("left", "right"), feet)
+            ],
+            axis=1,
+        )  # (T, P)
         self.k_len = len(robot.nodes)
         self.point_nodes = np.concatenate([robot.nodes, self.foot_nodes])
         self.point_offsets = np.concatenate([robot.offsets, self.foot_points])
         self.ori_nodes = robot.nodes[targets.ori_kp]
         self.sqrt_kp = np.sqrt(targets.kp_weight)
         self.sqrt_seg = np.sqrt(targets.seg_weight)
-        self.sqrt_ori = (np.sqrt(targets.ori_weight)[..., None] * L_ROT
-                         * np.sqrt(targets.ori_axis_weight)[None])  # (T, O, 3)
-        self.posture = robot.posture_weights * L_POSTURE ** 2
+        self.sqrt_ori = (
+            np.sqrt(targets.ori_weight)[..., None] * L_ROT * np.sqrt(targets.ori_axis_weight)[None]
+        )  # (T, O, 3)
+        self.posture = robot.posture_weights * L_POSTURE**2
         self.self_clearance = robot.self_clearance if config.self_clearance else None
         self.body_floor = robot.body_floor if config.body_floor else None
         self.w_body_floor = config.body_floor_weight
         # Temporal weights per velocity coordinate, rescaled to the frame rate.
         r = targets.fps / 20.0
         c = config
-        w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r ** 2
-        w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r ** 4
+        w_vel = np.concatenate([np.full(6, c.w_vel_root), np.full(tree.nj, c.w_vel_joint)]) * r**2
+        w_acc = np.concatenate([np.full(6, c.w_acc_root), np.full(tree.nj, c.w_acc_joint)]) * r**4
         self.span = np.zeros(self.t_len, dtype=int) if span is None else np.asarray(span, dtype=int)
         self.n_spans = int(self.span.max()) + 1 if self.t_len else 1
         self.span_frames = np.bincount(self.span, minlength=self.n_spans)  # (S,) frames per span
@@ -231,13 +263,13 @@ class _Problem:
         self._kp_matrix = self._seg_matrix + targets.kp_weight[:, :, None] * np.eye(self.k_len)  # (T, K, K)
 
     # -- cost and linearisation ---------------------------------------------------------------
-    def evaluate(self, root_pos, root_rot, q) -> "_State":
+    def evaluate(self, root_pos, root_rot, q) -> _State:
         """Forward kinematics, residuals and cost at one configuration of all frames."""
         tree, tg = self.tree, self.targets
         poses: Poses = tree.forward(root_pos, root_rot, q)
         pts = tree.points(poses, self.point_nodes, self.point_offsets)
         kp = pts[:, : self.k_len]
-        foot = pts[:, self.k_len:]
+        foot = pts[:, self.k_len :]
         kp_res = kp - tg.kp_pos
         seg_res = kp[:, tg.seg_child] - kp[:, tg.seg_parent] - tg.seg_vec
         ori_res = self.sqrt_ori * so3_log(poses.rot[:, self.ori_nodes] @ np.swapaxes(tg.ori_rot, -1, -2))
@@ -249,21 +281,46 @@ class _Problem:
         if self.body_floor is not None:
             body_z, body_end = lowest_points(poses, self.body_floor, BODY_CLEARANCE)
             body_low = np.minimum(body_z - BODY_CLEARANCE, 0.0)
-            extra_cost += self.w_body_floor * np.sum(body_low ** 2, axis=1)
+            extra_cost += self.w_body_floor * np.sum(body_low**2, axis=1)
         if self.self_clearance is not None:
             close = close_pairs(poses, self.self_clearance)
-            np.add.at(extra_cost, close.frame, W_SELF * (close.dist - self.self_clearance.margin[close.pair]) ** 2)
-        frame_cost = extra_cost + (np.sum(tg.kp_weight * np.sum(kp_res ** 2, axis=-1), axis=1)
-                      + np.sum(tg.seg_weight * np.sum(seg_res ** 2, axis=-1), axis=1)
-                      + np.sum(ori_res ** 2, axis=(1, 2)) + np.sum(floor_res ** 2, axis=1)
-                      + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1))
+            np.add.at(
+                extra_cost, close.frame, W_SELF * (close.dist - self.self_clearance.margin[close.pair]) ** 2
+            )
+        frame_cost = extra_cost + (
+            np.sum(tg.kp_weight * np.sum(kp_res**2, axis=-1), axis=1)
+            + np.sum(tg.seg_weight * np.sum(seg_res**2, axis=-1), axis=1)
+            + np.sum(ori_res**2, axis=(1, 2))
+            + np.sum(floor_res**2, axis=1)
+            + np.sum(self.posture * (q - self.robot.rest_q) ** 2, axis=1)
+        )
         x = self.temporal_values(root_pos, root_rot, q)
         d1, d2 = np.diff(x, axis=0), np.diff(x, n=2, axis=0)
         sp, ns = self.span, self.n_spans
-        span_cost = (np.bincount(sp, frame_cost, ns) + np.bincount(sp[:-1], np.sum(self.w_vel * d1 * d1, axis=1), ns)
-                     + np.bincount(sp[:-2], np.sum(self.w_acc * d2 * d2, axis=1), ns))
-        return _State(root_pos, root_rot, q, poses, pts, active, kp_res, seg_res, ori_res, floor_res, body_low,
-                      body_end, close, x, float(span_cost.sum()), frame_cost, span_cost)
+        span_cost = (
+            np.bincount(sp, frame_cost, ns)
+            + np.bincount(sp[:-1], np.sum(self.w_vel * d1 * d1, axis=1), ns)
+            + np.bincount(sp[:-2], np.sum(self.w_acc * d2 * d2, axis=1), ns)
+        )
+        return _State(
+            root_pos,
+            root_rot,
+            q,
+            poses,
+            pts,
+            active,
+            kp_res,
+            seg_res,
+            ori_res,
+            floor_res,
+            body_low,
+            body_end,
+            close,
+            x,
+            float(span_cost.sum()),
+            frame_cost,
+            span_cost,
+        )
 
     def span_max(self, values: np.ndarray, floor: float = -np.inf) -> np.ndarray:
         """(S,) the largest of per-frame ``values`` (T,) in each span (``floor`` if none is larger)."""
@@ -271,7 +328,7 @@ class _Problem:
         np.maximum.at(out, self.span, values)
         return out
 
-    def frame_violation(self, st: "_State") -> np.ndarray:
+    def frame_violation(self, st: _State) -> np.ndarray:
         """(T,) how deep (m) the enclosing capsules overlap each other, a body's support points
         reach below the floor or a swing foot comes below half its clearance, per frame (the
         margins are only the terms' soft zone: the check sees an overlap of the real
@@ -280,15 +337,17 @@ class _Problem:
         # swing feet more than halfway down to the floor from their clearance
         swing = self.foot_clearance > 0.005
         if swing.any():
-            height = st.pts[:, self.k_len:, 2] - self.foot_radius
-            worst = np.maximum(worst, np.max(np.where(swing, 0.5 * self.foot_clearance - height, 0.0), axis=1))
+            height = st.pts[:, self.k_len :, 2] - self.foot_radius
+            worst = np.maximum(
+                worst, np.max(np.where(swing, 0.5 * self.foot_clearance - height, 0.0), axis=1)
+            )
         if st.body_low is not None and st.body_low.size:
             worst = np.maximum(worst, -(st.body_low.min(axis=1) + BODY_CLEARANCE))
         if st.self_close is not None and st.self_close.frame.size:
             np.maximum.at(worst, st.self_close.frame, -st.self_close.dist)
         return worst
 
-    def normal_equations(self, st: "_State") -> tuple[np.ndarray, np.ndarray]:
+    def normal_equations(self, st: _State) -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton blocks H (T, n, n) and gradient g (T, n) of the per-frame terms.
 
         Keypoint and segment terms share one Jacobian: with W(t) = diag(w_k(t)) + sum_s w_s
@@ -318,11 +377,15 @@ class _Problem:
             fr, b = np.nonzero(st.body_low < 0)
             if fr.size:
                 up = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (fr.size, 3))
-                jb = tree.directional_jacobian(st.poses, fr, self.body_floor.node[b], st.body_low_end[fr, b], up)
+                jb = tree.directional_jacobian(
+                    st.poses, fr, self.body_floor.node[b], st.body_low_end[fr, b], up
+                )
                 root = np.sqrt(self.w_body_floor)
                 rows.append((fr, root * jb, root * st.body_low[fr, b]))
         if st.self_close is not None and st.self_close.frame.size:
-            rows.append(clearance_normal_equations(tree, st.poses, self.self_clearance, st.self_close, W_SELF))
+            rows.append(
+                clearance_normal_equations(tree, st.poses, self.self_clearance, st.self_close, W_SELF)
+            )
         if rows:  # sparse rows: accumulate J^T J and J^T r per frame (padded, batched matmul)
             fr = np.concatenate([r[0] for r in rows])
             jr = np.concatenate([r[1] for r in rows])
@@ -404,11 +467,12 @@ class _Problem:
         if t > 1:
             ab[kd - n, n:] += self._d1.reshape(-1)
         if t > 2 and kd >= 2 * n:
-            ab[kd - 2 * n, 2 * n:] += self._d2.reshape(-1)
+            ab[kd - 2 * n, 2 * n :] += self._d2.reshape(-1)
         return ab
 
-    def solve_step(self, ab: np.ndarray, g: np.ndarray, fixed: np.ndarray,
-                   fixed_step: np.ndarray | None = None) -> np.ndarray:
+    def solve_step(
+        self, ab: np.ndarray, g: np.ndarray, fixed: np.ndarray, fixed_step: np.ndarray | None = None
+    ) -> np.ndarray:
         """Solve the banded system ``ab`` dx = -g for all frames at once; returns dx (T, n).
 
         Coordinates where ``fixed`` is True take the step ``fixed_step`` (0 when None) and
@@ -456,12 +520,21 @@ def _take(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
     """The targets of frames ``idx``, labelled with frame rate ``fps``."""
     pick = lambda a: a[idx]  # noqa: E731
     return Targets(
-        fps=fps, transform=targets.transform, human_world=pick(targets.human_world),
-        kp_pos=pick(targets.kp_pos), kp_weight=pick(targets.kp_weight), seg_parent=targets.seg_parent,
-        seg_child=targets.seg_child, seg_vec=pick(targets.seg_vec), seg_weight=targets.seg_weight,
-        ori_kp=targets.ori_kp, ori_rot=pick(targets.ori_rot), ori_weight=pick(targets.ori_weight),
+        fps=fps,
+        transform=targets.transform,
+        human_world=pick(targets.human_world),
+        kp_pos=pick(targets.kp_pos),
+        kp_weight=pick(targets.kp_weight),
+        seg_parent=targets.seg_parent,
+        seg_child=targets.seg_child,
+        seg_vec=pick(targets.seg_vec),
+        seg_weight=targets.seg_weight,
+        ori_kp=targets.ori_kp,
+        ori_rot=pick(targets.ori_rot),
+        ori_weight=pick(targets.ori_weight),
         ori_axis_weight=targets.ori_axis_weight,
-        stance={k: pick(v) for k, v in targets.stance.items()}, lock={k: pick(v) for k, v in targets.lock.items()},
+        stance={k: pick(v) for k, v in targets.stance.items()},
+        lock={k: pick(v) for k, v in targets.lock.items()},
         clearance={k: pick(v) for k, v in targets.clearance.items()},
     )
 
@@ -477,8 +550,12 @@ def _upsample(sol_pos, sol_rot, sol_q, idx, dst):
     return pos, rot, q
 
 
-def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConfig(),
-          init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Solution:
+def solve(
+    robot: RobotModel,
+    targets: Targets,
+    config: SolverConfig = SolverConfig(),
+    init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> Solution:
     """Run the solver on ``targets``; see the module docstring.
 
     Coarse to fine (``config.levels``, without ``init``): each level solves every k-th frame
@@ -496,8 +573,14 @@ def solve(robot: RobotModel, targets: Targets, config: SolverConfig = SolverConf
         if prev is not None:
             init = _upsample(*prev, idx)
         last = k == 1
-        cfg = replace(config, max_iterations=iters, damping=damping,
-                      body_floor_weight=config.body_floor_weight if last else min(W_BODY_FLOOR, config.body_floor_weight))
+        cfg = replace(
+            config,
+            max_iterations=iters,
+            damping=damping,
+            body_floor_weight=config.body_floor_weight
+            if last
+            else min(W_BODY_FLOOR, config.body_floor_weight),
+        )
         sol, final = _solve(robot, small, cfg, init)
         total += sol.iterations
         damping = max(config.damping, float(np.median(sol.damping)))
@@ -538,8 +621,9 @@ def violation_spans(bad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return idx, pinned, span
 
 
-def _refine_violations(robot: RobotModel, config: SolverConfig, sol: Solution, damping: float,
-                       prob: _Problem, st: _State) -> int:
+def _refine_violations(
+    robot: RobotModel, config: SolverConfig, sol: Solution, damping: float, prob: _Problem, st: _State
+) -> int:
     """More iterations where the stiff terms are still violated, on those frames only.
 
     Self-clearance and body-floor terms converge more slowly than the rest. The spans of
@@ -556,18 +640,34 @@ def _refine_violations(robot: RobotModel, config: SolverConfig, sol: Solution, d
     cfg = replace(config, max_iterations=config.extra_iterations, extra_iterations=0, damping=damping)
     # Each frame starts from its own damping at the end of the full-rate solve.
     lam = np.maximum(np.asarray(sol.damping, dtype=float)[idx], damping)
-    out, _ = _solve(robot, sub, cfg, (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]), pinned=pinned,
-                    ref_pos=prob.ref_x[idx, :3], span=span, damping=lam, patience=REFINE_PATIENCE,
-                    until_resolved=True)
+    out, _ = _solve(
+        robot,
+        sub,
+        cfg,
+        (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]),
+        pinned=pinned,
+        ref_pos=prob.ref_x[idx, :3],
+        span=span,
+        damping=lam,
+        patience=REFINE_PATIENCE,
+        until_resolved=True,
+    )
     sol.root_pos[idx], sol.root_rot[idx], sol.q[idx] = out.root_pos, out.root_rot, out.q
     return out.iterations
 
 
-def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
-           init: tuple[np.ndarray, np.ndarray, np.ndarray] | None, pinned: np.ndarray | None = None,
-           ref_pos: np.ndarray | None = None, span: np.ndarray | None = None,
-           damping: np.ndarray | None = None, patience: int | None = None, until_resolved: bool = False
-           ) -> tuple[Solution, tuple[_Problem, _State]]:
+def _solve(
+    robot: RobotModel,
+    targets: Targets,
+    config: SolverConfig,
+    init: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+    pinned: np.ndarray | None = None,
+    ref_pos: np.ndarray | None = None,
+    span: np.ndarray | None = None,
+    damping: np.ndarray | None = None,
+    patience: int | None = None,
+    until_resolved: bool = False,
+) -> tuple[Solution, tuple[_Problem, _State]]:
     """Levenberg-Marquardt on one problem; ``pinned`` (T,) bool: frames held fixed;
     ``damping`` (T,): each frame's initial damping (default ``config.damping``);
     ``patience``: refused steps in a row after which a span gives up (default: until its
@@ -605,7 +705,9 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             g += prob.gradient_temporal(st.x)
             g[:, 6:] += prob.posture * (st.q - robot.rest_q)
             frozen = np.zeros_like(g, dtype=bool)
-            frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | ((st.q >= upper - 1e-12) & (g[:, 6:] < 0))
+            frozen[:, 6:] = ((st.q <= lower + 1e-12) & (g[:, 6:] > 0)) | (
+                (st.q >= upper - 1e-12) & (g[:, 6:] < 0)
+            )
             frozen[hold] = True
         try:
             ab = prob.normal_matrix(h, lam)
@@ -627,8 +729,11 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
             lam *= 10
             need_linearise = False
             continue
-        trial = prob.evaluate(st.root_pos + step[:, 0:3], so3_exp(step[:, 3:6]) @ st.root_rot,
-                              np.clip(st.q + step[:, 6:], lower, upper))
+        trial = prob.evaluate(
+            st.root_pos + step[:, 0:3],
+            so3_exp(step[:, 3:6]) @ st.root_rot,
+            np.clip(st.q + step[:, 6:], lower, upper),
+        )
         better = trial.frame_cost < st.frame_cost
         n_better = np.bincount(sp, better, prob.n_spans)
         n_frames = prob.span_frames
@@ -636,9 +741,11 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
         partial = (trial.span_cost >= st.span_cost) & (n_better > 0) & (n_better < n_frames)
         if partial.any():
             use = better | ~partial[sp]
-            trial = prob.evaluate(np.where(use[:, None], trial.root_pos, st.root_pos),
-                                  np.where(use[:, None, None], trial.root_rot, st.root_rot),
-                                  np.where(use[:, None], trial.q, st.q))
+            trial = prob.evaluate(
+                np.where(use[:, None], trial.root_pos, st.root_pos),
+                np.where(use[:, None, None], trial.root_rot, st.root_rot),
+                np.where(use[:, None], trial.q, st.q),
+            )
         accept = trial.span_cost < st.span_cost
         done = np.zeros(prob.n_spans, dtype=bool)
         if accept.any():
@@ -662,17 +769,35 @@ def _solve(robot: RobotModel, targets: Targets, config: SolverConfig,
         if done.any():  # go on with the spans still running only
             keep = ~done[sp]
             rows = np.flatnonzero(keep)
-            out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = st.root_pos, st.root_rot, st.q, lam
+            out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = (
+                st.root_pos,
+                st.root_rot,
+                st.q,
+                lam,
+            )
             settled += float(st.span_cost[done].sum())
             _, new_span = np.unique(sp[keep], return_inverse=True)
-            prob = _Problem(robot, _take(prob.targets, rows, prob.targets.fps), config,
-                            ref_pos=prob.ref_x[rows, :3], span=new_span)
+            prob = _Problem(
+                robot,
+                _take(prob.targets, rows, prob.targets.fps),
+                config,
+                ref_pos=prob.ref_x[rows, :3],
+                span=new_span,
+            )
             st = prob.evaluate(st.root_pos[rows], st.root_rot[rows], st.q[rows])
             frames, lam, hold, refused = frames[rows], lam[rows], hold[rows], refused[~done]
             need_linearise = True
     out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = st.root_pos, st.root_rot, st.q, lam
     # re-orthonormalise the root rotations
     u, _, vt = np.linalg.svd(out_rot)
-    sol = Solution(root_pos=out_pos, root_rot=u @ vt, q=out_q, iterations=iterations, cost=settled + st.cost,
-                   seconds=time.perf_counter() - start, history=history, damping=out_lam)
+    sol = Solution(
+        root_pos=out_pos,
+        root_rot=u @ vt,
+        q=out_q,
+        iterations=iterations,
+        cost=settled + st.cost,
+        seconds=time.perf_counter() - start,
+        history=history,
+        damping=out_lam,
+    )
     return sol, (prob, st)

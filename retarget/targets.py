@@ -130,8 +130,9 @@ def human_frames(world: np.ndarray) -> dict[str, np.ndarray]:
     j = JOINT_INDEX
     hips = (world[:, j["left_hip"]] + world[:, j["right_hip"]]) / 2
     pelvis = frame_from_axes(world[:, j["left_hip"]] - world[:, j["right_hip"]], world[:, j["pelvis"]] - hips)
-    torso = frame_from_axes(world[:, j["left_collar"]] - world[:, j["right_collar"]],
-                            world[:, j["neck"]] - world[:, j["spine3"]])
+    torso = frame_from_axes(
+        world[:, j["left_collar"]] - world[:, j["right_collar"]], world[:, j["neck"]] - world[:, j["spine3"]]
+    )
     return {"pelvis": pelvis, "spine3": torso}
 
 
@@ -182,8 +183,12 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
         d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
         return np.maximum(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
 
-    ok = ((a[:, 1] < STANCE_ANKLE_HEIGHT) & (t[:, 1] < STANCE_TOE_HEIGHT)
-          & (speed(a) < STANCE_SPEED) & (speed(t) < STANCE_SPEED))
+    ok = (
+        (a[:, 1] < STANCE_ANKLE_HEIGHT)
+        & (t[:, 1] < STANCE_TOE_HEIGHT)
+        & (speed(a) < STANCE_SPEED)
+        & (speed(t) < STANCE_SPEED)
+    )
     for s, e in _segments(~ok):  # fill one-frame gaps inside stance
         if 0 < s and e < n and e - s <= 1:
             ok[s:e] = True
@@ -197,7 +202,9 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     for (s0, e0), (s1, e1) in zip(runs[:-1], runs[1:]):
         if (s1 - e0) <= MERGE_GAP_SECONDS * fps:
             moved = np.linalg.norm(foot[s0:e0].mean(axis=0) - foot[s1:e1].mean(axis=0))
-            low = np.all(a[e0:s1, 1] < STANCE_ANKLE_HEIGHT + 0.03) and np.all(t[e0:s1, 1] < STANCE_TOE_HEIGHT + 0.03)
+            low = np.all(a[e0:s1, 1] < STANCE_ANKLE_HEIGHT + 0.03) and np.all(
+                t[e0:s1, 1] < STANCE_TOE_HEIGHT + 0.03
+            )
             if moved < MERGE_DISTANCE and low:
                 ok[e0:s1] = True
     return ok
@@ -249,8 +256,9 @@ def _ramp(stance: np.ndarray, fps: float, hold: int = 0) -> np.ndarray:
     return np.clip(1.0 - np.maximum(dist - hold, 0) / (r + 1), 0.0, 1.0)
 
 
-def detect_contacts(joints: np.ndarray, fps: float, side: str, stance: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def detect_contacts(
+    joints: np.ndarray, fps: float, side: str, stance: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Human foot contact per frame: (contact, heel_down, toe_down), each (T,) bool.
 
     ``heel_down``: the ankle within ``CONTACT_RISE`` of its flat-stance height and slower than
@@ -383,22 +391,61 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         # Horizontally the foot holds its contact place a little longer (RAMP_SECONDS more):
         # it lands and takes off vertically instead of sliding in or out.
         alpha_xy = _ramp(contact, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
-        _feet_targets(robot, side, world, fps, flat, contact, heel, toe, alpha, alpha_xy, kp_pos, kp_weight, ori_kp,
-                      ori_rot_a, ori_w_a)
+        _feet_targets(
+            robot,
+            side,
+            world,
+            fps,
+            flat,
+            contact,
+            heel,
+            toe,
+            alpha,
+            alpha_xy,
+            kp_pos,
+            kp_weight,
+            ori_kp,
+            ori_rot_a,
+            ori_w_a,
+        )
 
     return Targets(
-        fps=float(fps), transform=transform, human_world=world, kp_pos=kp_pos, kp_weight=kp_weight,
-        seg_parent=np.array(seg_parent, dtype=int), seg_child=np.array(seg_child, dtype=int),
+        fps=float(fps),
+        transform=transform,
+        human_world=world,
+        kp_pos=kp_pos,
+        kp_weight=kp_weight,
+        seg_parent=np.array(seg_parent, dtype=int),
+        seg_child=np.array(seg_child, dtype=int),
         seg_vec=seg_vec,
-        seg_weight=np.array(seg_weight, dtype=float), ori_kp=np.array(ori_kp, dtype=int),
-        ori_rot=ori_rot_a, ori_weight=ori_w_a, ori_axis_weight=np.array(ori_axes, dtype=float).reshape(-1, 3),
-        stance=stance, lock=lock, clearance=clearance)
+        seg_weight=np.array(seg_weight, dtype=float),
+        ori_kp=np.array(ori_kp, dtype=int),
+        ori_rot=ori_rot_a,
+        ori_weight=ori_w_a,
+        ori_axis_weight=np.array(ori_axes, dtype=float).reshape(-1, 3),
+        stance=stance,
+        lock=lock,
+        clearance=clearance,
+    )
 
 
-def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, fps: float, flat_stance: np.ndarray,
-                  contact: np.ndarray, heel: np.ndarray, toe: np.ndarray, alpha: np.ndarray, alpha_xy: np.ndarray,
-                  kp_pos: np.ndarray,
-                  kp_weight: np.ndarray, ori_kp: list[int], ori_rot: np.ndarray, ori_w: np.ndarray) -> None:
+def _feet_targets(
+    robot: RobotModel,
+    side: str,
+    world: np.ndarray,
+    fps: float,
+    flat_stance: np.ndarray,
+    contact: np.ndarray,
+    heel: np.ndarray,
+    toe: np.ndarray,
+    alpha: np.ndarray,
+    alpha_xy: np.ndarray,
+    kp_pos: np.ndarray,
+    kp_weight: np.ndarray,
+    ori_kp: list[int],
+    ori_rot: np.ndarray,
+    ori_w: np.ndarray,
+) -> None:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
     Each contact run gets one place and heading. Within it the foot is flat while the human
@@ -408,8 +455,11 @@ def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, fps: float, f
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     foot_node = robot.nodes[ka]
-    same_node = [k for k in range(len(robot.joints)) if robot.nodes[k] == foot_node
-                 and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")]
+    same_node = [
+        k
+        for k in range(len(robot.joints))
+        if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
+    ]
     rest_rot = robot.rest.rot[0, foot_node]
     rest_pos = robot.rest.pos[0, foot_node]
     heading, elevation = foot_heading_pitch(world, side)
@@ -442,7 +492,9 @@ def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, fps: float, f
         frames = np.arange(len(world))
         starts = np.array([s for s, _ in runs])
         ends = np.array([e - 1 for _, e in runs])
-        gap = np.maximum(starts[None, :] - frames[:, None], 0) + np.maximum(frames[:, None] - ends[None, :], 0)
+        gap = np.maximum(starts[None, :] - frames[:, None], 0) + np.maximum(
+            frames[:, None] - ends[None, :], 0
+        )
         owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
         height = rest_pos[2] - robot.floor_z + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
@@ -455,8 +507,9 @@ def _feet_targets(robot: RobotModel, side: str, world: np.ndarray, fps: float, f
             r_roll = rot_z(np.full(len(world), psi)) @ rot_y(theta) @ rest_rot  # (T, 3, 3)
             # Place: where the human's own foot puts the flat foot's origin, averaged over the run.
             shift = np.einsum("tij,tj->ti", r_roll, pivot) - pivot @ r_flat.T  # node origin, flat - rolled
-            origin = (kp_pos[pick, ka] - np.einsum("tij,j->ti", r_roll[pick], robot.offsets[ka])
-                      + shift[pick]).mean(axis=0)
+            origin = (
+                kp_pos[pick, ka] - np.einsum("tij,j->ti", r_roll[pick], robot.offsets[ka]) + shift[pick]
+            ).mean(axis=0)
             origin[2] = height
             lock_rot[sel] = r_roll[sel]
             lock_node[sel] = origin - shift[sel]

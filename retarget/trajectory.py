@@ -109,8 +109,11 @@ class RobotTrajectory:
             "mapping": robot.mapping.source,
             "source_motion": self.source,
             "scale": self.scale,
-            "transform": {"scale": self.transform.scale, "yaw": self.transform.yaw,
-                          "translation": list(self.transform.translation)},
+            "transform": {
+                "scale": self.transform.scale,
+                "yaw": self.transform.yaw,
+                "translation": list(self.transform.translation),
+            },
             "fps": self.fps,
             "frames": self.num_frames,
             "nq": int(self.qpos.shape[1]),
@@ -152,7 +155,7 @@ class RobotTrajectory:
         return paths
 
     @classmethod
-    def load(cls, path: str | Path) -> "RobotTrajectory":
+    def load(cls, path: str | Path) -> RobotTrajectory:
         """Read a trajectory back from its ``.npz`` (the sidecar is stored inside it)."""
         path = Path(path)
         if path.suffix.lower() != ".npz":
@@ -170,13 +173,28 @@ class RobotTrajectory:
         except (KeyError, ValueError, OSError) as exc:
             raise InputFileError(f"'{path}' is not a controlmm robot trajectory: {exc}") from None
         if meta.get("format") != TRAJECTORY_FORMAT:
-            raise InputFileError(f"'{path}' has format '{meta.get('format')}'; expected '{TRAJECTORY_FORMAT}'")
+            raise InputFileError(
+                f"'{path}' has format '{meta.get('format')}'; expected '{TRAJECTORY_FORMAT}'"
+            )
         tr = meta.get("transform", {})
-        transform = HumanToWorld(scale=float(tr.get("scale", meta.get("scale", 1.0))),
-                                 yaw=float(tr.get("yaw", 0.0)),
-                                 translation=tuple(tr.get("translation", (0.0, 0.0, 0.0))))
+        transform = HumanToWorld(
+            scale=float(tr.get("scale", meta.get("scale", 1.0))),
+            yaw=float(tr.get("yaw", 0.0)),
+            translation=tuple(tr.get("translation", (0.0, 0.0, 0.0))),
+        )
         if qpos.ndim != 2 or qpos.shape[1] != 7 + len(joint_names):
-            raise ControlMMError(f"'{path}': qpos has shape {qpos.shape}; expected (T, {7 + len(joint_names)})")
-        return cls(robot=robot, fps=fps, qpos=qpos, joint_names=joint_names, scale=float(meta.get("scale", 1.0)),
-                   transform=transform, metrics=meta.get("metrics", {}), stance=stance,
-                   source=meta.get("source_motion", {}), solver=meta.get("solver", {}))
+            raise ControlMMError(
+                f"'{path}': qpos has shape {qpos.shape}; expected (T, {7 + len(joint_names)})"
+            )
+        return cls(
+            robot=robot,
+            fps=fps,
+            qpos=qpos,
+            joint_names=joint_names,
+            scale=float(meta.get("scale", 1.0)),
+            transform=transform,
+            metrics=meta.get("metrics", {}),
+            stance=stance,
+            source=meta.get("source_motion", {}),
+            solver=meta.get("solver", {}),
+        )

@@ -6,14 +6,32 @@
 >>> term = obstacle_loss(sdf, scene.human_to_world(scale=0.78), safe_distance=0.05)
 """
 
-from scenes.losses import BODY_BONES, Bone, body_obstacle_loss, body_points, floor_loss, obstacle_loss, scene_loss_terms
+from scenes.losses import (
+    BODY_BONES,
+    Bone,
+    body_obstacle_loss,
+    body_points,
+    floor_loss,
+    obstacle_loss,
+    scene_loss_terms,
+)
 from scenes.registry import list_scenes
 from scenes.scene import Scene, StartPose, load_scene
 from scenes.sdf import SceneSDF
 from scenes.tracks import MocapTrack
 
 __all__ = [
-    "BODY_BONES", "Bone", "MocapTrack", "Scene", "SceneSDF", "StartPose",
-    "body_obstacle_loss", "body_points", "floor_loss", "list_scenes", "load_scene", "obstacle_loss",
+    "BODY_BONES",
+    "Bone",
+    "MocapTrack",
+    "Scene",
+    "SceneSDF",
+    "StartPose",
+    "body_obstacle_loss",
+    "body_points",
+    "floor_loss",
+    "list_scenes",
+    "load_scene",
+    "obstacle_loss",
     "scene_loss_terms",
 ]

@@ -49,18 +49,27 @@ class Bone:
 
 
 BODY_BONES: tuple[Bone, ...] = (
-    Bone(1, 0.09), Bone(2, 0.09), Bone(3, 0.12),  # pelvis -> hips, lower spine
-    Bone(4, 0.075), Bone(5, 0.075),  # thighs
+    Bone(1, 0.09),
+    Bone(2, 0.09),
+    Bone(3, 0.12),  # pelvis -> hips, lower spine
+    Bone(4, 0.075),
+    Bone(5, 0.075),  # thighs
     Bone(6, 0.12),  # spine
-    Bone(7, 0.05), Bone(8, 0.05),  # shins
+    Bone(7, 0.05),
+    Bone(8, 0.05),  # shins
     Bone(9, 0.13),  # chest
-    Bone(10, 0.04, 1.3), Bone(11, 0.04, 1.3),  # feet, toes past the foot joint
+    Bone(10, 0.04, 1.3),
+    Bone(11, 0.04, 1.3),  # feet, toes past the foot joint
     Bone(12, 0.06),  # neck
-    Bone(13, 0.07), Bone(14, 0.07),  # collars
+    Bone(13, 0.07),
+    Bone(14, 0.07),  # collars
     Bone(15, 0.10, 1.6),  # head, up to the top of the skull
-    Bone(16, 0.06), Bone(17, 0.06),  # shoulders
-    Bone(18, 0.045), Bone(19, 0.045),  # upper arms
-    Bone(20, 0.035, 1.35), Bone(21, 0.035, 1.35),  # forearms, hands past the wrists
+    Bone(16, 0.06),
+    Bone(17, 0.06),  # shoulders
+    Bone(18, 0.045),
+    Bone(19, 0.045),  # upper arms
+    Bone(20, 0.035, 1.35),
+    Bone(21, 0.035, 1.35),  # forearms, hands past the wrists
 )
 """Default body volume: one capsule per bone, radii of an adult in human metres (the loss
 multiplies them by the transform's scale to get the robot-sized body)."""
@@ -109,17 +118,26 @@ def _check_distance(name: str, value: float) -> float:
     return float(value)
 
 
-def _world_sdf(sdf, transform: HumanToWorld, points: Tensor, frames: Tensor, fps: float, time_offset: float) -> Tensor:
+def _world_sdf(
+    sdf, transform: HumanToWorld, points: Tensor, frames: Tensor, fps: float, time_offset: float
+) -> Tensor:
     """SDF (B, F, P) of human-frame points (B, F, P, 3) at the given frames."""
     world = transform.to_world(points)
     times = frames.to(points.dtype) / fps + time_offset
     return sdf(world, times if getattr(sdf, "is_moving", True) else None)
 
 
-def obstacle_loss(sdf, transform: HumanToWorld, safe_distance: float = 0.05,
-                  joints: Sequence[str | int] | None = None, frames: Sequence[int] | None = None,
-                  fps: float = FPS, time_offset: float = 0.0, weight: float = 1.0,
-                  name: str = "obstacle") -> LossTerm:
+def obstacle_loss(
+    sdf,
+    transform: HumanToWorld,
+    safe_distance: float = 0.05,
+    joints: Sequence[str | int] | None = None,
+    frames: Sequence[int] | None = None,
+    fps: float = FPS,
+    time_offset: float = 0.0,
+    weight: float = 1.0,
+    name: str = "obstacle",
+) -> LossTerm:
     """Paper Eq. 9 on joint centres: mean over (frames, joints) of max(d - SDF(p), 0), world metres.
 
     Args:
@@ -144,10 +162,18 @@ def obstacle_loss(sdf, transform: HumanToWorld, safe_distance: float = 0.05,
     return LossTerm(name, fn, weight)
 
 
-def body_obstacle_loss(sdf, transform: HumanToWorld, safe_distance: float = 0.02,
-                       bones: Sequence[Bone] = BODY_BONES, spacing: float = 0.05,
-                       frames: Sequence[int] | None = None, fps: float = FPS, time_offset: float = 0.0,
-                       weight: float = 1.0, name: str = "body_obstacle") -> LossTerm:
+def body_obstacle_loss(
+    sdf,
+    transform: HumanToWorld,
+    safe_distance: float = 0.02,
+    bones: Sequence[Bone] = BODY_BONES,
+    spacing: float = 0.05,
+    frames: Sequence[int] | None = None,
+    fps: float = FPS,
+    time_offset: float = 0.0,
+    weight: float = 1.0,
+    name: str = "body_obstacle",
+) -> LossTerm:
     """Eq. 9 over the body volume: points along the bones keep d + radius * scale from obstacles.
 
     The bone radii (``bones``, human metres) scale with ``transform.scale`` like the body does.
@@ -161,8 +187,10 @@ def body_obstacle_loss(sdf, transform: HumanToWorld, safe_distance: float = 0.02
         _check_joints(motion)
         key = (motion.dtype, motion.device)
         if key not in cache:
-            cache[key] = (torch.as_tensor(weights_np, dtype=motion.dtype, device=motion.device),
-                          torch.as_tensor(radii_np * transform.scale + d, dtype=motion.dtype, device=motion.device))
+            cache[key] = (
+                torch.as_tensor(weights_np, dtype=motion.dtype, device=motion.device),
+                torch.as_tensor(radii_np * transform.scale + d, dtype=motion.dtype, device=motion.device),
+            )
         w, clearance = cache[key]
         f = _frames(frames, motion.shape[1], motion.device)
         if len(f) == 0:
@@ -173,9 +201,15 @@ def body_obstacle_loss(sdf, transform: HumanToWorld, safe_distance: float = 0.02
     return LossTerm(name, fn, weight)
 
 
-def floor_loss(transform: HumanToWorld, floor_height: float = 0.0, clearance: float = 0.0,
-               joints: Sequence[str | int] | None = None, frames: Sequence[int] | None = None,
-               weight: float = 1.0, name: str = "floor") -> LossTerm:
+def floor_loss(
+    transform: HumanToWorld,
+    floor_height: float = 0.0,
+    clearance: float = 0.0,
+    joints: Sequence[str | int] | None = None,
+    frames: Sequence[int] | None = None,
+    weight: float = 1.0,
+    name: str = "floor",
+) -> LossTerm:
     """No joint below the floor: mean over (frames, joints) of max(floor + clearance - z, 0), world m.
 
     ``floor_height`` is the world z of the floor (``scene.floor_height``).
@@ -194,8 +228,14 @@ def floor_loss(transform: HumanToWorld, floor_height: float = 0.0, clearance: fl
     return LossTerm(name, fn, weight)
 
 
-def scene_loss_terms(scene, transform: HumanToWorld, safe_distance: float = 0.02, body: bool = True,
-                     obstacle_weight: float = 1.0, floor_weight: float = 1.0) -> list[LossTerm]:
+def scene_loss_terms(
+    scene,
+    transform: HumanToWorld,
+    safe_distance: float = 0.02,
+    body: bool = True,
+    obstacle_weight: float = 1.0,
+    floor_weight: float = 1.0,
+) -> list[LossTerm]:
     """The usual terms for a scene: body-volume (or joint) obstacle loss plus the floor loss.
 
     No obstacle term is returned for a scene without obstacles.
@@ -203,7 +243,14 @@ def scene_loss_terms(scene, transform: HumanToWorld, safe_distance: float = 0.02
     terms = []
     if scene.obstacle_geom_ids:
         make = body_obstacle_loss if body else obstacle_loss
-        terms.append(make(scene.sdf(), transform, safe_distance=safe_distance, weight=obstacle_weight,
-                          name=f"{'body_obstacle' if body else 'obstacle'}:{scene.name}"))
+        terms.append(
+            make(
+                scene.sdf(),
+                transform,
+                safe_distance=safe_distance,
+                weight=obstacle_weight,
+                name=f"{'body_obstacle' if body else 'obstacle'}:{scene.name}",
+            )
+        )
     terms.append(floor_loss(transform, scene.floor_height, weight=floor_weight))
     return terms

@@ -20,8 +20,14 @@ ROCK_RADII = (0.45, 0.35, 0.30)
 """Semi-axes of the rock before bumps (m)."""
 
 
-def make_rock(seed: int = 7, subdivisions: int = 3, radii: tuple[float, float, float] = ROCK_RADII,
-              bumps: int = 7, amplitude: float = 0.4, width: float = 0.15) -> trimesh.Trimesh:
+def make_rock(
+    seed: int = 7,
+    subdivisions: int = 3,
+    radii: tuple[float, float, float] = ROCK_RADII,
+    bumps: int = 7,
+    amplitude: float = 0.4,
+    width: float = 0.15,
+) -> trimesh.Trimesh:
     """A closed, outward-wound, non-convex rock mesh centred at the origin (metres)."""
     rng = np.random.default_rng(seed)
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
@@ -44,8 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     mesh = make_rock()
     assert mesh.is_watertight and mesh.is_winding_consistent
     mesh.export(args.out)
-    print(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
-          f"extent {np.round(mesh.extents, 3).tolist()} m, convex: {mesh.is_convex}")
+    print(
+        f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
+        f"extent {np.round(mesh.extents, 3).tolist()} m, convex: {mesh.is_convex}"
+    )
     return 0
 
 

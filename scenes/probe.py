@@ -27,12 +27,23 @@ def add_probe(spec: mujoco.MjSpec) -> None:
     spec.option.ccd_iterations = max(spec.option.ccd_iterations, 200)
     spec.option.ccd_tolerance = min(spec.option.ccd_tolerance, 1e-10)
     body = spec.worldbody.add_body(name=PROBE_BODY, mocap=True)
-    body.add_geom(name=PROBE_BODY, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[PROBE_RADIUS, 0, 0],
-                  contype=0, conaffinity=0, group=5)
+    body.add_geom(
+        name=PROBE_BODY,
+        type=mujoco.mjtGeom.mjGEOM_SPHERE,
+        size=[PROBE_RADIUS, 0, 0],
+        contype=0,
+        conaffinity=0,
+        group=5,
+    )
 
 
-def probe_distances(model: mujoco.MjModel, geom_ids: Sequence[int], points: np.ndarray,
-                    data: mujoco.MjData | None = None, distmax: float = 100.0) -> np.ndarray:
+def probe_distances(
+    model: mujoco.MjModel,
+    geom_ids: Sequence[int],
+    points: np.ndarray,
+    data: mujoco.MjData | None = None,
+    distmax: float = 100.0,
+) -> np.ndarray:
     """Signed distances (P, G) from world points (P, 3) to each geom, as MuJoCo computes them.
 
     ``model`` must hold the probe (:func:`add_probe`). ``data`` carries the poses of mocap

@@ -7,7 +7,15 @@ from pathlib import Path
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 
 SCENE_NAMES: tuple[str, ...] = (
-    "empty", "corridor", "pillars", "table", "low_beam", "doorway", "moving_obstacle", "mesh_rock", "room",
+    "empty",
+    "corridor",
+    "pillars",
+    "table",
+    "low_beam",
+    "doorway",
+    "moving_obstacle",
+    "mesh_rock",
+    "room",
 )
 """Packaged scenes, in the order ``controlmm scene list`` shows them."""
 

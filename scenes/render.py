@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -54,8 +53,9 @@ def _posed_data(scene: Scene, t: float) -> mujoco.MjData:
     return data
 
 
-def render_scene(scene: Scene, out: str | os.PathLike[str], width: int = 800, height: int = 600,
-                 t: float = 0.0) -> str:
+def render_scene(
+    scene: Scene, out: str | os.PathLike[str], width: int = 800, height: int = 600, t: float = 0.0
+) -> str:
     """Write a PNG with a perspective and a top view of ``scene`` at time ``t``.
 
     Returns the backend used: ``"mujoco"`` or ``"matplotlib (...reason...)"`` when MuJoCo's
@@ -64,8 +64,10 @@ def render_scene(scene: Scene, out: str | os.PathLike[str], width: int = 800, he
     try:
         images = _mujoco_views(scene, width, height, t)
     except Exception as exc:  # noqa: BLE001 - any GL failure means: fall back
-        reason = f"MuJoCo rendering failed with MUJOCO_GL={os.environ.get('MUJOCO_GL', '(unset)')}: " \
-                 f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}"
+        reason = (
+            f"MuJoCo rendering failed with MUJOCO_GL={os.environ.get('MUJOCO_GL', '(unset)')}: "
+            f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}"
+        )
         _matplotlib_views(scene, out, t)
         return f"matplotlib ({reason})"
     import matplotlib
@@ -121,19 +123,28 @@ def _mujoco_views(scene: Scene, width: int, height: int, t: float) -> list[np.nd
         top = renderer.render().copy()
         renderer.close()
     finally:
-        (m.vis.global_.offwidth, m.vis.global_.offheight, m.vis.global_.orthographic, m.vis.global_.fovy) = old
+        (m.vis.global_.offwidth, m.vis.global_.offheight, m.vis.global_.orthographic, m.vis.global_.fovy) = (
+            old
+        )
     return [perspective, top]
 
 
-def occupancy_grid(scene: Scene, lo: np.ndarray, hi: np.ndarray, t: float, res: int = 140) -> tuple[np.ndarray, ...]:
+def occupancy_grid(
+    scene: Scene, lo: np.ndarray, hi: np.ndarray, t: float, res: int = 140
+) -> tuple[np.ndarray, ...]:
     """Scene SDF on a (res, res, max(20, res // 3)) grid over the box lo..hi at time t: (xs, ys, zs, values)."""
     sdf = scene.sdf()
     xs, ys = np.linspace(lo[0], hi[0], res), np.linspace(lo[1], hi[1], res)
     zs = np.linspace(max(lo[2], 0.0), hi[2], max(20, res // 3))
     grid = torch.as_tensor(np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1), dtype=torch.float32)
     with torch.no_grad():
-        values = sdf(grid.reshape(-1, 1, 3), torch.full((grid[..., 0].numel(),), t)).reshape(grid.shape[:-1]).numpy() \
-            if scene.obstacle_geom_ids else np.full(grid.shape[:-1], np.inf)
+        values = (
+            sdf(grid.reshape(-1, 1, 3), torch.full((grid[..., 0].numel(),), t))
+            .reshape(grid.shape[:-1])
+            .numpy()
+            if scene.obstacle_geom_ids
+            else np.full(grid.shape[:-1], np.inf)
+        )
     return xs, ys, zs, values
 
 
@@ -141,7 +152,9 @@ def _robot_points(scene: Scene, t: float) -> np.ndarray:
     if scene.robot is None:
         return np.zeros((0, 3))
     data = _posed_data(scene, t)
-    return data.xpos[1:][np.isin(np.arange(1, scene.model.nbody), [scene.model.geom_bodyid[g] for g in scene.robot_geom_ids])]
+    return data.xpos[1:][
+        np.isin(np.arange(1, scene.model.nbody), [scene.model.geom_bodyid[g] for g in scene.robot_geom_ids])
+    ]
 
 
 def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> None:
@@ -154,11 +167,23 @@ def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> No
     xs, ys, zs, values = occupancy_grid(scene, lo, hi, t)
     robot = _robot_points(scene, t)
     fig, (top, side) = plt.subplots(1, 2, figsize=(13, 5.5))
-    top.imshow((values.min(axis=2) < 0).T, origin="lower", extent=(xs[0], xs[-1], ys[0], ys[-1]), cmap="Oranges",
-               vmin=0, vmax=1.5)
+    top.imshow(
+        (values.min(axis=2) < 0).T,
+        origin="lower",
+        extent=(xs[0], xs[-1], ys[0], ys[-1]),
+        cmap="Oranges",
+        vmin=0,
+        vmax=1.5,
+    )
     top.set(title="top view (obstacles projected)", xlabel="x (m)", ylabel="y (m)", aspect="equal")
-    side.imshow((values.min(axis=1) < 0).T, origin="lower", extent=(xs[0], xs[-1], zs[0], zs[-1]), cmap="Oranges",
-                vmin=0, vmax=1.5)
+    side.imshow(
+        (values.min(axis=1) < 0).T,
+        origin="lower",
+        extent=(xs[0], xs[-1], zs[0], zs[-1]),
+        cmap="Oranges",
+        vmin=0,
+        vmax=1.5,
+    )
     side.set(title="side view (obstacles projected along y)", xlabel="x (m)", ylabel="z (m)", aspect="equal")
     for ax, k in ((top, 1), (side, 2)):
         if len(robot):
@@ -174,13 +199,23 @@ def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> No
 
 def _start_arrow(ax, scene: Scene) -> None:
     s = scene.start
-    ax.annotate("", xy=(s.x + 0.6 * math.cos(s.yaw), s.y + 0.6 * math.sin(s.yaw)), xytext=(s.x, s.y),
-                arrowprops=dict(arrowstyle="->", color="tab:green", lw=2))
+    ax.annotate(
+        "",
+        xy=(s.x + 0.6 * math.cos(s.yaw), s.y + 0.6 * math.sin(s.yaw)),
+        xytext=(s.x, s.y),
+        arrowprops=dict(arrowstyle="->", color="tab:green", lw=2),
+    )
     ax.plot([s.x], [s.y], "o", color="tab:green", label="start")
 
 
-def plot_sdf_slice(scene: Scene, out: str | os.PathLike[str], height: float = 0.5, t: float = 0.0,
-                   y: float | None = None, res: int = 240) -> None:
+def plot_sdf_slice(
+    scene: Scene,
+    out: str | os.PathLike[str],
+    height: float = 0.5,
+    t: float = 0.0,
+    y: float | None = None,
+    res: int = 240,
+) -> None:
     """Write a PNG of the scene SDF: a horizontal slice at z = ``height`` and a vertical slice
     at y = ``y`` (default: the start's y), zero level in black, 0.1 m contours."""
     import matplotlib
@@ -195,8 +230,14 @@ def plot_sdf_slice(scene: Scene, out: str | os.PathLike[str], height: float = 0.
     xs, ys = np.linspace(lo[0], hi[0], res), np.linspace(lo[1], hi[1], res)
     zs = np.linspace(0.0, max(hi[2], height + 0.3), res // 2)
     horiz = np.stack([*np.meshgrid(xs, ys, indexing="xy"), np.full((res, res), height)], -1)
-    vert = np.stack([np.meshgrid(xs, zs, indexing="xy")[0], np.full((len(zs), res), y_cut),
-                     np.meshgrid(xs, zs, indexing="xy")[1]], -1)
+    vert = np.stack(
+        [
+            np.meshgrid(xs, zs, indexing="xy")[0],
+            np.full((len(zs), res), y_cut),
+            np.meshgrid(xs, zs, indexing="xy")[1],
+        ],
+        -1,
+    )
     with torch.no_grad():
         h_val = sdf(torch.as_tensor(horiz.reshape(-1, 3)), t).numpy().reshape(res, res)
         v_val = sdf(torch.as_tensor(vert.reshape(-1, 3)), t).numpy().reshape(len(zs), res)

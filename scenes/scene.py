@@ -134,8 +134,11 @@ class Scene:
         return self._sdf
 
 
-def load_scene(name_or_path: str | Path, robot: str | None = "g1",
-               edit_spec: Callable[[mujoco.MjSpec], None] | None = None) -> Scene:
+def load_scene(
+    name_or_path: str | Path,
+    robot: str | None = "g1",
+    edit_spec: Callable[[mujoco.MjSpec], None] | None = None,
+) -> Scene:
     """Load a packaged scene by name, or any scene MJCF file, and attach ``robot`` by name.
 
     ``edit_spec`` may change the ``mujoco.MjSpec`` just before it is compiled (for example
@@ -149,8 +152,10 @@ def load_scene(name_or_path: str | Path, robot: str | None = "g1",
     spec = _spec_from_file(path)
     joints = [j.name or "<unnamed>" for j in spec.joints]
     if joints:
-        raise ControlMMError(f"scene '{path}' has joints ({', '.join(joints[:5])}); scenes hold static or mocap "
-                             "obstacles only (attach the robot by name instead)")
+        raise ControlMMError(
+            f"scene '{path}' has joints ({', '.join(joints[:5])}); scenes hold static or mocap "
+            "obstacles only (attach the robot by name instead)"
+        )
     meta = _metadata(spec, path)
     tracks = _tracks(spec, path)
     robot_root = _attach_robot(spec, robot) if robot is not None else None
@@ -158,8 +163,17 @@ def load_scene(name_or_path: str | Path, robot: str | None = "g1",
         edit_spec(spec)
     model = _compile(spec, path)
     robot_ids, floor_ids, obstacle_ids = _classify_geoms(model, robot_root)
-    return Scene(name=path.stem, path=path, model=model, robot=robot, tracks=tracks, robot_geom_ids=robot_ids,
-                 floor_geom_ids=floor_ids, obstacle_geom_ids=obstacle_ids, **meta)
+    return Scene(
+        name=path.stem,
+        path=path,
+        model=model,
+        robot=robot,
+        tracks=tracks,
+        robot_geom_ids=robot_ids,
+        floor_geom_ids=floor_ids,
+        obstacle_geom_ids=obstacle_ids,
+        **meta,
+    )
 
 
 def _resolve(name_or_path: str | Path) -> Path:
@@ -172,7 +186,9 @@ def _resolve(name_or_path: str | Path) -> Path:
         if not path.is_file():
             raise InputFileError(f"scene file '{path}' does not exist")
         return path.resolve()
-    raise ControlMMError(f"unknown scene '{text}'; known scenes: {', '.join(list_scenes())} (or an MJCF file path)")
+    raise ControlMMError(
+        f"unknown scene '{text}'; known scenes: {', '.join(list_scenes())} (or an MJCF file path)"
+    )
 
 
 def _one_line(message: str) -> str:
@@ -202,10 +218,14 @@ def _metadata(spec: mujoco.MjSpec, path: Path) -> dict:
         try:
             control = json.loads(texts[f"{META}control"])
         except json.JSONDecodeError as exc:
-            raise ControlMMError(f"scene '{path}': custom text '{META}control' is not JSON ({exc.msg})") from None
+            raise ControlMMError(
+                f"scene '{path}': custom text '{META}control' is not JSON ({exc.msg})"
+            ) from None
     start = numerics.get(f"{META}start", np.zeros(3))
     if start.shape != (3,) or not np.all(np.isfinite(start)):
-        raise ControlMMError(f"scene '{path}': custom numeric '{META}start' must be 3 finite numbers (x y yaw)")
+        raise ControlMMError(
+            f"scene '{path}': custom numeric '{META}start' must be 3 finite numbers (x y yaw)"
+        )
     return {
         "description": texts.get(f"{META}description", ""),
         "suggested_prompt": texts.get(f"{META}prompt", ""),
@@ -219,10 +239,12 @@ def _tracks(spec: mujoco.MjSpec, path: Path) -> dict[str, MocapTrack]:
     for numeric in spec.numerics:
         if not numeric.name.startswith(TRACK_PREFIX):
             continue
-        body_name = numeric.name[len(TRACK_PREFIX):]
+        body_name = numeric.name[len(TRACK_PREFIX) :]
         body = spec.body(body_name)
         if body is None or not body.mocap:
-            raise ControlMMError(f"scene '{path}': track '{numeric.name}' needs a mocap body named '{body_name}'")
+            raise ControlMMError(
+                f"scene '{path}': track '{numeric.name}' needs a mocap body named '{body_name}'"
+            )
         track = MocapTrack.from_flat(body_name, np.asarray(numeric.data))
         body.pos, body.quat = track.pose_numpy(float(track.times[0]))  # the model starts on the track
         tracks[body_name] = track
@@ -235,8 +257,17 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
 
     robot_spec = mujoco.MjSpec.from_file(str(robot_mjcf(robot)))
     default_opt, scene_opt, robot_opt = mujoco.MjSpec().option, spec.option, robot_spec.option
-    for attr in ("timestep", "integrator", "iterations", "ls_iterations", "cone", "impratio", "solver",
-                 "noslip_iterations", "gravity"):
+    for attr in (
+        "timestep",
+        "integrator",
+        "iterations",
+        "ls_iterations",
+        "cone",
+        "impratio",
+        "solver",
+        "noslip_iterations",
+        "gravity",
+    ):
         # Physics settings the robot asks for win unless the scene set its own.
         scene_value, default_value = getattr(scene_opt, attr), getattr(default_opt, attr)
         if np.array_equal(np.asarray(scene_value), np.asarray(default_value)):
@@ -276,8 +307,11 @@ def _classify_geoms(model: mujoco.MjModel, robot_root: str | None) -> tuple[tupl
         body = int(model.geom_bodyid[g])
         if root_id >= 0 and int(model.body_rootid[body]) == root_id:
             robot.append(g)
-        elif (model.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE and model.body_mocapid[body] < 0
-              and data.geom_xmat[g].reshape(3, 3)[2, 2] > 1 - 1e-9):
+        elif (
+            model.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE
+            and model.body_mocapid[body] < 0
+            and data.geom_xmat[g].reshape(3, 3)[2, 2] > 1 - 1e-9
+        ):
             floor.append(g)
         elif model.geom_contype[g] or model.geom_conaffinity[g]:
             obstacles.append(g)

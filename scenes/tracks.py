@@ -47,14 +47,17 @@ class MocapTrack:
         """Parse the flat custom-numeric layout (rows ``t x y z qw qx qy qz``)."""
         data = np.asarray(data, dtype=np.float64).reshape(-1)
         if len(data) == 0 or len(data) % 8:
-            raise ControlMMError(f"track of mocap body '{body}' has {len(data)} numbers; expected rows of 8 "
-                                 "(t x y z qw qx qy qz)")
+            raise ControlMMError(
+                f"track of mocap body '{body}' has {len(data)} numbers; expected rows of 8 "
+                "(t x y z qw qx qy qz)"
+            )
         rows = data.reshape(-1, 8)
         if not np.all(np.isfinite(rows)):
             raise ControlMMError(f"track of mocap body '{body}' holds NaN or inf")
         if np.any(np.diff(rows[:, 0]) <= 0):
-            raise ControlMMError(f"track of mocap body '{body}' must have strictly increasing times; "
-                                 f"got {rows[:, 0].tolist()}")
+            raise ControlMMError(
+                f"track of mocap body '{body}' must have strictly increasing times; got {rows[:, 0].tolist()}"
+            )
         quat = rows[:, 4:]
         norm = np.linalg.norm(quat, axis=1, keepdims=True)
         if np.any(norm < 1e-9):
@@ -73,8 +76,9 @@ class MocapTrack:
         """Interpolated pose at times ``t`` (any shape, seconds) -> pos (..., 3), quat (..., 4)."""
         key = (t.dtype, t.device)
         if key not in self._tensors:  # the keys as tensors, once per dtype and device
-            self._tensors[key] = tuple(torch.as_tensor(v, dtype=t.dtype, device=t.device)
-                                       for v in (self.times, self.pos, self.quat))
+            self._tensors[key] = tuple(
+                torch.as_tensor(v, dtype=t.dtype, device=t.device) for v in (self.times, self.pos, self.quat)
+            )
         times, pos, quat = self._tensors[key]
         if len(times) == 1:
             return pos[0].expand(*t.shape, 3), quat[0].expand(*t.shape, 4)
@@ -107,8 +111,17 @@ def _slerp(q0: Tensor, q1: Tensor, a: Tensor) -> Tensor:
 def quat_to_mat(q: Tensor) -> Tensor:
     """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), wxyz (MuJoCo's order)."""
     w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(*q.shape[:-1], 3, 3)
+    return torch.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        dim=-1,
+    ).reshape(*q.shape[:-1], 3, 3)

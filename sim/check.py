@@ -53,9 +53,18 @@ def check_trajectory(
     if hasattr(qpos, "qpos"):
         fps = getattr(qpos, "fps", None) if fps is None else fps
         qpos = qpos.qpos
-    world = scene if isinstance(scene, CheckWorld) else make_world(
-        scene, robot_geom_ids=robot_geom_ids, floor_geom_ids=floor_geom_ids, obstacle_geom_ids=obstacle_geom_ids,
-        set_time=set_time, foot_bodies=foot_bodies)
+    world = (
+        scene
+        if isinstance(scene, CheckWorld)
+        else make_world(
+            scene,
+            robot_geom_ids=robot_geom_ids,
+            floor_geom_ids=floor_geom_ids,
+            obstacle_geom_ids=obstacle_geom_ids,
+            set_time=set_time,
+            foot_bodies=foot_bodies,
+        )
+    )
     q, rate = validate_qpos(world, qpos, fps)
     timings: dict[str, float] = {}
     cpu: dict[str, float] = {}
@@ -69,15 +78,27 @@ def check_trajectory(
 
     qvel, qacc, half = timed("differences_s", lambda: velocities_and_accelerations(world.model, q, rate))
     kin = timed("kinematic_s", lambda: kinematic_check(world, q, rate, half, config))
-    dyn = timed("dynamics_s", lambda: dynamics_check(world, q, qvel, qacc, kin.support, config, rate,
-                                                     kin.supported)) if config.dynamics else None
-    trk = timed("tracking_s", lambda: tracking_check(world, q, qvel, half, rate, config)) \
-        if config.tracking else None
-    extra = {"timings_s": {k: round(v, 4) for k, v in timings.items()},
-             "cpu_s": {k: round(v, 4) for k, v in cpu.items()},
-             "robot_mass_kg": round(world.mass, 4), "nq": world.nq,
-             "obstacles": [world.geom_label(g) for g in world.obstacle_geoms],
-             "floor": [world.geom_label(g) for g in world.floor_geoms]}
+    dyn = (
+        timed(
+            "dynamics_s",
+            lambda: dynamics_check(world, q, qvel, qacc, kin.support, config, rate, kin.supported),
+        )
+        if config.dynamics
+        else None
+    )
+    trk = (
+        timed("tracking_s", lambda: tracking_check(world, q, qvel, half, rate, config))
+        if config.tracking
+        else None
+    )
+    extra = {
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+        "cpu_s": {k: round(v, 4) for k, v in cpu.items()},
+        "robot_mass_kg": round(world.mass, 4),
+        "nq": world.nq,
+        "obstacles": [world.geom_label(g) for g in world.obstacle_geoms],
+        "floor": [world.geom_label(g) for g in world.floor_geoms],
+    }
     return build_report(world, rate, config, kin, dyn, trk, extra=extra)
 
 

@@ -54,7 +54,9 @@ def _enable_contacts(m: mujoco.MjModel) -> None:
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
 
 
-def scene_model(world: CheckWorld, floor_gap: float, obstacle_gap: float, with_self: bool = False) -> mujoco.MjModel:
+def scene_model(
+    world: CheckWorld, floor_gap: float, obstacle_gap: float, with_self: bool = False
+) -> mujoco.MjModel:
     """Copy of the model where robot-vs-(floor, obstacle) pairs collide through a dedicated bit.
 
     With ``with_self`` the robot keeps its own contype/conaffinity bits as well, so the same

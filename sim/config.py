@@ -17,18 +17,45 @@ SelfCollisionMode = Literal["model", "capsules", "off"]
 PUBLISHED_VELOCITY_LIMITS: dict[str, float] = {
     # Unitree G1 (29 DoF), rad/s: whole_body_tracking robots/g1.py `velocity_limit_sim`
     # (= Unitree's G1 URDF `velocity` attributes); Menagerie's MJCF has none.
-    **{f"{s}_{j}": v for s in ("left", "right") for j, v in (
-        ("hip_pitch_joint", 32.0), ("hip_roll_joint", 20.0), ("hip_yaw_joint", 32.0),
-        ("knee_joint", 20.0), ("ankle_pitch_joint", 37.0), ("ankle_roll_joint", 37.0),
-        ("shoulder_pitch_joint", 37.0), ("shoulder_roll_joint", 37.0), ("shoulder_yaw_joint", 37.0),
-        ("elbow_joint", 37.0), ("wrist_roll_joint", 37.0), ("wrist_pitch_joint", 22.0),
-        ("wrist_yaw_joint", 22.0))},
-    "waist_yaw_joint": 32.0, "waist_roll_joint": 37.0, "waist_pitch_joint": 37.0,
+    **{
+        f"{s}_{j}": v
+        for s in ("left", "right")
+        for j, v in (
+            ("hip_pitch_joint", 32.0),
+            ("hip_roll_joint", 20.0),
+            ("hip_yaw_joint", 32.0),
+            ("knee_joint", 20.0),
+            ("ankle_pitch_joint", 37.0),
+            ("ankle_roll_joint", 37.0),
+            ("shoulder_pitch_joint", 37.0),
+            ("shoulder_roll_joint", 37.0),
+            ("shoulder_yaw_joint", 37.0),
+            ("elbow_joint", 37.0),
+            ("wrist_roll_joint", 37.0),
+            ("wrist_pitch_joint", 22.0),
+            ("wrist_yaw_joint", 22.0),
+        )
+    },
+    "waist_yaw_joint": 32.0,
+    "waist_roll_joint": 37.0,
+    "waist_pitch_joint": 37.0,
     # Unitree H1 (19 DoF), rad/s: unitree_ros robots/h1_description/urdf/h1.urdf `velocity`
     # attributes; Menagerie names the joints without the `_joint` suffix.
-    **{f"{s}_{j}": v for s in ("left", "right") for j, v in (
-        ("hip_yaw", 23.0), ("hip_roll", 23.0), ("hip_pitch", 23.0), ("knee", 14.0), ("ankle", 9.0),
-        ("shoulder_pitch", 9.0), ("shoulder_roll", 9.0), ("shoulder_yaw", 20.0), ("elbow", 20.0))},
+    **{
+        f"{s}_{j}": v
+        for s in ("left", "right")
+        for j, v in (
+            ("hip_yaw", 23.0),
+            ("hip_roll", 23.0),
+            ("hip_pitch", 23.0),
+            ("knee", 14.0),
+            ("ankle", 9.0),
+            ("shoulder_pitch", 9.0),
+            ("shoulder_roll", 9.0),
+            ("shoulder_yaw", 20.0),
+            ("elbow", 20.0),
+        )
+    },
     "torso": 23.0,
 }
 """Published joint velocity limits (rad/s) by MJCF joint name (G1 and H1 of Menagerie)."""
@@ -131,7 +158,8 @@ class CheckConfig:
                 raise ControlMMError(f"CheckConfig.{f.name} must be a finite number >= 0; got {value!r}")
         if self.self_collision not in ("model", "capsules", "off"):
             raise ControlMMError(
-                f"CheckConfig.self_collision must be 'model', 'capsules' or 'off'; got {self.self_collision!r}")
+                f"CheckConfig.self_collision must be 'model', 'capsules' or 'off'; got {self.self_collision!r}"
+            )
         if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
             raise ControlMMError(f"CheckConfig.friction must be > 0 or None; got {self.friction!r}")
         for name, limit in self.velocity_limits.items():
@@ -140,7 +168,9 @@ class CheckConfig:
         if int(self.substeps) != self.substeps:
             raise ControlMMError(f"CheckConfig.substeps must be an integer >= 0; got {self.substeps!r}")
         if not 0 < self.fall_height_ratio < 1:
-            raise ControlMMError(f"CheckConfig.fall_height_ratio must be in (0, 1); got {self.fall_height_ratio!r}")
+            raise ControlMMError(
+                f"CheckConfig.fall_height_ratio must be in (0, 1); got {self.fall_height_ratio!r}"
+            )
 
     def velocity_limit(self, joint_name: str) -> float:
         """Velocity limit (rad/s) of a joint: configured, else published, else the default.

@@ -89,7 +89,9 @@ class DynamicsResult:
 def inverse_model(world: CheckWorld) -> mujoco.MjModel:
     """Copy of the model for rigid-body inverse dynamics: every constraint disabled."""
     m = copy.deepcopy(world.model)
-    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(
+        mujoco.mjtDisableBit.mjDSBL_CONTACT
+    )
     m.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_INVDISCRETE)
     return m
 
@@ -117,9 +119,16 @@ def window_mean(values: np.ndarray, frames: int) -> np.ndarray:
     return uniform_filter1d(np.asarray(values, dtype=np.float64), size=frames, axis=0, mode="constant")
 
 
-def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray,
-                   support: SupportContacts, config: CheckConfig, fps: float = 50.0,
-                   supported: np.ndarray | None = None) -> DynamicsResult:
+def dynamics_check(
+    world: CheckWorld,
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+    qacc: np.ndarray,
+    support: SupportContacts,
+    config: CheckConfig,
+    fps: float = 50.0,
+    supported: np.ndarray | None = None,
+) -> DynamicsResult:
     """Inverse dynamics of a trajectory against what its support can supply.
 
     Args:
@@ -171,14 +180,14 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
         to_com[:3, :3] = np.eye(3)
         to_com[3:, :3] = _skew(lever)
         to_com[3:, 3:] = rot
-        idx = order[bounds[t]:bounds[t + 1]]
+        idx = order[bounds[t] : bounds[t + 1]]
         generalized = np.zeros(m.nv)
         if idx.size:
             edges = all_edges[idx]  # (K, 4, 3)
             cols = np.empty((m.nv, idx.size * 4))
             for i, c in enumerate(idx):
                 mujoco.mj_jac(m, d, jacp, None, support.pos[c], int(support.body[c]))
-                cols[:, 4 * i:4 * i + 4] = jacp.T @ edges[i].T
+                cols[:, 4 * i : 4 * i + 4] = jacp.T @ edges[i].T
             a = weights[:, None] * (to_com @ cols[root_dofs]) * mg
             b = weights * (to_com @ need[root_dofs])
             a_tau = w_tau[:, None] * cols[tau_dofs] * mg
@@ -208,13 +217,39 @@ def dynamics_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, qacc: 
     per_frame = "error" if config.strict_dynamics else "warning"
     failures = from_mask("residual_force", sus_force > config.max_sustained_residual_force_ratio, sus_force)
     failures += from_mask("residual_moment", sus_moment > config.max_sustained_residual_moment_m, sus_moment)
-    failures += from_mask("residual_force", force_ratio > config.max_residual_force_ratio, force_ratio,
-                          severity=per_frame)
-    failures += from_mask("residual_moment", moment_m > config.max_residual_moment_m, moment_m, severity=per_frame)
+    failures += from_mask(
+        "residual_force", force_ratio > config.max_residual_force_ratio, force_ratio, severity=per_frame
+    )
+    failures += from_mask(
+        "residual_moment", moment_m > config.max_residual_moment_m, moment_m, severity=per_frame
+    )
     for j, name in enumerate(J.names):
-        failures += from_mask("torque_limit", sus_torque[:, j] > config.max_sustained_torque_ratio,
-                              sus_torque[:, j], robot_body=J.bodies[j], joint=name)
-        failures += from_mask("torque_limit", ratio[:, j] > config.max_torque_ratio, ratio[:, j],
-                              robot_body=J.bodies[j], joint=name, severity=per_frame)
-    return DynamicsResult(res_force, res_moment, force_ratio, moment_m, sup_force, torque, J.torque_limit.copy(),
-                          ratio, sus_force, sus_moment, sus_torque, failures)
+        failures += from_mask(
+            "torque_limit",
+            sus_torque[:, j] > config.max_sustained_torque_ratio,
+            sus_torque[:, j],
+            robot_body=J.bodies[j],
+            joint=name,
+        )
+        failures += from_mask(
+            "torque_limit",
+            ratio[:, j] > config.max_torque_ratio,
+            ratio[:, j],
+            robot_body=J.bodies[j],
+            joint=name,
+            severity=per_frame,
+        )
+    return DynamicsResult(
+        res_force,
+        res_moment,
+        force_ratio,
+        moment_m,
+        sup_force,
+        torque,
+        J.torque_limit.copy(),
+        ratio,
+        sus_force,
+        sus_moment,
+        sus_torque,
+        failures,
+    )

@@ -35,8 +35,19 @@ import numpy as np
 
 SEVERITIES = ("error", "warning")
 
-KINDS = ("obstacle_penetration", "floor_penetration", "self_collision", "joint_limit", "joint_velocity",
-         "foot_sliding", "floating", "residual_force", "residual_moment", "torque_limit", "tracking_fall")
+KINDS = (
+    "obstacle_penetration",
+    "floor_penetration",
+    "self_collision",
+    "joint_limit",
+    "joint_velocity",
+    "foot_sliding",
+    "floating",
+    "residual_force",
+    "residual_moment",
+    "torque_limit",
+    "tracking_fall",
+)
 
 
 @dataclass(frozen=True)
@@ -83,7 +94,11 @@ class Failure:
             who = self.joint
         if self.obstacle_geom:
             who += f" x {self.obstacle_geom}"
-        span = f"frame {self.frame_start}" if self.num_frames == 1 else f"frames {self.frame_start}-{self.frame_end}"
+        span = (
+            f"frame {self.frame_start}"
+            if self.num_frames == 1
+            else f"frames {self.frame_start}-{self.frame_end}"
+        )
         if fps:
             span += f" ({self.frame_start / fps:.2f}-{self.frame_end / fps:.2f} s)"
         tag = "" if self.is_error else " (warning)"
@@ -101,20 +116,33 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def from_mask(kind: str, mask: np.ndarray, values: np.ndarray, *, robot_body: str | None = None,
-              obstacle_geom: str | None = None, joint: str | None = None, total: bool = False,
-              severity: str = "error") -> list[Failure]:
+def from_mask(
+    kind: str,
+    mask: np.ndarray,
+    values: np.ndarray,
+    *,
+    robot_body: str | None = None,
+    obstacle_geom: str | None = None,
+    joint: str | None = None,
+    total: bool = False,
+    severity: str = "error",
+) -> list[Failure]:
     """One failure per run of ``mask``; depth = max of ``values`` over the run (sum if ``total``)."""
     out = []
     for a, b in runs(mask):
-        seg = np.asarray(values[a:b + 1], dtype=np.float64)
+        seg = np.asarray(values[a : b + 1], dtype=np.float64)
         depth = float(np.nansum(seg) if total else np.nanmax(seg))
         out.append(Failure(kind, a, b, robot_body, obstacle_geom, depth, joint, severity))
     return out
 
 
-def from_events(kind: str, frames: np.ndarray, keys: np.ndarray, depths: np.ndarray,
-                label: Callable[[int], tuple[str | None, str | None]]) -> list[Failure]:
+def from_events(
+    kind: str,
+    frames: np.ndarray,
+    keys: np.ndarray,
+    depths: np.ndarray,
+    label: Callable[[int], tuple[str | None, str | None]],
+) -> list[Failure]:
     """Merge sparse (frame, key, depth) events into failures per key.
 
     Args:
@@ -151,5 +179,14 @@ def from_events(kind: str, frames: np.ndarray, keys: np.ndarray, depths: np.ndar
 def sort_failures(failures: list[Failure]) -> list[Failure]:
     """Order errors before warnings, then by kind (as in :data:`KINDS`), start frame, body."""
     order = {k: i for i, k in enumerate(KINDS)}
-    return sorted(failures, key=lambda f: (not f.is_error, order.get(f.kind, len(order)), f.frame_start,
-                                           f.robot_body or "", f.obstacle_geom or "", f.joint or ""))
+    return sorted(
+        failures,
+        key=lambda f: (
+            not f.is_error,
+            order.get(f.kind, len(order)),
+            f.frame_start,
+            f.robot_body or "",
+            f.obstacle_geom or "",
+            f.joint or "",
+        ),
+    )

@@ -33,22 +33,31 @@ def load_qpos(path: str | Path, fps: float | None = None) -> tuple[np.ndarray, f
         raise InputFileError(f"trajectory file '{path}' does not exist")
     if suffix == ".csv":
         if fps is None:
-            raise InputFileError(f"'{path}' is a CSV, which has no frame rate: pass --fps (LAFAN1 data is 30)")
+            raise InputFileError(
+                f"'{path}' is a CSV, which has no frame rate: pass --fps (LAFAN1 data is 30)"
+            )
         try:
             rows = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
         except ValueError as exc:
             raise InputFileError(f"'{path}' is not a numeric CSV without header ({exc})") from None
         if rows.shape[1] < 8:
-            raise InputFileError(f"'{path}' has {rows.shape[1]} columns; expected root xyz, qx qy qz qw, joints")
+            raise InputFileError(
+                f"'{path}' has {rows.shape[1]} columns; expected root xyz, qx qy qz qw, joints"
+            )
         qpos = np.concatenate([rows[:, 0:3], rows[:, [6, 3, 4, 5]], rows[:, 7:]], axis=1)
         return qpos, float(fps), None
     try:
         with np.load(path, allow_pickle=False) as data:
             if "qpos" not in data.files:
-                raise InputFileError(f"'{path}' has no 'qpos' array; found: {', '.join(data.files) or 'none'}")
+                raise InputFileError(
+                    f"'{path}' has no 'qpos' array; found: {', '.join(data.files) or 'none'}"
+                )
             qpos = np.asarray(data["qpos"], dtype=np.float64)
-            rate = fps if fps is not None else (float(np.asarray(data["fps"]).reshape(-1)[0])
-                                                if "fps" in data.files else None)
+            rate = (
+                fps
+                if fps is not None
+                else (float(np.asarray(data["fps"]).reshape(-1)[0]) if "fps" in data.files else None)
+            )
             robot = str(data["robot"]) if "robot" in data.files else None
     except InputFileError:
         raise

@@ -42,7 +42,10 @@ def support_heights(
     """
     geoms = np.asarray(geoms, dtype=np.int64)
     n = np.broadcast_to(plane_normal, (xpos.shape[0], 3))
-    centre = np.einsum("tgk,tk->tg", xpos, n) - np.einsum("tk,tk->t", np.broadcast_to(plane_point, n.shape), n)[:, None]
+    centre = (
+        np.einsum("tgk,tk->tg", xpos, n)
+        - np.einsum("tk,tk->t", np.broadcast_to(plane_point, n.shape), n)[:, None]
+    )
     rot = xmat.reshape(xmat.shape[0], xmat.shape[1], 3, 3)
     local_n = np.einsum("tgki,tk->tgi", rot, n)  # the normal in each geom frame, (T, G, 3)
     out = np.full(centre.shape, np.nan)
@@ -62,7 +65,9 @@ def support_heights(
             reach = np.sqrt(((ln * size) ** 2).sum(axis=1))
         elif kind == _T.mjGEOM_MESH and int(geoms[i]) in hulls:
             reach = np.full(ln.shape[0], float(model.geom_rbound[geoms[i]]))
-            near = slice(None) if cutoff is None else centre[:, i] - reach < np.broadcast_to(cutoff, reach.shape)
+            near = (
+                slice(None) if cutoff is None else centre[:, i] - reach < np.broadcast_to(cutoff, reach.shape)
+            )
             reach[near] = np.max(-(ln[near] @ hulls[int(geoms[i])].T), axis=1)
         else:
             continue

@@ -97,6 +97,7 @@ class KinematicResult:
 
 # ------------------------------------------------------------------------------- measures
 
+
 def _contact_friction(m: mujoco.MjModel, g1: np.ndarray, g2: np.ndarray) -> np.ndarray:
     """MuJoCo's sliding friction of a geom pair: the higher-priority geom's, else the max."""
     f1, f2 = m.geom_friction[g1, 0], m.geom_friction[g2, 0]
@@ -114,7 +115,7 @@ def _body_max(T: int, nb: int, frames: np.ndarray, body_index: np.ndarray, depth
 def _ballistic(com_z: np.ndarray, fps: float, g: float, tol: float) -> bool:
     """Does a height sequence fit z0 + v0 t - g t^2 / 2 within ``tol`` (RMS)?"""
     t = np.arange(com_z.size) / fps
-    target = com_z + 0.5 * g * t ** 2
+    target = com_z + 0.5 * g * t**2
     if com_z.size < 3:
         return True
     coef = np.polyfit(t, target, 1)
@@ -144,8 +145,9 @@ class _Index:
         return cls(body, geom, category)
 
 
-def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.ndarray,
-                    config: CheckConfig) -> KinematicResult:
+def kinematic_check(
+    world: CheckWorld, qpos: np.ndarray, fps: float, half: np.ndarray, config: CheckConfig
+) -> KinematicResult:
     """Replay ``qpos`` (T, nq) kinematically and measure every kinematic failure kind.
 
     Args:
@@ -163,7 +165,9 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
     support_dist = np.full((T, world.robot_geoms.size), np.inf)  # (T, G) distance to floor/obstacles
     np.minimum.at(support_dist, (sc.frame, ix.geom[sc.robot_geom]), sc.dist)
     heights = _floor_heights(world, rep)
-    lowest = np.nanmin(heights, axis=1) if heights.size and not np.isnan(heights).all() else np.full(T, np.nan)
+    lowest = (
+        np.nanmin(heights, axis=1) if heights.size and not np.isnan(heights).all() else np.full(T, np.nan)
+    )
     feet, feet_failures = _foot_measures(world, rep, ix, support_dist, heights, fps, config)
     support, support_failures = _support_measures(world, rep, support_dist, heights, lowest, fps, config)
     joints, joint_failures = _joint_measures(world, qpos, half, config)
@@ -175,15 +179,19 @@ def kinematic_check(world: CheckWorld, qpos: np.ndarray, fps: float, half: np.nd
         lowest_height=lowest,
         self_collision=body_self.max(axis=1) if nb else np.zeros(T),
         body_self_collision=body_self,
-        **scene, **feet, **support, **joints,
+        **scene,
+        **feet,
+        **support,
+        **joints,
         support=_support_contacts(world, sc, config),
         contacts=Contacts.concat(sc, sf),
         failures=failures + self_failures + feet_failures + support_failures + joint_failures,
     )
 
 
-def _scene_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: CheckConfig
-                    ) -> tuple[Contacts, dict[str, np.ndarray], list[Failure]]:
+def _scene_measures(
+    world: CheckWorld, rep: Replay, ix: _Index, T: int, config: CheckConfig
+) -> tuple[Contacts, dict[str, np.ndarray], list[Failure]]:
     """Robot-vs-scene contacts: clearance, obstacle and floor penetration per frame and body."""
     m = world.model
     nb = world.robot_bodies.size
@@ -209,15 +217,20 @@ def _scene_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: 
         return world.body_name(world.robot_bodies[key // m.ngeom]), world.geom_label(key % m.ngeom)
 
     failures: list[Failure] = []
-    for kind, mask, tol in (("obstacle_penetration", obst, config.obstacle_penetration_m),
-                            ("floor_penetration", floor, config.floor_penetration_m)):
+    for kind, mask, tol in (
+        ("obstacle_penetration", obst, config.obstacle_penetration_m),
+        ("floor_penetration", floor, config.floor_penetration_m),
+    ):
         hit = mask & (pen > tol)
-        failures += from_events(kind, sc.frame[hit], body[hit] * m.ngeom + sc.other_geom[hit], pen[hit], label)
+        failures += from_events(
+            kind, sc.frame[hit], body[hit] * m.ngeom + sc.other_geom[hit], pen[hit], label
+        )
     return sc, fields, failures
 
 
-def _self_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: CheckConfig
-                   ) -> tuple[Contacts, np.ndarray, list[Failure]]:
+def _self_measures(
+    world: CheckWorld, rep: Replay, ix: _Index, T: int, config: CheckConfig
+) -> tuple[Contacts, np.ndarray, list[Failure]]:
     """Robot-robot overlaps per frame and body; failures per body pair."""
     nb = world.robot_bodies.size
     if config.self_collision == "off":
@@ -232,13 +245,27 @@ def _self_measures(world: CheckWorld, rep: Replay, ix: _Index, T: int, config: C
     hit = depth > config.self_collision_m
     lo, hi = np.minimum(b1, b2)[hit], np.maximum(b1, b2)[hit]
     failures = from_events(
-        "self_collision", sf.frame[hit], lo * nb + hi, depth[hit],
-        lambda key: (world.body_name(world.robot_bodies[key // nb]), world.body_name(world.robot_bodies[key % nb])))
+        "self_collision",
+        sf.frame[hit],
+        lo * nb + hi,
+        depth[hit],
+        lambda key: (
+            world.body_name(world.robot_bodies[key // nb]),
+            world.body_name(world.robot_bodies[key % nb]),
+        ),
+    )
     return sf, body_self, failures
 
 
-def _foot_measures(world: CheckWorld, rep: Replay, ix: _Index, support_dist: np.ndarray, heights: np.ndarray,
-                   fps: float, config: CheckConfig) -> tuple[dict[str, np.ndarray], list[Failure]]:
+def _foot_measures(
+    world: CheckWorld,
+    rep: Replay,
+    ix: _Index,
+    support_dist: np.ndarray,
+    heights: np.ndarray,
+    fps: float,
+    config: CheckConfig,
+) -> tuple[dict[str, np.ndarray], list[Failure]]:
     """Foot heights, stance between consecutive frames and the stance foot's horizontal slide."""
     T, F = support_dist.shape[0], len(world.feet)
     height = np.full((T, F), np.nan)
@@ -260,9 +287,15 @@ def _foot_measures(world: CheckWorld, rep: Replay, ix: _Index, support_dist: np.
     return {"foot_height": height, "foot_stance": stance, "foot_slide": slide}, failures
 
 
-def _support_measures(world: CheckWorld, rep: Replay, support_dist: np.ndarray, heights: np.ndarray,
-                      lowest: np.ndarray, fps: float, config: CheckConfig
-                      ) -> tuple[dict[str, np.ndarray], list[Failure]]:
+def _support_measures(
+    world: CheckWorld,
+    rep: Replay,
+    support_dist: np.ndarray,
+    heights: np.ndarray,
+    lowest: np.ndarray,
+    fps: float,
+    config: CheckConfig,
+) -> tuple[dict[str, np.ndarray], list[Failure]]:
     """Supported frames, ballistic flights and floating (unsupported, not a flight)."""
     m = world.model
     T = support_dist.shape[0]
@@ -281,7 +314,9 @@ def _support_measures(world: CheckWorld, rep: Replay, support_dist: np.ndarray, 
         # around the contact (20 fps source, splines): the centre of mass may still rise just
         # after the feet left the floor. The ballistic fit skips flight_edge_s at each end.
         middle = slice(a + edge, b + 1 - edge) if b + 1 - a > 2 * edge + 2 else span
-        if (b - a + 1) / fps <= config.max_flight_s and _ballistic(com[middle, 2], fps, g, config.ballistic_tol_m):
+        if (b - a + 1) / fps <= config.max_flight_s and _ballistic(
+            com[middle, 2], fps, g, config.ballistic_tol_m
+        ):
             flight[span] = True
         else:
             floating[span] = True
@@ -289,14 +324,21 @@ def _support_measures(world: CheckWorld, rep: Replay, support_dist: np.ndarray, 
     low_body = _lowest_body(world, heights)
     unknown = max(config.support_height_m, config.clearance_sense_m)  # beyond sensing, no plane floor
     for a, b in runs(floating):
-        values = np.nan_to_num(gap[a:b + 1], nan=unknown)
+        values = np.nan_to_num(gap[a : b + 1], nan=unknown)
         body = low_body[a + int(np.argmax(values))] if low_body else None
         failures.append(Failure("floating", a, b, body, None, float(values.max())))
-    return {"supported": supported, "support_gap": gap, "flight": flight, "floating": floating, "com": com}, failures
+    return {
+        "supported": supported,
+        "support_gap": gap,
+        "flight": flight,
+        "floating": floating,
+        "com": com,
+    }, failures
 
 
-def _joint_measures(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, config: CheckConfig
-                    ) -> tuple[dict[str, np.ndarray], list[Failure]]:
+def _joint_measures(
+    world: CheckWorld, qpos: np.ndarray, half: np.ndarray, config: CheckConfig
+) -> tuple[dict[str, np.ndarray], list[Failure]]:
     """Joint-limit overshoot and margin, joint speed against velocity limits."""
     J = world.joints
     T = qpos.shape[0]
@@ -309,13 +351,23 @@ def _joint_measures(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, confi
     ratio = speed / limits if J.names else np.zeros((T, 0))
     failures: list[Failure] = []
     for j, name in enumerate(J.names):
-        failures += from_mask("joint_limit", violation[:, j] > config.joint_limit_tol_rad, violation[:, j],
-                              robot_body=J.bodies[j], joint=name)
-        failures += from_mask("joint_velocity", ratio[:, j] > 1.0, speed[:, j] - limits[j],
-                              robot_body=J.bodies[j], joint=name)
-    return {"joint_position": position, "joint_limit_violation": violation,
-            "joint_limit_margin": np.where(np.isfinite(margin), margin, np.nan), "joint_speed": speed,
-            "joint_velocity_ratio": ratio}, failures
+        failures += from_mask(
+            "joint_limit",
+            violation[:, j] > config.joint_limit_tol_rad,
+            violation[:, j],
+            robot_body=J.bodies[j],
+            joint=name,
+        )
+        failures += from_mask(
+            "joint_velocity", ratio[:, j] > 1.0, speed[:, j] - limits[j], robot_body=J.bodies[j], joint=name
+        )
+    return {
+        "joint_position": position,
+        "joint_limit_violation": violation,
+        "joint_limit_margin": np.where(np.isfinite(margin), margin, np.nan),
+        "joint_speed": speed,
+        "joint_velocity_ratio": ratio,
+    }, failures
 
 
 HEIGHT_CUTOFF_M = 0.10
@@ -367,10 +419,24 @@ def _floor_heights(world: CheckWorld, rep: Replay) -> np.ndarray:
     return heights
 
 
-def _plane_heights(world: CheckWorld, rep: Replay, cols: np.ndarray, point: np.ndarray, normal: np.ndarray,
-                   cutoff: float | np.ndarray) -> np.ndarray:
-    return support_heights(world.model, world.robot_geoms[cols], rep.geom_xpos[:, cols], rep.geom_xmat[:, cols],
-                           point, normal, world.hull_vertices, cutoff=cutoff)
+def _plane_heights(
+    world: CheckWorld,
+    rep: Replay,
+    cols: np.ndarray,
+    point: np.ndarray,
+    normal: np.ndarray,
+    cutoff: float | np.ndarray,
+) -> np.ndarray:
+    return support_heights(
+        world.model,
+        world.robot_geoms[cols],
+        rep.geom_xpos[:, cols],
+        rep.geom_xmat[:, cols],
+        point,
+        normal,
+        world.hull_vertices,
+        cutoff=cutoff,
+    )
 
 
 def _lowest_body(world: CheckWorld, heights: np.ndarray) -> list[str]:
@@ -396,4 +462,6 @@ def _support_contacts(world: CheckWorld, sc: Contacts, config: CheckConfig) -> S
         mu = np.full(c.frame.size, float(config.friction))
     else:
         mu = _contact_friction(world.model, c.robot_geom, c.other_geom)
-    return SupportContacts(c.frame, c.pos, c.normal, world.model.geom_bodyid[c.robot_geom].astype(np.int64), mu)
+    return SupportContacts(
+        c.frame, c.pos, c.normal, world.model.geom_bodyid[c.robot_geom].astype(np.int64), mu
+    )

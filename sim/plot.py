@@ -13,12 +13,24 @@ import numpy as np
 from controlmm.atomic import atomic_path
 from sim.report import Report
 
-_PANEL_OF = {"obstacle_penetration": 0, "floor_penetration": 0, "self_collision": 0, "foot_sliding": 1,
-             "floating": 1, "residual_force": 2, "residual_moment": 2, "torque_limit": 3, "joint_limit": 3,
-             "joint_velocity": 3, "tracking_fall": 2}
+_PANEL_OF = {
+    "obstacle_penetration": 0,
+    "floor_penetration": 0,
+    "self_collision": 0,
+    "foot_sliding": 1,
+    "floating": 1,
+    "residual_force": 2,
+    "residual_moment": 2,
+    "torque_limit": 3,
+    "joint_limit": 3,
+    "joint_velocity": 3,
+    "tracking_fall": 2,
+}
 
 
-def plot_report(report: Report, path: str | os.PathLike[str], title: str | None = None, dpi: int = 110) -> None:
+def plot_report(
+    report: Report, path: str | os.PathLike[str], title: str | None = None, dpi: int = 110
+) -> None:
     """Write the per-frame plot of ``report`` to ``path`` (PNG, atomically)."""
     import matplotlib
 
@@ -53,17 +65,35 @@ def plot_report(report: Report, path: str | os.PathLike[str], title: str | None 
             ax.plot(t, h * mm, color=col, label=f"{name} height")
         slide = f[f"foot_slide_m:{name}"] * report.fps
         stance = f[f"foot_stance:{name}"].astype(bool)
-        ax.plot(t, np.where(stance, slide, np.nan) * 100, color=col, ls="--", label=f"{name} stance slide [cm/s]")
+        ax.plot(
+            t, np.where(stance, slide, np.nan) * 100, color=col, ls="--", label=f"{name} stance slide [cm/s]"
+        )
     ax.axhline(c.max_foot_slide_speed * 100, color="tab:red", ls="--", lw=0.8)
     ax.axhline(c.stance_height_m * mm, color="gray", ls=":", lw=0.8)
     floating = f["floating"].astype(bool)
     if floating.any():
-        ax.fill_between(t, 0, 1, where=floating, transform=ax.get_xaxis_transform(), color="tab:red", alpha=0.12,
-                        label="floating")
+        ax.fill_between(
+            t,
+            0,
+            1,
+            where=floating,
+            transform=ax.get_xaxis_transform(),
+            color="tab:red",
+            alpha=0.12,
+            label="floating",
+        )
     flight = f["flight"].astype(bool)
     if flight.any():
-        ax.fill_between(t, 0, 1, where=flight, transform=ax.get_xaxis_transform(), color="tab:blue", alpha=0.1,
-                        label="flight")
+        ax.fill_between(
+            t,
+            0,
+            1,
+            where=flight,
+            transform=ax.get_xaxis_transform(),
+            color="tab:blue",
+            alpha=0.1,
+            label="flight",
+        )
     ax.set_ylabel("mm  |  cm/s")
     ax.set_title("feet: height above floor, stance sliding speed", fontsize=9, loc="left")
 
@@ -96,7 +126,9 @@ def plot_report(report: Report, path: str | os.PathLike[str], title: str | None 
     dt = 0.5 / report.fps
     for failure in report.failures:
         panel = axes[_PANEL_OF.get(failure.kind, 0)]
-        panel.axvspan(t[failure.frame_start] - dt, t[failure.frame_end] + dt, color="tab:red", alpha=0.15, lw=0)
+        panel.axvspan(
+            t[failure.frame_start] - dt, t[failure.frame_end] + dt, color="tab:red", alpha=0.15, lw=0
+        )
     for ax in axes:
         ax.grid(alpha=0.3)
         handles, _ = ax.get_legend_handles_labels()

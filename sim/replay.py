@@ -43,12 +43,22 @@ class Contacts:
 
     @classmethod
     def concat(cls, a: Contacts, b: Contacts) -> Contacts:
-        return cls(*(np.concatenate([getattr(a, k), getattr(b, k)]) for k in
-                     ("frame", "robot_geom", "other_geom", "dist", "pos", "normal")))
+        return cls(
+            *(
+                np.concatenate([getattr(a, k), getattr(b, k)])
+                for k in ("frame", "robot_geom", "other_geom", "dist", "pos", "normal")
+            )
+        )
 
     def select(self, mask: np.ndarray) -> Contacts:
-        return Contacts(self.frame[mask], self.robot_geom[mask], self.other_geom[mask], self.dist[mask],
-                        self.pos[mask], self.normal[mask])
+        return Contacts(
+            self.frame[mask],
+            self.robot_geom[mask],
+            self.other_geom[mask],
+            self.dist[mask],
+            self.pos[mask],
+            self.normal[mask],
+        )
 
 
 @dataclass
@@ -57,11 +67,11 @@ class Replay:
 
     scene: Contacts
     self_: Contacts
-    geom_xpos: np.ndarray      # (T, G, 3) robot collision geoms
-    geom_xmat: np.ndarray      # (T, G, 9)
-    plane_xpos: np.ndarray     # (T, P, 3) floor planes
-    plane_xmat: np.ndarray     # (T, P, 9)
-    body_xipos: np.ndarray     # (T, B, 3) robot body centres of mass
+    geom_xpos: np.ndarray  # (T, G, 3) robot collision geoms
+    geom_xmat: np.ndarray  # (T, G, 9)
+    plane_xpos: np.ndarray  # (T, P, 3) floor planes
+    plane_xmat: np.ndarray  # (T, P, 9)
+    body_xipos: np.ndarray  # (T, B, 3) robot body centres of mass
 
 
 def _gather(buf: list) -> Contacts:
@@ -86,8 +96,10 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
     floor_gap = max(config.stance_height_m, config.support_height_m)
     obstacle_gap = max(config.clearance_sense_m, config.support_height_m, config.stance_height_m)
     merged = config.self_collision == "model"
-    ms = world.derived(("scene", floor_gap, obstacle_gap, merged),
-                       lambda: scene_model(world, floor_gap, obstacle_gap, with_self=merged))
+    ms = world.derived(
+        ("scene", floor_gap, obstacle_gap, merged),
+        lambda: scene_model(world, floor_gap, obstacle_gap, with_self=merged),
+    )
     passes = [(ms, mujoco.MjData(ms), [])]
     if config.self_collision == "capsules":
         mself = world.derived(("self", True), lambda: self_model(world, capsules=True))
@@ -96,7 +108,7 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
     substeps = int(config.substeps)
     dense, owner = interpolate(world.model, qpos, half, fps, substeps)
     record = np.zeros(dense.shape[0], dtype=bool)
-    record[::substeps + 1] = True
+    record[:: substeps + 1] = True
     mocap = world.mocap_poses(np.arange(dense.shape[0]) / (fps * (substeps + 1)))
 
     # Robot geoms are recorded as one contiguous block (a slice copy is cheaper than fancy
@@ -125,7 +137,9 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
             n = d.ncon
             if n:
                 c = d.contact
-                buf.append((frame, c.geom[:n].copy(), c.dist[:n].copy(), c.pos[:n].copy(), c.frame[:n, :3].copy()))
+                buf.append(
+                    (frame, c.geom[:n].copy(), c.dist[:n].copy(), c.pos[:n].copy(), c.frame[:n, :3].copy())
+                )
         if record[k]:
             block_xpos[t] = xpos[lo:hi]
             block_xmat[t] = xmat[lo:hi]
@@ -134,7 +148,9 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
     plane_xpos = np.empty((T, planes.size, 3))
     plane_xmat = np.empty((T, planes.size, 9))
     if planes.size:  # floor planes are static unless they sit on a mocap body
-        moving = bool((world.model.body_mocapid[world.model.geom_bodyid[planes]] >= 0).any()) and mocap is not None
+        moving = (
+            bool((world.model.body_mocapid[world.model.geom_bodyid[planes]] >= 0).any()) and mocap is not None
+        )
         data = mujoco.MjData(world.model)
         for t_ in range(T if moving else 1):
             if moving:
@@ -145,8 +161,15 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
             plane_xmat[t_:] = data.geom_xmat[planes]
     scene = _gather(passes[0][2])
     self_ = scene if merged else (_gather(passes[1][2]) if len(passes) > 1 else Contacts.empty())
-    return Replay(scene, self_, block_xpos[:, rg - lo], block_xmat[:, rg - lo], plane_xpos, plane_xmat,
-                   body_xipos[:, rb])
+    return Replay(
+        scene,
+        self_,
+        block_xpos[:, rg - lo],
+        block_xmat[:, rg - lo],
+        plane_xpos,
+        plane_xmat,
+        body_xipos[:, rb],
+    )
 
 
 def orient(world: CheckWorld, c: Contacts) -> Contacts:

@@ -136,7 +136,9 @@ class Report:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        stats = {k: (v if isinstance(v, (dict, list)) or v is None else _num(v)) for k, v in self.stats.items()}
+        stats = {
+            k: (v if isinstance(v, (dict, list)) or v is None else _num(v)) for k, v in self.stats.items()
+        }
         for key in ("residual_force", "residual_moment", "tracking"):
             if isinstance(stats.get(key), dict):
                 stats[key] = {k: _num(v) for k, v in stats[key].items()}
@@ -168,19 +170,23 @@ class Report:
         s, c = self.stats, self.config
         verdict = "PASSED" if self.passed else "FAILED"
         n_err, n_warn = len(self.errors), len(self.warnings)
-        lines = [f"{verdict}: {self.num_frames} frames at {self.fps:g} fps ({self.duration_s:.2f} s), "
-                 f"{n_err} error{'s' if n_err != 1 else ''}, {n_warn} warning{'s' if n_warn != 1 else ''}"]
+        lines = [
+            f"{verdict}: {self.num_frames} frames at {self.fps:g} fps ({self.duration_s:.2f} s), "
+            f"{n_err} error{'s' if n_err != 1 else ''}, {n_warn} warning{'s' if n_warn != 1 else ''}"
+        ]
         clearance = s.get("min_clearance_m")
         clear_txt = f", min clearance {clearance * 1000:.1f} mm" if clearance is not None else ""
         lines.append(
             f"  contact: obstacle penetration {s['max_penetration_m'] * 1000:.1f} mm (tol "
             f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor {s['floor_penetration_m'] * 1000:.1f} mm "
-            f"(tol {c.floor_penetration_m * 1000:.1f}); self-collision {s['self_collision_frames']} frames")
+            f"(tol {c.floor_penetration_m * 1000:.1f}); self-collision {s['self_collision_frames']} frames"
+        )
         lines.append(
             f"  joints: {s['joint_limit_violations']} frames past limits (max {s['max_joint_limit_violation_rad']:.4f} "
             f"rad), peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
             f"{s['foot_sliding_m'] * 1000:.1f} mm in stance (peak {s['max_foot_slide_speed_mps']:.2f} m/s); "
-            f"floating {s['floating_frames']} frames, flight {s['flight_frames']}")
+            f"floating {s['floating_frames']} frames, flight {s['flight_frames']}"
+        )
         rf, rm = s.get("residual_force"), s.get("residual_moment")
         if rf is not None and rm is not None:
             lines.append(
@@ -190,7 +196,8 @@ class Report:
                 f"residual moment max {rm['max_m'] * 1000:.0f} mm (warn {c.max_residual_moment_m * 1000:.0f}), "
                 f"sustained {rm['sustained_max_m'] * 1000:.0f} mm (fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
                 f"torque peak {s['max_torque_ratio'] * 100:.0f}% of limit, sustained "
-                f"{s['max_sustained_torque_ratio'] * 100:.0f}% (fail {c.max_sustained_torque_ratio * 100:.0f}%)")
+                f"{s['max_sustained_torque_ratio'] * 100:.0f}% (fail {c.max_sustained_torque_ratio * 100:.0f}%)"
+            )
         tr = s.get("tracking")
         if tr:
             state = f"fell at {tr['time_up_s']:.2f} s" if tr["fell"] else "stayed up"
@@ -205,8 +212,9 @@ class Report:
         return self.summary()
 
 
-def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None,
-                 extra: dict[str, Any] | None = None) -> Report:
+def build_report(
+    world, fps: float, config: CheckConfig, kin, dyn=None, trk=None, extra: dict[str, Any] | None = None
+) -> Report:
     """Assemble a :class:`Report` from the kinematic, dynamics and tracking results."""
     T = kin.num_frames
     failures = list(kin.failures)
@@ -226,7 +234,8 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         "joint_limit_violations": int(violated.any(axis=1).sum()) if violated.size else 0,
         "max_joint_limit_violation_rad": float(kin.joint_limit_violation.max(initial=0.0)),
         "joint_velocity_violations": int((kin.joint_velocity_ratio > 1.0).any(axis=1).sum())
-        if kin.joint_velocity_ratio.size else 0,
+        if kin.joint_velocity_ratio.size
+        else 0,
         "max_joint_velocity_ratio": float(kin.joint_velocity_ratio.max(initial=0.0)),
         "foot_sliding_m": float(stance_slide.sum()),
         "max_foot_slide_speed_mps": float(stance_slide.max(initial=0.0) * fps),
@@ -249,8 +258,9 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         "lowest_height_m": kin.lowest_height,
         "self_collision_m": kin.self_collision,
         "joint_limit_margin_rad": kin.joint_limit_margin,
-        "max_joint_velocity_ratio": (kin.joint_velocity_ratio.max(axis=1) if kin.joint_velocity_ratio.size
-                                     else np.zeros(T)),
+        "max_joint_velocity_ratio": (
+            kin.joint_velocity_ratio.max(axis=1) if kin.joint_velocity_ratio.size else np.zeros(T)
+        ),
         "supported": kin.supported,
         "floating": kin.floating,
         "flight": kin.flight,
@@ -262,12 +272,20 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         frames[f"foot_stance:{name}"] = kin.foot_stance[:, i]
     if dyn is not None:
         mean, p95, peak = _stats(dyn.residual_force_ratio)
-        stats["residual_force"] = {"mean_ratio": mean, "p95_ratio": p95, "max_ratio": peak,
-                                   "max_N": peak * world.mass * float(np.linalg.norm(world.model.opt.gravity)),
-                                   "sustained_max_ratio": float(dyn.sustained_force_ratio.max(initial=0.0))}
+        stats["residual_force"] = {
+            "mean_ratio": mean,
+            "p95_ratio": p95,
+            "max_ratio": peak,
+            "max_N": peak * world.mass * float(np.linalg.norm(world.model.opt.gravity)),
+            "sustained_max_ratio": float(dyn.sustained_force_ratio.max(initial=0.0)),
+        }
         mean, p95, peak = _stats(dyn.residual_moment_m)
-        stats["residual_moment"] = {"mean_m": mean, "p95_m": p95, "max_m": peak,
-                                    "sustained_max_m": float(dyn.sustained_moment_m.max(initial=0.0))}
+        stats["residual_moment"] = {
+            "mean_m": mean,
+            "p95_m": p95,
+            "max_m": peak,
+            "sustained_max_m": float(dyn.sustained_moment_m.max(initial=0.0)),
+        }
         stats["max_torque_ratio"] = float(dyn.torque_ratio.max(initial=0.0))
         stats["max_sustained_torque_ratio"] = float(dyn.sustained_torque_ratio.max(initial=0.0))
         frames["residual_force_ratio"] = dyn.residual_force_ratio
@@ -275,26 +293,45 @@ def build_report(world, fps: float, config: CheckConfig, kin, dyn=None, trk=None
         frames["max_torque_ratio"] = dyn.torque_ratio.max(axis=1) if dyn.torque_ratio.size else np.zeros(T)
         frames["sustained_residual_force_ratio"] = dyn.sustained_force_ratio
         frames["sustained_residual_moment_m"] = dyn.sustained_moment_m
-        frames["max_sustained_torque_ratio"] = (dyn.sustained_torque_ratio.max(axis=1) if dyn.sustained_torque_ratio.size
-                                                else np.zeros(T))
+        frames["max_sustained_torque_ratio"] = (
+            dyn.sustained_torque_ratio.max(axis=1) if dyn.sustained_torque_ratio.size else np.zeros(T)
+        )
     if trk is not None:
-        stats["tracking"] = {"fell": trk.fell, "fall_frame": trk.fall_frame, "time_up_s": trk.time_up_s,
-                             "mean_joint_error_rad": float(trk.joint_error.mean()),
-                             "max_joint_error_rad": float(trk.joint_error.max()),
-                             "max_root_error_m": float(trk.root_error.max())}
+        stats["tracking"] = {
+            "fell": trk.fell,
+            "fall_frame": trk.fall_frame,
+            "time_up_s": trk.time_up_s,
+            "mean_joint_error_rad": float(trk.joint_error.mean()),
+            "max_joint_error_rad": float(trk.joint_error.max()),
+            "max_root_error_m": float(trk.root_error.max()),
+        }
         frames["tracking_joint_error_rad"] = trk.joint_error
         frames["tracking_root_height_m"] = trk.root_height
     per_body = {}
     for i, b in enumerate(world.robot_bodies):
-        values = {"obstacle_penetration_m": float(kin.body_obstacle_penetration[:, i].max(initial=0.0)),
-                  "floor_penetration_m": float(kin.body_floor_penetration[:, i].max(initial=0.0)),
-                  "self_collision_m": float(kin.body_self_collision[:, i].max(initial=0.0))}
+        values = {
+            "obstacle_penetration_m": float(kin.body_obstacle_penetration[:, i].max(initial=0.0)),
+            "floor_penetration_m": float(kin.body_floor_penetration[:, i].max(initial=0.0)),
+            "self_collision_m": float(kin.body_self_collision[:, i].max(initial=0.0)),
+        }
         if any(v > 0 for v in values.values()):
             per_body[world.body_name(b)] = {k: _num(v) for k, v in values.items()}
     stats["per_body"] = per_body
-    return Report(passed=not errors, num_frames=T, fps=fps, failures=failures, stats=stats, frames=frames,
-                  feet=feet, joints=list(world.joints.names), config=config, extra=dict(extra or {}),
-                  kinematic=kin, dynamics=dyn, tracking=trk)
+    return Report(
+        passed=not errors,
+        num_frames=T,
+        fps=fps,
+        failures=failures,
+        stats=stats,
+        frames=frames,
+        feet=feet,
+        joints=list(world.joints.names),
+        config=config,
+        extra=dict(extra or {}),
+        kinematic=kin,
+        dynamics=dyn,
+        tracking=trk,
+    )
 
 
 def load_report(path: str | os.PathLike[str]) -> Report:
@@ -308,12 +345,32 @@ def load_report(path: str | os.PathLike[str]) -> Report:
         raise InputFileError(f"cannot read report '{path}': {exc}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise InputFileError(f"'{path}' is not a controlmm simulation report (format {FORMAT})")
-    skip = {"format", "passed", "num_frames", "fps", "duration_s", "failures", "frames", "feet", "joints",
-            "config", "extra"}
+    skip = {
+        "format",
+        "passed",
+        "num_frames",
+        "fps",
+        "duration_s",
+        "failures",
+        "frames",
+        "feet",
+        "joints",
+        "config",
+        "extra",
+    }
     stats = {k: v for k, v in data.items() if k not in skip}
     frames = {k: np.array([np.nan if v is None else v for v in vals]) for k, vals in data["frames"].items()}
     config = CheckConfig(**data["config"])
     failures = [Failure(**f) for f in data["failures"]]
-    return Report(passed=bool(data["passed"]), num_frames=int(data["num_frames"]), fps=float(data["fps"]),
-                  failures=failures, stats=stats, frames=frames, feet=list(data["feet"]),
-                  joints=list(data["joints"]), config=config, extra=dict(data.get("extra") or {}))
+    return Report(
+        passed=bool(data["passed"]),
+        num_frames=int(data["num_frames"]),
+        fps=float(data["fps"]),
+        failures=failures,
+        stats=stats,
+        frames=frames,
+        feet=list(data["feet"]),
+        joints=list(data["joints"]),
+        config=config,
+        extra=dict(data.get("extra") or {}),
+    )

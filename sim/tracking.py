@@ -51,8 +51,9 @@ def _tracking_model(world: CheckWorld) -> mujoco.MjModel:
     return m
 
 
-def tracking_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, half: np.ndarray, fps: float,
-                   config: CheckConfig) -> TrackingResult:
+def tracking_check(
+    world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, half: np.ndarray, fps: float, config: CheckConfig
+) -> TrackingResult:
     """Replay ``qpos`` (T, nq) at ``fps`` with PD servos in MuJoCo physics (``mj_step``)."""
     m = world.derived(("tracking",), lambda: _tracking_model(world))
     d = mujoco.MjData(m)
@@ -73,7 +74,7 @@ def tracking_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, half: 
     fall: int | None = None
     for t in range(T):
         err = d.qpos[J.qpos_adr] - qpos[t, J.qpos_adr]
-        joint_err[t] = float(np.sqrt(np.mean(err ** 2))) if err.size else 0.0
+        joint_err[t] = float(np.sqrt(np.mean(err**2))) if err.size else 0.0
         root = slice(world.root_qpos_adr, world.root_qpos_adr + 3)
         root_err[t] = float(np.linalg.norm(d.qpos[root] - qpos[t, root]))
         height[t] = d.qpos[z0]
@@ -89,7 +90,8 @@ def tracking_check(world: CheckWorld, qpos: np.ndarray, qvel: np.ndarray, half: 
             alpha = s / steps_per_frame
             target = (1.0 - alpha) * qpos[t, J.qpos_adr] + alpha * qpos[t + 1, J.qpos_adr]
             tau = config.tracking_kp * (target - d.qpos[J.qpos_adr]) + config.tracking_kd * (
-                target_vel - d.qvel[J.dof_adr])
+                target_vel - d.qvel[J.dof_adr]
+            )
             d.qfrc_applied[:] = 0.0
             d.qfrc_applied[J.dof_adr] = np.clip(tau, -limit, limit)
             mujoco.mj_step(m, d)

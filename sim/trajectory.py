@@ -19,8 +19,11 @@ MAX_FPS = 1000.0
 
 
 def _describe_nq(world) -> str:
-    return (f"nq={world.nq} (free joint xyz + quaternion wxyz, then {world.nq - 7} joint positions)"
-            if world.nq >= 7 else f"nq={world.nq}")
+    return (
+        f"nq={world.nq} (free joint xyz + quaternion wxyz, then {world.nq - 7} joint positions)"
+        if world.nq >= 7
+        else f"nq={world.nq}"
+    )
 
 
 def validate_qpos(world, qpos: object, fps: object) -> tuple[np.ndarray, float]:
@@ -53,11 +56,11 @@ def validate_qpos(world, qpos: object, fps: object) -> tuple[np.ndarray, float]:
         t, c = np.argwhere(bad)[0]
         raise ShapeError(f"qpos holds NaN/inf (first at frame {t}, column {c}); every value must be finite")
     a = world.root_qpos_adr + 3
-    norm = np.linalg.norm(q[:, a:a + 4], axis=1)
+    norm = np.linalg.norm(q[:, a : a + 4], axis=1)
     if (norm < 1e-6).any():
         t = int(np.argmax(norm < 1e-6))
         raise ShapeError(f"qpos frame {t} has a zero root quaternion (columns {a}..{a + 3}, wxyz)")
-    q[:, a:a + 4] /= norm[:, None]
+    q[:, a : a + 4] /= norm[:, None]
     return q, rate
 
 
@@ -70,8 +73,9 @@ def half_step_velocities(model: mujoco.MjModel, qpos: np.ndarray, fps: float) ->
     return out
 
 
-def velocities_and_accelerations(model: mujoco.MjModel, qpos: np.ndarray, fps: float
-                                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def velocities_and_accelerations(
+    model: mujoco.MjModel, qpos: np.ndarray, fps: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Finite-difference ``qvel`` and ``qacc`` at every frame, each (T, nv), plus the half steps.
 
     ``qvel[t]`` is the mean of the half-step velocities around frame t (one-sided at the
@@ -93,8 +97,9 @@ def velocities_and_accelerations(model: mujoco.MjModel, qpos: np.ndarray, fps: f
     return qvel, qacc, half
 
 
-def interpolate(model: mujoco.MjModel, qpos: np.ndarray, half: np.ndarray, fps: float, substeps: int
-                ) -> tuple[np.ndarray, np.ndarray]:
+def interpolate(
+    model: mujoco.MjModel, qpos: np.ndarray, half: np.ndarray, fps: float, substeps: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Insert ``substeps`` poses between consecutive frames (constant velocity on the manifold).
 
     Returns:

@@ -180,7 +180,7 @@ def _hulls(model: mujoco.MjModel, geoms: np.ndarray) -> dict[int, np.ndarray]:
         mesh = int(model.geom_dataid[g])
         if mesh not in cache:
             adr, num = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
-            verts = np.asarray(model.mesh_vert[adr:adr + num], dtype=np.float64)
+            verts = np.asarray(model.mesh_vert[adr : adr + num], dtype=np.float64)
             try:
                 verts = verts[ConvexHull(verts).vertices]
             except (QhullError, ValueError):  # flat or tiny meshes: keep every vertex
@@ -191,8 +191,11 @@ def _hulls(model: mujoco.MjModel, geoms: np.ndarray) -> dict[int, np.ndarray]:
 
 
 def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
-    rows = [j for j in range(model.njnt)
-            if model.jnt_type[j] in (_HINGE, _SLIDE) and model.jnt_bodyid[j] in set(robot_bodies.tolist())]
+    rows = [
+        j
+        for j in range(model.njnt)
+        if model.jnt_type[j] in (_HINGE, _SLIDE) and model.jnt_bodyid[j] in set(robot_bodies.tolist())
+    ]
     dof_adr = np.array([model.jnt_dofadr[j] for j in rows], dtype=np.int64)
     torque = np.full(len(rows), np.nan)
     for i, j in enumerate(rows):
@@ -209,11 +212,17 @@ def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
         gear = abs(float(model.actuator_gear[a, 0]))
         if model.actuator_forcelimited[a]:
             limit = float(np.max(np.abs(model.actuator_forcerange[a]))) * gear
-        elif (model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
-              and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
-              and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
-              and model.actuator_ctrllimited[a]):
-            limit = float(np.max(np.abs(model.actuator_ctrlrange[a]))) * abs(float(model.actuator_gainprm[a, 0])) * gear
+        elif (
+            model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
+            and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
+            and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
+            and model.actuator_ctrllimited[a]
+        ):
+            limit = (
+                float(np.max(np.abs(model.actuator_ctrlrange[a])))
+                * abs(float(model.actuator_gainprm[a, 0]))
+                * gear
+            )
         else:
             continue
         torque[i] = limit if np.isnan(torque[i]) else min(torque[i], limit)
@@ -229,17 +238,30 @@ def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
     )
 
 
-def _lowest_point(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.ndarray,
-                  hulls: dict[int, np.ndarray]) -> np.ndarray:
+def _lowest_point(
+    model: mujoco.MjModel, data: mujoco.MjData, geoms: np.ndarray, hulls: dict[int, np.ndarray]
+) -> np.ndarray:
     """World height of each geom's lowest point, (G,)."""
     from sim.geometry import support_heights
 
-    return support_heights(model, geoms, data.geom_xpos[geoms][None], data.geom_xmat[geoms][None],
-                           np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), hulls)[0]
+    return support_heights(
+        model,
+        geoms,
+        data.geom_xpos[geoms][None],
+        data.geom_xmat[geoms][None],
+        np.zeros((1, 3)),
+        np.array([[0.0, 0.0, 1.0]]),
+        hulls,
+    )[0]
 
 
-def _feet(model: mujoco.MjModel, robot_geoms: np.ndarray, hulls: dict[int, np.ndarray],
-          qpos_adr: int, foot_bodies: Sequence[str] | None) -> tuple[Foot, ...]:
+def _feet(
+    model: mujoco.MjModel,
+    robot_geoms: np.ndarray,
+    hulls: dict[int, np.ndarray],
+    qpos_adr: int,
+    foot_bodies: Sequence[str] | None,
+) -> tuple[Foot, ...]:
     body_of = model.geom_bodyid[robot_geoms]
     if foot_bodies is not None:
         feet = []
@@ -251,7 +273,7 @@ def _feet(model: mujoco.MjModel, robot_geoms: np.ndarray, hulls: dict[int, np.nd
             feet.append(Foot(name, int(body), geoms))
         return tuple(feet)
     data = mujoco.MjData(model)
-    data.qpos[qpos_adr + 3:qpos_adr + 7] = (1.0, 0.0, 0.0, 0.0)
+    data.qpos[qpos_adr + 3 : qpos_adr + 7] = (1.0, 0.0, 0.0, 0.0)
     mujoco.mj_kinematics(model, data)
     low = _lowest_point(model, data, robot_geoms, hulls)
     body_low: dict[int, float] = {}
@@ -291,7 +313,8 @@ def make_world(
         model, scene = scene_or_model.model, scene_or_model
     else:
         raise ControlMMError(
-            f"expected a mujoco.MjModel or a scene with a .model; got {type(scene_or_model).__name__}")
+            f"expected a mujoco.MjModel or a scene with a .model; got {type(scene_or_model).__name__}"
+        )
 
     def pick(given: Iterable[int] | None, attr: str) -> np.ndarray | None:
         if given is None and scene is not None:

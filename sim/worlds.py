@@ -17,9 +17,13 @@ import numpy as np
 
 from controlmm.errors import ControlMMError
 
-_TYPES = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
-          "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER, "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
-          "ellipsoid": mujoco.mjtGeom.mjGEOM_ELLIPSOID}
+_TYPES = {
+    "box": mujoco.mjtGeom.mjGEOM_BOX,
+    "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+    "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+    "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
+    "ellipsoid": mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+}
 
 
 @dataclass(frozen=True)
@@ -70,14 +74,20 @@ def standing_qpos(model: mujoco.MjModel) -> np.ndarray:
     world = make_world(model)
     q = np.array(model.qpos0)
     adr = world.root_qpos_adr
-    q[adr + 3:adr + 7] = (1.0, 0.0, 0.0, 0.0)
+    q[adr + 3 : adr + 7] = (1.0, 0.0, 0.0, 0.0)
     data = mujoco.MjData(model)
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
     from sim.geometry import support_heights
 
-    low = support_heights(model, world.robot_geoms, data.geom_xpos[world.robot_geoms][None],
-                          data.geom_xmat[world.robot_geoms][None], np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
-                          world.hull_vertices)
+    low = support_heights(
+        model,
+        world.robot_geoms,
+        data.geom_xpos[world.robot_geoms][None],
+        data.geom_xmat[world.robot_geoms][None],
+        np.zeros((1, 3)),
+        np.array([[0.0, 0.0, 1.0]]),
+        world.hull_vertices,
+    )
     q[adr + 2] -= float(np.nanmin(low))
     return q

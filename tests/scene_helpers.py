@@ -24,7 +24,7 @@ def heightfield_xml(heights: np.ndarray, size=(1.0, 0.6, 0.4, 0.1)) -> str:
     nrow, ncol = heights.shape
     elevation = " ".join(f"{v:.4f}" for v in heights.ravel())
     return f"""<mujoco>
-  <asset><hfield name="hf" nrow="{nrow}" ncol="{ncol}" size="{' '.join(map(str, size))}" elevation="{elevation}"/></asset>
+  <asset><hfield name="hf" nrow="{nrow}" ncol="{ncol}" size="{" ".join(map(str, size))}" elevation="{elevation}"/></asset>
   <worldbody>
     <geom name="floor" type="plane" size="0 0 0.05"/>
     <body name="terrain" pos="1 0.5 0.2" euler="0 0 30"><geom name="terrain" type="hfield" hfield="hf"/></body>

@@ -13,8 +13,14 @@ import numpy as np
 from sim.geometry import support_heights
 from sim.world import CheckWorld
 
-H1_HOME = {"left_hip_pitch": -0.4, "left_knee": 0.8, "left_ankle": -0.4,
-           "right_hip_pitch": -0.4, "right_knee": 0.8, "right_ankle": -0.4}
+H1_HOME = {
+    "left_hip_pitch": -0.4,
+    "left_knee": 0.8,
+    "left_ankle": -0.4,
+    "right_hip_pitch": -0.4,
+    "right_knee": 0.8,
+    "right_ankle": -0.4,
+}
 
 
 def adr(model: mujoco.MjModel, joint: str) -> int:
@@ -48,8 +54,15 @@ def feet_reference(world: CheckWorld, q: np.ndarray) -> tuple[np.ndarray, float]
     mujoco.mj_kinematics(m, d)
     geoms = np.concatenate([f.geoms for f in world.feet])
     xy = d.geom_xpos[geoms, :2].mean(axis=0)
-    low = support_heights(m, geoms, d.geom_xpos[geoms][None], d.geom_xmat[geoms][None], np.zeros((1, 3)),
-                          np.array([[0.0, 0.0, 1.0]]), world.hull_vertices)
+    low = support_heights(
+        m,
+        geoms,
+        d.geom_xpos[geoms][None],
+        d.geom_xmat[geoms][None],
+        np.zeros((1, 3)),
+        np.array([[0.0, 0.0, 1.0]]),
+        world.hull_vertices,
+    )
     return xy, float(np.nanmin(low))
 
 
@@ -60,7 +73,7 @@ def plant(world: CheckWorld, frames: np.ndarray, reference: np.ndarray) -> np.nd
     a = world.root_qpos_adr
     for t in range(out.shape[0]):
         xy, low = feet_reference(world, out[t])
-        out[t, a:a + 2] += ref_xy - xy
+        out[t, a : a + 2] += ref_xy - xy
         out[t, a + 2] += ref_low - low
     return out
 
@@ -70,17 +83,17 @@ def rotate_about(q: np.ndarray, axis_point: np.ndarray, angle: float, root_adr: 
     out = np.array(q, dtype=np.float64)
     c, s = np.cos(angle), np.sin(angle)
     rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    p = out[root_adr:root_adr + 3] - axis_point
-    out[root_adr:root_adr + 3] = axis_point + rot @ p
+    p = out[root_adr : root_adr + 3] - axis_point
+    out[root_adr : root_adr + 3] = axis_point + rot @ p
     dq = np.array([np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0])
     res = np.zeros(4)
-    mujoco.mju_mulQuat(res, dq, out[root_adr + 3:root_adr + 7])
-    out[root_adr + 3:root_adr + 7] = res
+    mujoco.mju_mulQuat(res, dq, out[root_adr + 3 : root_adr + 7])
+    out[root_adr + 3 : root_adr + 7] = res
     return out
 
 
 # ------------------------------------------------------------------ cached worlds and poses
-from functools import lru_cache  # noqa: E402
+from functools import cache  # noqa: E402
 
 from sim.world import make_world  # noqa: E402
 from sim.worlds import Obstacle, robot_world, standing_qpos  # noqa: E402
@@ -88,19 +101,22 @@ from sim.worlds import Obstacle, robot_world, standing_qpos  # noqa: E402
 FPS = 50.0
 
 
-@lru_cache(maxsize=None)
+@cache
 def g1_world() -> CheckWorld:
     """G1 on a floor with a shelf, a post, a low step and a mocap ball (parked far away)."""
-    model = robot_world("g1", [
-        Obstacle("shelf", "box", (0.25, 0.12, 0.05), (0.55, 0.09, 1.06)),
-        Obstacle("post", "cylinder", (0.05, 0.6), (-0.6, 0.4, 0.6)),
-        Obstacle("step", "box", (0.2, 0.3, 0.05), (1.2, -0.8, 0.05)),
-        Obstacle("ball", "sphere", (0.1,), (0.0, 3.0, 0.5), mocap=True),
-    ])
+    model = robot_world(
+        "g1",
+        [
+            Obstacle("shelf", "box", (0.25, 0.12, 0.05), (0.55, 0.09, 1.06)),
+            Obstacle("post", "cylinder", (0.05, 0.6), (-0.6, 0.4, 0.6)),
+            Obstacle("step", "box", (0.2, 0.3, 0.05), (1.2, -0.8, 0.05)),
+            Obstacle("ball", "sphere", (0.1,), (0.0, 3.0, 0.5), mocap=True),
+        ],
+    )
     return make_world(model)
 
 
-@lru_cache(maxsize=None)
+@cache
 def h1_world() -> CheckWorld:
     return make_world(robot_world("h1"))
 
@@ -117,19 +133,27 @@ def h1_stand() -> np.ndarray:
 
 def g1_squat_pose() -> np.ndarray:
     m = g1_world().model
-    return with_joints(m, g1_stand(), **{f"{s}_{j}": v for s in ("left", "right") for j, v in (
-        ("hip_pitch_joint", -0.8), ("knee_joint", 1.6), ("ankle_pitch_joint", -0.8))})
+    return with_joints(
+        m,
+        g1_stand(),
+        **{
+            f"{s}_{j}": v
+            for s in ("left", "right")
+            for j, v in (("hip_pitch_joint", -0.8), ("knee_joint", 1.6), ("ankle_pitch_joint", -0.8))
+        },
+    )
 
 
 def g1_squat() -> np.ndarray:
     """Stand, squat down over 1 s, hold, rise: 130 frames at 50 fps, feet planted."""
     q0, sq = g1_stand(), g1_squat_pose()
-    frames = np.concatenate([hold(q0, 10), smooth_blend(q0, sq, 50), hold(sq, 10), smooth_blend(sq, q0, 50),
-                             hold(q0, 10)])
+    frames = np.concatenate(
+        [hold(q0, 10), smooth_blend(q0, sq, 50), hold(sq, 10), smooth_blend(sq, q0, 50), hold(q0, 10)]
+    )
     return plant(g1_world(), frames, q0)
 
 
-@lru_cache(maxsize=None)
+@cache
 def g1_bare() -> CheckWorld:
     """G1 on an empty floor."""
     return make_world(robot_world("g1"))

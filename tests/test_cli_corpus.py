@@ -9,17 +9,36 @@ from controlmm.cli.main import main
 
 def test_corpus_then_probes_end_to_end(tmp_path, capsys):
     out = tmp_path / "c"
-    assert main(["corpus", "--out", str(out), "--clips", "6", "--seed", "3", "--workers", "1", "--quiet"]) == 0
+    assert (
+        main(["corpus", "--out", str(out), "--clips", "6", "--seed", "3", "--workers", "1", "--quiet"]) == 0
+    )
     assert "wrote" in capsys.readouterr().out
     assert len((out / "all.txt").read_text().split()) == 6
     report = tmp_path / "probes.json"
-    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--quiet", "--json", str(report)]) == 0
+    assert (
+        main(["eval", "probes", "--data", str(out), "--split", "all", "--quiet", "--json", str(report)]) == 0
+    )
     text = capsys.readouterr().out
     assert "100.0%" in text.splitlines()[-2] or "100.0%" in text
     assert json.loads(report.read_text())["rate"] == 1.0
     # A corpus directory may be regenerated in place; anything else is never replaced.
-    assert main(["corpus", "--out", str(out), "--clips", "2", "--workers", "1", "--quiet",
-                 "--families", "clap,squat"]) == 0
+    assert (
+        main(
+            [
+                "corpus",
+                "--out",
+                str(out),
+                "--clips",
+                "2",
+                "--workers",
+                "1",
+                "--quiet",
+                "--families",
+                "clap,squat",
+            ]
+        )
+        == 0
+    )
     assert sorted(json.loads((out / "corpus.json").read_text())["families"]) == ["clap", "squat"]
 
 
@@ -27,20 +46,75 @@ def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
     """--tokenizer-only probes the ground truth after an encode/decode round trip of the model's
     tokenizer: the shipped one reproduces walks (their probes pass), and the report says what it ran."""
     out = tmp_path / "c"
-    assert main(["corpus", "--out", str(out), "--clips", "4", "--seed", "5", "--workers", "1", "--quiet",
-                 "--families", "walk,sidestep_left"]) == 0
+    assert (
+        main(
+            [
+                "corpus",
+                "--out",
+                str(out),
+                "--clips",
+                "4",
+                "--seed",
+                "5",
+                "--workers",
+                "1",
+                "--quiet",
+                "--families",
+                "walk,sidestep_left",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     report = tmp_path / "tok.json"
-    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--model", "default", "--tokenizer-only",
-                 "--quiet", "--json", str(report)]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "probes",
+                "--data",
+                str(out),
+                "--split",
+                "all",
+                "--model",
+                "default",
+                "--tokenizer-only",
+                "--quiet",
+                "--json",
+                str(report),
+            ]
+        )
+        == 0
+    )
     data = json.loads(report.read_text())
     assert "through the tokenizer" in data["source"] and "all layer" in data["source"]
     assert data["families"]["walk"]["passed"] == data["families"]["walk"]["total"] > 0
-    assert main(["eval", "probes", "--data", str(out), "--split", "all", "--model", "default", "--tokenizer-only",
-                 "--layers", "1", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "probes",
+                "--data",
+                str(out),
+                "--split",
+                "all",
+                "--model",
+                "default",
+                "--tokenizer-only",
+                "--layers",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "1 layer(s)" in capsys.readouterr().out
-    for argv in (["--layers", "1"], ["--tokenizer-only"], ["--model", "default", "--tokenizer-only", "--layers", "9"],
-                 ["--model", "default", "--layers", "2"]):
+    for argv in (
+        ["--layers", "1"],
+        ["--tokenizer-only"],
+        ["--model", "default", "--tokenizer-only", "--layers", "9"],
+        ["--model", "default", "--layers", "2"],
+    ):
         assert main(["eval", "probes", "--data", str(out), "--quiet", *argv]) == 2, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "error" in err, (argv, err)

@@ -11,8 +11,13 @@ from controlmm.motion.bvh import read_bvh
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "controlmm", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "controlmm", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
 
 
 def test_version_and_help(capsys):

@@ -28,8 +28,9 @@ def test_sparse_and_dense_forms(tmp_path):
 
 def test_world_coords_convert_through_frames():
     tf = HumanToWorld(scale=0.8, yaw=0.0, translation=(1.0, 0.0, 0.0))
-    spec = ControlSpec.from_dict({"coords": "world", "constraints": [
-        {"joint": "head", "frame": 5, "position": [1.8, 0.0, 1.2]}]})
+    spec = ControlSpec.from_dict(
+        {"coords": "world", "constraints": [{"joint": "head", "frame": 5, "position": [1.8, 0.0, 1.2]}]}
+    )
     human = spec.human_positions(tf)
     assert np.allclose(tf.to_world(human), [[1.8, 0.0, 1.2]])
     assert np.allclose(human, [[0.0, 1.5, 1.0]])  # 1 m ahead, 1.5 m up in human units
@@ -38,13 +39,23 @@ def test_world_coords_convert_through_frames():
 @pytest.mark.parametrize(
     "spec,needle",
     [
-        ({"constraints": [{"joint": "left_hand", "frame": 1, "position": [0, 0, 0]}]}, "valid joints: pelvis"),
+        (
+            {"constraints": [{"joint": "left_hand", "frame": 1, "position": [0, 0, 0]}]},
+            "valid joints: pelvis",
+        ),
         ({"constraints": [{"joint": 22, "frame": 1, "position": [0, 0, 0]}]}, "out of range"),
         ({"constraints": [{"joint": "head", "frame": -1, "position": [0, 0, 0]}]}, ">= 0"),
         ({"constraints": [{"joint": "head", "frame": 1, "position": [0, "nan", 0]}]}, "NaN"),
         ({"constraints": [{"joint": "head", "frame": 1, "position": [0, 0]}]}, "shape"),
-        ({"constraints": [{"joint": "head", "frame": 1, "position": [0, 0, 0]},
-                          {"joint": 15, "frame": 1, "position": [1, 0, 0]}]}, "duplicate"),
+        (
+            {
+                "constraints": [
+                    {"joint": "head", "frame": 1, "position": [0, 0, 0]},
+                    {"joint": 15, "frame": 1, "position": [1, 0, 0]},
+                ]
+            },
+            "duplicate",
+        ),
         ({"constraints": [{"joint": "head", "frame_range": [3, 5], "positions": [[0, 0, 0]]}]}, "(3, 3)"),
         ({"coords": "robot", "constraints": []}, "coords must be one of"),
         ({"constraints": [{"joint": "head", "frame": 1.5, "position": [0, 0, 0]}]}, "whole number"),
@@ -69,9 +80,14 @@ def test_bad_json_file(tmp_path):
 
 
 def test_control_loss_matches_definition_and_errors(sample_joints):
-    spec = ControlSpec.from_dict({"constraints": [
-        {"joint": "pelvis", "frame": 10, "position": (sample_joints[10, 0] + [0.1, 0, 0]).tolist()},
-        {"joint": "left_wrist", "frame": 30, "position": sample_joints[30, 20].tolist()}]})
+    spec = ControlSpec.from_dict(
+        {
+            "constraints": [
+                {"joint": "pelvis", "frame": 10, "position": (sample_joints[10, 0] + [0.1, 0, 0]).tolist()},
+                {"joint": "left_wrist", "frame": 30, "position": sample_joints[30, 20].tolist()},
+            ]
+        }
+    )
     targets, mask = spec.dense(len(sample_joints))
     joints = torch.tensor(sample_joints)[None].repeat(2, 1, 1, 1)
     joints[1, 30, 20, 1] += 0.2
@@ -82,5 +98,7 @@ def test_control_loss_matches_definition_and_errors(sample_joints):
 
 
 def test_pinned_frame0_warning():
-    spec = ControlSpec.from_dict({"constraints": [{"joint": "pelvis", "frame": 0, "position": [0.5, 0.9, 0.0]}]})
+    spec = ControlSpec.from_dict(
+        {"constraints": [{"joint": "pelvis", "frame": 0, "position": [0.5, 0.9, 0.0]}]}
+    )
     assert "frame 0" in spec.pinned_frame0_warnings()[0]

@@ -48,7 +48,7 @@ def _skating(j: np.ndarray) -> float:
     feet = j[:, [10, 11]]
     v = np.linalg.norm(feet[1:, :, [0, 2]] - feet[:-1, :, [0, 2]], axis=-1) * 20.0
     padded = np.concatenate([np.zeros((2, 2)), v, np.zeros((2, 2))])
-    avg = np.stack([padded[i:i + len(v)] for i in range(5)]).mean(0)
+    avg = np.stack([padded[i : i + len(v)] for i in range(5)]).mean(0)
     contact = (feet[:-1, :, 1] < 0.05) & (feet[1:, :, 1] < 0.05)
     return float(np.any(contact & (v > 0.5) & (avg > 0.5), axis=1).sum() / (len(j) - 1))
 
@@ -80,8 +80,9 @@ def test_humanml3d_layout_and_round_trip(corpus):
 
 
 def test_mean_std_are_train_statistics_with_group_std(corpus):
-    feats = np.concatenate([np.load(corpus / "new_joint_vecs" / f"{i}.npy").astype(np.float64)
-                            for i in _ids(corpus, "train")])
+    feats = np.concatenate(
+        [np.load(corpus / "new_joint_vecs" / f"{i}.npy").astype(np.float64) for i in _ids(corpus, "train")]
+    )
     mean, std = np.load(corpus / "Mean.npy"), np.load(corpus / "Std.npy")
     assert mean.shape == std.shape == (263,)
     np.testing.assert_allclose(mean, feats.mean(0), rtol=1e-5, atol=1e-6)
@@ -98,7 +99,9 @@ def test_deterministic_for_a_seed_whatever_the_workers(tmp_path):
     assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
     for rel in files:
         assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
-    assert (a / "new_joint_vecs" / "000000.npy").read_bytes() != (c / "new_joint_vecs" / "000000.npy").read_bytes()
+    assert (a / "new_joint_vecs" / "000000.npy").read_bytes() != (
+        c / "new_joint_vecs" / "000000.npy"
+    ).read_bytes()
 
 
 def test_bones_floor_knees_and_foot_skating_measured_independently(corpus):
@@ -118,7 +121,9 @@ def test_bones_floor_knees_and_foot_skating_measured_independently(corpus):
             bend = rel - (rel * axis).sum(-1, keepdims=True) * axis
             foot = j[:, toe] - j[:, ankle]
             foot[:, 1] = 0
-            assert ((bend * foot).sum(-1) / np.linalg.norm(foot, axis=-1)).min() > -0.01  # knees never backwards
+            assert (
+                (bend * foot).sum(-1) / np.linalg.norm(foot, axis=-1)
+            ).min() > -0.01  # knees never backwards
         steps = np.linalg.norm(np.diff(j, axis=0), axis=-1) * 20
         assert steps.max() < 15.0  # no teleporting joints (m/s)
         skating.append(_skating(j))
@@ -150,8 +155,9 @@ def test_captions_tell_the_truth_about_sides_rotation_and_direction(index):
         j, caps, _ = _clip(f"sidestep_{side}", index)
         fwd, left = _facing(j[:5])
         d = j[-1, 0] - j[0, 0]
-        assert sign * (d @ left[0]) > 0.3 and all(f" {side}" in c.text or f"{side}ward" in c.text
-                                                  or f"the {side} " in c.text for c in caps)
+        assert sign * (d @ left[0]) > 0.3 and all(
+            f" {side}" in c.text or f"{side}ward" in c.text or f"the {side} " in c.text for c in caps
+        )
         j, caps, _ = _clip(f"turn_{side}", index)
         assert sign * _turn(j) > 60
         j, caps, _ = _clip(f"wave_{side}", index)
@@ -185,10 +191,14 @@ def test_held_out_phrasings_only_in_the_test_split(corpus):
                 assert cap["held_out"] == (split == "test")
                 if split != "test":
                     assert not template.held
-                    assert not any(cap["text"].startswith(s) or f" {s} " in cap["text"] for s, _ in HELD_SUBJECTS)
+                    assert not any(
+                        cap["text"].startswith(s) or f" {s} " in cap["text"] for s, _ in HELD_SUBJECTS
+                    )
                     slots = family.slots(meta["params"])
                     held_words = {h for slot in slots.values() for h in slot.held}
-                    assert not any(h and h.replace("{poss}", "") in cap["text"] for h in held_words if len(h) > 6)
+                    assert not any(
+                        h and h.replace("{poss}", "") in cap["text"] for h in held_words if len(h) > 6
+                    )
 
 
 def test_features_reproduce_the_joints_through_full_turns():

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from controlmm.corpus.feet import HEEL_LOCAL, Stance, ankle_from_pivot, foot_track, heel_position, toe_position
+from controlmm.corpus.feet import (
+    HEEL_LOCAL,
+    Stance,
+    ankle_from_pivot,
+    foot_track,
+    heel_position,
+    toe_position,
+)
 from controlmm.corpus.rig import heading_vectors, rot_y, two_bone_ik
 
 
@@ -12,7 +19,7 @@ def test_positive_yaw_turns_forward_towards_the_persons_left():
     fwd, left = heading_vectors(np.array([0.0, np.pi / 2]))
     np.testing.assert_allclose(fwd[0], [0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(left[0], [1, 0, 0], atol=1e-12)  # +X is the person's left
-    np.testing.assert_allclose(fwd[1], [1, 0, 0], atol=1e-12)   # after a left turn, facing +X
+    np.testing.assert_allclose(fwd[1], [1, 0, 0], atol=1e-12)  # after a left turn, facing +X
     np.testing.assert_allclose(rot_y(np.array(np.pi / 2)) @ [0, 0, 1], [1, 0, 0], atol=1e-12)
 
 
@@ -35,8 +42,8 @@ def test_two_bone_ik_keeps_lengths_bends_towards_pole_and_clamps():
 
 def test_planted_foot_rolls_about_a_fixed_toe_or_heel():
     flat = np.array([0.3, 0.055, 1.0])
-    heel_up = np.linspace(0.0, -1.0, 20)   # push-off / tucked toes: pivot on the toe
-    toe_up = np.linspace(0.0, 0.4, 20)     # heel strike: pivot on the heel
+    heel_up = np.linspace(0.0, -1.0, 20)  # push-off / tucked toes: pivot on the toe
+    toe_up = np.linspace(0.0, 0.4, 20)  # heel strike: pivot on the heel
     yaw = 0.7
     a = ankle_from_pivot("left", flat, np.full(20, yaw), heel_up)
     toes = toe_position("left", a, np.full(20, yaw), heel_up)

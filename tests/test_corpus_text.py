@@ -27,7 +27,9 @@ def test_every_word_a_family_can_write_is_in_the_lexicon():
         for seed in range(12):
             params = family.sample(np.random.default_rng(seed))
             words = phrase_words(family.templates, family.slots(params))
-            unknown = {w for w in words if w not in LEXICON and not w.isdigit() and w not in ("left", "right")}
+            unknown = {
+                w for w in words if w not in LEXICON and not w.isdigit() and w not in ("left", "right")
+            }
             assert not unknown, (name, unknown)
 
 
@@ -48,7 +50,10 @@ def test_captions_are_varied_true_to_parameters_and_hold_out_phrasings():
             if "hand" in cap.claims and cap.claims["hand"] in ("left", "right"):
                 other = "right" if cap.claims["hand"] == "left" else "left"
                 assert f"{other} hand" not in cap.text and f"{other} arm" not in cap.text
-    subjects = {get_family("walk").captions(get_family("walk").sample(np.random.default_rng(s)),
-                                           np.random.default_rng(s), False)[0].text.split(" walk")[0]
-                for s in range(40)}
+    subjects = {
+        get_family("walk")
+        .captions(get_family("walk").sample(np.random.default_rng(s)), np.random.default_rng(s), False)[0]
+        .text.split(" walk")[0]
+        for s in range(40)
+    }
     assert len(subjects) >= 4  # "a person", "someone", "a man", ...

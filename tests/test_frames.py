@@ -26,8 +26,9 @@ def test_transform_round_trip_numpy_and_torch():
     w.sum().backward()
     assert pt.grad is not None
     # Distances scale by the scale factor.
-    assert np.isclose(np.linalg.norm(tf.to_world(p[0, 0]) - tf.to_world(p[0, 1])),
-                      0.75 * np.linalg.norm(p[0, 0] - p[0, 1]))
+    assert np.isclose(
+        np.linalg.norm(tf.to_world(p[0, 0]) - tf.to_world(p[0, 1])), 0.75 * np.linalg.norm(p[0, 0] - p[0, 1])
+    )
     assert tf.distance_to_human(0.75) == pytest.approx(1.0)
 
 

@@ -34,7 +34,9 @@ def _yaw(angle: float) -> np.ndarray:
 
 def test_canonicalisation_removes_placement_heading_and_size(sample_joints):
     base, _ = joints_to_features(sample_joints)
-    moved = qrot(np.broadcast_to(_yaw(1.1), sample_joints.shape[:-1] + (4,)), sample_joints.astype(np.float64))
+    moved = qrot(
+        np.broadcast_to(_yaw(1.1), sample_joints.shape[:-1] + (4,)), sample_joints.astype(np.float64)
+    )
     moved = 1.3 * moved + np.array([4.0, 0.5, -2.0])
     feats, positions = joints_to_features(moved)
     assert np.abs(feats[:, :67] - base[:, :67]).max() < 1e-4

@@ -7,7 +7,6 @@ import json
 import pytest
 
 from controlmm.cli.main import main
-from controlmm.frames import HumanToWorld
 from controlmm.control.spec import ControlSpec
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from scenes import load_scene
@@ -26,17 +25,20 @@ BLOCKED_START = """<mujoco model="blocked">
 """
 
 
-@pytest.mark.parametrize("args, needle", [
-    (["--scene", "volcano"], "volcano"),
-    (["--robot", "r2d2"], "r2d2"),
-    (["--control", "missing_spec.json"], "missing_spec.json"),
-    (["--rounds", "-1"], "rounds"),
-    (["--seconds", "30"], "seconds"),
-    (["--text", "  "], "text"),
-    (["--fps", "5"], "fps"),
-    (["--preset", "turbo"], "turbo"),
-    (["--threads", "0"], "threads"),
-])
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--scene", "volcano"], "volcano"),
+        (["--robot", "r2d2"], "r2d2"),
+        (["--control", "missing_spec.json"], "missing_spec.json"),
+        (["--rounds", "-1"], "rounds"),
+        (["--seconds", "30"], "seconds"),
+        (["--text", "  "], "text"),
+        (["--fps", "5"], "fps"),
+        (["--preset", "turbo"], "turbo"),
+        (["--threads", "0"], "threads"),
+    ],
+)
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
     out = tmp_path / "plan"
     assert main(["plan", "--out", str(out), "--no-render", "--no-progress", *args]) == 2
@@ -47,7 +49,9 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
 
 def test_bad_spec_names_the_joint(tmp_path, capsys):
     spec = tmp_path / "spec.json"
-    spec.write_text(json.dumps({"coords": "world", "constraints": [{"joint": "tail", "frame": 3, "position": [0, 0, 1]}]}))
+    spec.write_text(
+        json.dumps({"coords": "world", "constraints": [{"joint": "tail", "frame": 3, "position": [0, 0, 1]}]})
+    )
     assert main(["plan", "--out", str(tmp_path / "p"), "--control", str(spec), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "tail" in err and "pelvis" in err
@@ -67,12 +71,17 @@ def test_start_pose_inside_an_obstacle_is_an_error(tmp_path, capsys):
 def test_unreachable_and_buried_targets_warn_with_the_distance():
     scene = load_scene("table", robot=None)
     transform = scene.human_to_world(0.75)
-    spec = ControlSpec.from_dict({"coords": "world", "constraints": [
-        {"joint": "pelvis", "frame": 40, "position": [20.0, 0.0, 0.74]},  # 21 m in 2 s
-        {"joint": "right_wrist", "frame": 80, "position": [1.2, 0.0, 0.555]},  # inside the table top
-        {"joint": "head", "frame": 100, "position": [0.0, 0.0, 3.0]},  # far above any head
-        {"joint": "left_wrist", "frame": 120, "position": [-1.5, 0.3, 0.9]},  # fine
-    ]})
+    spec = ControlSpec.from_dict(
+        {
+            "coords": "world",
+            "constraints": [
+                {"joint": "pelvis", "frame": 40, "position": [20.0, 0.0, 0.74]},  # 21 m in 2 s
+                {"joint": "right_wrist", "frame": 80, "position": [1.2, 0.0, 0.555]},  # inside the table top
+                {"joint": "head", "frame": 100, "position": [0.0, 0.0, 3.0]},  # far above any head
+                {"joint": "left_wrist", "frame": 120, "position": [-1.5, 0.3, 0.9]},  # fine
+            ],
+        }
+    )
     warnings = constraint_warnings(spec, transform, scene.sdf())
     assert len(warnings) == 3
     far, buried, high = warnings
@@ -84,8 +93,12 @@ def test_unreachable_and_buried_targets_warn_with_the_distance():
 
 
 def _spec(*frames: int) -> ControlSpec:
-    return ControlSpec.from_dict({"coords": "world", "constraints": [
-        {"joint": "pelvis", "frame": f, "position": [0.5, 0.0, 0.74]} for f in frames]})
+    return ControlSpec.from_dict(
+        {
+            "coords": "world",
+            "constraints": [{"joint": "pelvis", "frame": f, "position": [0.5, 0.0, 0.74]} for f in frames],
+        }
+    )
 
 
 def test_a_plan_ends_half_a_second_after_its_last_constraint():
@@ -96,7 +109,9 @@ def test_a_plan_ends_half_a_second_after_its_last_constraint():
     assert plan_seconds(None, None) is None and plan_seconds(3.0, _spec(80)) == 3.0
     assert plan_seconds(None, _spec(196)) is None  # the generator names the out-of-range frame
     # the bundled example: a reach at frame 80
-    assert plan_seconds(None, ControlSpec.from_dict(load_scene("table").suggested_control)) == pytest.approx(4.55)
+    assert plan_seconds(None, ControlSpec.from_dict(load_scene("table").suggested_control)) == pytest.approx(
+        4.55
+    )
 
 
 def test_plan_help_explains_outputs(capsys):

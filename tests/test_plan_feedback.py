@@ -42,8 +42,14 @@ def test_robot_frames_map_to_padded_human_frames():
 def test_floor_failure_lifts_only_the_bodys_joints_over_its_frames(sample_joints, g1_body_joints):
     transform = HumanToWorld(scale=robot_scale("g1"))
     failure = Failure("floor_penetration", 100, 120, "left_ankle_roll_link", "floor", 0.02)
-    (term,) = feedback_terms([failure], sample_joints, body_joints=g1_body_joints, transform=transform,
-                             robot_fps=50.0, round_index=0)
+    (term,) = feedback_terms(
+        [failure],
+        sample_joints,
+        body_joints=g1_body_joints,
+        transform=transform,
+        robot_fps=50.0,
+        round_index=0,
+    )
     assert term.name.startswith("feedback1:floor_penetration:left_ankle_roll_link")
     grad = _grad(term, sample_joints)
     frames = human_frames(100, 120, 50.0, len(sample_joints), FeedbackConfig().frame_pad)
@@ -63,8 +69,14 @@ def test_floor_failure_lifts_only_the_bodys_joints_over_its_frames(sample_joints
 def test_self_collision_failure_asks_the_two_bodies_apart(sample_joints, g1_body_joints):
     transform = HumanToWorld(scale=robot_scale("g1"))
     failure = Failure("self_collision", 10, 40, "right_wrist_yaw_link", "right_hip_roll_link", 0.01)
-    (term,) = feedback_terms([failure], sample_joints, body_joints=g1_body_joints, transform=transform,
-                             robot_fps=50.0, round_index=1)
+    (term,) = feedback_terms(
+        [failure],
+        sample_joints,
+        body_joints=g1_body_joints,
+        transform=transform,
+        robot_fps=50.0,
+        round_index=1,
+    )
     assert term.weight == pytest.approx(FeedbackConfig().weight * FeedbackConfig().growth)
     grad = _grad(term, sample_joints)
     wrist = {joint_index(j) for j in g1_body_joints["right_wrist_yaw_link"]}
@@ -77,16 +89,29 @@ def test_self_collision_failure_asks_the_two_bodies_apart(sample_joints, g1_body
 
 def test_grouping_merges_failures_of_one_body_and_kind(sample_joints, g1_body_joints):
     transform = HumanToWorld(scale=robot_scale("g1"))
-    failures = [Failure("residual_force", 10, 12, None, None, 0.3), Failure("residual_force", 60, 61, None, None, 0.2),
-                Failure("foot_sliding", 30, 40, "right_ankle_roll_link", None, 0.02)]
-    terms = feedback_terms(failures, sample_joints, body_joints=g1_body_joints, transform=transform, robot_fps=50.0,
-                           round_index=0)
+    failures = [
+        Failure("residual_force", 10, 12, None, None, 0.3),
+        Failure("residual_force", 60, 61, None, None, 0.2),
+        Failure("foot_sliding", 30, 40, "right_ankle_roll_link", None, 0.02),
+    ]
+    terms = feedback_terms(
+        failures,
+        sample_joints,
+        body_joints=g1_body_joints,
+        transform=transform,
+        robot_fps=50.0,
+        round_index=0,
+    )
     assert len(terms) == 2
     smooth = next(t for t in terms if "residual_force" in t.name)
     grad = _grad(smooth, sample_joints)
     assert grad[:, [0, 3, 6, 9]].sum() > 0 and grad[:, [20, 21, 10, 11]].sum() == 0  # the trunk only
     rows = set(np.nonzero(grad.sum(1))[0])  # acceleration at frame f reaches frames f-1..f+1
-    allowed = {g for f in human_frames(10, 12, 50.0, 170, 3) + human_frames(60, 61, 50.0, 170, 3) for g in (f - 1, f, f + 1)}
+    allowed = {
+        g
+        for f in human_frames(10, 12, 50.0, 170, 3) + human_frames(60, 61, 50.0, 170, 3)
+        for g in (f - 1, f, f + 1)
+    }
     assert rows and rows <= allowed
 
 
@@ -107,10 +132,26 @@ def test_obstacle_failure_uses_a_larger_margin(sample_joints, g1_body_joints):
     scene = load_scene("pillars", robot=None)
     transform = scene.human_to_world(robot_scale("g1"))
     failure = Failure("obstacle_penetration", 0, 200, "left_elbow_link", "pillar_2", 0.05)
-    small = feedback_terms([failure], sample_joints, body_joints=g1_body_joints, transform=transform, robot_fps=50.0,
-                           round_index=0, sdf=scene.sdf(), config=FeedbackConfig(margin_m=0.0))[0]
-    large = feedback_terms([failure], sample_joints, body_joints=g1_body_joints, transform=transform, robot_fps=50.0,
-                           round_index=0, sdf=scene.sdf(), config=FeedbackConfig(margin_m=2.0))[0]
+    small = feedback_terms(
+        [failure],
+        sample_joints,
+        body_joints=g1_body_joints,
+        transform=transform,
+        robot_fps=50.0,
+        round_index=0,
+        sdf=scene.sdf(),
+        config=FeedbackConfig(margin_m=0.0),
+    )[0]
+    large = feedback_terms(
+        [failure],
+        sample_joints,
+        body_joints=g1_body_joints,
+        transform=transform,
+        robot_fps=50.0,
+        round_index=0,
+        sdf=scene.sdf(),
+        config=FeedbackConfig(margin_m=2.0),
+    )[0]
     j = torch.as_tensor(sample_joints)[None]
     assert float(large(j)) > float(small(j)) >= 0
     grad = _grad(large, sample_joints)

@@ -82,8 +82,14 @@ def test_check_accepts_a_metadata_record_and_reports_values(corpus):
     motion = Motion.from_features(np.load(corpus / "new_joint_vecs" / f"{clip_id}.npy"))
     result = check(meta, motion)
     assert result.passed and np.isfinite(result.value) and result.family == meta["family"]
-    case = ProbeCase(clip_id, meta["captions"][0]["text"], meta["family"], meta["captions"][0]["claims"],
-                     meta["frames"], "test")
+    case = ProbeCase(
+        clip_id,
+        meta["captions"][0]["text"],
+        meta["family"],
+        meta["captions"][0]["claims"],
+        meta["frames"],
+        "test",
+    )
     assert check(case, motion.joints).passed
     with pytest.raises(ControlMMError):
         probe(motion, "fly_to_the_moon", {})

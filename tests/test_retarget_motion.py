@@ -19,16 +19,39 @@ from retarget import RobotTrajectory, retarget_motion, robot_mjcf, robot_scale
 
 # Robot bodies that sit on human joints (HumanML3D index), per robot.
 BODIES = {
-    "g1": {"pelvis": 0, "left_hip_roll_link": 1, "right_hip_roll_link": 2, "left_knee_link": 4,
-           "right_knee_link": 5, "left_ankle_roll_link": 7, "right_ankle_roll_link": 8,
-           "left_shoulder_roll_link": 16, "right_shoulder_roll_link": 17, "left_elbow_link": 18,
-           "right_elbow_link": 19, "left_wrist_yaw_link": 20, "right_wrist_yaw_link": 21},
-    "h1": {"pelvis": 0, "left_hip_pitch_link": 1, "right_hip_pitch_link": 2, "left_knee_link": 4,
-           "right_knee_link": 5, "left_ankle_link": 7, "right_ankle_link": 8,
-           "left_shoulder_roll_link": 16, "right_shoulder_roll_link": 17, "left_elbow_link": 18,
-           "right_elbow_link": 19},
+    "g1": {
+        "pelvis": 0,
+        "left_hip_roll_link": 1,
+        "right_hip_roll_link": 2,
+        "left_knee_link": 4,
+        "right_knee_link": 5,
+        "left_ankle_roll_link": 7,
+        "right_ankle_roll_link": 8,
+        "left_shoulder_roll_link": 16,
+        "right_shoulder_roll_link": 17,
+        "left_elbow_link": 18,
+        "right_elbow_link": 19,
+        "left_wrist_yaw_link": 20,
+        "right_wrist_yaw_link": 21,
+    },
+    "h1": {
+        "pelvis": 0,
+        "left_hip_pitch_link": 1,
+        "right_hip_pitch_link": 2,
+        "left_knee_link": 4,
+        "right_knee_link": 5,
+        "left_ankle_link": 7,
+        "right_ankle_link": 8,
+        "left_shoulder_roll_link": 16,
+        "right_shoulder_roll_link": 17,
+        "left_elbow_link": 18,
+        "right_elbow_link": 19,
+    },
 }
-FEET = {"g1": ("left_ankle_roll_link", "right_ankle_roll_link"), "h1": ("left_ankle_link", "right_ankle_link")}
+FEET = {
+    "g1": ("left_ankle_roll_link", "right_ankle_roll_link"),
+    "h1": ("left_ankle_link", "right_ankle_link"),
+}
 LIMBS = [(1, 4), (4, 7), (2, 5), (5, 8), (16, 18), (17, 19)]  # thighs, shanks, upper arms (human joints)
 
 
@@ -121,9 +144,14 @@ def test_csv_layout_and_quaternion_order(exported, robot):
     meta = json.loads((prefix.parent / (prefix.name + ".json")).read_text())
     assert rows.shape == (traj.num_frames, model.nq)
     # xyz, quaternion xyzw, then joints in MJCF (qpos) order.
-    hinge = [model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE]
+    hinge = [
+        model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE
+    ]
     assert names == hinge
-    assert meta["csv_columns"] == ["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw"] + hinge
+    assert (
+        meta["csv_columns"]
+        == ["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw"] + hinge
+    )
     assert meta["quaternion_order"]["csv"] == "xyzw"
     np.testing.assert_array_equal(rows[:, 0:3], qpos[:, 0:3])
     np.testing.assert_array_equal(rows[:, 3:7], qpos[:, [4, 5, 6, 3]])
@@ -182,12 +210,26 @@ def test_limits_floor_and_positions_checked_in_mujoco(exported, motion, robot):
 
 def _foot_geoms(model, body_name):
     body = model.body(body_name).id
-    return [g for g in range(model.ngeom)
-            if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])]
+    return [
+        g
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
 
 
-@pytest.mark.parametrize("robot", ["g1", pytest.param("h1", marks=pytest.mark.xfail(
-    strict=True, reason="known limitation: one H1 touchdown skids 15 mm in its first contact frame"))])
+@pytest.mark.parametrize(
+    "robot",
+    [
+        "g1",
+        pytest.param(
+            "h1",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="known limitation: one H1 touchdown skids 15 mm in its first contact frame",
+            ),
+        ),
+    ],
+)
 def test_stance_feet_stay_in_place(exported, robot):
     """The contact does not slip: the feet roll (heel strike, toe-off), so the ankle body may
     move over a planted toe; what must stay put is the collision geom that is on the floor."""
@@ -207,14 +249,17 @@ def test_stance_feet_stay_in_place(exported, robot):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], contact.astype(int), [0]])))
         for s, e in zip(edges[::2], edges[1::2]):
             # H1's 5-joint legs (no ankle roll) cannot hold a foot flat and still in every pose.
-            assert slide[s:e].max() < {"g1": 0.004, "h1": 0.01}[robot], \
+            assert slide[s:e].max() < {"g1": 0.004, "h1": 0.01}[robot], (
                 f"{foot} slid {slide[s:e].max() * 1000:.1f} mm in one frame"
+            )
             stances += 1
         for i, g in enumerate(geoms):  # each geom, while it stays down, stays where it touched
             runs = np.flatnonzero(np.diff(np.concatenate([[0], down[:, i].astype(int), [0]])))
             for s, e in zip(runs[::2], runs[1::2]):
-                drift = np.linalg.norm(gpos[s:e + 1, g, :2] - gpos[s, g, :2], axis=1).max()
-                assert drift < {"g1": 0.01, "h1": 0.03}[robot], f"{foot} slid {drift * 1000:.1f} mm in a stance"
+                drift = np.linalg.norm(gpos[s : e + 1, g, :2] - gpos[s, g, :2], axis=1).max()
+                assert drift < {"g1": 0.01, "h1": 0.03}[robot], (
+                    f"{foot} slid {drift * 1000:.1f} mm in a stance"
+                )
     assert stances >= 6  # the clip has several steps per foot
 
 
@@ -269,8 +314,14 @@ def test_transform_places_the_robot(motion):
     """The HumanToWorld given is where the robot goes (yaw and translation)."""
     cropped = Motion(joints=motion.joints[:40], fps=motion.fps)
     scale = robot_scale("g1")
-    moved = retarget_motion(cropped, "g1", transform=HumanToWorld(scale=scale, yaw=np.pi / 2, translation=(1.0, 2.0, 0.0)),
-                            metrics=False)
-    human = HumanToWorld(scale=scale, yaw=np.pi / 2, translation=(1.0, 2.0, 0.0)).to_world(cropped.joints.astype(float))
+    moved = retarget_motion(
+        cropped,
+        "g1",
+        transform=HumanToWorld(scale=scale, yaw=np.pi / 2, translation=(1.0, 2.0, 0.0)),
+        metrics=False,
+    )
+    human = HumanToWorld(scale=scale, yaw=np.pi / 2, translation=(1.0, 2.0, 0.0)).to_world(
+        cropped.joints.astype(float)
+    )
     assert np.linalg.norm(moved.qpos[0, :2] - human[0, 0, :2]) < 0.06
     assert moved.transform.yaw == pytest.approx(np.pi / 2)

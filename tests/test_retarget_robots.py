@@ -21,15 +21,20 @@ T1_MAPPING = {
     "robot": "t1",
     "keypoints": {
         "pelvis": {"body": "Waist", "offset": [0.015, 0.0, 0.031], "orientation_weight": 2.0},
-        "left_hip": {"body": "Hip_Roll_Left"}, "right_hip": {"body": "Hip_Roll_Right"},
-        "left_knee": {"body": "Shank_Left"}, "right_knee": {"body": "Shank_Right"},
-        "left_ankle": {"body": "left_foot_link"}, "right_ankle": {"body": "right_foot_link"},
+        "left_hip": {"body": "Hip_Roll_Left"},
+        "right_hip": {"body": "Hip_Roll_Right"},
+        "left_knee": {"body": "Shank_Left"},
+        "right_knee": {"body": "Shank_Right"},
+        "left_ankle": {"body": "left_foot_link"},
+        "right_ankle": {"body": "right_foot_link"},
         "left_foot": {"body": "left_foot_link", "offset": [0.083, 0.0, -0.028]},
         "right_foot": {"body": "right_foot_link", "offset": [0.083, 0.0, -0.028]},
         "spine3": {"body": "Trunk", "offset": [0.0, 0.0, 0.115]},
         "head": {"body": "H2", "offset": [0.05, 0.0, 0.09]},
-        "left_shoulder": {"body": "AL2"}, "right_shoulder": {"body": "AR2"},
-        "left_elbow": {"body": "left_hand_link"}, "right_elbow": {"body": "right_hand_link"},
+        "left_shoulder": {"body": "AL2"},
+        "right_shoulder": {"body": "AR2"},
+        "left_elbow": {"body": "left_hand_link"},
+        "right_elbow": {"body": "right_hand_link"},
         "left_wrist": {"body": "left_hand_link", "offset": [0.0, 0.2, 0.0]},
         "right_wrist": {"body": "right_hand_link", "offset": [0.0, -0.2, 0.0]},
     },
@@ -37,8 +42,9 @@ T1_MAPPING = {
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "controlmm", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "controlmm", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.fixture(scope="module")
@@ -54,10 +60,21 @@ def test_packaged_robots_and_scales():
         rm = load_robot(robot)
         hips = [rm.mapping.keypoint(j).body for j in ("left_hip", "right_hip")]
         hip_z = np.mean([data.xpos[model.body(b).id][2] for b in hips])
-        feet = [g for g in range(model.ngeom) if model.geom_contype[g] and
-                model.body(model.geom_bodyid[g]).name in (rm.mapping.keypoint("left_ankle").body,)]
-        sole = min(data.geom_xpos[g][2] - (model.geom_size[g][0] if model.geom_type[g] == 2 else
-                   abs(data.geom_xmat[g][8]) * model.geom_size[g][1] + model.geom_size[g][0]) for g in feet)
+        feet = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_contype[g]
+            and model.body(model.geom_bodyid[g]).name in (rm.mapping.keypoint("left_ankle").body,)
+        ]
+        sole = min(
+            data.geom_xpos[g][2]
+            - (
+                model.geom_size[g][0]
+                if model.geom_type[g] == 2
+                else abs(data.geom_xmat[g][8]) * model.geom_size[g][1] + model.geom_size[g][0]
+            )
+            for g in feet
+        )
         assert robot_scale(robot) == pytest.approx((hip_z - sole) / HUMAN_HIP_HEIGHT, rel=1e-6)
     assert 0.7 < robot_scale("g1") < 0.8 and 0.95 < robot_scale("h1") < 1.05
     # Every body of the robot lists the human joints it follows (for simulation feedback).
@@ -158,8 +175,9 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, sample_features, capsys):
     wrong = tmp_path / "wrong.npy"
     np.save(wrong, np.zeros((30, 5)))
     bad_map = tmp_path / "bad.json"
-    bad_map.write_text(json.dumps(dict(T1_MAPPING, keypoints=dict(T1_MAPPING["keypoints"],
-                                                                  head={"body": "Head_Link"}))))
+    bad_map.write_text(
+        json.dumps(dict(T1_MAPPING, keypoints=dict(T1_MAPPING["keypoints"], head={"body": "Head_Link"})))
+    )
     cases = [
         ((motion, "--robot", "nao"), "known robots: g1, h1"),
         ((motion, "--robot", bad_map), "Head_Link"),
@@ -182,20 +200,52 @@ def test_cli_render_mujoco_egl_and_stick_fallback(tmp_path, sample_features):
     np.save(motion, sample_features[:12])
     small = ("--render-width", "64", "--render-height", "48", "--render-fps", "10")
     env = {**__import__("os").environ, "MUJOCO_GL": "egl"}
-    res = subprocess.run([sys.executable, "-m", "controlmm", "retarget", str(motion), "--out", str(tmp_path / "a"),
-                          "--render", str(tmp_path / "a.mp4"), *small], capture_output=True, text=True,
-                         timeout=300, env=env)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "controlmm",
+            "retarget",
+            str(motion),
+            "--out",
+            str(tmp_path / "a"),
+            "--render",
+            str(tmp_path / "a.mp4"),
+            *small,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
     assert res.returncode == 0, res.stderr
     assert "(mujoco)" in res.stdout and (tmp_path / "a.mp4").stat().st_size > 500
     # OSMesa is not installed on the reference machine: MuJoCo cannot load it -> stick figure.
     env["MUJOCO_GL"] = "osmesa"
-    res = subprocess.run([sys.executable, "-m", "controlmm", "retarget", str(motion), "--out", str(tmp_path / "b"),
-                          "--render", str(tmp_path / "b.gif"), *small], capture_output=True, text=True,
-                         timeout=300, env=env)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "controlmm",
+            "retarget",
+            str(motion),
+            "--out",
+            str(tmp_path / "b"),
+            "--render",
+            str(tmp_path / "b.gif"),
+            *small,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
     assert res.returncode == 0, res.stderr
     if "(mujoco)" in res.stdout:
         pytest.skip("this machine has OSMesa, so the fallback path is not exercised")
     assert "(stick)" in res.stdout
-    notes = [line for line in res.stderr.splitlines() if "MuJoCo rendering unavailable (MUJOCO_GL=osmesa" in line]
+    notes = [
+        line for line in res.stderr.splitlines() if "MuJoCo rendering unavailable (MUJOCO_GL=osmesa" in line
+    ]
     assert len(notes) == 1 and "stick figure" in notes[0]
     assert (tmp_path / "b.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")

@@ -18,7 +18,15 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget.metrics import geom_lowest_z, replay
 from retarget.robot_model import load_robot
-from retarget.solver import CONSTRAINT_TOLERANCE, SolverConfig, _Problem, _solve, _take, solve, violation_spans
+from retarget.solver import (
+    CONSTRAINT_TOLERANCE,
+    SolverConfig,
+    _Problem,
+    _solve,
+    _take,
+    solve,
+    violation_spans,
+)
 from retarget.targets import build_targets
 
 
@@ -33,8 +41,9 @@ def test_spans_solved_together_equal_spans_solved_alone(sample_features, patienc
     config = SolverConfig(**robot.mapping.solver)
     sol = solve(robot, targets, replace(config, extra_iterations=0, pin_iterations=0))
     prob = _Problem(robot, targets, config)
-    idx, pinned, span = violation_spans(prob.frame_violation(prob.evaluate(sol.root_pos, sol.root_rot, sol.q))
-                                        > CONSTRAINT_TOLERANCE)
+    idx, pinned, span = violation_spans(
+        prob.frame_violation(prob.evaluate(sol.root_pos, sol.root_rot, sol.q)) > CONSTRAINT_TOLERANCE
+    )
     assert span.max() >= 2  # at least three spans
     config = replace(config, max_iterations=6)
     ref = prob.ref_x[:, :3]
@@ -43,12 +52,29 @@ def test_spans_solved_together_equal_spans_solved_alone(sample_features, patienc
     alone = []
     for s in range(span.max() + 1):
         r = idx[span == s]
-        alone.append(_solve(robot, _take(targets, r, targets.fps), config,
-                            (sol.root_pos[r], sol.root_rot[r], sol.q[r]), pinned=pinned[span == s],
-                            ref_pos=ref[r], damping=lam[r], patience=patience)[0])
-    together, _ = _solve(robot, _take(targets, idx, targets.fps), config,
-                         (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]), pinned=pinned, ref_pos=ref[idx],
-                         span=span, damping=lam[idx], patience=patience)
+        alone.append(
+            _solve(
+                robot,
+                _take(targets, r, targets.fps),
+                config,
+                (sol.root_pos[r], sol.root_rot[r], sol.q[r]),
+                pinned=pinned[span == s],
+                ref_pos=ref[r],
+                damping=lam[r],
+                patience=patience,
+            )[0]
+        )
+    together, _ = _solve(
+        robot,
+        _take(targets, idx, targets.fps),
+        config,
+        (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]),
+        pinned=pinned,
+        ref_pos=ref[idx],
+        span=span,
+        damping=lam[idx],
+        patience=patience,
+    )
 
     # the spans really behave differently: different iteration counts, some steps refused
     assert len({a.iterations for a in alone}) > 1
@@ -80,6 +106,6 @@ def test_mesh_lowest_point_from_hull_equals_every_vertex():
     low = geom_lowest_z(m, rep, meshes)
     for i, g in enumerate(meshes):
         mid = m.geom_dataid[g]
-        verts = m.mesh_vert[m.mesh_vertadr[mid]: m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+        verts = m.mesh_vert[m.mesh_vertadr[mid] : m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
         world_z = rep.geom_xpos[:, g, 2:3] + np.einsum("tk,vk->tv", rep.geom_xmat[:, g, 2, :], verts)
         np.testing.assert_allclose(low[:, i], world_z.min(axis=1), atol=1e-12)

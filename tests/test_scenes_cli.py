@@ -11,15 +11,25 @@ from controlmm.cli.main import SUBCOMMANDS, main
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "controlmm", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "controlmm", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_scene_is_a_subcommand_and_list_names_every_scene(capsys):
     assert "scene" in SUBCOMMANDS
     assert main(["scene", "list", "-v"]) == 0
     out = capsys.readouterr().out
-    for name in ("empty", "corridor", "pillars", "table", "low_beam", "doorway", "moving_obstacle", "mesh_rock"):
+    for name in (
+        "empty",
+        "corridor",
+        "pillars",
+        "table",
+        "low_beam",
+        "doorway",
+        "moving_obstacle",
+        "mesh_rock",
+    ):
         assert name in out
     assert "prompt :" in out and '"coords": "world"' in out
 
@@ -48,15 +58,20 @@ def test_sdf_slice(tmp_path, capsys):
     assert (tmp_path / "s.png").stat().st_size > 10_000
 
 
-@pytest.mark.parametrize("args,needle", [
-    (["scene", "show", "nowhere", "--out", "{d}/x.png"], "known scenes: empty, corridor"),
-    (["scene", "sdf", "{d}/bad.xml", "--out", "{d}/x.png"], "line 3"),
-    (["scene", "sdf", "low_beam", "--out", "{d}/x.jpg"], "allowed: .png"),
-    (["scene", "sdf", "low_beam", "--out", "{d}/x.png", "--height", "nan"], "finite"),
-    (["scene", "show", "low_beam", "--out", "{d}/x.png", "--robot", "r2d2"], "unknown robot"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["scene", "show", "nowhere", "--out", "{d}/x.png"], "known scenes: empty, corridor"),
+        (["scene", "sdf", "{d}/bad.xml", "--out", "{d}/x.png"], "line 3"),
+        (["scene", "sdf", "low_beam", "--out", "{d}/x.jpg"], "allowed: .png"),
+        (["scene", "sdf", "low_beam", "--out", "{d}/x.png", "--height", "nan"], "finite"),
+        (["scene", "show", "low_beam", "--out", "{d}/x.png", "--robot", "r2d2"], "unknown robot"),
+    ],
+)
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
-    (tmp_path / "bad.xml").write_text('<mujoco>\n<worldbody>\n<geom type="boxx" size="1 1 1"/>\n</worldbody>\n</mujoco>\n')
+    (tmp_path / "bad.xml").write_text(
+        '<mujoco>\n<worldbody>\n<geom type="boxx" size="1 1 1"/>\n</worldbody>\n</mujoco>\n'
+    )
     before = set(tmp_path.iterdir())
     assert main([a.format(d=tmp_path) for a in args]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -6,14 +6,24 @@ import mujoco
 import numpy as np
 import pytest
 import trimesh
+from scene_helpers import user_scene_xml
 
 from controlmm.errors import ControlMMError
 from controlmm.motion.skeleton import JOINT_NAMES
 from retarget.robots import robot_mjcf
-from scene_helpers import user_scene_xml
 from scenes import list_scenes, load_scene
 
-EXPECTED = {"empty", "corridor", "pillars", "table", "low_beam", "doorway", "moving_obstacle", "mesh_rock", "room"}
+EXPECTED = {
+    "empty",
+    "corridor",
+    "pillars",
+    "table",
+    "low_beam",
+    "doorway",
+    "moving_obstacle",
+    "mesh_rock",
+    "room",
+}
 
 
 @pytest.fixture(scope="module")
@@ -146,11 +156,15 @@ def test_bad_input_messages(tmp_path):
     msg = _error(lambda: load_scene(str(bad)))
     assert "bad.xml" in msg and "Line number=3" in msg
     jointed = tmp_path / "jointed.xml"
-    jointed.write_text('<mujoco><worldbody><body name="door"><joint name="hinge"/>'
-                       '<geom type="box" size=".1 .1 .1"/></body></worldbody></mujoco>')
+    jointed.write_text(
+        '<mujoco><worldbody><body name="door"><joint name="hinge"/>'
+        '<geom type="box" size=".1 .1 .1"/></body></worldbody></mujoco>'
+    )
     assert "has joints (hinge)" in _error(lambda: load_scene(str(jointed), robot=None))
     track = tmp_path / "track.xml"
-    track.write_text('<mujoco><custom><numeric name="controlmm.track.m" data="1 0 0 0 1 0 0 0 0.5 0 0 0 1 0 0 0"/>'
-                     '</custom><worldbody><body name="m" mocap="true"><geom size=".1"/></body></worldbody></mujoco>')
+    track.write_text(
+        '<mujoco><custom><numeric name="controlmm.track.m" data="1 0 0 0 1 0 0 0 0.5 0 0 0 1 0 0 0"/>'
+        '</custom><worldbody><body name="m" mocap="true"><geom size=".1"/></body></worldbody></mujoco>'
+    )
     assert "strictly increasing times" in _error(lambda: load_scene(str(track), robot=None))
     assert "unknown robot 'r2d2'" in _error(lambda: load_scene("empty", robot="r2d2"))

@@ -39,7 +39,11 @@ def _descend(term: LossTerm, joints: torch.Tensor, steps: int = 5, lr: float = 0
 
 def test_losses_are_zero_when_clear(beam, joints):
     tf = beam.human_to_world(SCALE)  # the sample motion stays 1.8 m before the beam
-    for term in (obstacle_loss(beam.sdf(), tf), body_obstacle_loss(beam.sdf(), tf), floor_loss(tf, beam.floor_height)):
+    for term in (
+        obstacle_loss(beam.sdf(), tf),
+        body_obstacle_loss(beam.sdf(), tf),
+        floor_loss(tf, beam.floor_height),
+    ):
         value = term(joints)
         assert value.shape == (1,) and float(value) == 0.0
 
@@ -80,8 +84,10 @@ def test_body_volume_catches_a_forearm_between_clear_joints(joints):
 
     from scenes import SceneSDF
 
-    xml = ('<mujoco><worldbody><body name="bar" pos="{} {} {}"><geom type="capsule" size="0.01 0.3" '
-           'euler="90 0 0"/></body></worldbody></mujoco>').format(*mid)
+    xml = (
+        '<mujoco><worldbody><body name="bar" pos="{} {} {}"><geom type="capsule" size="0.01 0.3" '
+        'euler="90 0 0"/></body></worldbody></mujoco>'
+    ).format(*mid)
     sdf = SceneSDF(mujoco.MjModel.from_xml_string(xml))
     joint_term = obstacle_loss(sdf, tf, safe_distance=0.02, frames=[0])
     body_term = body_obstacle_loss(sdf, tf, safe_distance=0.0, frames=[0])

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scene_helpers import PRIMITIVES_XML, heightfield_xml
 
 from controlmm.errors import ControlMMError
-from scene_helpers import PRIMITIVES_XML, heightfield_xml
 from scenes import SceneSDF, load_scene
 from scenes.probe import add_probe, probe_distances
 from scenes.render import scene_bounds
@@ -77,8 +77,8 @@ def rock():
     data = mujoco.MjData(m)
     mujoco.mj_kinematics(m, data)
     mid = m.geom_dataid[g]
-    v = m.mesh_vert[m.mesh_vertadr[mid]: m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
-    f = m.mesh_face[m.mesh_faceadr[mid]: m.mesh_faceadr[mid] + m.mesh_facenum[mid]]
+    v = m.mesh_vert[m.mesh_vertadr[mid] : m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+    f = m.mesh_face[m.mesh_faceadr[mid] : m.mesh_faceadr[mid] + m.mesh_facenum[mid]]
     centre, rot = _geom_frame(m, data, g)
     mesh = trimesh.Trimesh(v @ rot.T + centre, f, process=True)  # the rock in world coordinates
     return scene, data, g, mesh
@@ -196,9 +196,13 @@ def test_gradients_match_finite_differences(scene_name):
         step = torch.zeros(3, dtype=torch.float64)
         step[axis] = eps
         with torch.no_grad():
-            fd = (sdf((points + step)[:, None], times) - sdf((points - step)[:, None], times))[:, 0] / (2 * eps)
+            fd = (sdf((points + step)[:, None], times) - sdf((points - step)[:, None], times))[:, 0] / (
+                2 * eps
+            )
         assert torch.allclose(grad[:, axis], fd, atol=1e-4)
-    assert torch.allclose(grad.norm(dim=-1), torch.ones(64, dtype=torch.float64), atol=1e-6)  # an SDF: |grad| = 1
+    assert torch.allclose(
+        grad.norm(dim=-1), torch.ones(64, dtype=torch.float64), atol=1e-6
+    )  # an SDF: |grad| = 1
 
 
 def test_dtypes_devices_shapes_and_empty_scene():
@@ -230,7 +234,8 @@ def test_sdf_errors(tmp_path):
         '<mujoco><extension><plugin plugin="mujoco.sdf.torus"><instance name="torus">'
         '<config key="radius1" value="0.35"/><config key="radius2" value="0.15"/></instance></plugin></extension>'
         '<asset><mesh name="torus"><plugin instance="torus"/></mesh></asset><worldbody><body name="t">'
-        '<geom name="donut" type="sdf" mesh="torus"><plugin instance="torus"/></geom></body></worldbody></mujoco>')
+        '<geom name="donut" type="sdf" mesh="torus"><plugin instance="torus"/></geom></body></worldbody></mujoco>'
+    )
     with pytest.raises(ControlMMError, match="geom 'donut' has type 'sdf'"):
         load_scene(str(torus), robot=None).sdf()
 
@@ -272,8 +277,14 @@ EVERY_PRIMITIVE_XML = """<mujoco>
 </mujoco>
 """
 
-_REFERENCE = {"sphere": formulas.sdf_sphere, "capsule": formulas.sdf_capsule, "cylinder": formulas.sdf_cylinder,
-              "box": formulas.sdf_box, "ellipsoid": formulas.sdf_ellipsoid, "plane": formulas.sdf_plane}
+_REFERENCE = {
+    "sphere": formulas.sdf_sphere,
+    "capsule": formulas.sdf_capsule,
+    "cylinder": formulas.sdf_cylinder,
+    "box": formulas.sdf_box,
+    "ellipsoid": formulas.sdf_ellipsoid,
+    "plane": formulas.sdf_plane,
+}
 
 
 def _geom_poses(scene, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -299,7 +310,9 @@ def _per_geom_reference(scene, geom_ids, points: torch.Tensor, poses) -> torch.T
         rot = torch.as_tensor(poses[1][:, g], dtype=points.dtype)  # (T, 3, 3)
         local = (points - centre) @ rot
         size = torch.as_tensor(m.geom_size[g], dtype=points.dtype)
-        cols.append(_REFERENCE[mujoco.mjtGeom(m.geom_type[g]).name.removeprefix("mjGEOM_").lower()](local, size))
+        cols.append(
+            _REFERENCE[mujoco.mjtGeom(m.geom_type[g]).name.removeprefix("mjGEOM_").lower()](local, size)
+        )
     return torch.stack(cols, dim=-1)
 
 
@@ -323,8 +336,11 @@ def test_vectorised_sdf_equals_a_per_geom_reference(every_primitive):
     poses = _geom_poses(scene, times)
     points = []
     for k in range(len(times)):  # uniform in the scene, and in every geom's box at time k
-        near = [poses[0][k, g] + (rng.uniform(-1.3, 1.3, (25, 3)) * np.minimum(m.geom_aabb[g, 3:], 1.0))
-                @ poses[1][k, g].T for g in sdf.geom_ids]
+        near = [
+            poses[0][k, g]
+            + (rng.uniform(-1.3, 1.3, (25, 3)) * np.minimum(m.geom_aabb[g, 3:], 1.0)) @ poses[1][k, g].T
+            for g in sdf.geom_ids
+        ]
         points.append(np.concatenate([rng.uniform([-2.5, -2.0, -0.6], [3.5, 2.0, 1.8], (100, 3)), *near]))
     points = torch.as_tensor(np.stack(points))  # (T, 400, 3)
     ref = _per_geom_reference(scene, sdf.geom_ids, points.clone().requires_grad_(True), poses)
@@ -344,7 +360,11 @@ def test_vectorised_sdf_equals_a_per_geom_reference(every_primitive):
     assert torch.allclose(sdf(points.float(), t.float()).double(), value.detach(), atol=2e-5)
     # Subsets exercise each kind alone (no cheaper kind to cull against) and mixed pairs.
     names = {m.geom(g).name: g for g in sdf.geom_ids}
-    for subset in (["s_ellipsoid", "m_ellipsoid"], ["s_wall", "m_plane"], ["m_capsule", "s_cylinder", "m_ellipsoid"]):
+    for subset in (
+        ["s_ellipsoid", "m_ellipsoid"],
+        ["s_wall", "m_plane"],
+        ["m_capsule", "s_cylinder", "m_ellipsoid"],
+    ):
         ids = [names[n] for n in subset]
         cols = [sdf.geom_ids.index(g) for g in ids]
         part = SceneSDF(scene, geom_ids=ids)

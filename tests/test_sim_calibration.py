@@ -99,8 +99,8 @@ def test_stance_foot_sliding_10cm_fails(world, clean):
     stance = np.all([report.frames[f"foot_stance:{f.name}"] for f in world.feet], axis=0)  # both feet down
     start = int(np.flatnonzero(stance)[0])
     n = 25  # the whole robot glides 10 cm in 0.5 s while standing
-    q[start:start + n, 0] += 0.10 * (0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n)))
-    q[start + n:, 0] += 0.10
+    q[start : start + n, 0] += 0.10 * (0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n)))
+    q[start + n :, 0] += 0.10
     report = check_trajectory(world, q, 50.0)
     hits = report.failures_of("foot_sliding")
     assert hits and all(f.is_error for f in hits) and not report.passed
@@ -115,7 +115,8 @@ def test_teleported_pelvis_fails(world, clean):
     assert not report.passed
     slides = report.failures_of("foot_sliding")
     assert {f.robot_body for f in slides} == {f.name for f in world.feet}
-    assert all((f.frame_start, f.frame_end) == (300, 300) and f.depth == pytest.approx(0.3, abs=1e-3)
-               for f in slides)
+    assert all(
+        (f.frame_start, f.frame_end) == (300, 300) and f.depth == pytest.approx(0.3, abs=1e-3) for f in slides
+    )
     # the sustained dynamic checks see the impulse too, within their 0.5 s window of frame 300
     assert all(300 - 13 <= f.frame_start and f.frame_end <= 300 + 13 for f in report.failures if f.is_error)

@@ -69,8 +69,9 @@ def test_joint_torques_match_a_physics_hold():
     # sagittal joints: their torques are fixed by the (symmetric) load; roll/yaw joints also
     # carry the internal left-right squeeze, which statics leaves undetermined
     sagittal = [i for i, n in enumerate(J.names) if "pitch" in n or "knee" in n or "elbow" in n]
-    np.testing.assert_allclose(report.dynamics.joint_torque[1, sagittal], np.mean(torques, axis=0)[sagittal],
-                               atol=0.05)
+    np.testing.assert_allclose(
+        report.dynamics.joint_torque[1, sagittal], np.mean(torques, axis=0)[sagittal], atol=0.05
+    )
     knee = J.names.index("left_knee_joint")
     assert abs(report.dynamics.joint_torque[1, knee]) > 20.0  # the knees do carry the body
 
@@ -78,8 +79,9 @@ def test_joint_torques_match_a_physics_hold():
 def test_holding_an_arm_out_needs_the_gravity_moment():
     w = g1_bare()
     m = w.model
-    reach = with_joints(m, g1_q0(), left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0,
-                        left_elbow_joint=1.5708)
+    reach = with_joints(
+        m, g1_q0(), left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0, left_elbow_joint=1.5708
+    )
     report = check_trajectory(w, hold(reach, 3), FPS)
     d = mujoco.MjData(m)
     d.qpos[:] = reach
@@ -98,7 +100,9 @@ def test_floating_robot_needs_a_hand_of_god():
     q0 = g1_q0()
     up = q0.copy()
     up[2] += 0.10
-    q = np.concatenate([hold(q0, 10), smooth_blend(q0, up, 6), hold(up, 30), smooth_blend(up, q0, 6), hold(q0, 8)])
+    q = np.concatenate(
+        [hold(q0, 10), smooth_blend(q0, up, 6), hold(up, 30), smooth_blend(up, q0, 6), hold(q0, 8)]
+    )
     report = check_trajectory(w, q, FPS)
     ratio = report.frames["residual_force_ratio"]
     hover = slice(18, 44)
@@ -113,7 +117,7 @@ def test_ballistic_jump_is_feasible():
     w = g1_bare()
     q = hold(g1_q0(), 46)
     t = np.arange(16) / FPS
-    q[15:31, 2] += 9.81 * 0.15 * t - 0.5 * 9.81 * t ** 2  # 0.3 s of free flight, lands on frame 30
+    q[15:31, 2] += 9.81 * 0.15 * t - 0.5 * 9.81 * t**2  # 0.3 s of free flight, lands on frame 30
     report = check_trajectory(w, q, FPS)
     assert report.passed, report.summary()
     assert report.frames["flight"].any()
@@ -129,7 +133,7 @@ def test_accelerating_root_exceeds_friction():
     q = hold(g1_q0(), 100)
     q[:, 1] += 0.1 * np.sin(omega * t)
     report = check_trajectory(w, q, FPS)
-    accel = np.abs(-0.1 * omega ** 2 * np.sin(omega * t)) / 9.81
+    accel = np.abs(-0.1 * omega**2 * np.sin(omega * t)) / 9.81
     ratio = report.frames["residual_force_ratio"]
     assert report.failures_of("residual_force")
     assert ratio[accel > 0.9].min() > 0.2
@@ -161,8 +165,10 @@ def test_fast_arm_swing_exceeds_the_arm_torque_limits():
     report = check_trajectory(w, q, FPS)
     hits = report.failures_of("torque_limit")
     assert "left_shoulder_pitch_joint" in {f.joint for f in hits}
-    assert all(f.joint.startswith("left_") and ("shoulder" in f.joint or "elbow" in f.joint or "wrist" in f.joint)
-               for f in hits)
+    assert all(
+        f.joint.startswith("left_") and ("shoulder" in f.joint or "elbow" in f.joint or "wrist" in f.joint)
+        for f in hits
+    )
     shoulder = max(f.depth for f in hits if f.joint == "left_shoulder_pitch_joint")
     assert 1.5 < shoulder < 6.0  # |torque| / 25 N m
     assert not report.failures_of("joint_velocity")  # 15 rad/s is within 37 rad/s
@@ -206,9 +212,12 @@ def test_an_arm_inside_an_obstacle_does_not_hold_the_robot():
 
     w = g1_world()  # has a shelf at shoulder height in front of the left arm
     q0 = g1_stand()
-    reach = with_joints(w.model, q0, left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0,
-                        left_elbow_joint=1.5708)
-    q = np.concatenate([hold(q0, 5), smooth_blend(q0, reach, 20), hold(reach, 15), smooth_blend(reach, q0, 20)])
+    reach = with_joints(
+        w.model, q0, left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0, left_elbow_joint=1.5708
+    )
+    q = np.concatenate(
+        [hold(q0, 5), smooth_blend(q0, reach, 20), hold(reach, 15), smooth_blend(reach, q0, 20)]
+    )
     report = check_trajectory(w, q, FPS)
     assert {f.kind for f in report.failures} == {"obstacle_penetration"}
     assert report.stats["max_torque_ratio"] < 1.0  # the wrist (5 N m) is not loaded by the shelf

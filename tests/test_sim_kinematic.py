@@ -71,20 +71,28 @@ def test_world_classification_and_feet():
 def test_arm_pushed_into_shelf():
     w = g1_world()
     q0 = g1_stand()
-    reach = with_joints(w.model, q0, left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0,
-                        left_elbow_joint=1.5708)
-    q = np.concatenate([hold(q0, 5), smooth_blend(q0, reach, 20), hold(reach, 15), smooth_blend(reach, q0, 20)])
+    reach = with_joints(
+        w.model, q0, left_shoulder_pitch_joint=-1.5708, left_shoulder_roll_joint=0.0, left_elbow_joint=1.5708
+    )
+    q = np.concatenate(
+        [hold(q0, 5), smooth_blend(q0, reach, 20), hold(reach, 15), smooth_blend(reach, q0, 20)]
+    )
     report = check_trajectory(w, q, FPS, KIN)
     shelf = w.model.geom("shelf").id
     truth = true_depths(w, q, shelf)
     hits = report.failures_of("obstacle_penetration")
     assert hits and {f.obstacle_geom for f in hits} == {"shelf"}
-    assert {f.robot_body for f in hits} <= {"left_elbow_link", "left_wrist_roll_link", "left_wrist_pitch_link",
-                                             "left_wrist_yaw_link", "left_shoulder_yaw_link"}
+    assert {f.robot_body for f in hits} <= {
+        "left_elbow_link",
+        "left_wrist_roll_link",
+        "left_wrist_pitch_link",
+        "left_wrist_yaw_link",
+        "left_shoulder_yaw_link",
+    }
     assert "left_wrist_yaw_link" in {f.robot_body for f in hits}
     flagged = np.zeros(len(q), dtype=bool)
     for f in hits:
-        flagged[f.frame_start:f.frame_end + 1] = True
+        flagged[f.frame_start : f.frame_end + 1] = True
     np.testing.assert_array_equal(flagged, truth > 0.005)
     assert not flagged[:5].any() and flagged[25:40].all()  # clear at rest, inside while the arm is held out
     assert report.max_penetration_m == pytest.approx(truth.max(), abs=1e-3)
@@ -109,11 +117,14 @@ def test_moving_mocap_ball_hits_the_legs():
     truth = true_depths(w, q, w.model.geom("ball").id, mocap=set_time)
     hits = report.failures_of("obstacle_penetration")
     assert hits and {f.obstacle_geom for f in hits} == {"ball"}
-    assert {f.robot_body for f in hits} <= {f"{s}_{b}" for s in ("left", "right")
-                                           for b in ("knee_link", "hip_yaw_link", "hip_roll_link", "ankle_pitch_link")}
+    assert {f.robot_body for f in hits} <= {
+        f"{s}_{b}"
+        for s in ("left", "right")
+        for b in ("knee_link", "hip_yaw_link", "hip_roll_link", "ankle_pitch_link")
+    }
     flagged = np.zeros(len(q), dtype=bool)
     for f in hits:
-        flagged[f.frame_start:f.frame_end + 1] = True
+        flagged[f.frame_start : f.frame_end + 1] = True
     np.testing.assert_array_equal(flagged, truth > 0.005)
     assert report.max_penetration_m == pytest.approx(truth.max(), abs=1e-3)
     # without the callback the ball stays parked at y = 3 m and nothing is hit
@@ -125,7 +136,9 @@ def test_pose_sunk_into_floor():
     q0 = g1_stand()
     low = q0.copy()
     low[2] -= 0.03
-    q = np.concatenate([hold(q0, 20), smooth_blend(q0, low, 6), hold(low, 20), smooth_blend(low, q0, 6), hold(q0, 8)])
+    q = np.concatenate(
+        [hold(q0, 20), smooth_blend(q0, low, 6), hold(low, 20), smooth_blend(low, q0, 6), hold(q0, 8)]
+    )
     report = check_trajectory(w, q, FPS, KIN)
     hits = report.failures_of("floor_penetration")
     assert {f.robot_body for f in hits} == {"left_ankle_roll_link", "right_ankle_roll_link"}
@@ -143,7 +156,9 @@ def test_pose_sunk_into_floor():
 def _crossing_arms(world) -> np.ndarray:
     q0 = g1_stand()
     cross = with_joints(world.model, q0, left_shoulder_roll_joint=-1.5, right_shoulder_roll_joint=1.5)
-    return np.concatenate([hold(q0, 10), smooth_blend(q0, cross, 20), hold(cross, 10), smooth_blend(cross, q0, 20)])
+    return np.concatenate(
+        [hold(q0, 10), smooth_blend(q0, cross, 20), hold(cross, 10), smooth_blend(cross, q0, 20)]
+    )
 
 
 def test_arms_crossing_the_torso_self_collide():
@@ -152,13 +167,19 @@ def test_arms_crossing_the_torso_self_collide():
     report = check_trajectory(w, q, FPS, KIN)
     hits = report.failures_of("self_collision")
     pairs = {(f.robot_body, f.obstacle_geom) for f in hits}
-    assert ("torso_link", "left_shoulder_yaw_link") in pairs and ("torso_link", "right_shoulder_yaw_link") in pairs
+    assert ("torso_link", "left_shoulder_yaw_link") in pairs and (
+        "torso_link",
+        "right_shoulder_yaw_link",
+    ) in pairs
     torso = [f for f in hits if f.robot_body == "torso_link" and f.obstacle_geom == "left_shoulder_yaw_link"]
-    assert len(torso) == 1 and torso[0].frame_start <= 30 <= 39 <= torso[0].frame_end and torso[0].depth > 0.05
+    assert (
+        len(torso) == 1 and torso[0].frame_start <= 30 <= 39 <= torso[0].frame_end and torso[0].depth > 0.05
+    )
     assert not report.failures_of("obstacle_penetration") and not report.failures_of("floor_penetration")
     # the self-collision check can be switched off
     assert not check_trajectory(w, q, FPS, CheckConfig(dynamics=False, self_collision="off")).failures_of(
-        "self_collision")
+        "self_collision"
+    )
 
 
 def test_exclusions_and_parent_filter_are_honoured():
@@ -166,15 +187,23 @@ def test_exclusions_and_parent_filter_are_honoured():
     # colliders overlap by about 1 cm.
     w = h1_world()
     q0 = h1_stand()
-    up = with_joints(w.model, q0, left_shoulder_pitch=-2.8, left_shoulder_roll=0.57, right_shoulder_pitch=-2.8,
-                     right_shoulder_roll=-0.57)
+    up = with_joints(
+        w.model,
+        q0,
+        left_shoulder_pitch=-2.8,
+        left_shoulder_roll=0.57,
+        right_shoulder_pitch=-2.8,
+        right_shoulder_roll=-0.57,
+    )
     q = np.concatenate([hold(q0, 3), smooth_blend(q0, up, 10), hold(up, 5)])
     excluded = {("torso_link", "left_shoulder_roll_link"), ("torso_link", "right_shoulder_roll_link")}
     assert w.model.nexclude == 2
 
     def pairs(model):
-        return {(f.robot_body, f.obstacle_geom) for f in
-                check_trajectory(model, q, FPS, KIN).failures_of("self_collision")}
+        return {
+            (f.robot_body, f.obstacle_geom)
+            for f in check_trajectory(model, q, FPS, KIN).failures_of("self_collision")
+        }
 
     assert not pairs(w.model) & excluded
     unexcluded = copy.deepcopy(w.model)
@@ -184,8 +213,12 @@ def test_exclusions_and_parent_filter_are_honoured():
     spec = mujoco.MjSpec.from_file(str(__import__("retarget").robots.robot_mjcf("g1")))
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
     spec.add_exclude(bodyname1="torso_link", bodyname2="left_shoulder_yaw_link")
-    pairs = {(f.robot_body, f.obstacle_geom) for f in
-             check_trajectory(spec.compile(), _crossing_arms(g1_world()), FPS, KIN).failures_of("self_collision")}
+    pairs = {
+        (f.robot_body, f.obstacle_geom)
+        for f in check_trajectory(spec.compile(), _crossing_arms(g1_world()), FPS, KIN).failures_of(
+            "self_collision"
+        )
+    }
     assert ("torso_link", "left_shoulder_yaw_link") not in pairs
     assert ("torso_link", "right_shoulder_yaw_link") in pairs
     # MuJoCo's parent-child filter: off in the model -> adjacent links collide at rest
@@ -196,7 +229,9 @@ def test_exclusions_and_parent_filter_are_honoured():
 
 def test_capsule_colliders_keep_real_self_collisions():
     w = g1_world()
-    report = check_trajectory(w, _crossing_arms(w), FPS, CheckConfig(dynamics=False, self_collision="capsules"))
+    report = check_trajectory(
+        w, _crossing_arms(w), FPS, CheckConfig(dynamics=False, self_collision="capsules")
+    )
     pairs = {(f.robot_body, f.obstacle_geom) for f in report.failures_of("self_collision")}
     assert ("torso_link", "left_shoulder_yaw_link") in pairs
     assert check_trajectory(w, g1_squat(), FPS, CheckConfig(dynamics=False, self_collision="capsules")).passed
@@ -259,7 +294,9 @@ def test_floating_robot_and_ballistic_flight():
     q0 = g1_stand()
     up = q0.copy()
     up[2] += 0.10
-    q = np.concatenate([hold(q0, 20), smooth_blend(q0, up, 6), hold(up, 50), smooth_blend(up, q0, 6), hold(q0, 10)])
+    q = np.concatenate(
+        [hold(q0, 20), smooth_blend(q0, up, 6), hold(up, 50), smooth_blend(up, q0, 6), hold(q0, 10)]
+    )
     report = check_trajectory(w, q, FPS, KIN)
     hits = report.failures_of("floating")
     lowest = q[:, 2] - q0[2] - 0.00186
@@ -270,7 +307,7 @@ def test_floating_robot_and_ballistic_flight():
     # a jump: 0.3 s of ballistic flight is allowed
     t = np.arange(16) / FPS
     g = 9.81
-    z = 1.5 * g * 0.15 / 1.5 * t - 0.5 * g * t ** 2  # take-off speed g * 0.15 -> lands after 0.3 s
+    z = 1.5 * g * 0.15 / 1.5 * t - 0.5 * g * t**2  # take-off speed g * 0.15 -> lands after 0.3 s
     q = hold(q0, 46)
     q[15:31, 2] += z
     report = check_trajectory(w, q, FPS, KIN)

@@ -23,26 +23,51 @@ def failing_report():
     bad = q0.copy()
     bad[2] -= 0.03
     bad[w.model.jnt_qposadr[w.model.joint("left_elbow_joint").id]] = 2.2
-    q = np.concatenate([hold(q0, 10), smooth_blend(q0, bad, 5), hold(bad, 10), smooth_blend(bad, q0, 5), hold(q0, 5)])
+    q = np.concatenate(
+        [hold(q0, 10), smooth_blend(q0, bad, 5), hold(bad, 10), smooth_blend(bad, q0, 5), hold(q0, 5)]
+    )
     return check_trajectory(w, q, FPS)
 
 
 def test_report_json_fields(failing_report, tmp_path):
     r = failing_report
     data = json.loads(r.to_json())
-    for key in ("passed", "max_penetration_m", "floor_penetration_m", "self_collision_frames",
-                "joint_limit_violations", "foot_sliding_m", "residual_force", "failures", "frames"):
+    for key in (
+        "passed",
+        "max_penetration_m",
+        "floor_penetration_m",
+        "self_collision_frames",
+        "joint_limit_violations",
+        "foot_sliding_m",
+        "residual_force",
+        "failures",
+        "frames",
+    ):
         assert key in data
     assert data["passed"] is False and data["format"] == "controlmm.sim.report/1"
-    assert set(data["residual_force"]) == {"mean_ratio", "p95_ratio", "max_ratio", "max_N", "sustained_max_ratio"}
+    assert set(data["residual_force"]) == {
+        "mean_ratio",
+        "p95_ratio",
+        "max_ratio",
+        "max_N",
+        "sustained_max_ratio",
+    }
     assert data["error_count"] >= 2 and set(data["error_kinds"]) >= {"floor_penetration", "joint_limit"}
     assert data["floor_penetration_m"] == pytest.approx(0.03186, abs=3e-4)
     assert data["joint_limit_violations"] > 0
     kinds = {f["kind"] for f in data["failures"]}
     assert {"floor_penetration", "joint_limit"} <= kinds
     for f in data["failures"]:
-        assert set(f) == {"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint",
-                          "severity"}
+        assert set(f) == {
+            "kind",
+            "frame_start",
+            "frame_end",
+            "robot_body",
+            "obstacle_geom",
+            "depth",
+            "joint",
+            "severity",
+        }
         assert f["severity"] in ("error", "warning")
         assert 0 <= f["frame_start"] <= f["frame_end"] < r.num_frames
     frames = data["frames"]
@@ -58,7 +83,14 @@ def test_report_json_fields(failing_report, tmp_path):
     assert back.passed is False and len(back.failures) == len(r.failures)
     for a, b in zip(back.failures, r.failures):
         assert (a.kind, a.frame_start, a.frame_end, a.robot_body, a.obstacle_geom, a.joint, a.severity) == (
-            b.kind, b.frame_start, b.frame_end, b.robot_body, b.obstacle_geom, b.joint, b.severity)
+            b.kind,
+            b.frame_start,
+            b.frame_end,
+            b.robot_body,
+            b.obstacle_geom,
+            b.joint,
+            b.severity,
+        )
         assert a.depth == pytest.approx(b.depth, abs=1e-6)
     assert back.floor_penetration_m == pytest.approx(r.floor_penetration_m, abs=1e-6)
     np.testing.assert_allclose(back.frames["floor_penetration_m"], r.frames["floor_penetration_m"], atol=1e-6)
@@ -136,7 +168,9 @@ def test_bad_input_one_line_errors():
         with pytest.raises(ControlMMError, match=r"fps must be a number in \[1, 1000\]"):
             check_trajectory(w, q, fps)
     config = CheckConfig(velocity_limits={"left_knee_joint": 5.0})
-    assert config.velocity_limit("left_knee_joint") == 5.0 and config.velocity_limit("right_knee_joint") == 20.0
+    assert (
+        config.velocity_limit("left_knee_joint") == 5.0 and config.velocity_limit("right_knee_joint") == 20.0
+    )
     assert config.velocity_limit("robot/left_ankle") == 9.0  # H1, attached with a prefix
     assert config.velocity_limit("tail") == pytest.approx(3 * np.pi)
     with pytest.raises(ControlMMError, match="CheckConfig.floor_penetration_m"):
@@ -154,8 +188,13 @@ def test_scene_like_objects_and_trajectory_objects():
     m = w.model
     shelf = m.geom("shelf").id
     # a Scene-shaped object: explicit sets, the shelf deliberately left out of the obstacles
-    scene = SimpleNamespace(model=m, robot_geom_ids=w.robot_geoms.tolist(), floor_geom_ids=[m.geom("floor").id],
-                            obstacle_geom_ids=[m.geom("post").id], set_time=None)
+    scene = SimpleNamespace(
+        model=m,
+        robot_geom_ids=w.robot_geoms.tolist(),
+        floor_geom_ids=[m.geom("floor").id],
+        obstacle_geom_ids=[m.geom("post").id],
+        set_time=None,
+    )
     world = make_world(scene)
     assert world.obstacle_geoms.tolist() == [m.geom("post").id] and shelf not in world.obstacle_geoms
     traj = SimpleNamespace(qpos=hold(g1_stand(), 6), fps=30.0)
@@ -163,8 +202,11 @@ def test_scene_like_objects_and_trajectory_objects():
     assert report.passed and report.fps == 30.0 and report.extra["obstacles"] == ["post"]
     assert check_pose(world, g1_stand()).passed
     with pytest.raises(ControlMMError, match="both robot and floor/obstacle"):
-        make_world(SimpleNamespace(model=m, robot_geom_ids=[shelf] + w.robot_geoms.tolist(),
-                                   obstacle_geom_ids=[shelf]))
+        make_world(
+            SimpleNamespace(
+                model=m, robot_geom_ids=[shelf] + w.robot_geoms.tolist(), obstacle_geom_ids=[shelf]
+            )
+        )
 
 
 def test_failure_merging():
@@ -175,6 +217,9 @@ def test_failure_merging():
     names = {7: ("a", 1), 2: ("b", 2)}
     out = from_events("obstacle_penetration", frames, keys, depths, names.__getitem__)
     kind = "obstacle_penetration"
-    assert out == [Failure(kind, 4, 5, "b", 2, 0.06), Failure(kind, 3, 5, "a", 1, 0.3),
-                   Failure(kind, 9, 9, "a", 1, 0.5)]
+    assert out == [
+        Failure(kind, 4, 5, "b", 2, 0.06),
+        Failure(kind, 3, 5, "a", 1, 0.3),
+        Failure(kind, 9, 9, "a", 1, 0.5),
+    ]
     assert "frames 3-5 (0.06-0.10 s)" in out[1].describe(fps=50.0)

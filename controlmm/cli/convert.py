@@ -21,13 +21,20 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("convert", help="convert motions between .npz, .npy (HumanML3D) and .bvh",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "convert",
+        help="convert motions between .npz, .npy (HumanML3D) and .bvh",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("input", help="input motion (.npz, .npy, .bvh)")
     p.add_argument("output", help="output motion (.npz, .npy, .bvh)")
-    p.add_argument("--joints", action="store_true", help="write joints (T, 22, 3) instead of features to .npy")
-    p.add_argument("--process", action="store_true",
-                   help="run the HumanML3D processing on joint input (adds features)")
+    p.add_argument(
+        "--joints", action="store_true", help="write joints (T, 22, 3) instead of features to .npy"
+    )
+    p.add_argument(
+        "--process", action="store_true", help="run the HumanML3D processing on joint input (adds features)"
+    )
     p.set_defaults(func=run)
 
 

@@ -22,10 +22,16 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("corpus", help="generate the procedural motion corpus (HumanML3D format)",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "corpus",
+        help="generate the procedural motion corpus (HumanML3D format)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--out", help="output dataset directory")
-    p.add_argument("--clips", type=int, default=6400, help="number of clips (default 6400, the default corpus)")
+    p.add_argument(
+        "--clips", type=int, default=6400, help="number of clips (default 6400, the default corpus)"
+    )
     p.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
     p.add_argument("--workers", type=int, default=0, help="worker processes (default: all CPU cores)")
     p.add_argument("--families", default=None, help="comma-separated family names (default: all)")
@@ -57,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     config = CorpusConfig(clips=args.clips, seed=args.seed, families=families, captions=args.captions)
     summary = write_corpus(args.out, config, workers=args.workers, progress=not args.quiet)
     splits = ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
-    print(f"wrote {args.out}: {summary['clips']} clips ({splits}), {summary['frames']} frames, "
-          f"{len(summary['families'])} families, {summary['seconds']:.1f} s on {summary['workers']} worker(s)")
+    print(
+        f"wrote {args.out}: {summary['clips']} clips ({splits}), {summary['frames']} frames, "
+        f"{len(summary['families'])} families, {summary['seconds']:.1f} s on {summary['workers']} worker(s)"
+    )
     return 0

@@ -10,8 +10,11 @@ EVAL_SUBCOMMANDS: tuple[str, ...] = ("probes", "quality", "control")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("eval", help="evaluate motion: text-adherence probes, quality (FID, R-precision), spatial control",
-                       description="Evaluate motion data or models. Run 'controlmm eval COMMAND --help'.")
+    p = sub.add_parser(
+        "eval",
+        help="evaluate motion: text-adherence probes, quality (FID, R-precision), spatial control",
+        description="Evaluate motion data or models. Run 'controlmm eval COMMAND --help'.",
+    )
     evsub = p.add_subparsers(dest="eval_command", metavar="COMMAND", parser_class=type(p))
     for name in EVAL_SUBCOMMANDS:
         importlib.import_module(f"controlmm.cli.eval_{name}").register(evsub)

@@ -34,35 +34,74 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("control", help="spatial-control metrics (Traj./Loc./Avg. err, foot skating)",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "control",
+        help="spatial-control metrics (Traj./Loc./Avg. err, foot skating)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
-    p.add_argument("--data", default=None,
-                   help="HumanML3D-format directory whose test split gives the targets "
-                        "(default: the data the model was trained on)")
-    p.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"),
-                   help="control/editing preset (default accurate)")
+    p.add_argument(
+        "--data",
+        default=None,
+        help="HumanML3D-format directory whose test split gives the targets "
+        "(default: the data the model was trained on)",
+    )
+    p.add_argument(
+        "--preset",
+        default="accurate",
+        choices=("fast", "medium", "accurate"),
+        help="control/editing preset (default accurate)",
+    )
     p.add_argument("--joints", default="pelvis", help="joint mode(s), comma-separated (default pelvis)")
-    p.add_argument("--density", default="all",
-                   help="controlled frames: 1, 2, 5, 49 (25%%), 196 (100%%) or all (the five in turn; default)")
+    p.add_argument(
+        "--density",
+        default="all",
+        help="controlled frames: 1, 2, 5, 49 (25%%), 196 (100%%) or all (the five in turn; default)",
+    )
     p.add_argument("--samples", type=int, default=50, help="cases per joint mode (default 50)")
     p.add_argument("--seed", type=int, default=0, help="seed of the cases and of generation (default 0)")
-    p.add_argument("--batch-size", type=int, default=1,
-                   help="cases generated together (default 1: per-motion timings)")
-    p.add_argument("--tolerance", type=float, default=None, metavar="CM", help="editing tolerance in cm (default 1)")
+    p.add_argument(
+        "--batch-size", type=int, default=1, help="cases generated together (default 1: per-motion timings)"
+    )
+    p.add_argument(
+        "--tolerance", type=float, default=None, metavar="CM", help="editing tolerance in cm (default 1)"
+    )
     p.add_argument("--no-control-model", action="store_true", help="editing only, without the control model")
-    p.add_argument("--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps")
-    p.add_argument("--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps")
-    p.add_argument("--contact-steps", type=int, default=None, metavar="N",
-                   help="override the preset's foot-contact steps after codebook editing (accurate: 200)")
-    p.add_argument("--repeats", type=int, default=1,
-                   help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)")
-    p.add_argument("--evaluator", default=None, metavar="E",
-                   help="text-motion evaluator directory for the quality columns (default: the shipped one)")
-    p.add_argument("--no-quality", action="store_true", help="skip the text-motion columns (R-precision, FID, ...)")
+    p.add_argument(
+        "--logits-steps", type=int, default=None, metavar="N", help="override the preset's logits steps"
+    )
+    p.add_argument(
+        "--codebook-steps", type=int, default=None, metavar="N", help="override the preset's codebook steps"
+    )
+    p.add_argument(
+        "--contact-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="override the preset's foot-contact steps after codebook editing (accurate: 200)",
+    )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)",
+    )
+    p.add_argument(
+        "--evaluator",
+        default=None,
+        metavar="E",
+        help="text-motion evaluator directory for the quality columns (default: the shipped one)",
+    )
+    p.add_argument(
+        "--no-quality", action="store_true", help="skip the text-motion columns (R-precision, FID, ...)"
+    )
     p.add_argument("--real", action="store_true", help="add the Real row (the ground truth of the cases)")
-    p.add_argument("--uncontrolled", action="store_true",
-                   help="add a row generated without control model or editing (errors against the first mode's targets)")
+    p.add_argument(
+        "--uncontrolled",
+        action="store_true",
+        help="add a row generated without control model or editing (errors against the first mode's targets)",
+    )
     p.add_argument("--json", default=None, help="also write the per-case results to this JSON file")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -108,8 +147,10 @@ def default_data(model) -> str:
         data = training.get(stage, {}).get("data")
         if data and Path(data).is_dir():
             return data
-    raise ControlMMError("the model's training data is not on this machine; pass --data DIR "
-                         "(a HumanML3D-format directory with a test split)")
+    raise ControlMMError(
+        "the model's training data is not on this machine; pass --data DIR "
+        "(a HumanML3D-format directory with a test split)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -143,7 +184,10 @@ def run(args: argparse.Namespace) -> int:
     config = editing_preset(args.preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
         control_model=False if args.no_control_model else None,
-        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps, contact_steps=args.contact_steps)
+        logits_steps=args.logits_steps,
+        codebook_steps=args.codebook_steps,
+        contact_steps=args.contact_steps,
+    )
     from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table
 
     evaluator = None
@@ -154,28 +198,48 @@ def run(args: argparse.Namespace) -> int:
         evaluator = load_evaluator(args.evaluator or model_evaluator(args.model))
     rows = [TableRow("uncontrolled", modes[0], UNCONTROLLED)] if args.uncontrolled else []
     rows += [TableRow(mode, mode, config) for mode in dict.fromkeys(modes)]
-    table = evaluate_control_table(model, data, rows, evaluator=evaluator, densities=densities, samples=args.samples,
-                                   repeats=args.repeats, seed=args.seed, batch_size=args.batch_size, real=args.real,
-                                   progress=not args.quiet)
+    table = evaluate_control_table(
+        model,
+        data,
+        rows,
+        evaluator=evaluator,
+        densities=densities,
+        samples=args.samples,
+        repeats=args.repeats,
+        seed=args.seed,
+        batch_size=args.batch_size,
+        real=args.real,
+        progress=not args.quiet,
+    )
     unknown = getattr(evaluator, "unknown_word_share", None)
     if unknown is not None:
         share = unknown([c.text for c in table.evaluations[rows[0].name][0].cases])
         if share > 0.5:
-            print(f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
-                  f"({evaluator.name}); train one on this data: controlmm train evaluator --data {data}")
+            print(
+                f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
+                f"({evaluator.name}); train one on this data: controlmm train evaluator --data {data}"
+            )
     reports = []
     for mode in dict.fromkeys(modes):
         results = table.evaluations[mode]
         print(results[0].table())
-        report = results[0].to_json() | {"data": str(data), "model": str(model.directory),
-                                         "table_row": table.rows[mode].to_json()}
+        report = results[0].to_json() | {
+            "data": str(data),
+            "model": str(model.directory),
+            "table_row": table.rows[mode].to_json(),
+        }
         if args.repeats > 1:
             report["repeats"] = [r.by_density()["all"] for r in results]
         reports.append(report)
-    reports += [{"joints": name, "table_row": table.rows[name].to_json()} for name in ("Real", "uncontrolled")
-                if name in table.rows]
-    print(f"\n{len(table.rows)} rows, {args.samples} cases x {args.repeats} repeat(s) each, mean ± 95% CI"
-          + (f"; quality by {evaluator.name}" if evaluator is not None else ""))
+    reports += [
+        {"joints": name, "table_row": table.rows[name].to_json()}
+        for name in ("Real", "uncontrolled")
+        if name in table.rows
+    ]
+    print(
+        f"\n{len(table.rows)} rows, {args.samples} cases x {args.repeats} repeat(s) each, mean ± 95% CI"
+        + (f"; quality by {evaluator.name}" if evaluator is not None else "")
+    )
     print(table.table())
     if args.json:
         write_text(args.json, json.dumps(reports if len(reports) > 1 else reports[0], indent=1) + "\n")

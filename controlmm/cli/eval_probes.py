@@ -28,24 +28,49 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("probes", help="text-adherence probes per motion family (ground truth or a model)",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "probes",
+        help="text-adherence probes per motion family (ground truth or a model)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--data", required=True, help="corpus directory (HumanML3D format with meta/)")
-    p.add_argument("--split", default="test", choices=("train", "val", "test", "all"),
-                   help="which split's captions to check (default test)")
-    p.add_argument("--model", default=None, metavar="MODEL_DIR",
-                   help="generate from each caption with this model directory ('default': the embedded model)")
-    p.add_argument("--samples", type=int, default=None, metavar="N",
-                   help="at most N captions per family (a seeded random choice; default all)")
+    p.add_argument(
+        "--split",
+        default="test",
+        choices=("train", "val", "test", "all"),
+        help="which split's captions to check (default test)",
+    )
+    p.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL_DIR",
+        help="generate from each caption with this model directory ('default': the embedded model)",
+    )
+    p.add_argument(
+        "--samples",
+        type=int,
+        default=None,
+        metavar="N",
+        help="at most N captions per family (a seeded random choice; default all)",
+    )
     p.add_argument("--families", default=None, help="comma-separated families to check (default all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the caption choice and the generation (default 0)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the caption choice and the generation (default 0)"
+    )
     p.add_argument("--batch-size", type=int, default=32, help="captions generated together (default 32)")
     p.add_argument("--device", default="cpu", help="cpu or cuda, for --model (default cpu)")
-    p.add_argument("--tokenizer-only", action="store_true",
-                   help="with --model: probe the ground truth reconstructed by the model's tokenizer")
-    p.add_argument("--layers", type=int, default=None,
-                   help="with --tokenizer-only: quantizer layers kept (default all)")
-    p.add_argument("--json", default=None, help="also write the report (with failed checks) to this JSON file")
+    p.add_argument(
+        "--tokenizer-only",
+        action="store_true",
+        help="with --model: probe the ground truth reconstructed by the model's tokenizer",
+    )
+    p.add_argument(
+        "--layers", type=int, default=None, help="with --tokenizer-only: quantizer layers kept (default all)"
+    )
+    p.add_argument(
+        "--json", default=None, help="also write the report (with failed checks) to this JSON file"
+    )
     p.add_argument("--show-failures", type=int, default=10, help="print up to N failed captions (default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -77,19 +102,22 @@ def run(args: argparse.Namespace) -> int:
         from controlmm.generate import load_model
 
         # generation without control: every listed part but the motion control model
-        model = load_model(None if args.model == "default" else args.model, device=args.device, skip=("control",))
+        model = load_model(
+            None if args.model == "default" else args.model, device=args.device, skip=("control",)
+        )
         if args.tokenizer_only:
             source = tokenized_motions(model, args.data, args.layers)
             what = f"ground truth through the tokenizer of {model.directory}, {args.layers or 'all'} layer(s)"
         else:
-            source = generated_motions(model, cases, seed=args.seed, batch_size=args.batch_size,
-                                       progress=not args.quiet)
+            source = generated_motions(
+                model, cases, seed=args.seed, batch_size=args.batch_size, progress=not args.quiet
+            )
             what = f"model {model.directory}, seed {args.seed}"
         report = evaluate(cases, source, split=args.split, progress=not args.quiet)
     print(f"probes on {args.data} ({args.split} split, {what})")
     print(report.table())
     for case, result in report.failures[: max(args.show_failures, 0)]:
-        print(f"FAIL {case.clip_id} {case.family}: \"{case.caption}\" -> {result.describe()}")
+        print(f'FAIL {case.clip_id} {case.family}: "{case.caption}" -> {result.describe()}')
     if args.json:
         data = report.to_json()
         data["source"] = what

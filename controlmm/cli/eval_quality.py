@@ -23,21 +23,51 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("quality", help="FID, R-precision, MM-Dist, Diversity, Multimodality with CIs",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", action="append", default=None, metavar="MODEL_DIR",
-                   help="model directory to evaluate (repeatable: one row each; default: the embedded model)")
-    p.add_argument("--data", required=True, help="HumanML3D-format directory (the real dataset or the corpus)")
-    p.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to evaluate (default test)")
+    p = sub.add_parser(
+        "quality",
+        help="FID, R-precision, MM-Dist, Diversity, Multimodality with CIs",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--model",
+        action="append",
+        default=None,
+        metavar="MODEL_DIR",
+        help="model directory to evaluate (repeatable: one row each; default: the embedded model)",
+    )
+    p.add_argument(
+        "--data", required=True, help="HumanML3D-format directory (the real dataset or the corpus)"
+    )
+    p.add_argument(
+        "--split", default="test", choices=("train", "val", "test"), help="split to evaluate (default test)"
+    )
     p.add_argument("--repeats", type=int, default=10, help="evaluation passes (default 10, as the paper)")
-    p.add_argument("--evaluator", default=None, metavar="E", help="evaluator directory (default: the shipped one)")
-    p.add_argument("--limit", type=int, default=None, metavar="N",
-                   help="at most N samples per pass, whole groups of 32 (default: the whole split)")
-    p.add_argument("--mm-texts", type=int, default=32,
-                   help="captions for Multimodality per pass (default 32; paper 100; 0 = skip)")
-    p.add_argument("--mm-repeats", type=int, default=12,
-                   help="generations per caption for Multimodality (default 12; paper 30)")
-    p.add_argument("--mm-pairs", type=int, default=10, help="pairs per caption for Multimodality (default 10)")
+    p.add_argument(
+        "--evaluator", default=None, metavar="E", help="evaluator directory (default: the shipped one)"
+    )
+    p.add_argument(
+        "--limit",
+        type=int,
+        default=None,
+        metavar="N",
+        help="at most N samples per pass, whole groups of 32 (default: the whole split)",
+    )
+    p.add_argument(
+        "--mm-texts",
+        type=int,
+        default=32,
+        help="captions for Multimodality per pass (default 32; paper 100; 0 = skip)",
+    )
+    p.add_argument(
+        "--mm-repeats",
+        type=int,
+        default=12,
+        help="generations per caption for Multimodality (default 12; paper 30)",
+    )
+    p.add_argument(
+        "--mm-pairs", type=int, default=10, help="pairs per caption for Multimodality (default 10)"
+    )
     p.add_argument("--real-only", action="store_true", help="only the Real row (no model needed)")
     p.add_argument("--seed", type=int, default=0, help="seed of pass r is SEED + r (default 0)")
     p.add_argument("--batch-size", type=int, default=64, help="prompts generated together (default 64)")
@@ -91,13 +121,26 @@ def run(args: argparse.Namespace) -> int:
     if unknown is not None:
         share = unknown([c.text for caps in evalset.captions for c in caps])
         if share > 0.5:
-            print(f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
-                  f"({evaluator.name}); train one on this data: controlmm train evaluator --data {args.data}")
-    report = evaluate_quality(evaluator, evalset, generators, repeats=args.repeats, seed=args.seed, limit=args.limit,
-                              mm_texts=args.mm_texts, mm_repeats=args.mm_repeats, mm_times=args.mm_pairs,
-                              progress=not args.quiet)
-    print(f"quality on {args.data} ({args.split} split, {report.samples} samples per pass, {args.repeats} passes; "
-          f"evaluator: {evaluator.name}; mean ± 95% CI)")
+            print(
+                f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
+                f"({evaluator.name}); train one on this data: controlmm train evaluator --data {args.data}"
+            )
+    report = evaluate_quality(
+        evaluator,
+        evalset,
+        generators,
+        repeats=args.repeats,
+        seed=args.seed,
+        limit=args.limit,
+        mm_texts=args.mm_texts,
+        mm_repeats=args.mm_repeats,
+        mm_times=args.mm_pairs,
+        progress=not args.quiet,
+    )
+    print(
+        f"quality on {args.data} ({args.split} split, {report.samples} samples per pass, {args.repeats} passes; "
+        f"evaluator: {evaluator.name}; mean ± 95% CI)"
+    )
     print(report.table())
     if args.json:
         write_text(args.json, json.dumps(report.to_json(), indent=1) + "\n")

@@ -25,46 +25,101 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("generate", help="generate motion from text", description=HELP,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "generate",
+        help="generate motion from text",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--text", action="append", required=True, help="prompt (repeat for a batch)")
     length = p.add_mutually_exclusive_group()
     length.add_argument("--seconds", type=float, default=None, help="length in seconds, 2.0..9.8 (default 6)")
     length.add_argument("--frames", type=int, default=None, help="length in frames at 20 fps, 40..196")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: random, stored in the output)")
+    p.add_argument(
+        "--seed", type=int, default=None, help="random seed (default: random, stored in the output)"
+    )
     p.add_argument("--out", required=True, help="output .npz")
     p.add_argument("--plot", default=None, help="also write a plot/animation (.png, .gif or .mp4)")
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
-    p.add_argument("--cfg-scale", type=float, default=4.0, help="classifier-free guidance, base layer (default 4)")
-    p.add_argument("--residual-cfg-scale", type=float, default=5.0, help="guidance of the residual layers (default 5)")
-    p.add_argument("--temperature", type=float, default=1.0, help="sampling temperature; 0 = greedy (default 1)")
-    p.add_argument("--topk", type=float, default=0.9,
-                   help="top-k filter threshold: keep ceil((1 - topk) x 512) logits (default 0.9)")
+    p.add_argument(
+        "--cfg-scale", type=float, default=4.0, help="classifier-free guidance, base layer (default 4)"
+    )
+    p.add_argument(
+        "--residual-cfg-scale", type=float, default=5.0, help="guidance of the residual layers (default 5)"
+    )
+    p.add_argument(
+        "--temperature", type=float, default=1.0, help="sampling temperature; 0 = greedy (default 1)"
+    )
+    p.add_argument(
+        "--topk",
+        type=float,
+        default=0.9,
+        help="top-k filter threshold: keep ceil((1 - topk) x 512) logits (default 0.9)",
+    )
     p.add_argument("--iterations", type=int, default=10, help="masked-decoding iterations (default 10)")
     p.add_argument("--no-residual", action="store_true", help="decode the base layer only")
-    p.add_argument("--residual-layers", type=int, default=None, metavar="N",
-                   help="predict only the first N residual layers (default: all)")
-    p.add_argument("--no-token-view", action="store_true",
-                   help="decode with the sentence-vector transformer alone (default: when the model has a "
-                        "token-state transformer, both text views are mixed; not used with --control)")
-    p.add_argument("--clip-weights", default=None, metavar="PATH", help="CLIP weights for CLIP-conditioned models")
+    p.add_argument(
+        "--residual-layers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="predict only the first N residual layers (default: all)",
+    )
+    p.add_argument(
+        "--no-token-view",
+        action="store_true",
+        help="decode with the sentence-vector transformer alone (default: when the model has a "
+        "token-state transformer, both text views are mixed; not used with --control)",
+    )
+    p.add_argument(
+        "--clip-weights", default=None, metavar="PATH", help="CLIP weights for CLIP-conditioned models"
+    )
     ctrl = p.add_argument_group("spatial control")
-    ctrl.add_argument("--control", default=None, metavar="SPEC.json",
-                      help="control spec: joints at frames at positions (JSON; see README 'Spatial control')")
-    ctrl.add_argument("--preset", default=None, choices=("fast", "medium", "accurate"),
-                      help="control/editing preset (default accurate)")
-    ctrl.add_argument("--tolerance", type=float, default=None, metavar="CM",
-                      help="stop editing when every constraint is this close, in cm (default 1)")
-    ctrl.add_argument("--logits-steps", type=int, default=None, metavar="N",
-                      help="logits-editing steps per decoding iteration (default: the preset's)")
-    ctrl.add_argument("--codebook-steps", type=int, default=None, metavar="N",
-                      help="codebook-editing steps (default: the preset's)")
-    ctrl.add_argument("--contact-steps", type=int, default=None, metavar="N",
-                      help="after codebook editing, up to N more steps that stop planted feet sliding, kept only "
-                           "where every constraint stays met (default: the preset's, 200 for accurate, else 0)")
-    ctrl.add_argument("--no-control-model", action="store_true",
-                      help="do not use the motion control model (editing only)")
+    ctrl.add_argument(
+        "--control",
+        default=None,
+        metavar="SPEC.json",
+        help="control spec: joints at frames at positions (JSON; see README 'Spatial control')",
+    )
+    ctrl.add_argument(
+        "--preset",
+        default=None,
+        choices=("fast", "medium", "accurate"),
+        help="control/editing preset (default accurate)",
+    )
+    ctrl.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        metavar="CM",
+        help="stop editing when every constraint is this close, in cm (default 1)",
+    )
+    ctrl.add_argument(
+        "--logits-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="logits-editing steps per decoding iteration (default: the preset's)",
+    )
+    ctrl.add_argument(
+        "--codebook-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="codebook-editing steps (default: the preset's)",
+    )
+    ctrl.add_argument(
+        "--contact-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="after codebook editing, up to N more steps that stop planted feet sliding, kept only "
+        "where every constraint stays met (default: the preset's, 200 for accurate, else 0)",
+    )
+    ctrl.add_argument(
+        "--no-control-model", action="store_true", help="do not use the motion control model (editing only)"
+    )
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.set_defaults(func=run)
 
@@ -113,23 +168,39 @@ def run(args: argparse.Namespace) -> int:
         if not spec.constraints:
             raise ControlMMError(f"control spec '{args.control}' has no constraints")
     else:
-        for flag, value in (("--preset", args.preset), ("--tolerance", args.tolerance),
-                            ("--logits-steps", args.logits_steps), ("--codebook-steps", args.codebook_steps),
-                            ("--contact-steps", args.contact_steps)):
+        for flag, value in (
+            ("--preset", args.preset),
+            ("--tolerance", args.tolerance),
+            ("--logits-steps", args.logits_steps),
+            ("--codebook-steps", args.codebook_steps),
+            ("--contact-steps", args.contact_steps),
+        ):
             if value is not None:
                 raise ControlMMError(f"{flag} needs --control SPEC.json")
     model = load_model(args.model, device=args.device, clip_weights=args.clip_weights)
-    options = DecodeOptions(iterations=args.iterations, cfg_scale=args.cfg_scale, temperature=args.temperature,
-                            topk=args.topk)
+    options = DecodeOptions(
+        iterations=args.iterations, cfg_scale=args.cfg_scale, temperature=args.temperature, topk=args.topk
+    )
     if spec is not None:
         return _run_controlled(args, model, texts, spec, options, outs, plots)
-    result = generate(model, texts, seconds=args.seconds, frames=args.frames, seed=args.seed, options=options,
-                      use_residual=not args.no_residual, residual_cfg_scale=args.residual_cfg_scale,
-                      residual_layers=args.residual_layers, token_view=not args.no_token_view)
+    result = generate(
+        model,
+        texts,
+        seconds=args.seconds,
+        frames=args.frames,
+        seed=args.seed,
+        options=options,
+        use_residual=not args.no_residual,
+        residual_cfg_scale=args.residual_cfg_scale,
+        residual_layers=args.residual_layers,
+        token_view=not args.no_token_view,
+    )
     for i, motion in enumerate(result.motions):
         save_motion(motion, outs[i])
-        print(f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): "
-              f"'{motion.text}'")
+        print(
+            f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): "
+            f"'{motion.text}'"
+        )
         if plots:
             from controlmm.motion.plot import plot_or_animate
 
@@ -152,32 +223,58 @@ def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
     preset = args.preset or "accurate"
     config = editing_preset(preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
-        logits_steps=args.logits_steps, codebook_steps=args.codebook_steps, contact_steps=args.contact_steps,
-        control_model=False if args.no_control_model else None)
+        logits_steps=args.logits_steps,
+        codebook_steps=args.codebook_steps,
+        contact_steps=args.contact_steps,
+        control_model=False if args.no_control_model else None,
+    )
     for warning in spec.pinned_frame0_warnings():
         print(f"controlmm: warning: {warning}", file=sys.stderr)
     if config.control_model and "control" not in model.parts:
-        print(f"controlmm: warning: model '{model.directory}' has no motion control model (control.pt); "
-              "using inference-time editing only", file=sys.stderr)
-    result = generate_controlled(model, texts, control=spec, preset=config, seconds=args.seconds, frames=args.frames,
-                                 seed=args.seed, options=options, residual_cfg_scale=args.residual_cfg_scale)
+        print(
+            f"controlmm: warning: model '{model.directory}' has no motion control model (control.pt); "
+            "using inference-time editing only",
+            file=sys.stderr,
+        )
+    result = generate_controlled(
+        model,
+        texts,
+        control=spec,
+        preset=config,
+        seconds=args.seconds,
+        frames=args.frames,
+        seed=args.seed,
+        options=options,
+        residual_cfg_scale=args.residual_cfg_scale,
+    )
     tolerance_cm = 100.0 * config.tolerance
     for i, motion in enumerate(result.motions):
         record = result.records[i]
         save_motion(motion, outs[i])
         errors = 100.0 * result.errors[i]
-        print(f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): '{motion.text}'")
-        steps = f"logits editing {sum(record.logits_steps)} steps" if record.logits_steps else "no logits editing"
-        print(f"control ({preset}{', control model' if record.control_model else ', no control model'}): "
-              f"{steps}, codebook editing {record.codebook_steps} steps, {record.seconds:.1f} s")
+        print(
+            f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): '{motion.text}'"
+        )
+        steps = (
+            f"logits editing {sum(record.logits_steps)} steps" if record.logits_steps else "no logits editing"
+        )
+        print(
+            f"control ({preset}{', control model' if record.control_model else ', no control model'}): "
+            f"{steps}, codebook editing {record.codebook_steps} steps, {record.seconds:.1f} s"
+        )
         width = max(len(spec.constraints[k].joint_name) for k in range(len(errors)))
         for c, e in zip(spec.constraints, errors):
             flag = "" if e <= tolerance_cm else f"  (over {tolerance_cm:g} cm)"
             print(f"  {c.joint_name:<{width}}  frame {c.frame:>3}  error {e:6.2f} cm{flag}")
         over = int((errors > tolerance_cm).sum())
-        print(f"  max {errors.max():.2f} cm, mean {errors.mean():.2f} cm; "
-              + (f"all {len(errors)} constraints within {tolerance_cm:g} cm" if not over
-                 else f"{over} of {len(errors)} constraints over {tolerance_cm:g} cm"))
+        print(
+            f"  max {errors.max():.2f} cm, mean {errors.mean():.2f} cm; "
+            + (
+                f"all {len(errors)} constraints within {tolerance_cm:g} cm"
+                if not over
+                else f"{over} of {len(errors)} constraints over {tolerance_cm:g} cm"
+            )
+        )
         if plots:
             from controlmm.motion.plot import plot_or_animate
 

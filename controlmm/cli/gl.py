@@ -18,12 +18,16 @@ def import_mujoco(default_backend: str) -> str | None:
     os.environ.setdefault("MUJOCO_GL", default_backend)
     try:
         import mujoco  # noqa: F401
+
         return None
     except Exception as exc:  # noqa: BLE001 - AttributeError/ImportError/OSError from the GL layer
-        note = f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {' '.join(str(exc).split()) or type(exc).__name__}"
+        note = (
+            f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {' '.join(str(exc).split()) or type(exc).__name__}"
+        )
         for name in list(sys.modules):
             if name == "mujoco" or name.startswith(("mujoco.", "OpenGL")):
                 del sys.modules[name]
         os.environ["MUJOCO_GL"] = "disable"
         import mujoco  # noqa: F401
+
         return note

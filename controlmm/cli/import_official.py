@@ -31,17 +31,33 @@ example:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("import-official", help="import the official MoMask/MaskControl checkpoints",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--momask", required=True, metavar="DIR", help="folder with the three MoMask model folders")
+    p = sub.add_parser(
+        "import-official",
+        help="import the official MoMask/MaskControl checkpoints",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--momask", required=True, metavar="DIR", help="folder with the three MoMask model folders"
+    )
     p.add_argument("--control", default=None, metavar="DIR", help="a MaskControl run folder (optional)")
-    p.add_argument("--evaluator", default=None, metavar="DIR", help="folder with the HumanML3D evaluator (optional)")
+    p.add_argument(
+        "--evaluator", default=None, metavar="DIR", help="folder with the HumanML3D evaluator (optional)"
+    )
     p.add_argument("--out", required=True, metavar="MODEL_DIR", help="model directory to write")
-    p.add_argument("--clip-weights", default=None, metavar="PATH",
-                   help="CLIP ViT-B/32 weights recorded in model.json (a transformers save_pretrained folder or a "
-                        "model id in the local cache; default openai/clip-vit-base-patch32)")
-    p.add_argument("--clip-precision", default="float16", choices=("float16", "float32"),
-                   help="precision of the CLIP text features (official: float16)")
+    p.add_argument(
+        "--clip-weights",
+        default=None,
+        metavar="PATH",
+        help="CLIP ViT-B/32 weights recorded in model.json (a transformers save_pretrained folder or a "
+        "model id in the local cache; default openai/clip-vit-base-patch32)",
+    )
+    p.add_argument(
+        "--clip-precision",
+        default="float16",
+        choices=("float16", "float32"),
+        help="precision of the CLIP text features (official: float16)",
+    )
     p.add_argument("--force", action="store_true", help="replace MODEL_DIR if it exists")
     p.set_defaults(func=run)
 
@@ -49,8 +65,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from controlmm.models.official import import_official
 
-    out = import_official(args.momask, args.out, control=args.control, evaluator=args.evaluator,
-                          clip_weights=args.clip_weights, clip_precision=args.clip_precision, force=args.force,
-                          log=print)
+    out = import_official(
+        args.momask,
+        args.out,
+        control=args.control,
+        evaluator=args.evaluator,
+        clip_weights=args.clip_weights,
+        clip_precision=args.clip_precision,
+        force=args.force,
+        log=print,
+    )
     print(f"wrote {out} (use it with: controlmm generate --model {out} ...)")
     return 0

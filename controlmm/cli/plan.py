@@ -34,29 +34,54 @@ scenes: controlmm scene list    control spec format: README (Spatial control)"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plan", help="plan a robot motion in a scene, check it in MuJoCo, export it (main job)",
-                       description=HELP, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "plan",
+        help="plan a robot motion in a scene, check it in MuJoCo, export it (main job)",
+        description=HELP,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--out", required=True, help="output directory (replaced atomically when complete)")
     p.add_argument("--scene", default=None, help="packaged scene name or scene .xml (default: table)")
     p.add_argument("--text", default=None, help="prompt (default: the scene's suggested prompt)")
-    p.add_argument("--control", default=None, metavar="SPEC.json",
-                   help="spatial control spec (default: the scene's suggested one when --text is not given)")
-    p.add_argument("--timeline", default=None, metavar="TIMELINE.json",
-                   help="body-part timeline spec instead of --text (see docs/timeline.md)")
+    p.add_argument(
+        "--control",
+        default=None,
+        metavar="SPEC.json",
+        help="spatial control spec (default: the scene's suggested one when --text is not given)",
+    )
+    p.add_argument(
+        "--timeline",
+        default=None,
+        metavar="TIMELINE.json",
+        help="body-part timeline spec instead of --text (see docs/timeline.md)",
+    )
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
-    p.add_argument("--seconds", type=float, default=None,
-                   help="motion length, 2 to 9.8 s (default: 6 s; with constraints, 0.5 s past the last one, "
-                        "at least 2 s and at most 6 s unless a constraint comes later)")
+    p.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        help="motion length, 2 to 9.8 s (default: 6 s; with constraints, 0.5 s past the last one, "
+        "at least 2 s and at most 6 s unless a constraint comes later)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--rounds", type=int, default=3, help="feedback rounds after the first try (default 3)")
     p.add_argument("--preset", default="accurate", help="editing preset: fast, medium, accurate (default)")
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument("--fps", type=float, default=50.0, help="robot trajectory rate in Hz (default 50)")
-    p.add_argument("--safe-distance", type=float, default=0.03,
-                   help="clearance to keep from obstacles in metres (default 0.03)")
-    p.add_argument("--threads", type=int, default=1,
-                   help="torch CPU threads (default 1: the editing loops are small and sequential; on a busy "
-                        "machine more threads spin-wait and run slower)")
+    p.add_argument(
+        "--safe-distance",
+        type=float,
+        default=0.03,
+        help="clearance to keep from obstacles in metres (default 0.03)",
+    )
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch CPU threads (default 1: the editing loops are small and sequential; on a busy "
+        "machine more threads spin-wait and run slower)",
+    )
     p.add_argument("--no-render", action="store_true", help="skip render.mp4 (the slowest output)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines or bars")
     p.set_defaults(func=run)
@@ -74,19 +99,32 @@ def run(args: argparse.Namespace) -> int:
     if args.threads < 1:
         raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
     torch.set_num_threads(args.threads)
-    config = PlanConfig(scene=args.scene or DEFAULT_SCENE, text=args.text, control=args.control, robot=args.robot,
-                        seconds=args.seconds, seed=args.seed, rounds=args.rounds, preset=args.preset,
-                        model=args.model, fps=args.fps, safe_distance_m=args.safe_distance,
-                        render=not args.no_render, timeline=args.timeline)
+    config = PlanConfig(
+        scene=args.scene or DEFAULT_SCENE,
+        text=args.text,
+        control=args.control,
+        robot=args.robot,
+        seconds=args.seconds,
+        seed=args.seed,
+        rounds=args.rounds,
+        preset=args.preset,
+        model=args.model,
+        fps=args.fps,
+        safe_distance_m=args.safe_distance,
+        render=not args.no_render,
+        timeline=args.timeline,
+    )
     progress = not args.no_progress
     result = plan(config, progress=progress)
     backend = write_plan(result, args.out, progress=progress)
     print(result.report.summary())
     rounds = len(result.rounds)
-    print(f"plan: {'PASSED' if result.passed else 'FAILED'} in round {result.best} of {rounds} "
-          f"({'passed' if result.rounds[0].passed else 'failed'} before feedback), {result.seconds:.1f} s; "
-          f"wrote {args.out}/ (motion.npz, robot.csv, robot.npz, report.json"
-          f"{', render.mp4 (' + backend + ')' if backend else ''}, plots/)")
+    print(
+        f"plan: {'PASSED' if result.passed else 'FAILED'} in round {result.best} of {rounds} "
+        f"({'passed' if result.rounds[0].passed else 'failed'} before feedback), {result.seconds:.1f} s; "
+        f"wrote {args.out}/ (motion.npz, robot.csv, robot.npz, report.json"
+        f"{', render.mp4 (' + backend + ')' if backend else ''}, plots/)"
+    )
     for name, err in zip(_constraint_names(result), result.final.constraint_errors_m):
         print(f"  constraint {name}: {err * 100:.2f} cm")
     sys.stdout.flush()

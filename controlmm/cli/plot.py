@@ -11,8 +11,12 @@ Axes are the MuJoCo world's: X forward, Y left, Z up."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="plot a motion to PNG or animate it to GIF/MP4",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "plot",
+        help="plot a motion to PNG or animate it to GIF/MP4",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("motion", help="motion file (.npz, .npy, .bvh)")
     p.add_argument("--out", required=True, help="output .png, .gif or .mp4")
     p.set_defaults(func=run)
@@ -26,7 +30,9 @@ def run(args: argparse.Namespace) -> int:
     from controlmm.motion.plot import plot_or_animate
 
     if Path(args.out).suffix.lower() not in (".png", ".gif", ".mp4"):
-        raise ControlMMError(f"unknown output format '{Path(args.out).suffix or args.out}'; allowed: .png, .gif, .mp4")
+        raise ControlMMError(
+            f"unknown output format '{Path(args.out).suffix or args.out}'; allowed: .png, .gif, .mp4"
+        )
     motion = load_motion(args.motion)
     plot_or_animate(motion, args.out)
     print(f"wrote {args.out}")

@@ -24,23 +24,37 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("retarget", help="retarget a human motion to a robot (CSV/NPZ/JSON, optional MP4)",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "retarget",
+        help="retarget a human motion to a robot (CSV/NPZ/JSON, optional MP4)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("motion", help="human motion (.npz, .npy, .bvh)")
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
     p.add_argument("--fps", type=float, default=50.0, help="output frame rate in Hz (default 50)")
     p.add_argument("--out", required=True, help="output prefix: writes OUT.csv, OUT.npz, OUT.json")
-    p.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees about world Z (default 0: +X)")
+    p.add_argument(
+        "--yaw", type=float, default=0.0, help="start heading in degrees about world Z (default 0: +X)"
+    )
     p.add_argument("--x", type=float, default=0.0, help="start position x in metres (default 0)")
     p.add_argument("--y", type=float, default=0.0, help="start position y in metres (default 0)")
-    p.add_argument("--solver", choices=("batched", "mink"), default="batched",
-                   help="batched (all frames at once, default) or mink (per-frame IK; needs mink, daqp)")
+    p.add_argument(
+        "--solver",
+        choices=("batched", "mink"),
+        default="batched",
+        help="batched (all frames at once, default) or mink (per-frame IK; needs mink, daqp)",
+    )
     p.add_argument("--render", metavar="VIDEO", help="also write a video (.mp4 or .gif)")
     p.add_argument("--render-width", type=int, default=480, help="video width in pixels (default 480)")
     p.add_argument("--render-height", type=int, default=360, help="video height in pixels (default 360)")
     p.add_argument("--render-fps", type=float, default=25.0, help="video frame rate (default 25)")
-    p.add_argument("--render-backend", choices=("auto", "mujoco", "stick"), default="auto",
-                   help="auto: MuJoCo, else the stick figure (default); mujoco; stick")
+    p.add_argument(
+        "--render-backend",
+        choices=("auto", "mujoco", "stick"),
+        default="auto",
+        help="auto: MuJoCo, else the stick figure (default); mujoco; stick",
+    )
     p.set_defaults(func=run)
 
 
@@ -51,14 +65,24 @@ def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
     rows.append(("joint-limit violations", str(metrics.get("joint_limit_violations"))))
     rows.append(("floor penetration max (mm)", f"{metrics.get('floor_penetration_max_mm', 0):.2f}"))
     sl = metrics.get("foot_sliding_mm_per_stance", {})
-    rows.append(("foot sliding per stance (mm)", f"mean {sl.get('mean', 0):.1f}  max {sl.get('max', 0):.1f}"
-                 f"  ({metrics.get('stances', 0)} stances)"))
+    rows.append(
+        (
+            "foot sliding per stance (mm)",
+            f"mean {sl.get('mean', 0):.1f}  max {sl.get('max', 0):.1f}"
+            f"  ({metrics.get('stances', 0)} stances)",
+        )
+    )
     if "joint_jerk_rms_rad_s3" in metrics:
         rows.append(("joint jerk RMS (rad/s^3)", f"{metrics['joint_jerk_rms_rad_s3']:.1f}"))
         rows.append(("joint velocity max (rad/s)", f"{metrics['joint_velocity_max_rad_s']:.2f}"))
     rows.append(("frames @ fps", f"{metrics.get('frames')} @ {metrics.get('fps'):g}"))
-    rows.append(("solver", f"{solver.get('method')}: {solver.get('iterations')} iterations, "
-                           f"{solver.get('total_seconds', 0) * 1000:.0f} ms"))
+    rows.append(
+        (
+            "solver",
+            f"{solver.get('method')}: {solver.get('iterations')} iterations, "
+            f"{solver.get('total_seconds', 0) * 1000:.0f} ms",
+        )
+    )
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"  {k:<{width}}  {v}" for k, v in rows)
 
@@ -82,7 +106,9 @@ def run(args: argparse.Namespace) -> int:
     if not out.parent.exists():
         raise ControlMMError(f"cannot write '{out}': directory '{out.parent}' does not exist")
     if args.render and Path(args.render).suffix.lower() not in (".mp4", ".gif"):
-        raise ControlMMError(f"unknown video format '{Path(args.render).suffix or args.render}'; allowed: .mp4, .gif")
+        raise ControlMMError(
+            f"unknown video format '{Path(args.render).suffix or args.render}'; allowed: .mp4, .gif"
+        )
     import math
 
     motion = load_motion(args.motion)
@@ -91,8 +117,10 @@ def run(args: argparse.Namespace) -> int:
     traj = retarget_motion(motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver)
     traj.source["path"] = str(args.motion)
     paths = traj.save(out)
-    print(f"retargeted {motion.num_frames} frames @ {motion.fps:g} fps -> {traj.robot_model().name}, "
-          f"{traj.num_frames} frames @ {traj.fps:g} Hz")
+    print(
+        f"retargeted {motion.num_frames} frames @ {motion.fps:g} fps -> {traj.robot_model().name}, "
+        f"{traj.num_frames} frames @ {traj.fps:g} Hz"
+    )
     print(_format_metrics(traj.metrics, traj.solver, traj.scale))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     if args.render:
@@ -102,10 +130,19 @@ def run(args: argparse.Namespace) -> int:
         if gl_note and backend != "stick":
             if backend == "mujoco":
                 raise ControlMMError(f"MuJoCo rendering unavailable ({gl_note[:200]})")
-            print(f"controlmm: MuJoCo rendering unavailable ({gl_note[:160]}); drawing a matplotlib stick "
-                  "figure instead", file=sys.stderr)
+            print(
+                f"controlmm: MuJoCo rendering unavailable ({gl_note[:160]}); drawing a matplotlib stick "
+                "figure instead",
+                file=sys.stderr,
+            )
             backend = "stick"
-        used = render_trajectory(traj, args.render, width=args.render_width, height=args.render_height,
-                                 fps=args.render_fps, backend=backend)
+        used = render_trajectory(
+            traj,
+            args.render,
+            width=args.render_width,
+            height=args.render_height,
+            fps=args.render_fps,
+            backend=backend,
+        )
         print(f"wrote {args.render} ({used})")
     return 0

@@ -11,36 +11,53 @@ bodies only)."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("scene", help="list scenes, render them, plot their SDFs", description=HELP,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "scene",
+        help="list scenes, render them, plot their SDFs",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     actions = p.add_subparsers(dest="scene_command", metavar="ACTION", parser_class=type(p))
 
-    ls = actions.add_parser("list", help="list the packaged scenes",
-                            description="List the packaged scenes with what each tests.")
-    ls.add_argument("--verbose", "-v", action="store_true", help="also print prompts, controls and start poses")
+    ls = actions.add_parser(
+        "list", help="list the packaged scenes", description="List the packaged scenes with what each tests."
+    )
+    ls.add_argument(
+        "--verbose", "-v", action="store_true", help="also print prompts, controls and start poses"
+    )
     ls.set_defaults(func=run_list)
 
     show = actions.add_parser(
-        "show", help="render a scene to PNG (perspective + top view)",
+        "show",
+        help="render a scene to PNG (perspective + top view)",
         description="Render SCENE with MuJoCo offscreen (MUJOCO_GL=egl unless set) with the robot standing at the "
-                    "start pose; without a working GL backend, draw matplotlib top and side views instead.")
+        "start pose; without a working GL backend, draw matplotlib top and side views instead.",
+    )
     show.add_argument("scene", help="scene name or MJCF file")
     show.add_argument("--out", required=True, help="output .png")
     show.add_argument("--robot", default="g1", help="robot to attach (g1, h1, t1) or 'none' (default g1)")
-    show.add_argument("--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)")
+    show.add_argument(
+        "--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+    )
     show.add_argument("--width", type=int, default=800, help="width of each view in pixels (default 800)")
     show.add_argument("--height", type=int, default=600, help="height of each view in pixels (default 600)")
     show.set_defaults(func=run_show)
 
     sdf = actions.add_parser(
-        "sdf", help="plot SDF slices of a scene to PNG",
+        "sdf",
+        help="plot SDF slices of a scene to PNG",
         description="Plot the scene's obstacle SDF (floor excluded) on a horizontal slice at --height and a "
-                    "vertical slice through the start pose, for eyeballing.")
+        "vertical slice through the start pose, for eyeballing.",
+    )
     sdf.add_argument("scene", help="scene name or MJCF file")
     sdf.add_argument("--out", required=True, help="output .png")
-    sdf.add_argument("--height", type=float, default=0.5, help="z of the horizontal slice in metres (default 0.5)")
+    sdf.add_argument(
+        "--height", type=float, default=0.5, help="z of the horizontal slice in metres (default 0.5)"
+    )
     sdf.add_argument("--y", type=float, default=None, help="y of the vertical slice (default: the start's y)")
-    sdf.add_argument("--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)")
+    sdf.add_argument(
+        "--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+    )
     sdf.set_defaults(func=run_sdf)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 

@@ -25,24 +25,49 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("timeline", help="body-part timeline control: several prompts, each for a part and a span",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "timeline",
+        help="body-part timeline control: several prompts, each for a part and a span",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("spec", help="timeline spec (JSON)")
     p.add_argument("--out", required=True, help="output motion .npz")
     p.add_argument("--plot", default=None, help="also write a plot/animation (.png, .gif or .mp4)")
     p.add_argument("--report", default=None, help="also write the report as JSON")
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: random, stored in the output)")
-    p.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"),
-                   help="editing preset; its codebook-editing budget per pass: fast 100 + 200 settle steps per try, "
-                        "medium and accurate (default) 600 + 1200")
-    p.add_argument("--codebook-steps", type=int, default=None, metavar="N",
-                   help="codebook-editing steps per pass (default: the preset's)")
-    p.add_argument("--settle-steps", type=int, default=None, metavar="N",
-                   help="steps of each pass's second editing run, per try (default 2x codebook steps)")
-    p.add_argument("--blend-frames", type=int, default=10, metavar="N",
-                   help="frames blended at each interior span edge (default 10)")
+    p.add_argument(
+        "--seed", type=int, default=None, help="random seed (default: random, stored in the output)"
+    )
+    p.add_argument(
+        "--preset",
+        default="accurate",
+        choices=("fast", "medium", "accurate"),
+        help="editing preset; its codebook-editing budget per pass: fast 100 + 200 settle steps per try, "
+        "medium and accurate (default) 600 + 1200",
+    )
+    p.add_argument(
+        "--codebook-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="codebook-editing steps per pass (default: the preset's)",
+    )
+    p.add_argument(
+        "--settle-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="steps of each pass's second editing run, per try (default 2x codebook steps)",
+    )
+    p.add_argument(
+        "--blend-frames",
+        type=int,
+        default=10,
+        metavar="N",
+        help="frames blended at each interior span edge (default 10)",
+    )
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.set_defaults(func=run)
 
@@ -84,20 +109,34 @@ def run(args: argparse.Namespace) -> int:
 
     config = editing_preset(args.preset).with_overrides(codebook_steps=args.codebook_steps)
     model = load_model(args.model, device=args.device)
-    motion, report = generate_timeline(model, timeline, seed=args.seed, preset=config,
-                                       blend_frames=args.blend_frames, settle_steps=args.settle_steps,
-                                       progress=True)
+    motion, report = generate_timeline(
+        model,
+        timeline,
+        seed=args.seed,
+        preset=config,
+        blend_frames=args.blend_frames,
+        settle_steps=args.settle_steps,
+        progress=True,
+    )
     save_motion(motion, args.out)
-    print(f"wrote {args.out} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {report['seed']}, "
-          f"{report['wall_seconds']:.1f} s)")
+    print(
+        f"wrote {args.out} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {report['seed']}, "
+        f"{report['wall_seconds']:.1f} s)"
+    )
     for t in report["tracks"]:
-        edges = ", ".join(f"{k} {v:.2f} m/s" for k, v in t["boundary_speed_mps"].items()) or "no interior edges"
+        edges = (
+            ", ".join(f"{k} {v:.2f} m/s" for k, v in t["boundary_speed_mps"].items()) or "no interior edges"
+        )
         probe = ""
         if "probe" in t:
             probe = f"; probe {t['probe']['family']}: {'pass' if t['probe']['passed'] else 'FAIL'}"
-        print(f"  track {t['track']} {t['part']} {t['frames'][0]}..{t['frames'][1]}: '{t['prompt']}': "
-              f"fixed entries drift {t['final_drift_cm']:.2f} cm; edges {edges}{probe}")
-    print(f"  max drift {report['max_drift_cm']:.2f} cm, max boundary speed {report['max_boundary_speed_mps']:.2f} m/s")
+        print(
+            f"  track {t['track']} {t['part']} {t['frames'][0]}..{t['frames'][1]}: '{t['prompt']}': "
+            f"fixed entries drift {t['final_drift_cm']:.2f} cm; edges {edges}{probe}"
+        )
+    print(
+        f"  max drift {report['max_drift_cm']:.2f} cm, max boundary speed {report['max_boundary_speed_mps']:.2f} m/s"
+    )
     if args.report:
         write_text(args.report, json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.report}")

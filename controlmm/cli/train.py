@@ -11,8 +11,14 @@ import argparse
 import importlib
 import sys
 
-TRAIN_SUBCOMMANDS: tuple[str, ...] = ("tokenizer", "transformer", "token_transformer", "residual", "control",
-                                      "evaluator")
+TRAIN_SUBCOMMANDS: tuple[str, ...] = (
+    "tokenizer",
+    "transformer",
+    "token_transformer",
+    "residual",
+    "control",
+    "evaluator",
+)
 """Modules ``controlmm.cli.train_<name>`` that register a training stage, in ``--help`` order."""
 
 HELP = """Train a model directory stage by stage (the same commands for the demo and the paper preset):
@@ -35,8 +41,13 @@ EPILOG = """presets: demo (CPU-sized, MiniLM text; about 2 h (112-118 min) for e
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train the tokenizer, transformers, motion control model or evaluator",
-                       description=HELP, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "train",
+        help="train the tokenizer, transformers, motion control model or evaluator",
+        description=HELP,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     stages = p.add_subparsers(dest="stage", metavar="STAGE", parser_class=type(p))
     for name in TRAIN_SUBCOMMANDS:
         importlib.import_module(f"controlmm.cli.train_{name}").register(stages)
@@ -46,8 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _no_stage(parser: argparse.ArgumentParser) -> int:
     from controlmm.models.model_dir import train_command
 
-    print(f"controlmm train: error: choose a stage: {', '.join(map(train_command, TRAIN_SUBCOMMANDS))} "
-          "(see 'controlmm train --help')", file=sys.stderr)
+    print(
+        f"controlmm train: error: choose a stage: {', '.join(map(train_command, TRAIN_SUBCOMMANDS))} "
+        "(see 'controlmm train --help')",
+        file=sys.stderr,
+    )
     return 2
 
 
@@ -55,33 +69,59 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     """Arguments every training stage accepts."""
     p.add_argument("--data", required=True, help="HumanML3D-format data directory")
     p.add_argument("--out", required=True, help="model directory (created by the tokenizer stage)")
-    p.add_argument("--preset", default=None,
-                   help="demo, paper or tiny" + (" (default demo)" if creates else " (default: the model directory's)"))
+    p.add_argument(
+        "--preset",
+        default=None,
+        help="demo, paper or tiny" + (" (default demo)" if creates else " (default: the model directory's)"),
+    )
     length = p.add_mutually_exclusive_group()
     length.add_argument("--iters", type=int, default=None, help="training iterations (default: the preset's)")
-    length.add_argument("--epochs", type=float, default=None, help="training length in epochs instead of --iters")
+    length.add_argument(
+        "--epochs", type=float, default=None, help="training length in epochs instead of --iters"
+    )
     p.add_argument("--batch-size", type=int, default=None, help="global batch size (default: the preset's)")
     p.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the preset's)")
-    p.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
-                   help="write a checkpoint every N iterations (default: the preset's)")
+    p.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=None,
+        metavar="N",
+        help="write a checkpoint every N iterations (default: the preset's)",
+    )
     p.add_argument("--resume", action="store_true", help="continue from MODEL_DIR/checkpoints/<stage>.pt")
     p.add_argument("--force", action="store_true", help="start this stage over, discarding its checkpoint")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--workers", type=int, default=0, help="data-loading worker processes (default 0)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
-    p.add_argument("--precision", default="fp32", choices=("fp32", "bf16"),
-                   help="bf16 = bfloat16 autocast of the forward pass: 1.2-1.5x faster on CPUs with "
-                        "AVX512-BF16 and on GPUs (default fp32)")
+    p.add_argument(
+        "--precision",
+        default="fp32",
+        choices=("fp32", "bf16"),
+        help="bf16 = bfloat16 autocast of the forward pass: 1.2-1.5x faster on CPUs with "
+        "AVX512-BF16 and on GPUs (default fp32)",
+    )
     if creates:
-        p.add_argument("--text-encoder", default=None,
-                       help="minilm or clip (default: the preset's; fixed for the model directory)")
-        p.add_argument("--text-tokens", type=int, default=None, metavar="N",
-                       help="MiniLM only: condition the masked transformer on the text's token states "
-                            "(at most N) instead of one sentence vector; 0 = sentence vector (default: "
-                            "the preset's; fixed for the model directory)")
-    p.add_argument("--clip-weights", default=None, metavar="PATH",
-                   help="CLIP ViT-B/32 folder saved by transformers (CLIP-conditioned models)")
+        p.add_argument(
+            "--text-encoder",
+            default=None,
+            help="minilm or clip (default: the preset's; fixed for the model directory)",
+        )
+        p.add_argument(
+            "--text-tokens",
+            type=int,
+            default=None,
+            metavar="N",
+            help="MiniLM only: condition the masked transformer on the text's token states "
+            "(at most N) instead of one sentence vector; 0 = sentence vector (default: "
+            "the preset's; fixed for the model directory)",
+        )
+    p.add_argument(
+        "--clip-weights",
+        default=None,
+        metavar="PATH",
+        help="CLIP ViT-B/32 folder saved by transformers (CLIP-conditioned models)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -95,13 +135,27 @@ def run_stage(name: str, args: argparse.Namespace, stage_options: dict | None = 
 
         raise ControlMMError(f"--workers must be >= 0; got {args.workers}")
     options = TrainOptions(
-        data=Path(args.data), out=Path(args.out), preset=args.preset, iters=args.iters, epochs=args.epochs,
-        batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every, resume=args.resume,
-        force=args.force, seed=args.seed, device=args.device, workers=args.workers,
-        text_encoder=getattr(args, "text_encoder", None), clip_weights=args.clip_weights,
+        data=Path(args.data),
+        out=Path(args.out),
+        preset=args.preset,
+        iters=args.iters,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        checkpoint_every=args.checkpoint_every,
+        resume=args.resume,
+        force=args.force,
+        seed=args.seed,
+        device=args.device,
+        workers=args.workers,
+        text_encoder=getattr(args, "text_encoder", None),
+        clip_weights=args.clip_weights,
         text_tokens=getattr(args, "text_tokens", None),
-        progress=not args.no_progress, command="controlmm " + " ".join(sys.argv[1:]),
-        precision=args.precision, threads=args.threads, stage_options=dict(stage_options or {}),
+        progress=not args.no_progress,
+        command="controlmm " + " ".join(sys.argv[1:]),
+        precision=args.precision,
+        threads=args.threads,
+        stage_options=dict(stage_options or {}),
     )
     train(name, options)
     return 0

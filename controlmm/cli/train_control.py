@@ -22,23 +22,43 @@ def register(sub: argparse._SubParsersAction) -> None:
     from controlmm.cli.train import EPILOG, add_common_arguments
     from controlmm.training.control import CONTROL_MODES, DENSITIES, ESTIMATORS
 
-    p = sub.add_parser("control", help="train the motion control model (spatial control)",
-                       description=DESCRIPTION, epilog=EPILOG_CONTROL + "\n" + EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "control",
+        help="train the motion control model (spatial control)",
+        description=DESCRIPTION,
+        epilog=EPILOG_CONTROL + "\n" + EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_common_arguments(p, creates=False)
-    p.add_argument("--joints", default=None, choices=("all", "pelvis"),
-                   help="joints the control branch sees (default: all)")
+    p.add_argument(
+        "--joints",
+        default=None,
+        choices=("all", "pelvis"),
+        help="joints the control branch sees (default: all)",
+    )
     p.add_argument("--alpha", type=float, default=None, help="weight of the cross-entropy (default 0.1)")
-    p.add_argument("--estimator", default=None, choices=ESTIMATORS,
-                   help="token estimate for the consistency loss: gumbel (straight-through Gumbel-softmax, "
-                        "the paper; default) or softmax (the released code)")
+    p.add_argument(
+        "--estimator",
+        default=None,
+        choices=ESTIMATORS,
+        help="token estimate for the consistency loss: gumbel (straight-through Gumbel-softmax, "
+        "the paper; default) or softmax (the released code)",
+    )
     p.add_argument("--tau", type=float, default=None, help="Gumbel-softmax temperature (default 1)")
-    p.add_argument("--mode", default=None, choices=CONTROL_MODES,
-                   help="control sampling: trajectory (pelvis), random (one control joint), cross "
-                        "(random frame/joint pairs), mixed (one of them per sample; default)")
-    p.add_argument("--density", default=None, choices=DENSITIES,
-                   help="controlled frames per sample: uniform (1..196, the released code) or mixed "
-                        "(half of the samples log-uniform: sparse keyframes as often as dense; default)")
+    p.add_argument(
+        "--mode",
+        default=None,
+        choices=CONTROL_MODES,
+        help="control sampling: trajectory (pelvis), random (one control joint), cross "
+        "(random frame/joint pairs), mixed (one of them per sample; default)",
+    )
+    p.add_argument(
+        "--density",
+        default=None,
+        choices=DENSITIES,
+        help="controlled frames per sample: uniform (1..196, the released code) or mixed "
+        "(half of the samples log-uniform: sparse keyframes as often as dense; default)",
+    )
     p.add_argument("--cond-drop", type=float, default=None, help="text dropout probability (default 0.1)")
     p.set_defaults(func=run)
 
@@ -46,6 +66,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from controlmm.cli.train import run_stage
 
-    options = {"joints": args.joints, "alpha": args.alpha, "estimator": args.estimator, "tau": args.tau,
-               "mode": args.mode, "density": args.density, "cond_drop": args.cond_drop}
+    options = {
+        "joints": args.joints,
+        "alpha": args.alpha,
+        "estimator": args.estimator,
+        "tau": args.tau,
+        "mode": args.mode,
+        "density": args.density,
+        "cond_drop": args.cond_drop,
+    }
     return run_stage("control", args, {k: v for k, v in options.items() if v is not None})

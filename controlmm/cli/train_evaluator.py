@@ -20,20 +20,35 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("evaluator", help="train the text-motion evaluator (FID, R-precision)",
-                       description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "evaluator",
+        help="train the text-motion evaluator (FID, R-precision)",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--data", required=True, help="HumanML3D-format data directory")
     p.add_argument("--out", required=True, help="evaluator directory to create")
     p.add_argument("--preset", default="default", help="default or tiny (tests) (default: default)")
     length = p.add_mutually_exclusive_group()
-    length.add_argument("--iters", type=int, default=None, help="training iterations (default: the preset's, 1500)")
-    length.add_argument("--epochs", type=float, default=None, help="training length in epochs instead of --iters")
+    length.add_argument(
+        "--iters", type=int, default=None, help="training iterations (default: the preset's, 1500)"
+    )
+    length.add_argument(
+        "--epochs", type=float, default=None, help="training length in epochs instead of --iters"
+    )
     p.add_argument("--batch-size", type=int, default=None, help="batch size (default 64)")
     p.add_argument("--lr", type=float, default=None, help="peak learning rate (default 2e-3)")
-    p.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
-                   help="write a checkpoint every N iterations (default 250)")
+    p.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=None,
+        metavar="N",
+        help="write a checkpoint every N iterations (default 250)",
+    )
     p.add_argument("--resume", action="store_true", help="continue from EVAL_DIR/checkpoints/evaluator.pt")
-    p.add_argument("--force", action="store_true", help="start over, discarding an existing evaluator training")
+    p.add_argument(
+        "--force", action="store_true", help="start over, discarding an existing evaluator training"
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
@@ -46,10 +61,23 @@ def run(args: argparse.Namespace) -> int:
 
     from controlmm.training.evaluator import EvaluatorTrainOptions, train_evaluator
 
-    train_evaluator(EvaluatorTrainOptions(
-        data=Path(args.data), out=Path(args.out), preset=args.preset, iters=args.iters, epochs=args.epochs,
-        batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every, resume=args.resume,
-        force=args.force, seed=args.seed, device=args.device, threads=args.threads,
-        progress=not args.no_progress, command="controlmm " + " ".join(sys.argv[1:]),
-    ))
+    train_evaluator(
+        EvaluatorTrainOptions(
+            data=Path(args.data),
+            out=Path(args.out),
+            preset=args.preset,
+            iters=args.iters,
+            epochs=args.epochs,
+            batch_size=args.batch_size,
+            lr=args.lr,
+            checkpoint_every=args.checkpoint_every,
+            resume=args.resume,
+            force=args.force,
+            seed=args.seed,
+            device=args.device,
+            threads=args.threads,
+            progress=not args.no_progress,
+            command="controlmm " + " ".join(sys.argv[1:]),
+        )
+    )
     return 0

@@ -11,8 +11,9 @@ projections, 20% text dropout). Validation each epoch: cross-entropy and accurac
 def register(sub: argparse._SubParsersAction) -> None:
     from controlmm.cli.train import EPILOG, add_common_arguments
 
-    p = sub.add_parser("residual", help="train the residual transformer",
-                       description=DESCRIPTION, epilog=EPILOG)
+    p = sub.add_parser(
+        "residual", help="train the residual transformer", description=DESCRIPTION, epilog=EPILOG
+    )
     add_common_arguments(p, creates=False)
     p.set_defaults(func=run)
 

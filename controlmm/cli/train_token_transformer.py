@@ -17,8 +17,12 @@ Validation each epoch: masked-token cross-entropy and accuracy."""
 def register(sub: argparse._SubParsersAction) -> None:
     from controlmm.cli.train import EPILOG, add_common_arguments
 
-    p = sub.add_parser("token-transformer", help="train the token-state masked transformer (optional)",
-                       description=DESCRIPTION, epilog=EPILOG)
+    p = sub.add_parser(
+        "token-transformer",
+        help="train the token-state masked transformer (optional)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+    )
     add_common_arguments(p, creates=False)
     p.set_defaults(func=run)
 

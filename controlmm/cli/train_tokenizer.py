@@ -12,8 +12,12 @@ tokenizer.pt. Validation each epoch: reconstruction loss, MPJPE (mm), code usage
 def register(sub: argparse._SubParsersAction) -> None:
     from controlmm.cli.train import EPILOG, add_common_arguments
 
-    p = sub.add_parser("tokenizer", help="train the RVQ-VAE tokenizer (creates the model directory)",
-                       description=DESCRIPTION, epilog=EPILOG)
+    p = sub.add_parser(
+        "tokenizer",
+        help="train the RVQ-VAE tokenizer (creates the model directory)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+    )
     add_common_arguments(p, creates=True)
     p.set_defaults(func=run)
 

@@ -12,8 +12,12 @@ epoch: masked-token cross-entropy and accuracy."""
 def register(sub: argparse._SubParsersAction) -> None:
     from controlmm.cli.train import EPILOG, add_common_arguments
 
-    p = sub.add_parser("transformer", help="train the masked (base-layer) transformer",
-                       description=DESCRIPTION, epilog=EPILOG)
+    p = sub.add_parser(
+        "transformer",
+        help="train the masked (base-layer) transformer",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+    )
     add_common_arguments(p, creates=False)
     p.set_defaults(func=run)
 

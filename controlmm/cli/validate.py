@@ -16,12 +16,24 @@ Exit status: 0 when every check passes, 1 when the trajectory fails a check, 2 o
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("validate", help="check a robot trajectory in a scene (penetration, limits, sliding, dynamics)",
-                       description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "validate",
+        help="check a robot trajectory in a scene (penetration, limits, sliding, dynamics)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("trajectory", help="robot trajectory (.npz or .csv)")
-    p.add_argument("--scene", default="empty", help="scene name (see `controlmm scene list`) or MJCF file (default: empty)")
-    p.add_argument("--robot", default=None, help="robot name or mapping .json (default: the file's robot, else g1)")
-    p.add_argument("--fps", type=float, default=None, help="frame rate (required for .csv; overrides the file's)")
+    p.add_argument(
+        "--scene",
+        default="empty",
+        help="scene name (see `controlmm scene list`) or MJCF file (default: empty)",
+    )
+    p.add_argument(
+        "--robot", default=None, help="robot name or mapping .json (default: the file's robot, else g1)"
+    )
+    p.add_argument(
+        "--fps", type=float, default=None, help="frame rate (required for .csv; overrides the file's)"
+    )
     p.add_argument("--out", required=True, help="report .json to write (a .png plot is written beside it)")
     p.add_argument("--no-plot", action="store_true", help="skip the per-frame plot")
     p.set_defaults(func=run)
@@ -47,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
     report = check_trajectory(scene, qpos, fps)
     report.save(out)
     if not args.no_plot:
-        plot_report(report, out.with_suffix(".png"), title=f"{Path(args.trajectory).name} in {scene.name} ({robot})")
+        plot_report(
+            report, out.with_suffix(".png"), title=f"{Path(args.trajectory).name} in {scene.name} ({robot})"
+        )
     print(report.summary())
     print(f"wrote {out}" + ("" if args.no_plot else f" and {out.with_suffix('.png')}"))
     return 0 if report.passed else 1

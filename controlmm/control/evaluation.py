@@ -44,7 +44,8 @@ DENSITIES: tuple[int, ...] = (1, 2, 5, 49, 196)
 SINGLE_JOINTS: dict[str, int] = {JOINT_NAMES[j]: j for j in CONTROL_JOINTS}
 JOINT_MODES: tuple[str, ...] = tuple(SINGLE_JOINTS) + ("cross", "all", "random", "each")
 CROSS_COMBINATIONS: tuple[tuple[int, ...], ...] = tuple(
-    c for k in range(1, len(CONTROL_JOINTS) + 1) for c in itertools.combinations(CONTROL_JOINTS, k))
+    c for k in range(1, len(CONTROL_JOINTS) + 1) for c in itertools.combinations(CONTROL_JOINTS, k)
+)
 """The 63 non-empty subsets of the six control joints: 6 singles, 15 pairs, 20 triples, 15, 6, 1."""
 THRESHOLD = 0.5  # metres, the "50 cm" of Traj./Loc. err
 
@@ -66,8 +67,14 @@ class ControlCase:
     features: np.ndarray  # (frames, 263) the ground-truth clip
 
 
-def build_cases(data_dir: str | Path, joints: str = "pelvis", densities: Sequence[int] = DENSITIES,
-                samples: int = 100, seed: int = 0, split: str = "test") -> list[ControlCase]:
+def build_cases(
+    data_dir: str | Path,
+    joints: str = "pelvis",
+    densities: Sequence[int] = DENSITIES,
+    samples: int = 100,
+    seed: int = 0,
+    split: str = "test",
+) -> list[ControlCase]:
     """``samples`` cases from a split; case i uses ``densities[i % len(densities)]``.
 
     Clips are drawn without replacement while they last (then again), with a random caption and crop.
@@ -95,7 +102,7 @@ def build_cases(data_dir: str | Path, joints: str = "pelvis", densities: Sequenc
         text = sample.captions[int(rng.integers(len(sample.captions)))]
         m = min(sample.length, MAX_FRAMES) // 4 * 4
         start = int(rng.integers(0, sample.length - m + 1))
-        feats = sample.motion[start:start + m].astype(np.float32)
+        feats = sample.motion[start : start + m].astype(np.float32)
         targets = features_to_joints_np(feats).astype(np.float32)
         density = int(densities[i % len(densities)])
         chosen = _case_joints(joints, i, rng)
@@ -128,15 +135,20 @@ def keyframe_errors(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray) -
     return np.array([dist[f][mask[f]].mean() for f in frames], dtype=np.float64)
 
 
-def case_metrics(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray,
-                 threshold: float = THRESHOLD) -> dict[str, float]:
+def case_metrics(
+    joints: np.ndarray, targets: np.ndarray, mask: np.ndarray, threshold: float = THRESHOLD
+) -> dict[str, float]:
     """Traj. fail (0/1), Loc. fail fraction, Avg. err (m) and the worst controlled-joint error (m) of one case."""
     e = keyframe_errors(joints, targets, mask)
     if len(e) == 0:
         raise ControlMMError("a control case needs at least one controlled entry")
     dist = np.linalg.norm(np.asarray(joints, dtype=np.float64)[: mask.shape[0]] - targets, axis=-1)[mask]
-    return {"traj": float(np.any(e > threshold)), "loc": float(np.mean(e > threshold)), "avg": float(e.mean()),
-            "max": float(dist.max())}
+    return {
+        "traj": float(np.any(e > threshold)),
+        "loc": float(np.mean(e > threshold)),
+        "avg": float(e.mean()),
+        "max": float(dist.max()),
+    }
 
 
 def summarize(rows: Sequence[dict[str, float]]) -> dict[str, float]:
@@ -173,24 +185,49 @@ class ControlEvaluation:
 
     def table(self) -> str:
         """A text table: one row per density and the average."""
-        header = (f"{'density':>8} {'cases':>6} {'Traj.err':>9} {'Loc.err':>8} {'Avg.err cm':>11} "
-                  f"{'max cm':>8} {'skate':>7} {'steps':>7} {'s/motion':>9}")
+        header = (
+            f"{'density':>8} {'cases':>6} {'Traj.err':>9} {'Loc.err':>8} {'Avg.err cm':>11} "
+            f"{'max cm':>8} {'skate':>7} {'steps':>7} {'s/motion':>9}"
+        )
         lines = [f"spatial control: joints {self.joints}, preset {self.preset}", header]
         for name, s in self.by_density().items():
-            lines.append(f"{name:>8} {int(s['cases']):>6} {s['traj']:>9.4f} {s['loc']:>8.4f} {100 * s['avg']:>11.3f} "
-                         f"{100 * s['max']:>8.2f} {s['skate']:>7.4f} {s['steps']:>7.0f} {s['seconds']:>9.2f}")
+            lines.append(
+                f"{name:>8} {int(s['cases']):>6} {s['traj']:>9.4f} {s['loc']:>8.4f} {100 * s['avg']:>11.3f} "
+                f"{100 * s['max']:>8.2f} {s['skate']:>7.4f} {s['steps']:>7.0f} {s['seconds']:>9.2f}"
+            )
         if self.extra:
             lines.append("  " + ", ".join(f"{k} {v:.4g}" for k, v in self.extra.items()))
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
-        return {"preset": self.preset, "joints": self.joints, "summary": self.by_density(),
-                "cases": [{"motion_id": c.motion_id, "text": c.text, "frames": c.frames, "density": c.density,
-                           "joints": [JOINT_NAMES[j] for j in c.joints]} | r for c, r in zip(self.cases, self.rows)]}
+        return {
+            "preset": self.preset,
+            "joints": self.joints,
+            "summary": self.by_density(),
+            "cases": [
+                {
+                    "motion_id": c.motion_id,
+                    "text": c.text,
+                    "frames": c.frames,
+                    "density": c.density,
+                    "joints": [JOINT_NAMES[j] for j in c.joints],
+                }
+                | r
+                for c, r in zip(self.cases, self.rows)
+            ],
+        }
 
 
-def evaluate_control(model, cases: Sequence[ControlCase], preset="accurate", seed: int = 0, batch_size: int = 1,
-                     text_metrics: TextMetrics | None = None, progress: bool = False, joints: str = "") -> ControlEvaluation:
+def evaluate_control(
+    model,
+    cases: Sequence[ControlCase],
+    preset="accurate",
+    seed: int = 0,
+    batch_size: int = 1,
+    text_metrics: TextMetrics | None = None,
+    progress: bool = False,
+    joints: str = "",
+) -> ControlEvaluation:
     """Generate every case under its control and measure it (see the module docstring).
 
     Args:
@@ -200,37 +237,55 @@ def evaluate_control(model, cases: Sequence[ControlCase], preset="accurate", see
         batch_size: cases generated together (1 gives per-motion timings).
         text_metrics: optional extra columns computed on (generated, texts, ground truth).
     """
+    from tqdm import tqdm
+
     from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate_controlled
-    from tqdm import tqdm
 
     rows: list[dict[str, float]] = []
     generated: list[Motion] = []
     started = time.perf_counter()
     bar = tqdm(total=len(cases), desc="eval control", unit="case", disable=not progress)
     for start in range(0, len(cases), batch_size):
-        chunk = list(cases[start:start + batch_size])
+        chunk = list(cases[start : start + batch_size])
         t_max = max(c.frames for c in chunk)
         targets = np.zeros((len(chunk), t_max, NUM_JOINTS, 3), dtype=np.float32)
         mask = np.zeros((len(chunk), t_max, NUM_JOINTS), dtype=bool)
         for k, c in enumerate(chunk):
             targets[k, : c.frames], mask[k, : c.frames] = c.targets, c.mask
-        out = generate_controlled(model, [c.text for c in chunk], targets=targets, mask=mask,
-                                  frames=[c.frames for c in chunk], preset=preset, seed=seed + start,
-                                  batch_size=batch_size)
+        out = generate_controlled(
+            model,
+            [c.text for c in chunk],
+            targets=targets,
+            mask=mask,
+            frames=[c.frames for c in chunk],
+            preset=preset,
+            seed=seed + start,
+            batch_size=batch_size,
+        )
         for c, motion, record in zip(chunk, out.motions, out.records):
             row = case_metrics(motion.joints, c.targets, c.mask)
-            row |= {"skate": foot_skating_ratio(motion.joints, FPS), "steps": float(record.total_steps),
-                    "seconds": record.seconds, "cpu_seconds": record.cpu_seconds,
-                    "converged": float(record.converged)}
+            row |= {
+                "skate": foot_skating_ratio(motion.joints, FPS),
+                "steps": float(record.total_steps),
+                "seconds": record.seconds,
+                "cpu_seconds": record.cpu_seconds,
+                "converged": float(record.converged),
+            }
             rows.append(row)
             generated.append(motion)
         bar.update(len(chunk))
     bar.close()
     from controlmm.editing import editing_preset
 
-    result = ControlEvaluation(preset=editing_preset(preset).name, joints=joints, cases=list(cases), rows=rows, generated=generated,
-                               seconds=time.perf_counter() - started)
+    result = ControlEvaluation(
+        preset=editing_preset(preset).name,
+        joints=joints,
+        cases=list(cases),
+        rows=rows,
+        generated=generated,
+        seconds=time.perf_counter() - started,
+    )
     if text_metrics is not None:
         truth = [Motion.from_features(c.features, text=c.text) for c in cases]
         result.extra = dict(text_metrics(generated, [c.text for c in cases], truth))

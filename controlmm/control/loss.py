@@ -35,7 +35,9 @@ def control_loss_term(targets: torch.Tensor, mask: torch.Tensor, weight: float =
     return LossTerm("control", lambda joints: control_loss(joints, targets, mask), weight)
 
 
-def constraint_errors(joints: np.ndarray, spec: ControlSpec, transform: HumanToWorld | None = None) -> np.ndarray:
+def constraint_errors(
+    joints: np.ndarray, spec: ControlSpec, transform: HumanToWorld | None = None
+) -> np.ndarray:
     """Euclidean error (m) of each constraint of ``spec`` on joints (T, 22, 3), (K,) in the human frame."""
     spec.check_length(len(joints))
     pos = spec.human_positions(transform)

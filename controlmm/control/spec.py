@@ -66,13 +66,15 @@ class ControlSpec:
 
     # ----------------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: Any) -> "ControlSpec":
+    def from_dict(cls, data: Any) -> ControlSpec:
         """Parse and validate the JSON structure (see the module docstring)."""
         if not isinstance(data, dict):
             raise ControlMMError(f"a control spec must be a JSON object; got {type(data).__name__}")
         unknown = set(data) - {"coords", "constraints"}
         if unknown:
-            raise ControlMMError(f"unknown control-spec keys: {', '.join(sorted(unknown))}; allowed: coords, constraints")
+            raise ControlMMError(
+                f"unknown control-spec keys: {', '.join(sorted(unknown))}; allowed: coords, constraints"
+            )
         coords = data.get("coords", "human")
         items = data.get("constraints")
         if not isinstance(items, list):
@@ -83,7 +85,7 @@ class ControlSpec:
         return cls(tuple(out), coords=str(coords), source=data)
 
     @classmethod
-    def load(cls, path: str | Path) -> "ControlSpec":
+    def load(cls, path: str | Path) -> ControlSpec:
         """Read a JSON control spec file."""
         path = Path(path)
         if not path.is_file():
@@ -99,7 +101,8 @@ class ControlSpec:
         return {
             "coords": self.coords,
             "constraints": [
-                {"joint": c.joint_name, "frame": c.frame, "position": list(c.position)} for c in self.constraints
+                {"joint": c.joint_name, "frame": c.frame, "position": list(c.position)}
+                for c in self.constraints
             ],
         }
 
@@ -161,7 +164,12 @@ def _position(value: Any, where: str) -> tuple[float, float, float]:
 
 
 def _frame(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value != int(value):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or value != int(value)
+    ):
         raise ControlMMError(f"{where}: frame must be a whole number >= 0; got {value!r}")
     if value < 0:
         raise ControlMMError(f"{where}: frame must be >= 0; got {int(value)}")
@@ -199,7 +207,9 @@ def _parse_item(item: Any, k: int) -> list[Constraint]:
         return [Constraint(joint, f, tuple(map(float, p))) for f, p in zip(range(start, end + 1), arr)]
     extra = set(item) - {"joint", "frame", "position"}
     if extra:
-        raise ControlMMError(f"{where}: unexpected keys {', '.join(sorted(extra))}; allowed: joint, frame, position")
+        raise ControlMMError(
+            f"{where}: unexpected keys {', '.join(sorted(extra))}; allowed: joint, frame, position"
+        )
     if "frame" not in item or "position" not in item:
         raise ControlMMError(f"{where} needs 'frame' and 'position' (or 'frame_range' and 'positions')")
     return [Constraint(joint, _frame(item["frame"], where), _position(item["position"], where))]

@@ -22,9 +22,31 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from controlmm.corpus.feet import ANKLE_HEIGHT, FootTrack, foot_frame, toe_local
 from controlmm.corpus.rig import (
-    ANKLE_INDEX, COLLAR_INDEX, ELBOW_INDEX, FOREARM, HIP_INDEX, KNEE_INDEX, L, REST, SHIN,
-    SHOULDER_INDEX, SIDE_SIGN, THIGH, TOE_INDEX, UPPER_ARM, WRIST_INDEX, apply, body_rotation,
-    heading_vectors, hip_offset, rot_axis, rot_x, rot_y, rot_z, two_bone_ik, unit,
+    ANKLE_INDEX,
+    COLLAR_INDEX,
+    ELBOW_INDEX,
+    FOREARM,
+    HIP_INDEX,
+    KNEE_INDEX,
+    REST,
+    SHIN,
+    SHOULDER_INDEX,
+    SIDE_SIGN,
+    THIGH,
+    TOE_INDEX,
+    UPPER_ARM,
+    WRIST_INDEX,
+    L,
+    apply,
+    body_rotation,
+    heading_vectors,
+    hip_offset,
+    rot_axis,
+    rot_x,
+    rot_y,
+    rot_z,
+    two_bone_ik,
+    unit,
 )
 
 SIDES = ("left", "right")
@@ -59,7 +81,7 @@ class ArmPlan:
     elevation: np.ndarray
 
     @classmethod
-    def hanging(cls, n: int, side: str, rng: np.random.Generator | None = None) -> "ArmPlan":
+    def hanging(cls, n: int, side: str, rng: np.random.Generator | None = None) -> ArmPlan:
         """Relaxed arm hanging at the side (slightly forward, elbow a little bent)."""
         r = rng if rng is not None else np.random.default_rng(0)
         flex = np.full(n, r.uniform(0.02, 0.15))
@@ -67,8 +89,17 @@ class ArmPlan:
         elbow = np.full(n, r.uniform(0.15, 0.4))
         twist = np.full(n, r.uniform(0.1, 0.4))
         pole = np.tile(np.array([SIDE_SIGN[side] * 0.5, -0.3, -1.0]), (n, 1))
-        return cls(flex=flex, abd=abd, elbow=elbow, twist=twist, swing=np.zeros(n), ik=np.zeros(n),
-                   target=np.zeros((n, 3)), pole=pole, elevation=np.zeros(n))
+        return cls(
+            flex=flex,
+            abd=abd,
+            elbow=elbow,
+            twist=twist,
+            swing=np.zeros(n),
+            ik=np.zeros(n),
+            target=np.zeros((n, 3)),
+            pole=pole,
+            elevation=np.zeros(n),
+        )
 
 
 @dataclass
@@ -124,7 +155,7 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     feet = plan.feet
     planted = {s: gaussian_filter1d(feet[s].planted.astype(np.float64), 1.5, mode="nearest") for s in SIDES}
     total = planted["left"] + planted["right"]
-    support = (planted["left"][:, None] * feet["left"].ankle + planted["right"][:, None] * feet["right"].ankle)
+    support = planted["left"][:, None] * feet["left"].ankle + planted["right"][:, None] * feet["right"].ankle
     support = support / np.maximum(total, 1e-6)[:, None]
     root = np.stack([plan.root_xz[:, 0], np.zeros(n), plan.root_xz[:, 1]], -1)
     lateral = ((support - root) * left).sum(-1) * np.clip(total, 0.0, 1.0)
@@ -149,8 +180,11 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     chest = r_pelvis @ rel[2]
     joints[:, 12] = joints[:, 9] + apply(chest, REST[12]) * L[12]
     lean = pitch + sp
-    head_rot = body_rotation(yaw + plan.get("head_yaw") + 0.3 * (twist + st),
-                             plan.get("head_pitch") + 0.45 * lean, 0.4 * (roll + sr))
+    head_rot = body_rotation(
+        yaw + plan.get("head_yaw") + 0.3 * (twist + st),
+        plan.get("head_pitch") + 0.45 * lean,
+        0.4 * (roll + sr),
+    )
     joints[:, 15] = joints[:, 12] + apply(head_rot, REST[15]) * L[15]
 
     # 3. Shoulder girdle and arms.
@@ -161,7 +195,9 @@ def assemble(plan: BodyPlan) -> np.ndarray:
         c, s = COLLAR_INDEX[side], SHOULDER_INDEX[side]
         joints[:, c] = joints[:, 9] + apply(chest @ elev, REST[c]) * L[c]
         joints[:, s] = joints[:, c] + apply(chest @ elev, REST[s]) * L[s]
-        joints[:, ELBOW_INDEX[side]], joints[:, WRIST_INDEX[side]] = _arm(plan, side, chest, joints[:, s], stride)
+        joints[:, ELBOW_INDEX[side]], joints[:, WRIST_INDEX[side]] = _arm(
+            plan, side, chest, joints[:, s], stride
+        )
 
     # 4. Legs.
     for side in SIDES:
@@ -211,8 +247,9 @@ def _pelvis_height(plan: BodyPlan, pelvis: np.ndarray, r_pelvis: np.ndarray) -> 
     return y
 
 
-def _arm(plan: BodyPlan, side: str, chest: np.ndarray, shoulder: np.ndarray,
-         stride: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _arm(
+    plan: BodyPlan, side: str, chest: np.ndarray, shoulder: np.ndarray, stride: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     arm = plan.arms[side]
     sign = SIDE_SIGN[side]
     flex = arm.flex - sign * arm.swing * stride  # arm swings opposite to the same-side leg
@@ -226,5 +263,9 @@ def _arm(plan: BodyPlan, side: str, chest: np.ndarray, shoulder: np.ndarray,
     w = np.clip(arm.ik, 0.0, 1.0)[:, None]
     target = (1.0 - w) * wrist_fk + w * (shoulder + apply(chest, arm.target))
     default_pole = apply(chest, np.array([sign * 0.4, -0.4, -1.0]))
-    pole = (1.0 - w) * (elbow_fk - 0.5 * (shoulder + wrist_fk)) + w * apply(chest, arm.pole) + 0.02 * default_pole
+    pole = (
+        (1.0 - w) * (elbow_fk - 0.5 * (shoulder + wrist_fk))
+        + w * apply(chest, arm.pole)
+        + 0.02 * default_pole
+    )
     return two_bone_ik(shoulder, target, pole, la, lf, max_reach=0.995)

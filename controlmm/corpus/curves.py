@@ -63,8 +63,13 @@ def integrate(rate: np.ndarray, fps: float) -> np.ndarray:
     return np.concatenate([np.zeros((1,) + rate.shape[1:]), np.cumsum(steps, axis=0)], axis=0)
 
 
-def gentle_noise(rng: np.random.Generator, t: np.ndarray, amplitude: float,
-                 freq: tuple[float, float] = (0.15, 0.6), terms: int = 3) -> np.ndarray:
+def gentle_noise(
+    rng: np.random.Generator,
+    t: np.ndarray,
+    amplitude: float,
+    freq: tuple[float, float] = (0.15, 0.6),
+    terms: int = 3,
+) -> np.ndarray:
     """A smooth random signal: a sum of ``terms`` sinusoids with random frequencies (Hz) and
     phases, scaled to peak amplitude about ``amplitude``. For idle sway and breathing."""
     f = rng.uniform(freq[0], freq[1], size=terms)

@@ -140,9 +140,17 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     else:
         raise RuntimeError(f"clip {spec.clip_id} ({spec.family}) failed {MAX_ATTEMPTS} attempts: {problem}")
     meta = {
-        "version": FORMAT_VERSION, "id": spec.clip_id, "family": spec.family, "group": family.group,
-        "split": spec.split, "frames": int(len(features)), "fps": FPS, "seed": [spec.seed, spec.index, attempt],
-        "held_out": spec.split == "test", "params": params, "captions": [c.to_json() for c in caps],
+        "version": FORMAT_VERSION,
+        "id": spec.clip_id,
+        "family": spec.family,
+        "group": family.group,
+        "split": spec.split,
+        "frames": int(len(features)),
+        "fps": FPS,
+        "seed": [spec.seed, spec.index, attempt],
+        "held_out": spec.split == "test",
+        "params": params,
+        "captions": [c.to_json() for c in caps],
         "retry_reasons": reasons,
     }
     return features, joints, caps, meta
@@ -193,11 +201,21 @@ def _work(args: tuple[ClipSpec, str, int]) -> ClipResult:
     out = Path(root)
     np.save(out / "new_joint_vecs" / f"{spec.clip_id}.npy", features)
     np.save(out / "new_joints" / f"{spec.clip_id}.npy", joints)
-    (out / "texts" / f"{spec.clip_id}.txt").write_text("\n".join(c.line() for c in caps) + "\n", encoding="utf-8")
+    (out / "texts" / f"{spec.clip_id}.txt").write_text(
+        "\n".join(c.line() for c in caps) + "\n", encoding="utf-8"
+    )
     (out / "meta" / f"{spec.clip_id}.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
     f64 = features.astype(np.float64)
-    return ClipResult(spec.clip_id, spec.family, spec.split, len(features), meta["seed"][2],
-                      meta["retry_reasons"], f64.sum(0), (f64 * f64).sum(0))
+    return ClipResult(
+        spec.clip_id,
+        spec.family,
+        spec.split,
+        len(features),
+        meta["seed"][2],
+        meta["retry_reasons"],
+        f64.sum(0),
+        (f64 * f64).sum(0),
+    )
 
 
 def _init_worker() -> None:
@@ -210,7 +228,9 @@ def _check_out(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise ControlMMError(f"--out '{out}' exists and is not a directory")
     if out.is_dir() and any(out.iterdir()) and not (out / "corpus.json").is_file():
-        raise ControlMMError(f"--out '{out}' is a non-empty directory that is not a corpus; refusing to replace it")
+        raise ControlMMError(
+            f"--out '{out}' is a non-empty directory that is not a corpus; refusing to replace it"
+        )
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' does not exist")
@@ -218,11 +238,14 @@ def _check_out(out: Path) -> None:
         probe = tempfile.mkdtemp(prefix=f".{out.name}.probe.", dir=parent)
         os.rmdir(probe)
     except OSError as exc:
-        raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' is not writable "
-                             f"({exc.strerror or exc})") from None
+        raise ControlMMError(
+            f"cannot write --out '{out}': directory '{parent}' is not writable ({exc.strerror or exc})"
+        ) from None
 
 
-def write_corpus(out: str | Path, config: CorpusConfig, workers: int = 0, progress: bool = True) -> dict[str, Any]:
+def write_corpus(
+    out: str | Path, config: CorpusConfig, workers: int = 0, progress: bool = True
+) -> dict[str, Any]:
     """Generate the corpus into ``out`` atomically (the directory appears complete or not at all).
 
     Args:
@@ -267,12 +290,15 @@ def write_corpus(out: str | Path, config: CorpusConfig, workers: int = 0, progre
     return summary
 
 
-def _finish(root: Path, config: CorpusConfig, results: list[ClipResult], seconds: float, workers: int) -> dict:
+def _finish(
+    root: Path, config: CorpusConfig, results: list[ClipResult], seconds: float, workers: int
+) -> dict:
     for split in SPLITS:
         ids = sorted(r.clip_id for r in results if r.split == split)
         (root / f"{split}.txt").write_text("".join(f"{i}\n" for i in ids), encoding="utf-8")
-    (root / "all.txt").write_text("".join(f"{r.clip_id}\n" for r in sorted(results, key=lambda r: r.clip_id)),
-                                  encoding="utf-8")
+    (root / "all.txt").write_text(
+        "".join(f"{r.clip_id}\n" for r in sorted(results, key=lambda r: r.clip_id)), encoding="utf-8"
+    )
     train = [r for r in results if r.split == "train"] or results
     count = sum(r.frames for r in train)
     total = np.sum([r.feature_sum for r in train], axis=0)
@@ -287,11 +313,15 @@ def _finish(root: Path, config: CorpusConfig, results: list[ClipResult], seconds
 
     families = {name: n for name in family_names() if (n := sum(r.family == name for r in results))}
     summary = {
-        "format": "humanml3d", "version": FORMAT_VERSION, "generator": "controlmm.corpus",
+        "format": "humanml3d",
+        "version": FORMAT_VERSION,
+        "generator": "controlmm.corpus",
         "config": {**asdict(config), "families": list(config.families) if config.families else None},
-        "clips": len(results), "frames": int(sum(r.frames for r in results)),
+        "clips": len(results),
+        "frames": int(sum(r.frames for r in results)),
         "splits": {s: sum(r.split == s for r in results) for s in SPLITS},
-        "families": families, "retries": int(sum(r.attempt for r in results)),
+        "families": families,
+        "retries": int(sum(r.attempt for r in results)),
         "retried": {r.clip_id: r.retry_reasons for r in results if r.retry_reasons},
     }
     # corpus.json is part of the deterministic output: no timings in it.

@@ -42,8 +42,15 @@ class RootPath:
         return xz, float(np.interp(tq, self.t, self.yaw))
 
     @classmethod
-    def from_velocity(cls, t: np.ndarray, speed: np.ndarray, move_dir: np.ndarray | float,
-                      yaw: np.ndarray, fps: float, start: tuple[float, float] = (0.0, 0.0)) -> "RootPath":
+    def from_velocity(
+        cls,
+        t: np.ndarray,
+        speed: np.ndarray,
+        move_dir: np.ndarray | float,
+        yaw: np.ndarray,
+        fps: float,
+        start: tuple[float, float] = (0.0, 0.0),
+    ) -> RootPath:
         """Integrate a speed (m/s) along ``move_dir`` (rad, relative to the heading: 0 forward,
         pi backward, +pi/2 to the left) while the heading follows ``yaw``."""
         direction = yaw + np.broadcast_to(np.asarray(move_dir, dtype=np.float64), yaw.shape)
@@ -96,8 +103,9 @@ class Gait:
     free_twist: float = 0.45
 
 
-def plan_footholds(path: RootPath, gait: Gait, fps: float,
-                   initial: dict[str, tuple[np.ndarray, float]] | None = None) -> dict[str, list[Stance]]:
+def plan_footholds(
+    path: RootPath, gait: Gait, fps: float, initial: dict[str, tuple[np.ndarray, float]] | None = None
+) -> dict[str, list[Stance]]:
     """Plan the stances of both feet along ``path``.
 
     Args:
@@ -119,7 +127,9 @@ def plan_footholds(path: RootPath, gait: Gait, fps: float,
             xz0, yaw0 = initial[side]
         else:
             xz0, yaw0 = _target(path, float(t[0]), side, gait.width, gait.toe_out)
-        stances[side] = [Stance(t_on=-np.inf, t_off=np.inf, xz=np.asarray(xz0, dtype=np.float64), yaw=float(yaw0))]
+        stances[side] = [
+            Stance(t_on=-np.inf, t_off=np.inf, xz=np.asarray(xz0, dtype=np.float64), yaw=float(yaw0))
+        ]
 
     for side, t0, t1 in _swing_windows(path, gait, fps):
         if t0 >= t_end:
@@ -140,8 +150,9 @@ def plan_footholds(path: RootPath, gait: Gait, fps: float,
         fwd = _forward_amount(cur, xz, yaw)
         ratio = min(abs(fwd) / gait.step_ref, 1.2)
         # Any real step lifts the toes clear of the floor (>= 7.5 cm at the ankle).
-        nxt.clearance = max(gait.clearance * (0.55 + 0.45 * min(move / gait.step_ref, 1.0)),
-                            0.075 if move > 0.1 else 0.05)
+        nxt.clearance = max(
+            gait.clearance * (0.55 + 0.45 * min(move / gait.step_ref, 1.0)), 0.075 if move > 0.1 else 0.05
+        )
         if fwd >= 0 and gait.strike == "heel":
             nxt.land_pitch = gait.heel_pitch * ratio
         else:
@@ -213,8 +224,9 @@ def _target(path: RootPath, tq: float, side: str, width: float, toe_out: float) 
     return xz + SIDE_SIGN[side] * 0.5 * width * left[[0, 2]], yaw + SIDE_SIGN[side] * toe_out
 
 
-def _keep_apart(xz: np.ndarray, yaw: float, side: str, stances: dict[str, list[Stance]], t1: float,
-                min_width: float) -> np.ndarray:
+def _keep_apart(
+    xz: np.ndarray, yaw: float, side: str, stances: dict[str, list[Stance]], t1: float, min_width: float
+) -> np.ndarray:
     other = "right" if side == "left" else "left"
     planted = [s for s in stances[other] if s.t_on <= t1]
     if not planted:
@@ -231,8 +243,9 @@ def _forward_amount(cur: Stance, xz: np.ndarray, yaw: float) -> float:
     return float((xz - cur.xz) @ fwd[[0, 2]])
 
 
-def _roll(cur: Stance, xz: np.ndarray, yaw: float, side: str, gait: Gait, t0: float, t1: float,
-          stance_time: float) -> None:
+def _roll(
+    cur: Stance, xz: np.ndarray, yaw: float, side: str, gait: Gait, t0: float, t1: float, stance_time: float
+) -> None:
     """Set the lift-off roll of the stance that ends at ``t0`` from the coming step."""
     fwd = _forward_amount(cur, xz, yaw)
     ratio = min(abs(fwd) / gait.step_ref, 1.2)

@@ -41,7 +41,9 @@ class Family:
     slots: Callable[[Params], dict[str, Slot]]
     core: Callable[[Params], dict[str, Any]] = lambda p: {}
 
-    def captions(self, params: Params, rng: np.random.Generator, held_out: bool, count: int = 3) -> list[Caption]:
+    def captions(
+        self, params: Params, rng: np.random.Generator, held_out: bool, count: int = 3
+    ) -> list[Caption]:
         """``count`` different captions of a clip with these parameters."""
         return render(self.name, self.templates, self.slots(params), rng, held_out, count, self.core(params))
 

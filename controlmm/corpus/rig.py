@@ -49,11 +49,14 @@ def rot_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     x, y, z = np.moveaxis(axis, -1, 0)
     c, s = np.cos(angle), np.sin(angle)
     C = 1.0 - c
-    return np.stack([
-        np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
-        np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
-        np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
+            np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
+            np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1),
+        ],
+        -2,
+    )
 
 
 def body_rotation(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
@@ -79,8 +82,9 @@ def heading_vectors(yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return fwd, left
 
 
-def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, l1: float, l2: float,
-                max_reach: float = 0.998) -> tuple[np.ndarray, np.ndarray]:
+def two_bone_ik(
+    root: np.ndarray, target: np.ndarray, pole: np.ndarray, l1: float, l2: float, max_reach: float = 0.998
+) -> tuple[np.ndarray, np.ndarray]:
     """Analytic two-bone IK (thigh/shin or upper arm/forearm), vectorised over frames.
 
     Args:
@@ -126,16 +130,16 @@ SIDE_SIGN = {"left": 1.0, "right": -1.0}
 # Designed so that the neck sits ~0.52 m and the head ~0.60 m above the pelvis, the
 # shoulders ~0.40 m above it and 0.40 m apart (HumanML3D standing proportions).
 REST = {
-    1: unit(np.array([0.56, -0.82, -0.08])),    # left_hip (from pelvis)
-    2: unit(np.array([-0.56, -0.82, -0.08])),   # right_hip
-    3: unit(np.array([0.0, 0.97, -0.24])),      # spine1
-    6: unit(np.array([0.0, 0.96, 0.28])),       # spine2
-    9: unit(np.array([0.0, 0.85, 0.53])),       # spine3
-    12: unit(np.array([0.0, 0.99, -0.12])),     # neck
-    15: unit(np.array([0.0, 0.64, 0.77])),      # head
-    13: unit(np.array([0.55, 0.80, -0.20])),    # left_collar (from spine3)
-    14: unit(np.array([-0.55, 0.80, -0.20])),   # right_collar
-    16: unit(np.array([0.97, -0.08, -0.14])),   # left_shoulder (from collar)
+    1: unit(np.array([0.56, -0.82, -0.08])),  # left_hip (from pelvis)
+    2: unit(np.array([-0.56, -0.82, -0.08])),  # right_hip
+    3: unit(np.array([0.0, 0.97, -0.24])),  # spine1
+    6: unit(np.array([0.0, 0.96, 0.28])),  # spine2
+    9: unit(np.array([0.0, 0.85, 0.53])),  # spine3
+    12: unit(np.array([0.0, 0.99, -0.12])),  # neck
+    15: unit(np.array([0.0, 0.64, 0.77])),  # head
+    13: unit(np.array([0.55, 0.80, -0.20])),  # left_collar (from spine3)
+    14: unit(np.array([-0.55, 0.80, -0.20])),  # right_collar
+    16: unit(np.array([0.97, -0.08, -0.14])),  # left_shoulder (from collar)
     17: unit(np.array([-0.97, -0.08, -0.14])),  # right_shoulder
 }
 
@@ -156,7 +160,10 @@ def hip_offset(side: str) -> np.ndarray:
 
 def shoulder_offset(side: str) -> np.ndarray:
     """Spine3 -> shoulder vector in the chest frame at rest (3,)."""
-    return REST[COLLAR_INDEX[side]] * L[COLLAR_INDEX[side]] + REST[SHOULDER_INDEX[side]] * L[SHOULDER_INDEX[side]]
+    return (
+        REST[COLLAR_INDEX[side]] * L[COLLAR_INDEX[side]]
+        + REST[SHOULDER_INDEX[side]] * L[SHOULDER_INDEX[side]]
+    )
 
 
 def chest_height() -> float:

@@ -27,7 +27,9 @@ def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
 class WindowDataset(Dataset):
     """Random ``window``-frame crops of whole motions, normalised: (window, 263) float32 (tokenizer)."""
 
-    def __init__(self, motions: Sequence[np.ndarray], normalizer: Normalizer, window: int, seed: int = 0) -> None:
+    def __init__(
+        self, motions: Sequence[np.ndarray], normalizer: Normalizer, window: int, seed: int = 0
+    ) -> None:
         self.motions = [m for m in motions if len(m) >= window]
         self.normalizer, self.window, self.seed = normalizer, window, seed
 
@@ -38,7 +40,7 @@ class WindowDataset(Dataset):
         index, epoch = key
         motion = self.motions[index]
         start = int(item_rng(self.seed, epoch, index).integers(0, len(motion) - self.window + 1))
-        window = self.normalizer.normalize(motion[start:start + self.window])
+        window = self.normalizer.normalize(motion[start : start + self.window])
         return torch.from_numpy(np.ascontiguousarray(window, dtype=np.float32))
 
 
@@ -52,8 +54,15 @@ class TextMotionDataset(Dataset):
     Returns (motion (max_frames, 263) float32, m (int), caption index (int, into ``caption_index``)).
     """
 
-    def __init__(self, samples: Sequence, normalizer: Normalizer, caption_index: dict[str, int],
-                 unit: int = 4, max_frames: int = MAX_FRAMES, seed: int = 0) -> None:
+    def __init__(
+        self,
+        samples: Sequence,
+        normalizer: Normalizer,
+        caption_index: dict[str, int],
+        unit: int = 4,
+        max_frames: int = MAX_FRAMES,
+        seed: int = 0,
+    ) -> None:
         self.samples = list(samples)
         self.normalizer, self.caption_index = normalizer, caption_index
         self.unit, self.max_frames, self.seed = unit, max_frames, seed
@@ -73,7 +82,7 @@ class TextMotionDataset(Dataset):
         m = units * self.unit
         start = int(rng.integers(0, sample.length - m + 1))
         motion = np.zeros((self.max_frames, sample.motion.shape[1]), dtype=np.float32)
-        motion[:m] = self.normalizer.normalize(sample.motion[start:start + m])
+        motion[:m] = self.normalizer.normalize(sample.motion[start : start + m])
         return torch.from_numpy(motion), m, self.caption_index[caption]
 
 
@@ -90,17 +99,30 @@ class StepBatchSampler(Sampler):
     of similar length, so trimming it to its longest clip saves the padded positions' compute.
     """
 
-    def __init__(self, num_items: int, batch_size: int, seed: int, epoch: int, start_step: int = 0,
-                 end_step: int | None = None, rank: int = 0, world: int = 1, shuffle: bool = True,
-                 lengths: Sequence[int] | None = None, bucket: int = 0) -> None:
+    def __init__(
+        self,
+        num_items: int,
+        batch_size: int,
+        seed: int,
+        epoch: int,
+        start_step: int = 0,
+        end_step: int | None = None,
+        rank: int = 0,
+        world: int = 1,
+        shuffle: bool = True,
+        lengths: Sequence[int] | None = None,
+        bucket: int = 0,
+    ) -> None:
         self.num_items, self.batch_size, self.seed, self.epoch = num_items, batch_size, seed, epoch
         self.rank, self.world, self.shuffle = rank, world, shuffle
         self.steps_per_epoch = num_items // batch_size
         self.start_step = start_step
         self.end_step = self.steps_per_epoch if end_step is None else min(end_step, self.steps_per_epoch)
         if bucket > 0 and (lengths is None or len(lengths) != num_items):
-            raise ValueError(f"length bucketing needs one length per item ({num_items}); got "
-                             f"{'none' if lengths is None else len(lengths)}")
+            raise ValueError(
+                f"length bucketing needs one length per item ({num_items}); got "
+                f"{'none' if lengths is None else len(lengths)}"
+            )
         self.lengths, self.bucket = lengths, bucket
 
     def __len__(self) -> int:
@@ -111,18 +133,18 @@ class StepBatchSampler(Sampler):
         rng = np.random.default_rng([self.seed, self.epoch, 7919])
         order = rng.permutation(self.num_items) if self.shuffle else np.arange(self.num_items)
         b = self.batch_size
-        order = order[:self.steps_per_epoch * b]
+        order = order[: self.steps_per_epoch * b]
         if self.bucket <= 0:
-            return [order[s * b:(s + 1) * b] for s in range(self.steps_per_epoch)]
+            return [order[s * b : (s + 1) * b] for s in range(self.steps_per_epoch)]
         lengths = np.asarray(self.lengths)
         batches = []
         for start in range(0, len(order), self.bucket * b):
-            group = order[start:start + self.bucket * b]
+            group = order[start : start + self.bucket * b]
             group = group[np.argsort(lengths[group], kind="stable")]
-            batches += [group[i:i + b] for i in range(0, len(group), b)]
+            batches += [group[i : i + b] for i in range(0, len(group), b)]
         return [batches[i] for i in rng.permutation(len(batches))] if self.shuffle else batches
 
     def __iter__(self) -> Iterator[list[Key]]:
         batches = self.batches()
         for step in range(self.start_step, self.end_step):
-            yield [(int(i), self.epoch) for i in batches[step][self.rank::self.world]]
+            yield [(int(i), self.epoch) for i in batches[step][self.rank :: self.world]]

@@ -68,9 +68,11 @@ class HumanML3D:
             raise InputFileError(f"data directory '{self.root}' does not exist")
         for sub in ("new_joint_vecs", "texts"):
             if not (self.root / sub).is_dir():
-                raise InputFileError(f"data directory '{self.root}' has no '{sub}/' folder "
-                                     "(expected the HumanML3D layout: new_joint_vecs/, texts/, train.txt, "
-                                     "val.txt, test.txt, Mean.npy, Std.npy)")
+                raise InputFileError(
+                    f"data directory '{self.root}' has no '{sub}/' folder "
+                    "(expected the HumanML3D layout: new_joint_vecs/, texts/, train.txt, "
+                    "val.txt, test.txt, Mean.npy, Std.npy)"
+                )
         self.normalizer = self._statistics()
 
     # -- files ------------------------------------------------------------------------------------
@@ -85,7 +87,9 @@ class HumanML3D:
             except Exception as exc:  # noqa: BLE001
                 raise InputFileError(f"cannot read '{path}': {type(exc).__name__}") from exc
             if arr.shape != (FEATURE_DIM,) or not np.all(np.isfinite(arr)):
-                raise InputFileError(f"'{path}' must hold a finite ({FEATURE_DIM},) array; got shape {arr.shape}")
+                raise InputFileError(
+                    f"'{path}' must hold a finite ({FEATURE_DIM},) array; got shape {arr.shape}"
+                )
             arrays.append(arr.astype(np.float32))
         if np.any(arrays[1] <= 0):
             raise InputFileError(f"'{self.root / 'Std.npy'}' has non-positive entries")
@@ -133,8 +137,9 @@ class HumanML3D:
             try:
                 start, end = float(parts[2]), float(parts[3])
             except ValueError as exc:
-                raise InputFileError(f"'{path}' line {number}: start/end '{parts[2]}'/'{parts[3]}' "
-                                     "are not numbers") from exc
+                raise InputFileError(
+                    f"'{path}' line {number}: start/end '{parts[2]}'/'{parts[3]}' are not numbers"
+                ) from exc
             start = 0.0 if math.isnan(start) else start
             end = 0.0 if math.isnan(end) else end
             captions.append(Caption(parts[0].strip(), tuple(parts[1].split()), start, end))
@@ -148,8 +153,9 @@ class HumanML3D:
         from tqdm import tqdm
 
         samples: list[MotionSample] = []
-        for motion_id in tqdm(self.split_ids(split), desc=f"loading {split}", unit="motion",
-                              disable=not progress, leave=False):
+        for motion_id in tqdm(
+            self.split_ids(split), desc=f"loading {split}", unit="motion", disable=not progress, leave=False
+        ):
             motion = self.load_motion(motion_id)
             captions = self.read_captions(motion_id)
             if not MIN_FRAMES <= len(motion) < MAX_FRAMES_EXCLUSIVE:
@@ -159,14 +165,16 @@ class HumanML3D:
                 if cap.start == 0.0 and cap.end == 0.0:
                     whole.append(cap.text)
                     continue
-                span = motion[int(cap.start * FPS): int(cap.end * FPS)]
+                span = motion[int(cap.start * FPS) : int(cap.end * FPS)]
                 if MIN_FRAMES <= len(span) < MAX_FRAMES_EXCLUSIVE:
                     samples.append(MotionSample(f"{motion_id}#{k}", motion_id, span, [cap.text]))
             if whole:
                 samples.append(MotionSample(motion_id, motion_id, motion, whole))
         if not samples:
-            raise InputFileError(f"split '{split}' of '{self.root}' has no usable captioned motion "
-                                 f"({MIN_FRAMES} <= frames < {MAX_FRAMES_EXCLUSIVE})")
+            raise InputFileError(
+                f"split '{split}' of '{self.root}' has no usable captioned motion "
+                f"({MIN_FRAMES} <= frames < {MAX_FRAMES_EXCLUSIVE})"
+            )
         return samples
 
     def motions(self, split: str, min_frames: int, progress: bool = False) -> list[np.ndarray]:
@@ -174,11 +182,14 @@ class HumanML3D:
         from tqdm import tqdm
 
         out = []
-        for motion_id in tqdm(self.split_ids(split), desc=f"loading {split}", unit="motion",
-                              disable=not progress, leave=False):
+        for motion_id in tqdm(
+            self.split_ids(split), desc=f"loading {split}", unit="motion", disable=not progress, leave=False
+        ):
             motion = self.load_motion(motion_id)
             if len(motion) >= min_frames:
                 out.append(motion)
         if not out:
-            raise InputFileError(f"split '{split}' of '{self.root}' has no motion of at least {min_frames} frames")
+            raise InputFileError(
+                f"split '{split}' of '{self.root}' has no motion of at least {min_frames} frames"
+            )
         return out

@@ -16,5 +16,15 @@ from controlmm.editing.optimize import EditOutcome, optimize
 from controlmm.editing.presets import PRESETS, EditingConfig, editing_preset
 from controlmm.editing.terms import LossTerm, total_loss
 
-__all__ = ["PRESETS", "EditOutcome", "EditingConfig", "LossTerm", "Objective", "codebook_editing", "editing_preset",
-           "logits_editing", "optimize", "total_loss"]
+__all__ = [
+    "PRESETS",
+    "EditOutcome",
+    "EditingConfig",
+    "LossTerm",
+    "Objective",
+    "codebook_editing",
+    "editing_preset",
+    "logits_editing",
+    "optimize",
+    "total_loss",
+]

@@ -18,8 +18,12 @@ from controlmm.editing.optimize import EditOutcome, optimize, optimize_lbfgs
 from controlmm.editing.presets import EditingConfig
 
 
-def codebook_editing(latent: torch.Tensor, decode: Callable[[torch.Tensor], torch.Tensor], objective: Objective,
-                     config: EditingConfig) -> EditOutcome:
+def codebook_editing(
+    latent: torch.Tensor,
+    decode: Callable[[torch.Tensor], torch.Tensor],
+    objective: Objective,
+    config: EditingConfig,
+) -> EditOutcome:
     """Edit the decoder latent (B, N, code_dim); returns the edited latent and the steps used.
 
     Args:

@@ -26,8 +26,9 @@ from controlmm.motion.skeleton import FPS
 # a foot (joints 10, 11) below SKATE_HEIGHT (m) at t and t+1 is in contact; above SKATE_SPEED (m/s) it slides.
 
 
-def foot_contact_term(weight: float, height: float = SKATE_HEIGHT, speed: float = SKATE_SPEED,
-                      fps: float = FPS) -> LossTerm:
+def foot_contact_term(
+    weight: float, height: float = SKATE_HEIGHT, speed: float = SKATE_SPEED, fps: float = FPS
+) -> LossTerm:
     """Feet in contact do not slide: sum over frames and feet of relu(planar speed - ``speed``)^2 / T.
 
     Contact (a foot below ``height`` metres at t and t+1, human frame, Y up) is read from the joints
@@ -45,8 +46,12 @@ def foot_contact_term(weight: float, height: float = SKATE_HEIGHT, speed: float 
     return LossTerm("foot_contact", fn, weight)
 
 
-def foot_contact_run(latent: torch.Tensor, decode: Callable[[torch.Tensor], torch.Tensor], objective: Objective,
-                     config: EditingConfig) -> tuple[torch.Tensor, torch.Tensor]:
+def foot_contact_run(
+    latent: torch.Tensor,
+    decode: Callable[[torch.Tensor], torch.Tensor],
+    objective: Objective,
+    config: EditingConfig,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Re-edit a latent (B, N, code_dim) that codebook editing produced; returns (latent, kept (B,) bool).
 
     Runs ``config.contact_steps`` codebook-editing steps on ``objective`` plus
@@ -63,7 +68,9 @@ def foot_contact_run(latent: torch.Tensor, decode: Callable[[torch.Tensor], torc
         return latent, kept
     contact = replace(objective, terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),))
     with torch.enable_grad():
-        outcome = codebook_editing(latent, decode, contact, replace(config, codebook_steps=config.contact_steps))
+        outcome = codebook_editing(
+            latent, decode, contact, replace(config, codebook_steps=config.contact_steps)
+        )
     with torch.no_grad():
         _, done_after, _ = objective.evaluate(decode(outcome.param))
     kept = done_before & done_after

@@ -28,16 +28,29 @@ from controlmm.editing.presets import EditingConfig
 from controlmm.models.layers import gumbel_noise
 
 
-def soft_latent(logits: torch.Tensor, codebook: torch.Tensor, editable: torch.Tensor, fixed: torch.Tensor,
-                temperature: float = 1.0, generator: torch.Generator | None = None) -> torch.Tensor:
+def soft_latent(
+    logits: torch.Tensor,
+    codebook: torch.Tensor,
+    editable: torch.Tensor,
+    fixed: torch.Tensor,
+    temperature: float = 1.0,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Decoder input (B, N, code_dim): Gumbel-softmax expectation p C_0 where ``editable``, else ``fixed``."""
     p = torch.softmax(logits / temperature + gumbel_noise(logits, generator), dim=-1)
     return torch.where(editable[..., None], p @ codebook, fixed)
 
 
-def logits_editing(logits: torch.Tensor, editable: torch.Tensor, fixed: torch.Tensor, codebook: torch.Tensor,
-                   decode: Callable[[torch.Tensor], torch.Tensor], objective: Objective, config: EditingConfig,
-                   generator: torch.Generator | None = None) -> EditOutcome:
+def logits_editing(
+    logits: torch.Tensor,
+    editable: torch.Tensor,
+    fixed: torch.Tensor,
+    codebook: torch.Tensor,
+    decode: Callable[[torch.Tensor], torch.Tensor],
+    objective: Objective,
+    config: EditingConfig,
+    generator: torch.Generator | None = None,
+) -> EditOutcome:
     """Edit the logits (B, N, K) of one decoding iteration; returns the edited logits and the steps used.
 
     Args:
@@ -49,8 +62,16 @@ def logits_editing(logits: torch.Tensor, editable: torch.Tensor, fixed: torch.Te
         objective: loss terms and the stopping rule.
         config: ``logits_steps``, optimiser, temperature.
     """
+
     def forward(x: torch.Tensor) -> torch.Tensor:
         return decode(soft_latent(x, codebook, editable, fixed, config.temperature, generator))
 
-    return optimize(logits, forward, objective, config.logits_steps, replace(config, lr=config.logits_lr),
-                    keep_best=False, patience=config.logits_patience)
+    return optimize(
+        logits,
+        forward,
+        objective,
+        config.logits_steps,
+        replace(config, lr=config.logits_lr),
+        keep_best=False,
+        patience=config.logits_patience,
+    )

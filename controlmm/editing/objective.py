@@ -38,8 +38,12 @@ class Objective:
     tolerance: float = 0.01
     loss_tolerance: float = 1e-6
     control_weight: float = 1.0
-    stop_on: str = "max"  # "max": every constraint within tolerance; "mean": their mean error (logits editing)
-    hinge_weight: float = 0.0  # extra weight on the constraints still over half the tolerance (see control_hinge)
+    stop_on: str = (
+        "max"  # "max": every constraint within tolerance; "mean": their mean error (logits editing)
+    )
+    hinge_weight: float = (
+        0.0  # extra weight on the constraints still over half the tolerance (see control_hinge)
+    )
 
     def __post_init__(self) -> None:
         if (self.targets is None) != (self.mask is None):

@@ -29,9 +29,16 @@ class EditOutcome:
     max_error: torch.Tensor  # (B,) worst constraint error (m) of the returned state
 
 
-def optimize(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.Tensor], objective: Objective,
-             steps: int, config: EditingConfig, keep_best: bool = True, patience: int = 0,
-             min_improvement: float = 0.02) -> EditOutcome:
+def optimize(
+    param: torch.Tensor,
+    forward: Callable[[torch.Tensor], torch.Tensor],
+    objective: Objective,
+    steps: int,
+    config: EditingConfig,
+    keep_best: bool = True,
+    patience: int = 0,
+    min_improvement: float = 0.02,
+) -> EditOutcome:
     """Minimise ``objective(forward(param))`` over ``param`` for at most ``steps`` AdamW steps.
 
     Args:
@@ -85,8 +92,14 @@ def optimize(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.Tensor
     return EditOutcome(param=kept, steps=used, done=done, loss=kept_loss, max_error=kept_err)
 
 
-def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.Tensor], objective: Objective,
-                   evaluations: int, config: EditingConfig, chunk: int = 10) -> EditOutcome:
+def optimize_lbfgs(
+    param: torch.Tensor,
+    forward: Callable[[torch.Tensor], torch.Tensor],
+    objective: Objective,
+    evaluations: int,
+    config: EditingConfig,
+    chunk: int = 10,
+) -> EditOutcome:
     """Minimise ``objective(forward(param))`` with L-BFGS (strong Wolfe line search) for at most ``evaluations``.
 
     The control loss is a smooth least-squares problem whose pelvis part is badly conditioned (the root
@@ -104,9 +117,14 @@ def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.
     x = param.detach().clone().requires_grad_(True)
     active = torch.ones(b, dtype=torch.bool, device=device)  # still optimised (restarts drop the done ones)
     scale = torch.ones(b, device=device)  # 1 / initial loss: L-BFGS's first step is sized by the gradient
-    state = {"kept": x.detach().clone(), "kept_loss": torch.full((b,), float("inf"), device=device),
-             "kept_err": torch.zeros(b, device=device), "done": torch.zeros(b, dtype=torch.bool, device=device),
-             "used": torch.zeros(b, dtype=torch.long, device=device), "count": 0}
+    state = {
+        "kept": x.detach().clone(),
+        "kept_loss": torch.full((b,), float("inf"), device=device),
+        "kept_err": torch.zeros(b, device=device),
+        "done": torch.zeros(b, dtype=torch.bool, device=device),
+        "used": torch.zeros(b, dtype=torch.long, device=device),
+        "count": 0,
+    }
 
     def closure() -> torch.Tensor:
         optimizer.zero_grad(set_to_none=True)
@@ -135,8 +153,16 @@ def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.
     while True:
         if optimizer is None or bool((active & state["done"]).any()):
             active = active & ~state["done"]
-            optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=chunk, max_eval=chunk * 2, history_size=50,
-                                          tolerance_grad=0.0, tolerance_change=0.0, line_search_fn="strong_wolfe")
+            optimizer = torch.optim.LBFGS(
+                [x],
+                lr=1.0,
+                max_iter=chunk,
+                max_eval=chunk * 2,
+                history_size=50,
+                tolerance_grad=0.0,
+                tolerance_change=0.0,
+                line_search_fn="strong_wolfe",
+            )
             with torch.no_grad():
                 x.copy_(torch.where(active.view(view), x, state["kept"]))
         if state["count"] == 0:
@@ -150,5 +176,10 @@ def optimize_lbfgs(param: torch.Tensor, forward: Callable[[torch.Tensor], torch.
         optimizer.step(closure)
         if state["count"] == before:  # converged to machine precision
             break
-    return EditOutcome(param=state["kept"], steps=state["used"], done=state["done"], loss=state["kept_loss"],
-                       max_error=state["kept_err"])
+    return EditOutcome(
+        param=state["kept"],
+        steps=state["used"],
+        done=state["done"],
+        loss=state["kept_loss"],
+        max_error=state["kept_err"],
+    )

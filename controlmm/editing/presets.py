@@ -30,7 +30,9 @@ class EditingConfig:
     lr: float = 0.06  # AdamW learning rate of codebook editing with codebook_optimizer="adam"
     logits_lr: float = 0.3  # AdamW learning rate of logits editing
     logits_patience: int = 10  # logits editing stops on a plateau of this many steps (0: never)
-    codebook_optimizer: str = "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
+    codebook_optimizer: str = (
+        "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
+    )
     betas: tuple[float, float] = (0.5, 0.9)
     weight_decay: float = 1e-6
     temperature: float = 1.0  # Gumbel-softmax temperature of logits editing
@@ -55,11 +57,13 @@ class EditingConfig:
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
         if not self.tolerance > 0 or not self.logits_tolerance > 0:
-            raise ControlMMError(f"tolerances must be positive (metres); got {self.tolerance}, {self.logits_tolerance}")
+            raise ControlMMError(
+                f"tolerances must be positive (metres); got {self.tolerance}, {self.logits_tolerance}"
+            )
         if self.loss_tolerance < 0:
             raise ControlMMError(f"loss_tolerance must be >= 0; got {self.loss_tolerance}")
 
-    def with_overrides(self, **changes) -> "EditingConfig":
+    def with_overrides(self, **changes) -> EditingConfig:
         """A copy with the non-None ``changes`` applied."""
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 
@@ -68,8 +72,9 @@ PRESETS: dict[str, EditingConfig] = {
     "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
     "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
     # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding
-    "accurate": EditingConfig(name="accurate", control_model=True, logits_steps=100, codebook_steps=600,
-                              contact_steps=200),
+    "accurate": EditingConfig(
+        name="accurate", control_model=True, logits_steps=100, codebook_steps=600, contact_steps=200
+    ),
 }
 """The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""
 

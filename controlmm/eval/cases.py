@@ -49,10 +49,19 @@ def list_cases(data_dir: str | Path, split: str = "test") -> list[ProbeCase]:
         try:
             meta = json.loads(path.read_text(encoding="utf-8"))
             for cap in meta["captions"]:
-                cases.append(ProbeCase(clip_id=clip_id, caption=cap["text"], family=meta["family"],
-                                       claims=dict(cap["claims"]), frames=int(meta["frames"]), split=meta["split"],
-                                       template=cap.get("template", ""), held_out=bool(cap.get("held_out")),
-                                       params=meta.get("params", {})))
+                cases.append(
+                    ProbeCase(
+                        clip_id=clip_id,
+                        caption=cap["text"],
+                        family=meta["family"],
+                        claims=dict(cap["claims"]),
+                        frames=int(meta["frames"]),
+                        split=meta["split"],
+                        template=cap.get("template", ""),
+                        held_out=bool(cap.get("held_out")),
+                        params=meta.get("params", {}),
+                    )
+                )
         except FileNotFoundError:
             raise InputFileError(f"clip '{clip_id}' has no metadata file {path}") from None
         except (ValueError, KeyError, TypeError) as exc:
@@ -100,10 +109,21 @@ class ProbeReport:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "split": self.split, "passed": self.passed, "total": self.total, "rate": self.rate,
+            "split": self.split,
+            "passed": self.passed,
+            "total": self.total,
+            "rate": self.rate,
             "families": {f: {"passed": p, "total": t} for f, (p, t) in self.counts.items()},
-            "failures": [{"clip": c.clip_id, "caption": c.caption, "family": c.family, "claims": c.claims,
-                          "checks": [vars(k) for k in r.failures()]} for c, r in self.failures],
+            "failures": [
+                {
+                    "clip": c.clip_id,
+                    "caption": c.caption,
+                    "family": c.family,
+                    "claims": c.claims,
+                    "checks": [vars(k) for k in r.failures()],
+                }
+                for c, r in self.failures
+            ],
         }
 
 
@@ -128,8 +148,13 @@ def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
     return load
 
 
-def evaluate(cases: list[ProbeCase], motion_for: Callable[[ProbeCase], Any], split: str = "test",
-             per_clip: bool = False, progress: bool = False) -> ProbeReport:
+def evaluate(
+    cases: list[ProbeCase],
+    motion_for: Callable[[ProbeCase], Any],
+    split: str = "test",
+    per_clip: bool = False,
+    progress: bool = False,
+) -> ProbeReport:
     """Probe every case with the motion ``motion_for(case)`` returns.
 
     Args:

@@ -33,10 +33,26 @@ from controlmm.eval.evaluator.base import Evaluator
 from controlmm.eval.scoring import SCORE_COLUMNS, MotionSet, Scores, score_motions
 
 CONTROL_COLUMNS = ("skate", "traj", "loc", "avg")
-TABLE_COLUMNS = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "diversity", "mm_dist") + CONTROL_COLUMNS
-HEADERS = {"r_precision_top1": "R@1", "r_precision_top2": "R@2", "r_precision_top3": "R@3", "fid": "FID",
-           "mm_dist": "MM-Dist", "diversity": "Diversity", "skate": "Skate", "traj": "Traj. err", "loc": "Loc. err",
-           "avg": "Avg. err cm"}
+TABLE_COLUMNS = (
+    "r_precision_top1",
+    "r_precision_top2",
+    "r_precision_top3",
+    "fid",
+    "diversity",
+    "mm_dist",
+) + CONTROL_COLUMNS
+HEADERS = {
+    "r_precision_top1": "R@1",
+    "r_precision_top2": "R@2",
+    "r_precision_top3": "R@3",
+    "fid": "FID",
+    "mm_dist": "MM-Dist",
+    "diversity": "Diversity",
+    "skate": "Skate",
+    "traj": "Traj. err",
+    "loc": "Loc. err",
+    "avg": "Avg. err cm",
+}
 UNCONTROLLED = EditingConfig(name="uncontrolled", control_model=False, logits_steps=0, codebook_steps=0)
 """Plain generation through the controlled path: no control model, no editing (Table 3 row 1)."""
 REAL_SEED_OFFSET = 100_003
@@ -89,9 +105,16 @@ class ControlTable:
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
-        return {"data": self.data, "model": self.model, "evaluator": self.evaluator, "repeats": self.repeats,
-                "samples_per_repeat": self.samples, "densities": list(self.densities), "settings": self.settings,
-                "rows": {name: scores.to_json() for name, scores in self.rows.items()}}
+        return {
+            "data": self.data,
+            "model": self.model,
+            "evaluator": self.evaluator,
+            "repeats": self.repeats,
+            "samples_per_repeat": self.samples,
+            "densities": list(self.densities),
+            "settings": self.settings,
+            "rows": {name: scores.to_json() for name, scores in self.rows.items()},
+        }
 
 
 def _control_values(result) -> dict[str, float]:
@@ -104,8 +127,12 @@ def _real_values(cases) -> dict[str, float]:
     from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.motion.skeleton import FPS
 
-    return {"skate": float(np.mean([foot_skating_ratio(c.targets, FPS) for c in cases])),
-            "traj": 0.0, "loc": 0.0, "avg": 0.0}
+    return {
+        "skate": float(np.mean([foot_skating_ratio(c.targets, FPS) for c in cases])),
+        "traj": 0.0,
+        "loc": 0.0,
+        "avg": 0.0,
+    }
 
 
 def recropped(data: str | Path, cases, seed: int, split: str = "test") -> list[np.ndarray]:
@@ -129,14 +156,24 @@ def recropped(data: str | Path, cases, seed: int, split: str = "test") -> list[n
         if rng.integers(3) == 2 and units > 1:
             units -= 1
         start = int(rng.integers(0, source.length - 4 * units + 1))
-        out.append(source.motion[start:start + 4 * units].astype(np.float32))
+        out.append(source.motion[start : start + 4 * units].astype(np.float32))
     return out
 
 
-def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *, evaluator: Evaluator | None = None,
-                           densities: Sequence[int] = (1, 2, 5, 49, 196), samples: int = 64, repeats: int = 1,
-                           seed: int = 0, batch_size: int = 1, real: bool = True,
-                           progress: bool = False) -> ControlTable:
+def evaluate_control_table(
+    model,
+    data: str | Path,
+    rows: Sequence[TableRow],
+    *,
+    evaluator: Evaluator | None = None,
+    densities: Sequence[int] = (1, 2, 5, 49, 196),
+    samples: int = 64,
+    repeats: int = 1,
+    seed: int = 0,
+    batch_size: int = 1,
+    real: bool = True,
+    progress: bool = False,
+) -> ControlTable:
     """Generate and measure every row on ``repeats`` fresh draws of cases (see the module docstring).
 
     Args:
@@ -161,12 +198,19 @@ def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *,
     names = [r.name for r in rows]
     if len(set(names)) != len(names) or (real and "Real" in names):
         raise ControlMMError(f"row names must be unique (and not 'Real'); got {', '.join(names)}")
-    table = ControlTable(data=str(data), model=str(model.directory or ""),
-                         evaluator=evaluator.name if evaluator is not None else "", repeats=repeats,
-                         samples=samples, densities=tuple(densities),
-                         settings={"seed": seed, "batch_size": batch_size,
-                                   "rows": {r.name: {"joints": r.joints, "preset": _preset_record(r.preset)}
-                                            for r in rows}})
+    table = ControlTable(
+        data=str(data),
+        model=str(model.directory or ""),
+        evaluator=evaluator.name if evaluator is not None else "",
+        repeats=repeats,
+        samples=samples,
+        densities=tuple(densities),
+        settings={
+            "seed": seed,
+            "batch_size": batch_size,
+            "rows": {r.name: {"joints": r.joints, "preset": _preset_record(r.preset)} for r in rows},
+        },
+    )
     sets: dict[str, list[MotionSet]] = {}
     for r in range(repeats):
         run_seed = seed + r
@@ -177,17 +221,29 @@ def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *,
         if real:
             cases = cases_by_mode[rows[0].joints]
             table.rows.setdefault("Real", Scores()).add(_real_values(cases), CONTROL_COLUMNS)
-            sets.setdefault("Real", []).append(MotionSet([c.features for c in cases], [c.text for c in cases],
-                                                         recropped(data, cases, run_seed)))
+            sets.setdefault("Real", []).append(
+                MotionSet(
+                    [c.features for c in cases], [c.text for c in cases], recropped(data, cases, run_seed)
+                )
+            )
         for row in rows:
             cases = cases_by_mode[row.joints]
-            result = evaluate_control(model, cases, preset=row.preset, seed=run_seed, batch_size=batch_size,
-                                      progress=progress, joints=row.joints)
+            result = evaluate_control(
+                model,
+                cases,
+                preset=row.preset,
+                seed=run_seed,
+                batch_size=batch_size,
+                progress=progress,
+                joints=row.joints,
+            )
             table.evaluations.setdefault(row.name, []).append(result)
-            table.rows.setdefault(row.name, Scores()).add(_control_values(result),
-                                                          CONTROL_COLUMNS + ("max", "steps", "seconds", "cpu_seconds"))
-            sets.setdefault(row.name, []).append(MotionSet(list(result.generated), [c.text for c in cases],
-                                                           [c.features for c in cases]))
+            table.rows.setdefault(row.name, Scores()).add(
+                _control_values(result), CONTROL_COLUMNS + ("max", "steps", "seconds", "cpu_seconds")
+            )
+            sets.setdefault(row.name, []).append(
+                MotionSet(list(result.generated), [c.text for c in cases], [c.features for c in cases])
+            )
     if evaluator is not None:
         for name, runs in sets.items():
             table.rows[name].values.update(score_motions(evaluator, runs, seed=seed).values)
@@ -197,9 +253,21 @@ def evaluate_control_table(model, data: str | Path, rows: Sequence[TableRow], *,
 def _preset_record(preset: str | EditingConfig) -> Any:
     if isinstance(preset, str):
         return preset
-    return {"name": preset.name, "control_model": preset.control_model, "logits_steps": preset.logits_steps,
-            "codebook_steps": preset.codebook_steps}
+    return {
+        "name": preset.name,
+        "control_model": preset.control_model,
+        "logits_steps": preset.logits_steps,
+        "codebook_steps": preset.codebook_steps,
+    }
 
 
-__all__ = ["CONTROL_COLUMNS", "ControlTable", "SCORE_COLUMNS", "TABLE_COLUMNS", "TableRow", "UNCONTROLLED",
-           "evaluate_control_table", "recropped"]
+__all__ = [
+    "CONTROL_COLUMNS",
+    "ControlTable",
+    "SCORE_COLUMNS",
+    "TABLE_COLUMNS",
+    "TableRow",
+    "UNCONTROLLED",
+    "evaluate_control_table",
+    "recropped",
+]

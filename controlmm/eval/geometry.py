@@ -68,7 +68,7 @@ def displacement_in_start_frame(joints: np.ndarray, start: int = 0, end: int = -
     j = np.asarray(joints, dtype=np.float64)
     forward, left = facing(j)
     s = start if start >= 0 else len(j) + start
-    f0 = forward[s:s + 5].mean(0)
+    f0 = forward[s : s + 5].mean(0)
     f0 /= np.linalg.norm(f0)
     l0 = np.cross(UP, f0)
     d = j[end, 0] - j[start, 0]

@@ -69,8 +69,9 @@ class Matching:
     pairs: int  # pairs used (a multiple of the group size)
 
 
-def matching_metrics(text_emb: np.ndarray, motion_emb: np.ndarray, group: int = R_PRECISION_GROUP,
-                     top_k: int = 3) -> Matching:
+def matching_metrics(
+    text_emb: np.ndarray, motion_emb: np.ndarray, group: int = R_PRECISION_GROUP, top_k: int = 3
+) -> Matching:
     """R-precision and MM-Dist of pairs (text_emb[i], motion_emb[i]) in consecutive groups of ``group``.
 
     Callers shuffle the pairs first (the official loader draws random batches of 32).
@@ -84,7 +85,7 @@ def matching_metrics(text_emb: np.ndarray, motion_emb: np.ndarray, group: int = 
     hits = np.zeros(top_k)
     dist_sum = 0.0
     for start in range(0, n, group):
-        dist = euclidean_distance_matrix(t[start:start + group], m[start:start + group])
+        dist = euclidean_distance_matrix(t[start : start + group], m[start : start + group])
         dist_sum += float(np.trace(dist))
         hits += top_k_hits(dist, top_k).sum(axis=0)
     return Matching(tuple(float(h / n) for h in hits), dist_sum / n, n)
@@ -98,8 +99,9 @@ def activation_statistics(emb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return emb.mean(axis=0), np.cov(emb, rowvar=False)
 
 
-def frechet_distance(mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma2: np.ndarray,
-                     eps: float = 1e-6) -> float:
+def frechet_distance(
+    mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma2: np.ndarray, eps: float = 1e-6
+) -> float:
     """||mu1 - mu2||^2 + tr(S1 + S2 - 2 (S1 S2)^(1/2)) of two Gaussians.
 
     When the product of the covariances is singular, ``eps`` is added to both diagonals (as the
@@ -118,8 +120,9 @@ def frechet_distance(mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma
             covmean = linalg.sqrtm((sigma1 + offset) @ (sigma2 + offset))
     if np.iscomplexobj(covmean):
         if not np.allclose(np.diagonal(covmean).imag, 0.0, atol=1e-3):
-            raise ControlMMError(f"FID: the covariance square root has an imaginary part "
-                                 f"{np.max(np.abs(covmean.imag)):.3g}")
+            raise ControlMMError(
+                f"FID: the covariance square root has an imaginary part {np.max(np.abs(covmean.imag)):.3g}"
+            )
         covmean = covmean.real
     traces = float(np.trace(sigma1) + np.trace(sigma2))
     value = float(diff @ diff + traces - 2.0 * np.trace(covmean))
@@ -144,15 +147,19 @@ def diversity(emb: np.ndarray, times: int = DIVERSITY_TIMES, rng: np.random.Gene
     return float(np.linalg.norm(emb[first] - emb[second], axis=1).mean())
 
 
-def multimodality(emb: np.ndarray, times: int = MULTIMODALITY_TIMES, rng: np.random.Generator | None = None) -> float:
+def multimodality(
+    emb: np.ndarray, times: int = MULTIMODALITY_TIMES, rng: np.random.Generator | None = None
+) -> float:
     """Embeddings (texts, repeats, D) of several generations per text -> mean distance over ``times``
     random pairs of generations (the same pair indices for every text; repeats > times required)."""
     emb = np.asarray(emb, dtype=np.float64)
     if emb.ndim != 3:
         raise ControlMMError(f"multimodality needs embeddings (texts, repeats, D); got shape {emb.shape}")
     if emb.shape[1] <= times:
-        raise ControlMMError(f"multimodality over {times} pairs needs more than {times} generations per text; "
-                             f"got {emb.shape[1]}")
+        raise ControlMMError(
+            f"multimodality over {times} pairs needs more than {times} generations per text; "
+            f"got {emb.shape[1]}"
+        )
     rng = rng or np.random.default_rng()
     first = rng.choice(emb.shape[1], times, replace=False)
     second = rng.choice(emb.shape[1], times, replace=False)

@@ -26,8 +26,12 @@ from controlmm.eval.cases import ProbeCase
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
 
-def select_cases(cases: Sequence[ProbeCase], families: Sequence[str] | None = None, samples: int | None = None,
-                 seed: int = 0) -> list[ProbeCase]:
+def select_cases(
+    cases: Sequence[ProbeCase],
+    families: Sequence[str] | None = None,
+    samples: int | None = None,
+    seed: int = 0,
+) -> list[ProbeCase]:
     """Cases of the given families (all by default), at most ``samples`` per family (a seeded random
     choice, kept in the original order)."""
     cases = list(cases)
@@ -40,7 +44,9 @@ def select_cases(cases: Sequence[ProbeCase], families: Sequence[str] | None = No
         present = sorted({c.family for c in cases})
         absent = [f for f in families if f not in present]
         if absent:
-            raise ControlMMError(f"no captions of {', '.join(absent)} in this split; present: {', '.join(present)}")
+            raise ControlMMError(
+                f"no captions of {', '.join(absent)} in this split; present: {', '.join(present)}"
+            )
         cases = [c for c in cases if c.family in set(families)]
     if samples is not None:
         if samples < 1:
@@ -49,13 +55,21 @@ def select_cases(cases: Sequence[ProbeCase], families: Sequence[str] | None = No
         keep: set[int] = set()
         for family in dict.fromkeys(c.family for c in cases):
             idx = [i for i, c in enumerate(cases) if c.family == family]
-            keep.update(int(i) for i in (rng.choice(idx, samples, replace=False) if len(idx) > samples else idx))
+            keep.update(
+                int(i) for i in (rng.choice(idx, samples, replace=False) if len(idx) > samples else idx)
+            )
         cases = [c for i, c in enumerate(cases) if i in keep]
     return cases
 
 
-def generated_motions(model, cases: Sequence[ProbeCase], seed: int = 0, batch_size: int = 32,
-                      progress: bool = False, **generate_kwargs) -> Callable[[ProbeCase], object]:
+def generated_motions(
+    model,
+    cases: Sequence[ProbeCase],
+    seed: int = 0,
+    batch_size: int = 32,
+    progress: bool = False,
+    **generate_kwargs,
+) -> Callable[[ProbeCase], object]:
     """Generate one motion per case (text ``case.caption``, ``case.frames`` frames) with a loaded
     :class:`~controlmm.models.MotionModel`; returns the ``motion_for`` function of
     :func:`controlmm.eval.probes.evaluate`."""
@@ -68,10 +82,16 @@ def generated_motions(model, cases: Sequence[ProbeCase], seed: int = 0, batch_si
     motions: dict[tuple[str, str], object] = {}
     starts = range(0, len(cases), batch_size)
     for k, start in enumerate(tqdm(starts, desc="generating", unit="batch", disable=not progress)):
-        chunk = cases[start:start + batch_size]
+        chunk = cases[start : start + batch_size]
         frames = [min(max(c.frames, MIN_FRAMES), MAX_FRAMES) for c in chunk]
-        result = generate(model, [c.caption for c in chunk], frames=frames, seed=seed + k, batch_size=batch_size,
-                          **generate_kwargs)
+        result = generate(
+            model,
+            [c.caption for c in chunk],
+            frames=frames,
+            seed=seed + k,
+            batch_size=batch_size,
+            **generate_kwargs,
+        )
         for case, motion in zip(chunk, result.motions):
             motions[(case.clip_id, case.caption)] = motion
 
@@ -102,7 +122,9 @@ def tokenized_motions(model, data_dir: str, layers: int | None = None) -> Callab
     def motion_for(case: ProbeCase):
         features = clip_features(data_dir, case.clip_id)
         n = len(features) // 4 * 4
-        x = torch.as_tensor(model.normalizer.normalize(features[:n]), dtype=torch.float32, device=model.device)
+        x = torch.as_tensor(
+            model.normalizer.normalize(features[:n]), dtype=torch.float32, device=model.device
+        )
         with torch.no_grad():
             ids = tokenizer.encode(x[None].to(dtype))
             out = tokenizer.decode(ids[..., :layers] if layers else ids)[0].float().cpu().numpy()

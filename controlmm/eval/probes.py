@@ -27,8 +27,18 @@ from controlmm.eval import geometry as geo
 from controlmm.eval.cases import ProbeCase, ProbeReport, evaluate, ground_truth, list_cases
 from controlmm.eval.measures import Measures
 
-__all__ = ["PROBES", "Check", "ProbeCase", "ProbeReport", "ProbeResult", "check", "evaluate", "ground_truth",
-           "list_cases", "probe"]
+__all__ = [
+    "PROBES",
+    "Check",
+    "ProbeCase",
+    "ProbeReport",
+    "ProbeResult",
+    "check",
+    "evaluate",
+    "ground_truth",
+    "list_cases",
+    "probe",
+]
 
 HANDS = {"left": (20, 16), "right": (21, 17)}  # wrist, shoulder
 KNEES = {"left": 4, "right": 5}
@@ -64,7 +74,9 @@ class ProbeResult:
         return [c for c in self.checks if not c.passed]
 
     def describe(self) -> str:
-        return "; ".join(f"{c.name}={c.value:.3g} ({'ok' if c.passed else 'FAIL'}: {c.rule})" for c in self.checks)
+        return "; ".join(
+            f"{c.name}={c.value:.3g} ({'ok' if c.passed else 'FAIL'}: {c.rule})" for c in self.checks
+        )
 
 
 def _c(name: str, value: float, ok: bool, rule: str) -> Check:
@@ -77,10 +89,13 @@ def _sign(direction: str) -> float:
 
 # --- shared checks --------------------------------------------------------------------------
 
+
 def _forward_travel(m: Measures, minimum: float) -> list[Check]:
     fwd, _, length = m.travel
-    return [_c("forward_travel_m", fwd, fwd >= minimum, f">= {minimum} m along the facing direction"),
-            _c("forward_share", fwd / max(length, 1e-6), fwd >= 0.75 * length, ">= 0.75 of the path")]
+    return [
+        _c("forward_travel_m", fwd, fwd >= minimum, f">= {minimum} m along the facing direction"),
+        _c("forward_share", fwd / max(length, 1e-6), fwd >= 0.75 * length, ">= 0.75 of the path"),
+    ]
 
 
 def _speed_band(m: Measures, lo: float, hi: float, name: str = "cruise_speed") -> Check:
@@ -99,12 +114,21 @@ def _turn_checks(m: Measures, claims: dict, minimum: float = 45.0) -> list[Check
     checks = []
     if "direction" in claims:
         s = _sign(claims["direction"])
-        checks.append(_c("turn_deg", m.turn, s * m.turn >= minimum, f"{'+' if s > 0 else '-'}{minimum} deg or more "
-                         f"({claims['direction']} is {'+' if s > 0 else '-'})"))
+        checks.append(
+            _c(
+                "turn_deg",
+                m.turn,
+                s * m.turn >= minimum,
+                f"{'+' if s > 0 else '-'}{minimum} deg or more "
+                f"({claims['direction']} is {'+' if s > 0 else '-'})",
+            )
+        )
     if "angle" in claims:
         a = float(claims["angle"])
         lo, hi = 0.7 * a - 10.0, 1.3 * a + 10.0
-        checks.append(_c("turn_size_deg", abs(m.turn), lo <= abs(m.turn) <= hi, f"|turn| in [{lo:.0f}, {hi:.0f}]"))
+        checks.append(
+            _c("turn_size_deg", abs(m.turn), lo <= abs(m.turn) <= hi, f"|turn| in [{lo:.0f}, {hi:.0f}]")
+        )
     if not checks:
         checks.append(_c("turn_size_deg", abs(m.turn), abs(m.turn) >= minimum, f"|turn| >= {minimum}"))
     return checks
@@ -117,10 +141,19 @@ def _wave_checks(m: Measures, hand: str) -> list[Check]:
     lateral = m.body(wrist)[:, 0]
     swings = geo.oscillations(lateral[high], 0.06) if high.sum() > 3 else 0
     return [
-        _c(f"{hand}_wrist_above_head_frames", high.sum(), high.sum() >= 15, ">= 15 frames 5 cm above the head"),
+        _c(
+            f"{hand}_wrist_above_head_frames",
+            high.sum(),
+            high.sum() >= 15,
+            ">= 15 frames 5 cm above the head",
+        ),
         _c(f"{hand}_wrist_swings", swings, swings >= 3, ">= 3 side-to-side swings of 6 cm while raised"),
-        _c("other_wrist_above_head_m", m.above(other, HEAD).max(), m.above(other, HEAD).max() < 0.0,
-           "the other wrist stays below the head"),
+        _c(
+            "other_wrist_above_head_m",
+            m.above(other, HEAD).max(),
+            m.above(other, HEAD).max() < 0.0,
+            "the other wrist stays below the head",
+        ),
     ]
 
 
@@ -137,9 +170,21 @@ def _squat_dips(m: Measures, start: int = 0) -> int:
 
 # --- family probes ------------------------------------------------------------------------
 
+
 def _walk(m, c):
-    return _forward_travel(m, 0.5) + [_speed_band(m, 0.4, 2.0), _c("flight_frames", sum(b - a for a, b in m.flights),
-                                      sum(b - a for a, b in m.flights) < 3, "< 3 (a foot always down)")] + _speed_claim(m, c)
+    return (
+        _forward_travel(m, 0.5)
+        + [
+            _speed_band(m, 0.4, 2.0),
+            _c(
+                "flight_frames",
+                sum(b - a for a, b in m.flights),
+                sum(b - a for a, b in m.flights) < 3,
+                "< 3 (a foot always down)",
+            ),
+        ]
+        + _speed_claim(m, c)
+    )
 
 
 def _jog(m, c):
@@ -152,16 +197,25 @@ def _run(m, c):
 
 def _backward(m, c):
     fwd, _, length = m.travel
-    return [_c("backward_travel_m", -fwd, -fwd >= 0.5, ">= 0.5 m against the facing direction"),
-            _c("backward_share", -fwd / max(length, 1e-6), -fwd >= 0.75 * length, ">= 0.75 of the path")]
+    return [
+        _c("backward_travel_m", -fwd, -fwd >= 0.5, ">= 0.5 m against the facing direction"),
+        _c("backward_share", -fwd / max(length, 1e-6), -fwd >= 0.75 * length, ">= 0.75 of the path"),
+    ]
 
 
 def _sidestep(m, c):
     s = _sign(c["direction"])
     fwd, left, length = m.travel
-    return [_c("sideways_travel_m", s * left, s * left >= 0.4, f">= 0.4 m to the {c['direction']}"),
-            _c("sideways_share", abs(left) / max(length, 1e-6), abs(left) >= 2 * abs(fwd), "|left| >= 2 |forward|"),
-            _c("turn_deg", m.turn, abs(m.turn) <= 45.0, "|turn| <= 45 (keeps facing the same way)")]
+    return [
+        _c("sideways_travel_m", s * left, s * left >= 0.4, f">= 0.4 m to the {c['direction']}"),
+        _c(
+            "sideways_share",
+            abs(left) / max(length, 1e-6),
+            abs(left) >= 2 * abs(fwd),
+            "|left| >= 2 |forward|",
+        ),
+        _c("turn_deg", m.turn, abs(m.turn) <= 45.0, "|turn| <= 45 (keeps facing the same way)"),
+    ]
 
 
 def _crouch_walk(m, c):
@@ -178,8 +232,9 @@ def _stop_and_go(m, c):
     for a, b in still:
         before, after = dist[a], dist[-1] - dist[b]
         best = max(best, min(before, after))
-    return _forward_travel(m, 1.0) + [_c("walk_around_stop_m", best, best >= 0.5,
-                                         ">= 0.5 m before and after a stop of >= 0.5 s")]
+    return _forward_travel(m, 1.0) + [
+        _c("walk_around_stop_m", best, best >= 0.5, ">= 0.5 m before and after a stop of >= 0.5 s")
+    ]
 
 
 def _walk_to_point(m, c):
@@ -195,48 +250,64 @@ def _walk_to_point(m, c):
         checks.append(_c("bearing_deg", bearing, abs(bearing) <= 15.0, "|bearing| <= 15"))
     elif where in ("left", "right"):
         s = _sign(where)
-        checks.append(_c("bearing_deg", bearing, 15.0 <= s * bearing <= 80.0, f"{where}: {'+' if s > 0 else '-'}15..80"))
+        checks.append(
+            _c("bearing_deg", bearing, 15.0 <= s * bearing <= 80.0, f"{where}: {'+' if s > 0 else '-'}15..80")
+        )
     return checks
 
 
 def _turn_in_place(m, c):
     fwd, left = m.displacement()
-    return _turn_checks(m, c) + [_c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.5,
-                                    "<= 0.5 m (in place)")]
+    return _turn_checks(m, c) + [
+        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.5, "<= 0.5 m (in place)")
+    ]
 
 
 def _circle(m, c):
     s = 1.0 if c["rotation"] == "counterclockwise" else -1.0
-    return [_c("turn_deg", m.turn, s * m.turn >= 300.0, f"{'+' if s > 0 else '-'}300 deg or more "
-               f"({c['rotation']} is {'+' if s > 0 else '-'})"), _c("path_m", m.travel[2], m.travel[2] >= 3.0, ">= 3 m")]
+    return [
+        _c(
+            "turn_deg",
+            m.turn,
+            s * m.turn >= 300.0,
+            f"{'+' if s > 0 else '-'}300 deg or more ({c['rotation']} is {'+' if s > 0 else '-'})",
+        ),
+        _c("path_m", m.travel[2], m.travel[2] >= 3.0, ">= 3 m"),
+    ]
 
 
 def _curve(m, c):
     s = _sign(c["direction"])
-    return [_c("turn_deg", m.turn, 30.0 <= s * m.turn <= 240.0, f"{'+' if s > 0 else '-'}30..240 deg"),
-            *_forward_travel(m, 1.0)]
+    return [
+        _c("turn_deg", m.turn, 30.0 <= s * m.turn <= 240.0, f"{'+' if s > 0 else '-'}30..240 deg"),
+        *_forward_travel(m, 1.0),
+    ]
 
 
 def _zigzag(m, c):
     h = m.heading
     swings = geo.oscillations(h - np.linspace(h[0], h[-1], len(h)), 30.0)
     fwd, _ = m.displacement()
-    return [_c("heading_swings", swings, swings >= 2, ">= 2 heading swings of 30 deg"),
-            _c("net_turn_deg", m.turn, abs(m.turn) <= 75.0, "|net turn| <= 75"),
-            _c("progress_m", fwd, fwd >= 1.5, ">= 1.5 m forward of the start")]
+    return [
+        _c("heading_swings", swings, swings >= 2, ">= 2 heading swings of 30 deg"),
+        _c("net_turn_deg", m.turn, abs(m.turn) <= 75.0, "|net turn| <= 75"),
+        _c("progress_m", fwd, fwd >= 1.5, ">= 1.5 m forward of the start"),
+    ]
 
 
 def _jump_in_place(m, c):
     fwd, left = m.displacement()
     return _count_check("flights", len(m.flights), c) + [
-        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.4, "<= 0.4 m (in place)")]
+        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.4, "<= 0.4 m (in place)")
+    ]
 
 
 def _jump_forward(m, c):
     fwd, _ = m.displacement()
     n = int(c.get("count", 1))
     return _count_check("flights", len(m.flights), c) + [
-        _c("forward_m", fwd, fwd >= 0.3 * n, f">= {0.3 * n:.1f} m forward")]
+        _c("forward_m", fwd, fwd >= 0.3 * n, f">= {0.3 * n:.1f} m forward")
+    ]
 
 
 def _squat(m, c):
@@ -247,12 +318,18 @@ def _kneel(m, c):
     knee = KNEES[c["knee"]]
     other = KNEES["right" if c["knee"] == "left" else "left"]
     low, other_low = m.j[:, knee, 1].min(), m.j[:, other, 1].min()
-    checks = [_c(f"{c['knee']}_knee_min_m", low, low <= 0.12, "<= 0.12 m (on the floor)"),
-              _c("other_knee_min_m", other_low, other_low >= 0.2, ">= 0.2 m (the other knee up)")]
+    checks = [
+        _c(f"{c['knee']}_knee_min_m", low, low <= 0.12, "<= 0.12 m (on the floor)"),
+        _c("other_knee_min_m", other_low, other_low >= 0.2, ">= 0.2 m (the other knee up)"),
+    ]
     if c.get("stand_up") is True:
-        checks.append(_c("final_pelvis_m", m.pelvis_height[-1], m.pelvis_height[-1] >= 0.8, ">= 0.8 m (standing)"))
+        checks.append(
+            _c("final_pelvis_m", m.pelvis_height[-1], m.pelvis_height[-1] >= 0.8, ">= 0.8 m (standing)")
+        )
     elif c.get("stand_up") is False:
-        checks.append(_c("final_pelvis_m", m.pelvis_height[-1], m.pelvis_height[-1] <= 0.65, "<= 0.65 m (kneeling)"))
+        checks.append(
+            _c("final_pelvis_m", m.pelvis_height[-1], m.pelvis_height[-1] <= 0.65, "<= 0.65 m (kneeling)")
+        )
     return checks
 
 
@@ -265,14 +342,28 @@ def _raise_arm(m, c):
     checks = []
     if len(hands) == 2:
         both = np.minimum(m.above(20, HEAD), m.above(21, HEAD))
-        checks.append(_c("both_wrists_above_head_m", both.max(), both.max() >= 0.15, ">= 0.15 m, both at once"))
+        checks.append(
+            _c("both_wrists_above_head_m", both.max(), both.max() >= 0.15, ">= 0.15 m, both at once")
+        )
     else:
         wrist, _ = HANDS[hands[0]]
         other, shoulder = HANDS["right" if hands[0] == "left" else "left"]
-        checks.append(_c(f"{hands[0]}_wrist_above_head_m", m.above(wrist, HEAD).max(),
-                         m.above(wrist, HEAD).max() >= 0.15, ">= 0.15 m"))
-        checks.append(_c("other_wrist_above_shoulder_m", m.above(other, shoulder).max(),
-                         m.above(other, shoulder).max() < 0.0, "< 0 (the other arm stays down)"))
+        checks.append(
+            _c(
+                f"{hands[0]}_wrist_above_head_m",
+                m.above(wrist, HEAD).max(),
+                m.above(wrist, HEAD).max() >= 0.15,
+                ">= 0.15 m",
+            )
+        )
+        checks.append(
+            _c(
+                "other_wrist_above_shoulder_m",
+                m.above(other, shoulder).max(),
+                m.above(other, shoulder).max() < 0.0,
+                "< 0 (the other arm stays down)",
+            )
+        )
     return checks
 
 
@@ -280,8 +371,10 @@ def _reach_forward(m, c):
     wrist, _ = HANDS[c["hand"]]
     other, _ = HANDS["right" if c["hand"] == "left" else "left"]
     ahead, other_ahead = m.body(wrist)[:, 2].max(), m.body(other)[:, 2].max()
-    return [_c(f"{c['hand']}_wrist_forward_m", ahead, ahead >= 0.45, ">= 0.45 m in front of the pelvis"),
-            _c("other_wrist_forward_m", other_ahead, other_ahead < 0.3, "< 0.3 m")]
+    return [
+        _c(f"{c['hand']}_wrist_forward_m", ahead, ahead >= 0.45, ">= 0.45 m in front of the pelvis"),
+        _c("other_wrist_forward_m", other_ahead, other_ahead < 0.3, "< 0.3 m"),
+    ]
 
 
 def _reach_up(m, c):
@@ -293,8 +386,10 @@ def _reach_sideways(m, c):
     wrist, _ = HANDS[c["hand"]]
     other, _ = HANDS["right" if c["hand"] == "left" else "left"]
     out, other_out = (s * m.body(wrist)[:, 0]).max(), (-s * m.body(other)[:, 0]).max()
-    return [_c(f"{c['hand']}_wrist_sideways_m", out, out >= 0.6, f">= 0.6 m to the {c['hand']} of the pelvis"),
-            _c("other_wrist_sideways_m", other_out, other_out < 0.4, "< 0.4 m")]
+    return [
+        _c(f"{c['hand']}_wrist_sideways_m", out, out >= 0.6, f">= 0.6 m to the {c['hand']} of the pelvis"),
+        _c("other_wrist_sideways_m", other_out, other_out < 0.4, "< 0.4 m"),
+    ]
 
 
 def _punch(m, c):
@@ -304,7 +399,8 @@ def _punch(m, c):
     punches = geo.count_dips(-reach, -0.42, -0.32)
     other_reach = m.body(other, CHEST)[:, 2].max()
     return _count_check("punches", punches, c) + [
-        _c("other_wrist_forward_m", other_reach, other_reach < 0.36, "< 0.36 m in front of the chest")]
+        _c("other_wrist_forward_m", other_reach, other_reach < 0.36, "< 0.36 m in front of the chest")
+    ]
 
 
 def _clap(m, c):
@@ -312,8 +408,9 @@ def _clap(m, c):
     claps = geo.count_dips(gap, 0.12, 0.22)
     front = np.minimum(m.body(20, CHEST)[:, 2], m.body(21, CHEST)[:, 2])[gap < 0.12]
     ahead = float(front.min()) if len(front) else 0.0
-    return _count_check("claps", claps, c) + [_c("clap_in_front_m", ahead, ahead >= 0.15,
-                                                 ">= 0.15 m in front of the chest")]
+    return _count_check("claps", claps, c) + [
+        _c("clap_in_front_m", ahead, ahead >= 0.15, ">= 0.15 m in front of the chest")
+    ]
 
 
 def _walk_and_wave(m, c):
@@ -332,22 +429,45 @@ def _walk_then_squat(m, c):
     dips = _squat_dips(m)
     low = int(np.argmin(m.pelvis_height))
     fwd, _ = m.displacement(0, low)
-    still = m.speed[max(low - 3, 0):low + 3].mean()
+    still = m.speed[max(low - 3, 0) : low + 3].mean()
     return _count_check("squats", dips, c) + [
         _c("walk_before_m", fwd, fwd >= 1.0, ">= 1 m forward before squatting"),
-        _c("speed_at_squat", still, still < 0.25, "< 0.25 m/s (stopped to squat)")]
+        _c("speed_at_squat", still, still < 0.25, "< 0.25 m/s (stopped to squat)"),
+    ]
 
 
 PROBES: dict[str, Callable[[Measures, dict], list[Check]]] = {
-    "walk": _walk, "jog": _jog, "run": _run, "walk_backward": _backward,
-    "sidestep_left": _sidestep, "sidestep_right": _sidestep, "crouch_walk": _crouch_walk,
-    "stop_and_go": _stop_and_go, "walk_to_point": _walk_to_point,
-    "turn_left": _turn_in_place, "turn_right": _turn_in_place, "circle_cw": _circle, "circle_ccw": _circle,
-    "curve_left": _curve, "curve_right": _curve, "zigzag": _zigzag,
-    "jump_in_place": _jump_in_place, "jump_forward": _jump_forward, "squat": _squat, "kneel": _kneel,
-    "wave_left": _wave, "wave_right": _wave, "raise_arm": _raise_arm, "raise_both_arms": _raise_arm,
-    "reach_forward": _reach_forward, "reach_up": _reach_up, "reach_sideways": _reach_sideways,
-    "punch": _punch, "clap": _clap, "walk_and_wave": _walk_and_wave, "turn_then_walk": _turn_then_walk,
+    "walk": _walk,
+    "jog": _jog,
+    "run": _run,
+    "walk_backward": _backward,
+    "sidestep_left": _sidestep,
+    "sidestep_right": _sidestep,
+    "crouch_walk": _crouch_walk,
+    "stop_and_go": _stop_and_go,
+    "walk_to_point": _walk_to_point,
+    "turn_left": _turn_in_place,
+    "turn_right": _turn_in_place,
+    "circle_cw": _circle,
+    "circle_ccw": _circle,
+    "curve_left": _curve,
+    "curve_right": _curve,
+    "zigzag": _zigzag,
+    "jump_in_place": _jump_in_place,
+    "jump_forward": _jump_forward,
+    "squat": _squat,
+    "kneel": _kneel,
+    "wave_left": _wave,
+    "wave_right": _wave,
+    "raise_arm": _raise_arm,
+    "raise_both_arms": _raise_arm,
+    "reach_forward": _reach_forward,
+    "reach_up": _reach_up,
+    "reach_sideways": _reach_sideways,
+    "punch": _punch,
+    "clap": _clap,
+    "walk_and_wave": _walk_and_wave,
+    "turn_then_walk": _turn_then_walk,
     "walk_then_squat": _walk_then_squat,
 }
 """The probe of each motion family, by name."""

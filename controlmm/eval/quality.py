@@ -16,7 +16,7 @@ Protocol (reference §8; MoMask/MaskControl evaluation scripts):
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,13 +30,38 @@ from controlmm.eval.evaluator.base import Evaluator, MotionLike
 from controlmm.eval.scoring import MotionSet, columns_from_embeddings, quality_columns, score_motions
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
-COLUMNS = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "mm_dist", "diversity", "multimodality")
-HEADERS = {"r_precision_top1": "R@1", "r_precision_top2": "R@2", "r_precision_top3": "R@3", "fid": "FID",
-           "mm_dist": "MM-Dist", "diversity": "Diversity", "multimodality": "MModality"}
+COLUMNS = (
+    "r_precision_top1",
+    "r_precision_top2",
+    "r_precision_top3",
+    "fid",
+    "mm_dist",
+    "diversity",
+    "multimodality",
+)
+HEADERS = {
+    "r_precision_top1": "R@1",
+    "r_precision_top2": "R@2",
+    "r_precision_top3": "R@3",
+    "fid": "FID",
+    "mm_dist": "MM-Dist",
+    "diversity": "Diversity",
+    "multimodality": "MModality",
+}
 UNIT = 4
 
-__all__ = ["COLUMNS", "EvalPass", "EvalSample", "EvalSet", "GenerateFn", "QualityReport", "columns_from_embeddings",
-           "evaluate_quality", "model_generator", "quality_columns"]
+__all__ = [
+    "COLUMNS",
+    "EvalPass",
+    "EvalSample",
+    "EvalSet",
+    "GenerateFn",
+    "QualityReport",
+    "columns_from_embeddings",
+    "evaluate_quality",
+    "model_generator",
+    "quality_columns",
+]
 
 GenerateFn = Callable[[list["EvalSample"], int], list[MotionLike]]
 """(samples, seed) -> one motion per sample, made from ``sample.caption.text`` with ``sample.frames``
@@ -83,8 +108,11 @@ class EvalPass:
 
     def matching(self, evaluator: Evaluator, group: int = M.R_PRECISION_GROUP) -> M.Matching:
         """Ground-truth R-precision and MM-Dist of this pass (its order is already random)."""
-        return M.matching_metrics(evaluator.embed_texts(self.captions), evaluator.embed_motions(self.motions),
-                                  group=min(group, len(self.samples)))
+        return M.matching_metrics(
+            evaluator.embed_texts(self.captions),
+            evaluator.embed_motions(self.motions),
+            group=min(group, len(self.samples)),
+        )
 
 
 @dataclass
@@ -129,7 +157,7 @@ class EvalSet:
                 units -= 1
             m = max(units, 1) * UNIT
             start = int(rng.integers(0, len(motion) - m + 1))
-            out.append(EvalSample(self.names[i], caption, motion[start:start + m]))
+            out.append(EvalSample(self.names[i], caption, motion[start : start + m]))
         return EvalPass(seed, out)
 
 
@@ -144,8 +172,14 @@ def model_generator(model, batch_size: int = 64, **generate_kwargs: Any) -> Gene
     def run(samples: list[EvalSample], seed: int) -> list[MotionLike]:
         frames = [s.frames for s in samples]
         asked = [min(max(f, MIN_FRAMES), MAX_FRAMES) for f in frames]
-        result = generate(model, [s.caption.text for s in samples], frames=asked, seed=seed, batch_size=batch_size,
-                          **generate_kwargs)
+        result = generate(
+            model,
+            [s.caption.text for s in samples],
+            frames=asked,
+            seed=seed,
+            batch_size=batch_size,
+            **generate_kwargs,
+        )
         return [m.features[:f] for m, f in zip(result.motions, frames)]
 
     return run
@@ -192,16 +226,33 @@ class QualityReport:
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
-        return {"evaluator": self.evaluator, "data": self.data, "split": self.split, "repeats": self.repeats,
-                "samples_per_repeat": self.samples, "settings": self.settings,
-                "rows": {row: {k: {"mean": m, "ci95": c, "values": self.rows[row][k]} for k, (m, c) in cols.items()}
-                         for row, cols in self.summary().items()}}
+        return {
+            "evaluator": self.evaluator,
+            "data": self.data,
+            "split": self.split,
+            "repeats": self.repeats,
+            "samples_per_repeat": self.samples,
+            "settings": self.settings,
+            "rows": {
+                row: {k: {"mean": m, "ci95": c, "values": self.rows[row][k]} for k, (m, c) in cols.items()}
+                for row, cols in self.summary().items()
+            },
+        }
 
 
-def evaluate_quality(evaluator: Evaluator, evalset: EvalSet, generators: dict[str, GenerateFn] | None = None,
-                     repeats: int = 10, seed: int = 0, limit: int | None = None, mm_texts: int = 32,
-                     mm_repeats: int = 12, mm_times: int = M.MULTIMODALITY_TIMES, real: bool = True,
-                     progress: bool = False) -> QualityReport:
+def evaluate_quality(
+    evaluator: Evaluator,
+    evalset: EvalSet,
+    generators: dict[str, GenerateFn] | None = None,
+    repeats: int = 10,
+    seed: int = 0,
+    limit: int | None = None,
+    mm_texts: int = 32,
+    mm_repeats: int = 12,
+    mm_times: int = M.MULTIMODALITY_TIMES,
+    real: bool = True,
+    progress: bool = False,
+) -> QualityReport:
     """The quality table: a "Real" row and one row per generator, ``repeats`` passes each.
 
     Args:
@@ -222,14 +273,27 @@ def evaluate_quality(evaluator: Evaluator, evalset: EvalSet, generators: dict[st
         raise ControlMMError(f"repeats must be at least 1; got {repeats}")
     generators = generators or {}
     if mm_texts and generators and mm_repeats <= mm_times:
-        raise ControlMMError(f"multimodality needs more generations per caption than pairs: --mm-repeats "
-                             f"{mm_repeats} <= {mm_times} pairs")
+        raise ControlMMError(
+            f"multimodality needs more generations per caption than pairs: --mm-repeats "
+            f"{mm_repeats} <= {mm_times} pairs"
+        )
     first = evalset.draw(seed, limit=limit)
-    report = QualityReport(evaluator=evaluator.name, data=evalset.source, split=evalset.split, repeats=repeats,
-                           samples=len(first.samples),
-                           settings={"seed": seed, "limit": limit, "group": M.R_PRECISION_GROUP,
-                                     "diversity_times": M.DIVERSITY_TIMES, "mm_texts": mm_texts,
-                                     "mm_repeats": mm_repeats, "mm_times": mm_times})
+    report = QualityReport(
+        evaluator=evaluator.name,
+        data=evalset.source,
+        split=evalset.split,
+        repeats=repeats,
+        samples=len(first.samples),
+        settings={
+            "seed": seed,
+            "limit": limit,
+            "group": M.R_PRECISION_GROUP,
+            "diversity_times": M.DIVERSITY_TIMES,
+            "mm_texts": mm_texts,
+            "mm_repeats": mm_repeats,
+            "mm_times": mm_times,
+        },
+    )
     steps = repeats * (int(real) + len(generators))
     bar = tqdm(total=steps, desc="quality", unit="run", disable=not progress, dynamic_ncols=True)
     sets: dict[str, list[MotionSet]] = {}
@@ -248,8 +312,12 @@ def evaluate_quality(evaluator: Evaluator, evalset: EvalSet, generators: dict[st
             k = min(mm_texts, len(passed.samples))
             if k > 0:
                 repeated = [s for s in passed.samples[:k] for _ in range(mm_repeats)]
-                emb = evaluator.embed_motions(generate_fn(repeated, run_seed + 7919)).reshape(k, mm_repeats, -1)
-                modality.setdefault(name, []).append(M.multimodality(emb, mm_times, np.random.default_rng(run_seed)))
+                emb = evaluator.embed_motions(generate_fn(repeated, run_seed + 7919)).reshape(
+                    k, mm_repeats, -1
+                )
+                modality.setdefault(name, []).append(
+                    M.multimodality(emb, mm_times, np.random.default_rng(run_seed))
+                )
             bar.update(1)
     bar.close()
     for name, runs in sets.items():

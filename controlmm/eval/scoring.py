@@ -30,9 +30,15 @@ from controlmm.eval.evaluator.base import Evaluator, MotionLike, TextLike
 SCORE_COLUMNS = ("r_precision_top1", "r_precision_top2", "r_precision_top3", "fid", "mm_dist", "diversity")
 
 
-def columns_from_embeddings(text_emb: np.ndarray, motion_emb: np.ndarray, reference_emb: np.ndarray,
-                            group: int = M.R_PRECISION_GROUP, diversity_times: int = M.DIVERSITY_TIMES,
-                            seed: int = 0, shuffle: bool = True) -> dict[str, float]:
+def columns_from_embeddings(
+    text_emb: np.ndarray,
+    motion_emb: np.ndarray,
+    reference_emb: np.ndarray,
+    group: int = M.R_PRECISION_GROUP,
+    diversity_times: int = M.DIVERSITY_TIMES,
+    seed: int = 0,
+    shuffle: bool = True,
+) -> dict[str, float]:
     """R-precision top-1/2/3, MM-Dist, FID and Diversity from embeddings.
 
     Args:
@@ -51,16 +57,27 @@ def columns_from_embeddings(text_emb: np.ndarray, motion_emb: np.ndarray, refere
     match = M.matching_metrics(np.asarray(text_emb)[order], np.asarray(motion_emb)[order], group=group)
     times = min(diversity_times, n - 1)
     return {
-        "r_precision_top1": match.r_precision[0], "r_precision_top2": match.r_precision[1],
-        "r_precision_top3": match.r_precision[2], "fid": M.fid(reference_emb, motion_emb),
-        "mm_dist": match.mm_dist, "diversity": M.diversity(motion_emb, times, rng),
-        "r_precision_group": group, "diversity_pairs": times, "samples": n,
+        "r_precision_top1": match.r_precision[0],
+        "r_precision_top2": match.r_precision[1],
+        "r_precision_top3": match.r_precision[2],
+        "fid": M.fid(reference_emb, motion_emb),
+        "mm_dist": match.mm_dist,
+        "diversity": M.diversity(motion_emb, times, rng),
+        "r_precision_group": group,
+        "diversity_pairs": times,
+        "samples": n,
     }
 
 
-def quality_columns(evaluator: Evaluator, generated: Sequence[MotionLike], texts: Sequence[TextLike],
-                    ground_truth: Sequence[MotionLike], group: int = M.R_PRECISION_GROUP,
-                    diversity_times: int = M.DIVERSITY_TIMES, seed: int = 0) -> dict[str, float]:
+def quality_columns(
+    evaluator: Evaluator,
+    generated: Sequence[MotionLike],
+    texts: Sequence[TextLike],
+    ground_truth: Sequence[MotionLike],
+    group: int = M.R_PRECISION_GROUP,
+    diversity_times: int = M.DIVERSITY_TIMES,
+    seed: int = 0,
+) -> dict[str, float]:
     """The paper's text-motion columns for one run of generated motions.
 
     Args:
@@ -81,8 +98,14 @@ def quality_columns(evaluator: Evaluator, generated: Sequence[MotionLike], texts
         raise ControlMMError(f"quality columns need at least 2 motions; got {len(generated)}")
     if len(ground_truth) < 2:
         raise ControlMMError(f"FID needs at least 2 real motions; got {len(ground_truth)}")
-    return columns_from_embeddings(evaluator.embed_texts(texts), evaluator.embed_motions(generated),
-                                   evaluator.embed_motions(ground_truth), group, diversity_times, seed)
+    return columns_from_embeddings(
+        evaluator.embed_texts(texts),
+        evaluator.embed_motions(generated),
+        evaluator.embed_motions(ground_truth),
+        group,
+        diversity_times,
+        seed,
+    )
 
 
 @dataclass(frozen=True)
@@ -121,11 +144,18 @@ class Scores:
         return {k: M.mean_ci(v) for k, v in self.values.items()}
 
     def to_json(self) -> dict[str, dict[str, Any]]:
-        return {k: {"mean": m, "ci95": c, "values": list(self.values[k])} for k, (m, c) in self.summary().items()}
+        return {
+            k: {"mean": m, "ci95": c, "values": list(self.values[k])} for k, (m, c) in self.summary().items()
+        }
 
 
-def score_motions(evaluator: Evaluator, runs: MotionSet | Sequence[MotionSet], seed: int = 0,
-                  group: int = M.R_PRECISION_GROUP, diversity_times: int = M.DIVERSITY_TIMES) -> Scores:
+def score_motions(
+    evaluator: Evaluator,
+    runs: MotionSet | Sequence[MotionSet],
+    seed: int = 0,
+    group: int = M.R_PRECISION_GROUP,
+    diversity_times: int = M.DIVERSITY_TIMES,
+) -> Scores:
     """R-precision top-1/2/3, FID, MM-Dist and Diversity of each run, with mean and 95 % CI over runs.
 
     Args:
@@ -142,5 +172,7 @@ def score_motions(evaluator: Evaluator, runs: MotionSet | Sequence[MotionSet], s
         raise ControlMMError("nothing to score: no runs")
     scores = Scores()
     for r, run in enumerate(runs):
-        scores.add(quality_columns(evaluator, run.motions, run.texts, run.real, group, diversity_times, seed + r))
+        scores.add(
+            quality_columns(evaluator, run.motions, run.texts, run.real, group, diversity_times, seed + r)
+        )
     return scores

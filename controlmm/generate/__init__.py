@@ -9,9 +9,26 @@ out = generate_controlled(model, "a person walks", control=spec, preset="accurat
 ```
 """
 
-from controlmm.generate.api import GenerationResult, frames_for, generate, latent_to_features, latent_to_joints
-from controlmm.generate.controlled import ControlledGeneration, EditingRecord, generate_controlled, latent_to_positions
-from controlmm.generate.masked_decoding import BaseDecoding, DecodeOptions, DecodeState, mask_counts, masked_decode
+from controlmm.generate.api import (
+    GenerationResult,
+    frames_for,
+    generate,
+    latent_to_features,
+    latent_to_joints,
+)
+from controlmm.generate.controlled import (
+    ControlledGeneration,
+    EditingRecord,
+    generate_controlled,
+    latent_to_positions,
+)
+from controlmm.generate.masked_decoding import (
+    BaseDecoding,
+    DecodeOptions,
+    DecodeState,
+    mask_counts,
+    masked_decode,
+)
 from controlmm.generate.residual_decoding import residual_decode
 from controlmm.generate.token_view import token_view_logits_fn
 from controlmm.models.model_dir import MotionModel, load_model

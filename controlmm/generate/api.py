@@ -21,8 +21,9 @@ from controlmm.motion.skeleton import FPS, MAX_FRAMES, MIN_FRAMES
 from controlmm.text.base import check_texts
 
 
-def frames_for(count: int, seconds: float | Sequence[float] | None = None,
-               frames: int | Sequence[int] | None = None) -> list[int]:
+def frames_for(
+    count: int, seconds: float | Sequence[float] | None = None, frames: int | Sequence[int] | None = None
+) -> list[int]:
     """Motion lengths in frames for ``count`` prompts from seconds (x 20 fps, rounded) or frames.
 
     Allowed: 40..196 frames (2.0..9.8 s), the range the models are trained on. Default: 6 s.
@@ -45,8 +46,10 @@ def frames_for(count: int, seconds: float | Sequence[float] | None = None,
     for f in frames:
         if isinstance(f, bool) or not isinstance(f, numbers.Integral) or not MIN_FRAMES <= f <= MAX_FRAMES:
             shown = f"{f / FPS:g} s ({f} frames)" if unit == "s" and isinstance(f, int) else f"{f} frames"
-            raise ControlMMError(f"length {shown} is out of range; allowed {MIN_FRAMES}..{MAX_FRAMES} frames "
-                                 f"({MIN_FRAMES / FPS:g}..{MAX_FRAMES / FPS:g} s at {FPS} fps)")
+            raise ControlMMError(
+                f"length {shown} is out of range; allowed {MIN_FRAMES}..{MAX_FRAMES} frames "
+                f"({MIN_FRAMES / FPS:g}..{MAX_FRAMES / FPS:g} s at {FPS} fps)"
+            )
     return [int(f) for f in frames]
 
 
@@ -84,12 +87,21 @@ class GenerationResult:
 
 
 @torch.no_grad()
-def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Sequence[float] | None = None,
-             frames: int | Sequence[int] | None = None, seed: int | None = None,
-             options: DecodeOptions = DecodeOptions(), use_residual: bool = True,
-             residual_cfg_scale: float = 5.0, residual_temperature: float = 1.0,
-             residual_topk: float | None = 0.9, residual_layers: int | None = None,
-             batch_size: int = 64, token_view: bool = True) -> GenerationResult:
+def generate(
+    model: MotionModel,
+    text: str | Sequence[str],
+    seconds: float | Sequence[float] | None = None,
+    frames: int | Sequence[int] | None = None,
+    seed: int | None = None,
+    options: DecodeOptions = DecodeOptions(),
+    use_residual: bool = True,
+    residual_cfg_scale: float = 5.0,
+    residual_temperature: float = 1.0,
+    residual_topk: float | None = 0.9,
+    residual_layers: int | None = None,
+    batch_size: int = 64,
+    token_view: bool = True,
+) -> GenerationResult:
     """Generate one motion per prompt.
 
     Args:
@@ -122,36 +134,67 @@ def generate(model: MotionModel, text: str | Sequence[str], seconds: float | Seq
     residual = model.residual if use_residual else None
     motions, id_chunks, base_chunks, res_chunks, latent_chunks = [], [], [], [], []
     for start in range(0, len(texts), batch_size):
-        chunk_texts = texts[start:start + batch_size]
-        chunk_frames = lengths[start:start + batch_size]
-        cond, states = model.encode_text_views(chunk_texts) if token_view else (model.encode_text(chunk_texts), None)
+        chunk_texts = texts[start : start + batch_size]
+        chunk_frames = lengths[start : start + batch_size]
+        cond, states = (
+            model.encode_text_views(chunk_texts) if token_view else (model.encode_text(chunk_texts), None)
+        )
         token_lengths = torch.tensor([math.ceil(f / unit) for f in chunk_frames], device=device)
         views = token_view_logits_fn(model, chunk_texts, options.cfg_scale, states) if token_view else None
         base = masked_decode(model.transformer, cond, token_lengths, options, generator, logits_fn=views)
         res_logits: list[torch.Tensor] = []
         if residual is not None:
-            ids, res_logits = residual_decode(residual, base.ids, cond, token_lengths, residual_cfg_scale,
-                                              residual_temperature, residual_topk, generator, residual_layers)
+            ids, res_logits = residual_decode(
+                residual,
+                base.ids,
+                cond,
+                token_lengths,
+                residual_cfg_scale,
+                residual_temperature,
+                residual_topk,
+                generator,
+                residual_layers,
+            )
         else:
             ids = base.ids[..., None]
         latent = model.tokenizer.ids_to_latent(ids)
         features = latent_to_features(model, latent)
         joints = features_to_joints(features)
         for i, (prompt, f) in enumerate(zip(chunk_texts, chunk_frames)):
-            meta = {"seed": int(seed), "index": start + i, "model": str(model.directory or ""),
-                    "preset": model.config.preset, "cfg_scale": options.cfg_scale,
-                    "temperature": options.temperature, "topk": options.topk, "iterations": options.iterations,
-                    "residual": residual is not None, "residual_layers": residual_layers, "frames": f,
-                    "token_view": views is not None}
-            motions.append(Motion(joints=joints[i, :f].cpu().numpy(), fps=float(FPS),
-                                  features=features[i, :f].cpu().numpy(), text=prompt, metadata=meta))
+            meta = {
+                "seed": int(seed),
+                "index": start + i,
+                "model": str(model.directory or ""),
+                "preset": model.config.preset,
+                "cfg_scale": options.cfg_scale,
+                "temperature": options.temperature,
+                "topk": options.topk,
+                "iterations": options.iterations,
+                "residual": residual is not None,
+                "residual_layers": residual_layers,
+                "frames": f,
+                "token_view": views is not None,
+            }
+            motions.append(
+                Motion(
+                    joints=joints[i, :f].cpu().numpy(),
+                    fps=float(FPS),
+                    features=features[i, :f].cpu().numpy(),
+                    text=prompt,
+                    metadata=meta,
+                )
+            )
         id_chunks.append(ids)
         base_chunks.append(base.logits)
         res_chunks.append(res_logits)
         latent_chunks.append(latent)
     return GenerationResult(
-        motions=motions, texts=texts, frames=lengths, seed=int(seed),
-        ids=_cat_padded(id_chunks, -1), base_logits=_cat_padded(base_chunks, 0.0),
+        motions=motions,
+        texts=texts,
+        frames=lengths,
+        seed=int(seed),
+        ids=_cat_padded(id_chunks, -1),
+        base_logits=_cat_padded(base_chunks, 0.0),
         residual_logits=[_cat_padded([c[q] for c in res_chunks], 0.0) for q in range(len(res_chunks[0]))],
         latent=_cat_padded(latent_chunks, 0.0),
     )

@@ -70,7 +70,9 @@ class EditingRecord:
 
     preset: str
     control_model: bool
-    budget: dict[str, Any] = field(default_factory=dict)  # step budgets, optimiser and tolerances of the preset
+    budget: dict[str, Any] = field(
+        default_factory=dict
+    )  # step budgets, optimiser and tolerances of the preset
     logits_steps: list[int] = field(default_factory=list)  # per decoding iteration
     codebook_steps: int = 0
     contact_kept: bool = False  # the foot-contact run's latent was kept (EditingConfig.contact_steps > 0)
@@ -85,12 +87,19 @@ class EditingRecord:
         return int(sum(self.logits_steps)) + int(self.codebook_steps)
 
     def to_json(self) -> dict[str, Any]:
-        return {"preset": self.preset, "control_model": self.control_model, "budget": dict(self.budget),
-                "logits_steps": list(self.logits_steps),
-                "codebook_steps": int(self.codebook_steps), "contact_kept": bool(self.contact_kept),
-                "converged": bool(self.converged),
-                "max_error_m": float(self.max_error), "losses": dict(self.losses), "seconds": round(self.seconds, 3),
-                "cpu_seconds": round(self.cpu_seconds, 3)}
+        return {
+            "preset": self.preset,
+            "control_model": self.control_model,
+            "budget": dict(self.budget),
+            "logits_steps": list(self.logits_steps),
+            "codebook_steps": int(self.codebook_steps),
+            "contact_kept": bool(self.contact_kept),
+            "converged": bool(self.converged),
+            "max_error_m": float(self.max_error),
+            "losses": dict(self.losses),
+            "seconds": round(self.seconds, 3),
+            "cpu_seconds": round(self.cpu_seconds, 3),
+        }
 
 
 @dataclass
@@ -115,15 +124,24 @@ class ControlledGeneration:
         return self.motions[0]
 
 
-def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
-                        control: ControlSpec | Sequence[ControlSpec | None] | None = None,
-                        targets: np.ndarray | torch.Tensor | None = None,
-                        mask: np.ndarray | torch.Tensor | None = None,
-                        terms: Sequence[LossTerm] = (), preset: str | EditingConfig = "accurate",
-                        seconds: float | Sequence[float] | None = None, frames: int | Sequence[int] | None = None,
-                        seed: int | None = None, transform: HumanToWorld | None = None,
-                        options: DecodeOptions = DecodeOptions(), residual_cfg_scale: float = 5.0,
-                        batch_size: int = 16, progress: bool = False) -> ControlledGeneration:
+def generate_controlled(
+    model: MotionModel,
+    text: str | Sequence[str],
+    *,
+    control: ControlSpec | Sequence[ControlSpec | None] | None = None,
+    targets: np.ndarray | torch.Tensor | None = None,
+    mask: np.ndarray | torch.Tensor | None = None,
+    terms: Sequence[LossTerm] = (),
+    preset: str | EditingConfig = "accurate",
+    seconds: float | Sequence[float] | None = None,
+    frames: int | Sequence[int] | None = None,
+    seed: int | None = None,
+    transform: HumanToWorld | None = None,
+    options: DecodeOptions = DecodeOptions(),
+    residual_cfg_scale: float = 5.0,
+    batch_size: int = 16,
+    progress: bool = False,
+) -> ControlledGeneration:
     """Generate one motion per prompt meeting spatial constraints and any extra loss terms.
 
     Args:
@@ -172,7 +190,9 @@ def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
         elif dense_t is not None:
             if dense_m[i, f:].any():
                 frame = int(np.argwhere(dense_m[i, f:])[0][0]) + f
-                raise ControlMMError(f"a controlled entry at frame {frame} is outside the motion (frames 0..{f - 1})")
+                raise ControlMMError(
+                    f"a controlled entry at frame {frame} is outside the motion (frames 0..{f - 1})"
+                )
             full_t[i, :f], full_m[i, :f] = dense_t[i, :f], dense_m[i, :f]
             pairs.append([(int(j), int(t)) for t, j in np.argwhere(dense_m[i, :f])])
         else:
@@ -188,9 +208,19 @@ def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
 
     bar = tqdm(total=count, desc="generate", unit="motion", disable=not progress, leave=False)
     for chunk in chunks:
-        out = _generate_chunk(model, [texts[i] for i in chunk], [lengths[i] for i in chunk],
-                              torch.from_numpy(full_t[chunk]), torch.from_numpy(full_m[chunk]), terms, config,
-                              preset_name, options, residual_cfg_scale, generator)
+        out = _generate_chunk(
+            model,
+            [texts[i] for i in chunk],
+            [lengths[i] for i in chunk],
+            torch.from_numpy(full_t[chunk]),
+            torch.from_numpy(full_m[chunk]),
+            terms,
+            config,
+            preset_name,
+            options,
+            residual_cfg_scale,
+            generator,
+        )
         for k, i in enumerate(chunk):
             results[i] = tuple(x[k] for x in out)
         bar.update(len(chunk))
@@ -199,27 +229,65 @@ def generate_controlled(model: MotionModel, text: str | Sequence[str], *,
     for i in range(count):
         joints, features, record, tokens = results[i]
         f = lengths[i]
-        err = np.array([np.linalg.norm(joints[fr, j] - full_t[i, fr, j]) for j, fr in pairs[i]], dtype=np.float64)
-        meta = {"seed": int(seed), "index": i, "model": str(model.directory or ""), "preset": model.config.preset,
-                "frames": f, "cfg_scale": options.cfg_scale, "iterations": options.iterations,
-                "control": _control_metadata(specs[i] if specs else None, pairs[i], err, record, preset_name)}
+        err = np.array(
+            [np.linalg.norm(joints[fr, j] - full_t[i, fr, j]) for j, fr in pairs[i]], dtype=np.float64
+        )
+        meta = {
+            "seed": int(seed),
+            "index": i,
+            "model": str(model.directory or ""),
+            "preset": model.config.preset,
+            "frames": f,
+            "cfg_scale": options.cfg_scale,
+            "iterations": options.iterations,
+            "control": _control_metadata(specs[i] if specs else None, pairs[i], err, record, preset_name),
+        }
         extras = {}
         if pairs[i]:
-            extras = {"control_mask": full_m[i, :f].copy(), "control_targets": full_t[i, :f].copy(),
-                      "control_errors": err.astype(np.float32)}
-        motions.append(Motion(joints=joints[:f], fps=float(FPS), features=features[:f], text=texts[i],
-                              metadata=meta, extras=extras))
+            extras = {
+                "control_mask": full_m[i, :f].copy(),
+                "control_targets": full_t[i, :f].copy(),
+                "control_errors": err.astype(np.float32),
+            }
+        motions.append(
+            Motion(
+                joints=joints[:f],
+                fps=float(FPS),
+                features=features[:f],
+                text=texts[i],
+                metadata=meta,
+                extras=extras,
+            )
+        )
         errors.append(err)
         records.append(record)
         ids.append(tokens)
-    return ControlledGeneration(motions=motions, errors=errors, constraints=pairs, records=records, texts=texts,
-                                frames=lengths, seed=int(seed), ids=ids)
+    return ControlledGeneration(
+        motions=motions,
+        errors=errors,
+        constraints=pairs,
+        records=records,
+        texts=texts,
+        frames=lengths,
+        seed=int(seed),
+        ids=ids,
+    )
 
 
 # -- one batch --------------------------------------------------------------------------------------
-def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], targets: torch.Tensor,
-                    mask: torch.Tensor, terms: Sequence[LossTerm], config: EditingConfig, preset_name: str,
-                    options: DecodeOptions, residual_cfg_scale: float, generator: torch.Generator):
+def _generate_chunk(
+    model: MotionModel,
+    texts: list[str],
+    lengths: list[int],
+    targets: torch.Tensor,
+    mask: torch.Tensor,
+    terms: Sequence[LossTerm],
+    config: EditingConfig,
+    preset_name: str,
+    options: DecodeOptions,
+    residual_cfg_scale: float,
+    generator: torch.Generator,
+):
     started, cpu_started = time.perf_counter(), time.process_time()
     device = model.device
     unit = model.config.tokenizer.downsample
@@ -228,9 +296,14 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
     span = n * unit  # frames the decoder produces
     t_max = max(lengths)
     targets, mask = targets[:, :span].to(device), mask[:, :span].to(device)
-    objective = Objective(targets=targets[:, :t_max], mask=mask[:, :t_max], terms=terms,
-                          tolerance=config.tolerance, loss_tolerance=config.loss_tolerance,
-                          hinge_weight=config.hinge_weight)
+    objective = Objective(
+        targets=targets[:, :t_max],
+        mask=mask[:, :t_max],
+        terms=terms,
+        tolerance=config.tolerance,
+        loss_tolerance=config.loss_tolerance,
+        hinge_weight=config.hinge_weight,
+    )
     cond = model.encode_text(texts)
     tokenizer, transformer = model.tokenizer, model.transformer
     codebook = tokenizer.codebooks[0]
@@ -248,26 +321,42 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         ctrl_in = control_input(targets, mask, current, control.joint_ids)
         return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
 
-    logits_objective = replace(objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean",
-                               hinge_weight=0.0)
+    logits_objective = replace(
+        objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean", hinge_weight=0.0
+    )
 
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
         known = ~state.is_mask & ~state.padding_mask
         fixed = torch.where(known[..., None], codebook[torch.where(known, state.ids, 0)], 0.0)
         with torch.enable_grad():
-            outcome = logits_editing(logits, state.is_mask, fixed, codebook, decode, logits_objective, config,
-                                     generator)
+            outcome = logits_editing(
+                logits, state.is_mask, fixed, codebook, decode, logits_objective, config, generator
+            )
         logit_steps.append(outcome.steps)
         return outcome.param
 
     editing = objective.active
-    base = masked_decode(transformer, cond, token_lengths, options, generator,
-                         logits_fn=control_logits if use_control else None,
-                         logits_hook=edit_logits if editing and config.logits_steps > 0 else None)
+    base = masked_decode(
+        transformer,
+        cond,
+        token_lengths,
+        options,
+        generator,
+        logits_fn=control_logits if use_control else None,
+        logits_hook=edit_logits if editing and config.logits_steps > 0 else None,
+    )
     ids = base.ids[..., None]
     if model.residual is not None:
-        ids, _ = residual_decode(model.residual, base.ids, cond, token_lengths, residual_cfg_scale,
-                                 temperature=0.0, topk=None, generator=generator)
+        ids, _ = residual_decode(
+            model.residual,
+            base.ids,
+            cond,
+            token_lengths,
+            residual_cfg_scale,
+            temperature=0.0,
+            topk=None,
+            generator=generator,
+        )
     with torch.no_grad():
         latent = tokenizer.ids_to_latent(ids)
     codebook_steps = torch.zeros(b, dtype=torch.long)
@@ -285,18 +374,31 @@ def _generate_chunk(model: MotionModel, texts: list[str], lengths: list[int], ta
         _, done, max_err = objective.evaluate(joints[:, :t_max])
     seconds = (time.perf_counter() - started) / b
     cpu_seconds = (time.process_time() - cpu_started) / b
-    budget = {"logits_steps": config.logits_steps, "codebook_steps": config.codebook_steps,
-              "codebook_optimizer": config.codebook_optimizer, "tolerance_m": config.tolerance,
-              "logits_tolerance_m": config.logits_tolerance, "contact_steps": config.contact_steps}
+    budget = {
+        "logits_steps": config.logits_steps,
+        "codebook_steps": config.codebook_steps,
+        "codebook_optimizer": config.codebook_optimizer,
+        "tolerance_m": config.tolerance,
+        "logits_tolerance_m": config.logits_tolerance,
+        "contact_steps": config.contact_steps,
+    }
     records = []
     for i in range(b):
-        records.append(EditingRecord(
-            preset=preset_name, control_model=use_control, budget=budget,
-            logits_steps=[int(s[i]) for s in logit_steps], codebook_steps=int(codebook_steps[i]),
-            contact_kept=bool(contact_kept[i]),
-            converged=bool(done[i]) if editing else True, max_error=float(max_err[i]),
-            losses={k: float(v[i]) for k, v in values.items()}, seconds=seconds,
-            cpu_seconds=cpu_seconds))
+        records.append(
+            EditingRecord(
+                preset=preset_name,
+                control_model=use_control,
+                budget=budget,
+                logits_steps=[int(s[i]) for s in logit_steps],
+                codebook_steps=int(codebook_steps[i]),
+                contact_kept=bool(contact_kept[i]),
+                converged=bool(done[i]) if editing else True,
+                max_error=float(max_err[i]),
+                losses={k: float(v[i]) for k, v in values.items()},
+                seconds=seconds,
+                cpu_seconds=cpu_seconds,
+            )
+        )
     joints_np = joints.cpu().numpy()
     features_np = features.cpu().numpy()
     tokens = [ids[i, : int(token_lengths[i])].cpu() for i in range(b)]
@@ -315,8 +417,14 @@ def latent_to_positions(model: MotionModel, latent: torch.Tensor) -> torch.Tenso
     for layer in decoder.model[:-1]:
         x = layer(x)
     last = decoder.model[-1]
-    y = F.conv1d(x, last.weight[:POSITION_DIMS], last.bias[:POSITION_DIMS], stride=last.stride,
-                 padding=last.padding, dilation=last.dilation).permute(0, 2, 1)
+    y = F.conv1d(
+        x,
+        last.weight[:POSITION_DIMS],
+        last.bias[:POSITION_DIMS],
+        stride=last.stride,
+        padding=last.padding,
+        dilation=last.dilation,
+    ).permute(0, 2, 1)
     norm = model.normalizer
     mean = torch.as_tensor(norm.mean[:POSITION_DIMS], dtype=y.dtype, device=y.device)
     std = torch.as_tensor(norm.std[:POSITION_DIMS], dtype=y.dtype, device=y.device)
@@ -333,8 +441,9 @@ def decode_latent(model: MotionModel, latent: torch.Tensor, frames: int) -> tupl
     return joints[0].cpu().numpy(), features[0].cpu().numpy()
 
 
-def edit_latent(model: MotionModel, latent: torch.Tensor, frames: int, objective: Objective,
-                config: EditingConfig) -> tuple[torch.Tensor, dict[str, Any]]:
+def edit_latent(
+    model: MotionModel, latent: torch.Tensor, frames: int, objective: Objective, config: EditingConfig
+) -> tuple[torch.Tensor, dict[str, Any]]:
     """Codebook editing of one motion's decoder latent (1, N, code_dim) so that its first ``frames``
     frames meet ``objective``, outside the decoding loop (the plan's feedback rounds, timeline passes).
 
@@ -355,8 +464,13 @@ def edit_latent(model: MotionModel, latent: torch.Tensor, frames: int, objective
         joints = decode(edited)
         values = objective.term_values(joints)
         _, done, max_err = objective.evaluate(joints)
-    return edited, {"steps": int(outcome.steps[0]), "converged": bool(done[0]), "max_error_m": float(max_err[0]),
-                    "contact_kept": bool(kept[0]), "losses": {k: float(v[0]) for k, v in values.items()}}
+    return edited, {
+        "steps": int(outcome.steps[0]),
+        "converged": bool(done[0]),
+        "max_error_m": float(max_err[0]),
+        "contact_kept": bool(kept[0]),
+        "losses": {k: float(v[0]) for k, v in values.items()},
+    }
 
 
 # -- inputs -----------------------------------------------------------------------------------------
@@ -387,7 +501,9 @@ def _dense_targets(targets, mask, count: int) -> tuple[np.ndarray | None, np.nda
     if m.ndim == 2:
         m = np.broadcast_to(m, (count,) + m.shape)
     if t.ndim != 4 or t.shape[0] != count or t.shape[2:] != (NUM_JOINTS, 3):
-        raise ShapeError(f"targets must have shape (T, 22, 3) or ({count}, T, 22, 3); got {np.shape(targets)}")
+        raise ShapeError(
+            f"targets must have shape (T, 22, 3) or ({count}, T, 22, 3); got {np.shape(targets)}"
+        )
     if m.shape != t.shape[:3]:
         raise ShapeError(f"mask must have shape {t.shape[1:3]} or {t.shape[:3]}; got {np.shape(mask)}")
     if t.shape[1] > MAX_FRAMES:
@@ -415,8 +531,9 @@ def _lengths(count: int, seconds, frames, specs, dense_m) -> list[int]:
     out = []
     for d, lf in zip(default, last):
         if lf >= MAX_FRAMES:
-            raise ControlMMError(f"a constraint at frame {lf} is beyond the longest motion "
-                                 f"(frames 0..{MAX_FRAMES - 1})")
+            raise ControlMMError(
+                f"a constraint at frame {lf} is beyond the longest motion (frames 0..{MAX_FRAMES - 1})"
+            )
         out.append(max(d, lf + 1))
     return out
 
@@ -427,18 +544,28 @@ def _chunks(lengths: list[int], batch_size: int, by_length: bool) -> list[list[i
         raise ControlMMError(f"batch_size must be at least 1; got {batch_size}")
     order = list(range(len(lengths)))
     if not by_length:
-        return [order[i:i + batch_size] for i in range(0, len(order), batch_size)]
+        return [order[i : i + batch_size] for i in range(0, len(order), batch_size)]
     groups: dict[int, list[int]] = {}
     for i in order:
         groups.setdefault(lengths[i], []).append(i)
-    return [g[i:i + batch_size] for g in groups.values() for i in range(0, len(g), batch_size)]
+    return [g[i : i + batch_size] for g in groups.values() for i in range(0, len(g), batch_size)]
 
 
-def _control_metadata(spec: ControlSpec | None, pairs: list[tuple[int, int]], errors: np.ndarray,
-                      record: EditingRecord, preset: str) -> dict[str, Any]:
-    data: dict[str, Any] = {"preset": preset, "editing": record.to_json(),
-                            "constraints": [{"joint": JOINT_NAMES[j], "frame": f, "error_cm": round(100 * float(e), 4)}
-                                            for (j, f), e in zip(pairs, errors)]}
+def _control_metadata(
+    spec: ControlSpec | None,
+    pairs: list[tuple[int, int]],
+    errors: np.ndarray,
+    record: EditingRecord,
+    preset: str,
+) -> dict[str, Any]:
+    data: dict[str, Any] = {
+        "preset": preset,
+        "editing": record.to_json(),
+        "constraints": [
+            {"joint": JOINT_NAMES[j], "frame": f, "error_cm": round(100 * float(e), 4)}
+            for (j, f), e in zip(pairs, errors)
+        ],
+    }
     if spec is not None:
         data["spec"] = spec.source if spec.source else spec.to_dict()
     if len(errors):

@@ -61,12 +61,14 @@ class BaseDecoding:
 def mask_counts(token_lengths: torch.Tensor, iterations: int) -> list[torch.Tensor]:
     """Number of masked tokens per iteration: max(1, round(cos(pi t_k / 2) L)), t_k = k / (K - 1)."""
     steps = torch.linspace(0, 1, iterations) if iterations > 1 else torch.zeros(1)
-    return [torch.round(torch.cos(t * math.pi * 0.5) * token_lengths.float()).clamp(min=1).long()
-            for t in steps]
+    return [
+        torch.round(torch.cos(t * math.pi * 0.5) * token_lengths.float()).clamp(min=1).long() for t in steps
+    ]
 
 
-def sample_ids(logits: torch.Tensor, temperature: float, gumbel: bool,
-               generator: torch.Generator | None) -> torch.Tensor:
+def sample_ids(
+    logits: torch.Tensor, temperature: float, gumbel: bool, generator: torch.Generator | None
+) -> torch.Tensor:
     """Draw ids (B, N) from logits (B, N, K) (-inf entries are never drawn)."""
     if temperature <= 0:
         return logits.argmax(-1)
@@ -82,9 +84,15 @@ LogitsHook = Callable[[torch.Tensor, DecodeState], torch.Tensor]
 
 
 @torch.no_grad()
-def masked_decode(transformer, cond: torch.Tensor, token_lengths: torch.Tensor,
-                  options: DecodeOptions = DecodeOptions(), generator: torch.Generator | None = None,
-                  logits_fn: LogitsFn | None = None, logits_hook: LogitsHook | None = None) -> BaseDecoding:
+def masked_decode(
+    transformer,
+    cond: torch.Tensor,
+    token_lengths: torch.Tensor,
+    options: DecodeOptions = DecodeOptions(),
+    generator: torch.Generator | None = None,
+    logits_fn: LogitsFn | None = None,
+    logits_hook: LogitsHook | None = None,
+) -> BaseDecoding:
     """Decode base-layer ids for text vectors ``cond`` (B, text_dim) and lengths (B,) in tokens."""
     device = cond.device
     token_lengths = token_lengths.to(device)
@@ -98,8 +106,9 @@ def masked_decode(transformer, cond: torch.Tensor, token_lengths: torch.Tensor,
         ranks = scores.argsort(dim=1, stable=True).argsort(dim=1, stable=True)
         is_mask = ranks < count.to(device)[:, None]
         ids = torch.where(is_mask, mask_id, ids)
-        state = DecodeState(step=k, ids=ids, is_mask=is_mask, padding_mask=padding, cond=cond,
-                            previous_logits=logits)
+        state = DecodeState(
+            step=k, ids=ids, is_mask=is_mask, padding_mask=padding, cond=cond, previous_logits=logits
+        )
         if logits_fn is not None:
             logits = logits_fn(ids, state)
         else:

@@ -17,11 +17,18 @@ from controlmm.models.layers import lengths_to_mask, top_k_filter
 
 
 @torch.no_grad()
-def residual_decode(residual, base_ids: torch.Tensor, cond: torch.Tensor, token_lengths: torch.Tensor,
-                    cfg_scale: float = 5.0, temperature: float = 1.0, topk: float | None = 0.9,
-                    generator: torch.Generator | None = None, num_layers: int | None = None,
-                    logits_hook: Callable[[torch.Tensor, int], torch.Tensor] | None = None
-                    ) -> tuple[torch.Tensor, list[torch.Tensor]]:
+def residual_decode(
+    residual,
+    base_ids: torch.Tensor,
+    cond: torch.Tensor,
+    token_lengths: torch.Tensor,
+    cfg_scale: float = 5.0,
+    temperature: float = 1.0,
+    topk: float | None = 0.9,
+    generator: torch.Generator | None = None,
+    num_layers: int | None = None,
+    logits_hook: Callable[[torch.Tensor, int], torch.Tensor] | None = None,
+) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """Complete base ids (B, N) (-1 at pads) with residual layers.
 
     Returns:

@@ -22,8 +22,9 @@ from controlmm.generate.masked_decoding import DecodeState, LogitsFn
 from controlmm.models.model_dir import MotionModel
 
 
-def token_view_logits_fn(model: MotionModel, texts: Sequence[str], cfg_scale: float,
-                         states: torch.Tensor | None = None) -> LogitsFn | None:
+def token_view_logits_fn(
+    model: MotionModel, texts: Sequence[str], cfg_scale: float, states: torch.Tensor | None = None
+) -> LogitsFn | None:
     """A ``logits_fn`` for :func:`masked_decode` mixing both text views of ``texts``; None when the model
     has no token-state transformer (decoding then uses ``model.transformer`` alone). ``states``: the
     texts' (B, L, 384) token states when already encoded (:meth:`MotionModel.encode_text_views`)."""

@@ -86,7 +86,9 @@ class TransformerConfig:
     text_dim: int = 512  # 512 for CLIP ViT-B/32, 384 for MiniLM
     max_len: int = 5000  # rows of the sinusoidal table (official 5000)
     text_norm: bool = False
-    pooled_row: bool = False  # with text token states: one more condition row for their pooled sentence vector
+    pooled_row: bool = (
+        False  # with text token states: one more condition row for their pooled sentence vector
+    )
     relative_positions: int = 0  # K > 0: learned attention bias per token offset, clipped at K tokens
     token_drop_prob: float = 0.0  # with text token states: training-time dropout of single token states
 
@@ -241,21 +243,29 @@ class ModelConfig:
     def __post_init__(self) -> None:
         check_consistent(self)
 
-    def with_text_encoder(self, text: TextEncoderConfig) -> "ModelConfig":
+    def with_text_encoder(self, text: TextEncoderConfig) -> ModelConfig:
         """This config conditioned on another text encoder (text_dim follows)."""
         dim = text.dim
         view = self.token_view
         if view is not None:  # token states are MiniLM's
-            view = replace(view, transformer=replace(view.transformer, text_dim=dim)) if text.name == "minilm" else None
-        return replace(self, text_encoder=text,
-                       transformer=replace(self.transformer, text_dim=dim),
-                       residual=replace(self.residual, text_dim=dim), token_view=view)
+            view = (
+                replace(view, transformer=replace(view.transformer, text_dim=dim))
+                if text.name == "minilm"
+                else None
+            )
+        return replace(
+            self,
+            text_encoder=text,
+            transformer=replace(self.transformer, text_dim=dim),
+            residual=replace(self.residual, text_dim=dim),
+            token_view=view,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "ModelConfig":
+    def from_dict(cls, data: dict[str, Any]) -> ModelConfig:
         try:
             return cls(
                 preset=str(data["preset"]),
@@ -302,13 +312,20 @@ def check_consistent(cfg: ModelConfig) -> None:
     tok, tr, res = cfg.tokenizer, cfg.transformer, cfg.residual
     transformers = [tr] if cfg.token_view is None else [tr, cfg.token_view.transformer]
     if cfg.text_encoder.name not in TEXT_ENCODER_DIMS:
-        raise ControlMMError(f"unknown text encoder '{cfg.text_encoder.name}'; "
-                             f"allowed: {', '.join(TEXT_ENCODER_DIMS)}")
+        raise ControlMMError(
+            f"unknown text encoder '{cfg.text_encoder.name}'; allowed: {', '.join(TEXT_ENCODER_DIMS)}"
+        )
     if cfg.control.joints not in CONTROL_JOINT_SETS:
-        raise ControlMMError(f"unknown control joint set '{cfg.control.joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}")
-    if cfg.text_encoder.tokens and (cfg.text_encoder.name != "minilm" or not 1 <= cfg.text_encoder.tokens <= 128):
-        raise ControlMMError(f"text encoder tokens must be 0 (sentence vectors) or 1..128 with minilm; got "
-                             f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}")
+        raise ControlMMError(
+            f"unknown control joint set '{cfg.control.joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}"
+        )
+    if cfg.text_encoder.tokens and (
+        cfg.text_encoder.name != "minilm" or not 1 <= cfg.text_encoder.tokens <= 128
+    ):
+        raise ControlMMError(
+            f"text encoder tokens must be 0 (sentence vectors) or 1..128 with minilm; got "
+            f"{cfg.text_encoder.tokens} with {cfg.text_encoder.name}"
+        )
     if tr.pooled_row and not cfg.text_encoder.tokens:
         raise ControlMMError("transformer pooled_row needs text token states (text encoder tokens > 0)")
     for t in transformers:
@@ -317,30 +334,48 @@ def check_consistent(cfg: ModelConfig) -> None:
     if cfg.token_view is not None:
         view = cfg.token_view
         if cfg.text_encoder.name != "minilm" or not 1 <= view.tokens <= 128:
-            raise ControlMMError(f"token_view needs the minilm text encoder and 1..128 tokens; got {view.tokens} "
-                                 f"with {cfg.text_encoder.name}")
+            raise ControlMMError(
+                f"token_view needs the minilm text encoder and 1..128 tokens; got {view.tokens} "
+                f"with {cfg.text_encoder.name}"
+            )
         if not 0.0 < view.weight < 1.0:
             raise ControlMMError(f"token_view weight must be between 0 and 1 (exclusive); got {view.weight}")
-        if (view.transformer.nb_code, view.transformer.code_dim, view.transformer.text_dim) != \
-                (tok.nb_code, tok.code_dim, cfg.text_encoder.dim):
-            raise ControlMMError("inconsistent model configuration: the token_view transformer's nb_code, code_dim "
-                                 "and text_dim must match the tokenizer and the text encoder")
+        if (view.transformer.nb_code, view.transformer.code_dim, view.transformer.text_dim) != (
+            tok.nb_code,
+            tok.code_dim,
+            cfg.text_encoder.dim,
+        ):
+            raise ControlMMError(
+                "inconsistent model configuration: the token_view transformer's nb_code, code_dim "
+                "and text_dim must match the tokenizer and the text encoder"
+            )
     for name, schedule in cfg.schedules.items():
         if schedule.bucket < 0 or (schedule.bucket and name not in BUCKETED_STAGES):
-            raise ControlMMError(f"schedule '{name}': bucket must be 0, or a positive number of batches for "
-                                 f"{', '.join(BUCKETED_STAGES)}; got {schedule.bucket}")
+            raise ControlMMError(
+                f"schedule '{name}': bucket must be 0, or a positive number of batches for "
+                f"{', '.join(BUCKETED_STAGES)}; got {schedule.bucket}"
+            )
     if cfg.text_encoder.precision not in ("float32", "float16"):
-        raise ControlMMError(f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}")
+        raise ControlMMError(
+            f"text encoder precision must be float32 or float16; got {cfg.text_encoder.precision}"
+        )
     checks = [
         (tr.nb_code == tok.nb_code == res.nb_code, "nb_code must match across tokenizer and transformers"),
-        (tr.code_dim == tok.code_dim == res.code_dim, "code_dim must match across tokenizer and transformers"),
+        (
+            tr.code_dim == tok.code_dim == res.code_dim,
+            "code_dim must match across tokenizer and transformers",
+        ),
         (res.num_quantizers == tok.num_quantizers, "residual num_quantizers must equal the tokenizer's"),
         (tok.num_quantizers >= 3, "the residual transformer needs at least 3 quantizers"),
-        (tr.text_dim == res.text_dim == cfg.text_encoder.dim,
-         f"text_dim must equal the text encoder's size ({cfg.text_encoder.dim})"),
+        (
+            tr.text_dim == res.text_dim == cfg.text_encoder.dim,
+            f"text_dim must equal the text encoder's size ({cfg.text_encoder.dim})",
+        ),
         (tr.latent_dim % tr.num_heads == 0, "transformer latent_dim must be divisible by num_heads"),
-        (min(t.relative_positions for t in transformers) >= 0,
-         "relative_positions must be 0 (off) or a positive number of tokens"),
+        (
+            min(t.relative_positions for t in transformers) >= 0,
+            "relative_positions must be 0 (off) or a positive number of tokens",
+        ),
         (res.latent_dim % res.num_heads == 0, "residual latent_dim must be divisible by num_heads"),
         (cfg.storage_dtype in ("float32", "float16"), "storage_dtype must be float32 or float16"),
     ]
@@ -352,16 +387,48 @@ def check_consistent(cfg: ModelConfig) -> None:
 def _paper() -> ModelConfig:
     schedules = {
         # 50 epochs of 64-frame windows at batch 256 is about 300k iterations (milestones 150k/250k).
-        "tokenizer": StageSchedule(iters=300_000, batch_size=256, lr=2e-4, weight_decay=0.0, warmup=2000,
-                                   milestones=(150_000, 250_000), gamma=0.05, checkpoint_every=2000),
+        "tokenizer": StageSchedule(
+            iters=300_000,
+            batch_size=256,
+            lr=2e-4,
+            weight_decay=0.0,
+            warmup=2000,
+            milestones=(150_000, 250_000),
+            gamma=0.05,
+            checkpoint_every=2000,
+        ),
         # 500 epochs of HumanML3D at batch 64 is about 200k iterations.
-        "transformer": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
-                                     milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
-        "residual": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
-                                  milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
+        "transformer": StageSchedule(
+            iters=200_000,
+            batch_size=64,
+            lr=2e-4,
+            weight_decay=1e-5,
+            warmup=2000,
+            milestones=(50_000,),
+            gamma=0.1,
+            checkpoint_every=2000,
+        ),
+        "residual": StageSchedule(
+            iters=200_000,
+            batch_size=64,
+            lr=2e-4,
+            weight_decay=1e-5,
+            warmup=2000,
+            milestones=(50_000,),
+            gamma=0.1,
+            checkpoint_every=2000,
+        ),
         # MaskControl train_ctrlnet.py: AdamW 2e-4, betas (0.9, 0.99), wd 1e-5, warm-up 2000, x0.1 at 50k.
-        "control": StageSchedule(iters=200_000, batch_size=64, lr=2e-4, weight_decay=1e-5, warmup=2000,
-                                 milestones=(50_000,), gamma=0.1, checkpoint_every=2000),
+        "control": StageSchedule(
+            iters=200_000,
+            batch_size=64,
+            lr=2e-4,
+            weight_decay=1e-5,
+            warmup=2000,
+            milestones=(50_000,),
+            gamma=0.1,
+            checkpoint_every=2000,
+        ),
     }
     return ModelConfig(
         preset="paper",
@@ -376,49 +443,120 @@ def _paper() -> ModelConfig:
 
 def _demo() -> ModelConfig:
     tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
-    common = dict(nb_code=512, code_dim=128, latent_dim=256, ff_size=512, num_heads=4, dropout=0.1,
-                  text_dim=384, max_len=64)
+    common = dict(
+        nb_code=512,
+        code_dim=128,
+        latent_dim=256,
+        ff_size=512,
+        num_heads=4,
+        dropout=0.1,
+        text_dim=384,
+        max_len=64,
+    )
     # Measured on the corpus when the shipped default was trained (fp32, 2 threads on 2 cores, one stage
     # at a time): tokenizer 6.9 it/s (8.6 min), transformer 3.2 it/s (34.5 min), residual 3.6 it/s
     # (19.0 min), token-state transformer 2.6 it/s (20.1 min), control 1.8 it/s (14.5 min): 97 min in
     # all (docs/model-card.md). Both masked transformers use a relative position bias of 16 tokens
     # (docs/BENCHMARKS.md, "Relative positions"); the residual transformer does not.
     schedules = {
-        "tokenizer": StageSchedule(iters=3500, batch_size=64, lr=1e-3, warmup=200, milestones=(2300,),
-                                   gamma=0.2, checkpoint_every=250),
-        "transformer": StageSchedule(iters=6400, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
-                                     milestones=(5120,), gamma=0.2, checkpoint_every=250, bucket=16),
-        "residual": StageSchedule(iters=4000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=100,
-                                  milestones=(3200,), gamma=0.2, checkpoint_every=250, bucket=16),
+        "tokenizer": StageSchedule(
+            iters=3500,
+            batch_size=64,
+            lr=1e-3,
+            warmup=200,
+            milestones=(2300,),
+            gamma=0.2,
+            checkpoint_every=250,
+        ),
+        "transformer": StageSchedule(
+            iters=6400,
+            batch_size=64,
+            lr=6e-4,
+            weight_decay=1e-5,
+            warmup=200,
+            milestones=(5120,),
+            gamma=0.2,
+            checkpoint_every=250,
+            bucket=16,
+        ),
+        "residual": StageSchedule(
+            iters=4000,
+            batch_size=64,
+            lr=6e-4,
+            weight_decay=1e-5,
+            warmup=100,
+            milestones=(3200,),
+            gamma=0.2,
+            checkpoint_every=250,
+            bucket=16,
+        ),
         # The optional token-state transformer (token_view), partly warm-started from the transformer.
-        "token_transformer": StageSchedule(iters=3000, batch_size=64, lr=6e-4, weight_decay=1e-5, warmup=200,
-                                           milestones=(2400,), gamma=0.2, checkpoint_every=250, bucket=16),
+        "token_transformer": StageSchedule(
+            iters=3000,
+            batch_size=64,
+            lr=6e-4,
+            weight_decay=1e-5,
+            warmup=200,
+            milestones=(2400,),
+            gamma=0.2,
+            checkpoint_every=250,
+            bucket=16,
+        ),
         # Sized from the measured control-stage throughput (docs/models.md, "Motion control model").
-        "control": StageSchedule(iters=1500, batch_size=32, lr=3e-4, weight_decay=1e-5, warmup=100,
-                                 milestones=(1200,), gamma=0.2, checkpoint_every=100),
+        "control": StageSchedule(
+            iters=1500,
+            batch_size=32,
+            lr=3e-4,
+            weight_decay=1e-5,
+            warmup=100,
+            milestones=(1200,),
+            gamma=0.2,
+            checkpoint_every=100,
+        ),
     }
     return ModelConfig(
         preset="demo",
         tokenizer=tok,
-        transformer=TransformerConfig(num_layers=4, cond_drop_prob=0.1, text_norm=True, relative_positions=16,
-                                      **common),
+        transformer=TransformerConfig(
+            num_layers=4, cond_drop_prob=0.1, text_norm=True, relative_positions=16, **common
+        ),
         residual=ResidualConfig(num_layers=3, num_quantizers=6, cond_drop_prob=0.2, text_norm=True, **common),
         text_encoder=TextEncoderConfig(name="minilm"),
         storage_dtype="float16",
         schedules=schedules,
-        token_view=TokenViewConfig(TransformerConfig(num_layers=3, cond_drop_prob=0.1, text_norm=True,
-                                                     relative_positions=16, **common),
-                                   tokens=32, weight=0.5),
+        token_view=TokenViewConfig(
+            TransformerConfig(
+                num_layers=3, cond_drop_prob=0.1, text_norm=True, relative_positions=16, **common
+            ),
+            tokens=32,
+            weight=0.5,
+        ),
     )
 
 
 def _tiny() -> ModelConfig:
     tok = TokenizerConfig(width=32, code_dim=16, nb_code=32, num_quantizers=3, resnet_dropout=0.0)
-    common = dict(nb_code=32, code_dim=16, latent_dim=32, ff_size=64, num_layers=2, num_heads=2,
-                  dropout=0.0, text_dim=384, max_len=64)
+    common = dict(
+        nb_code=32,
+        code_dim=16,
+        latent_dim=32,
+        ff_size=64,
+        num_layers=2,
+        num_heads=2,
+        dropout=0.0,
+        text_dim=384,
+        max_len=64,
+    )
     schedules = {
-        name: StageSchedule(iters=40, batch_size=8, lr=2e-3, warmup=5, checkpoint_every=10, window=32,
-                            bucket=2 if name in BUCKETED_STAGES else 0)
+        name: StageSchedule(
+            iters=40,
+            batch_size=8,
+            lr=2e-3,
+            warmup=5,
+            checkpoint_every=10,
+            window=32,
+            bucket=2 if name in BUCKETED_STAGES else 0,
+        )
         for name in ("tokenizer", "transformer", "token_transformer", "residual", "control")
     }
     return ModelConfig(

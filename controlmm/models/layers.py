@@ -32,7 +32,9 @@ class PositionalEncoding(nn.Module):
         super().__init__()
         self.dropout = nn.Dropout(p=dropout)
         position = torch.arange(max_len, dtype=torch.float32)[:, None]
-        div_term = torch.exp(torch.arange(0, d_model, 2, dtype=torch.float32) * (-math.log(10000.0) / d_model))
+        div_term = torch.exp(
+            torch.arange(0, d_model, 2, dtype=torch.float32) * (-math.log(10000.0) / d_model)
+        )
         pe = torch.zeros(max_len, d_model)
         pe[:, 0::2] = torch.sin(position * div_term)
         pe[:, 1::2] = torch.cos(position * div_term)
@@ -42,7 +44,9 @@ class PositionalEncoding(nn.Module):
         if x.shape[0] > self.pe.shape[0]:
             from controlmm.errors import ControlMMError
 
-            raise ControlMMError(f"sequence of {x.shape[0]} tokens exceeds the model's max_len {self.pe.shape[0]}")
+            raise ControlMMError(
+                f"sequence of {x.shape[0]} tokens exceeds the model's max_len {self.pe.shape[0]}"
+            )
         return self.dropout(x + self.pe[: x.shape[0]])
 
 
@@ -60,11 +64,13 @@ class OutputProcess(nn.Module):
         return self.poseFinal(hidden).permute(1, 0, 2)
 
 
-def transformer_trunk(latent_dim: int, num_heads: int, ff_size: int, dropout: float,
-                      num_layers: int) -> nn.TransformerEncoder:
+def transformer_trunk(
+    latent_dim: int, num_heads: int, ff_size: int, dropout: float, num_layers: int
+) -> nn.TransformerEncoder:
     """``num_layers`` post-LN GELU ``TransformerEncoderLayer``s, sequence-first, no final norm."""
-    layer = nn.TransformerEncoderLayer(d_model=latent_dim, nhead=num_heads, dim_feedforward=ff_size,
-                                       dropout=dropout, activation="gelu")
+    layer = nn.TransformerEncoderLayer(
+        d_model=latent_dim, nhead=num_heads, dim_feedforward=ff_size, dropout=dropout, activation="gelu"
+    )
     return nn.TransformerEncoder(layer, num_layers=num_layers, enable_nested_tensor=False)
 
 
@@ -102,15 +108,21 @@ def gumbel_noise(like: torch.Tensor, generator: torch.Generator | None = None) -
     return -torch.log((-torch.log(u.clamp(min=1e-20))).clamp(min=1e-20))
 
 
-def apply_layer(layer: nn.Module, x: torch.Tensor, padding_mask: torch.Tensor,
-                attn_mask: torch.Tensor | None = None) -> torch.Tensor:
+def apply_layer(
+    layer: nn.Module, x: torch.Tensor, padding_mask: torch.Tensor, attn_mask: torch.Tensor | None = None
+) -> torch.Tensor:
     """One encoder layer on (S, B, D) ``x``: with the key-padding mask (B, S), or with ``attn_mask``
     (B * heads, S, S), an additive mask that already holds the padding."""
     return layer(x, src_key_padding_mask=padding_mask) if attn_mask is None else layer(x, src_mask=attn_mask)
 
 
-def run_layers(layers: nn.ModuleList, x: torch.Tensor, padding_mask: torch.Tensor,
-               hook=None, attn_mask: torch.Tensor | None = None) -> torch.Tensor:
+def run_layers(
+    layers: nn.ModuleList,
+    x: torch.Tensor,
+    padding_mask: torch.Tensor,
+    hook=None,
+    attn_mask: torch.Tensor | None = None,
+) -> torch.Tensor:
     """Run encoder layers one by one on (S, B, D) ``x``.
 
     ``padding_mask`` (B, S) is True at padded positions. ``hook(i, x) -> x``, when given, is called

@@ -57,8 +57,9 @@ class MaskTransformer(nn.Module):
         self.mask_id, self.pad_id = cfg.mask_id, cfg.pad_id
         self.input_process = InputProcess(cfg.code_dim, cfg.latent_dim)
         self.position_enc = PositionalEncoding(cfg.latent_dim, cfg.dropout, cfg.max_len)
-        self.seqTransEncoder = transformer_trunk(cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout,
-                                                 cfg.num_layers)
+        self.seqTransEncoder = transformer_trunk(
+            cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout, cfg.num_layers
+        )
         self.text_norm = nn.LayerNorm(cfg.text_dim) if cfg.text_norm else nn.Identity()
         self.cond_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
         if cfg.pooled_row:
@@ -67,8 +68,9 @@ class MaskTransformer(nn.Module):
         self.output_process = OutputProcess(cfg.nb_code, cfg.latent_dim)
         self.token_emb = nn.Embedding(cfg.nb_code + 2, cfg.code_dim)
         self.apply(init_weights)
-        self.relative_bias = (RelativePositionBias(cfg.num_heads, cfg.relative_positions)
-                              if cfg.relative_positions else None)  # zero table: starts as MoMask
+        self.relative_bias = (
+            RelativePositionBias(cfg.num_heads, cfg.relative_positions) if cfg.relative_positions else None
+        )  # zero table: starts as MoMask
 
     # -- pieces -----------------------------------------------------------------------------------
     def mask_cond(self, cond: torch.Tensor, force_mask: bool = False) -> torch.Tensor:
@@ -86,8 +88,9 @@ class MaskTransformer(nn.Module):
         """Ids (B, N) -> (B, N, code_dim); soft embeddings (B, N, code_dim) pass through."""
         return self.token_emb(tokens) if tokens.dtype in (torch.long, torch.int32, torch.int64) else tokens
 
-    def embed(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
-              force_mask: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    def embed(
+        self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor, force_mask: bool = False
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """h_0 = [condition rows ; PE(poseEmbedding(tokens))] (C+N, B, D) and its key-padding mask (B, C+N).
 
         Args:
@@ -119,8 +122,9 @@ class MaskTransformer(nn.Module):
             return None
         return self.relative_bias.attention_mask(mask, num_tokens, dtype)
 
-    def run_layers(self, h: torch.Tensor, mask: torch.Tensor, hook=None, num_tokens: int | None = None
-                   ) -> torch.Tensor:
+    def run_layers(
+        self, h: torch.Tensor, mask: torch.Tensor, hook=None, num_tokens: int | None = None
+    ) -> torch.Tensor:
         """The encoder layers on (C+N, B, D); ``hook(i, h) -> h`` runs after layer i. ``num_tokens`` = N
         (the motion rows) is needed with the relative position bias."""
         if self.relative_bias is not None and num_tokens is None:
@@ -131,29 +135,38 @@ class MaskTransformer(nn.Module):
     def head(self, h: torch.Tensor, num_tokens: int) -> torch.Tensor:
         """Final hidden states (C+N, B, D) -> logits (B, N, nb_code) of the last ``num_tokens`` = N rows
         (the condition rows dropped)."""
-        return self.output_process(h[h.shape[0] - num_tokens:])
+        return self.output_process(h[h.shape[0] - num_tokens :])
 
     # -- passes -----------------------------------------------------------------------------------
-    def forward(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
-                force_mask: bool = False) -> torch.Tensor:
+    def forward(
+        self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor, force_mask: bool = False
+    ) -> torch.Tensor:
         """Logits (B, N, nb_code) for ids or soft embeddings ``tokens``; see :meth:`embed`."""
         h, mask = self.embed(tokens, cond, padding_mask, force_mask)
         n = padding_mask.shape[1]
         return self.head(self.run_layers(h, mask, num_tokens=n), n)
 
-    def cfg_logits(self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
-                   scale: float) -> torch.Tensor:
+    def cfg_logits(
+        self, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor, scale: float
+    ) -> torch.Tensor:
         """Classifier-free guidance l_u + scale (l_c - l_u), both passes in one batch; (B, N, nb_code)."""
         if scale == 1.0:
             return self(tokens, cond, padding_mask)
         b = cond.shape[0]
         both = torch.cat([cond, torch.zeros_like(cond)], dim=0)
-        logits = self(torch.cat([tokens, tokens], dim=0), both, torch.cat([padding_mask, padding_mask], dim=0))
+        logits = self(
+            torch.cat([tokens, tokens], dim=0), both, torch.cat([padding_mask, padding_mask], dim=0)
+        )
         cond_l, uncond_l = logits[:b], logits[b:]
         return uncond_l + scale * (cond_l - uncond_l)
 
-    def masked_loss(self, ids: torch.Tensor, cond: torch.Tensor, lengths: torch.Tensor,
-                    generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def masked_loss(
+        self,
+        ids: torch.Tensor,
+        cond: torch.Tensor,
+        lengths: torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """MoMask training objective on base-layer ids (B, N) with token lengths (B,).
 
         Returns (cross-entropy on masked positions, accuracy on masked positions).
@@ -177,8 +190,9 @@ class MaskTransformer(nn.Module):
         return token_loss_and_accuracy(logits, labels, ignore_index=self.mask_id)
 
 
-def token_loss_and_accuracy(logits: torch.Tensor, labels: torch.Tensor,
-                            ignore_index: int) -> tuple[torch.Tensor, torch.Tensor]:
+def token_loss_and_accuracy(
+    logits: torch.Tensor, labels: torch.Tensor, ignore_index: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Cross-entropy of logits (B, N, K) against labels (B, N) ignoring ``ignore_index``; and accuracy."""
     loss = F.cross_entropy(logits.permute(0, 2, 1), labels, ignore_index=ignore_index)
     keep = labels != ignore_index

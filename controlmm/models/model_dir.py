@@ -63,7 +63,9 @@ def train_command(part: str) -> str:
     return part.replace("_", "-")
 
 
-def register_part(name: str, build: Callable[[ModelConfig], nn.Module], requires: tuple[str, ...] = ()) -> None:
+def register_part(
+    name: str, build: Callable[[ModelConfig], nn.Module], requires: tuple[str, ...] = ()
+) -> None:
     """Make a part loadable from model directories (``<name>.pt``)."""
     PARTS[name] = PartSpec(name, build, requires)
 
@@ -84,7 +86,9 @@ def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
     from controlmm.models.mask_transformer import MaskTransformer
 
     if cfg.token_view is None:
-        raise ControlMMError("the model configuration has no token_view (the token-state transformer's config)")
+        raise ControlMMError(
+            "the model configuration has no token_view (the token-state transformer's config)"
+        )
     return MaskTransformer(cfg.token_view.transformer)
 
 
@@ -116,8 +120,10 @@ def read_manifest(model_dir: str | Path) -> dict[str, Any]:
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise InputFileError(f"'{path}' is not a controlmm model description (format '{FORMAT}')")
     if manifest.get("format_version") != FORMAT_VERSION:
-        raise InputFileError(f"'{path}' has format version {manifest.get('format_version')}; "
-                             f"this controlmm reads version {FORMAT_VERSION}")
+        raise InputFileError(
+            f"'{path}' has format version {manifest.get('format_version')}; "
+            f"this controlmm reads version {FORMAT_VERSION}"
+        )
     return manifest
 
 
@@ -131,8 +137,11 @@ def new_manifest(config: ModelConfig, normalization: dict[str, Any]) -> dict[str
         "format_version": FORMAT_VERSION,
         "preset": config.preset,
         "config": config.to_dict(),
-        "text_encoder": {"name": config.text_encoder.name, "dim": config.text_encoder.dim,
-                         "weights": config.text_encoder.weights},
+        "text_encoder": {
+            "name": config.text_encoder.name,
+            "dim": config.text_encoder.dim,
+            "weights": config.text_encoder.weights,
+        },
         "normalization": normalization,
         "parts": {},
         "training": {},
@@ -161,28 +170,43 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def save_part(model_dir: Path, name: str, module: nn.Module, dtype: str,
-              state_dict: dict[str, torch.Tensor] | None = None) -> dict[str, Any]:
+def save_part(
+    model_dir: Path,
+    name: str,
+    module: nn.Module,
+    dtype: str,
+    state_dict: dict[str, torch.Tensor] | None = None,
+) -> dict[str, Any]:
     """Write ``<name>.pt`` atomically; return its manifest entry (file, dtype, params, sha256)."""
     state = module.state_dict() if state_dict is None else state_dict
     target = torch.float16 if dtype == "float16" else torch.float32
-    state = {k: (v.detach().to("cpu", target) if v.is_floating_point() else v.detach().cpu()).contiguous()
-             for k, v in state.items()}
+    state = {
+        k: (v.detach().to("cpu", target) if v.is_floating_point() else v.detach().cpu()).contiguous()
+        for k, v in state.items()
+    }
     path = model_dir / f"{name}.pt"
     with atomic_path(path) as tmp:
         torch.save({"format": PART_FORMAT, "part": name, "dtype": dtype, "state_dict": state}, tmp)
-    return {"file": path.name, "dtype": dtype,
-            "parameters": int(sum(p.numel() for p in module.parameters())),
-            "bytes": path.stat().st_size, "sha256": sha256_file(path),
-            "saved": time.strftime("%Y-%m-%dT%H:%M:%S")}
+    return {
+        "file": path.name,
+        "dtype": dtype,
+        "parameters": int(sum(p.numel() for p in module.parameters())),
+        "bytes": path.stat().st_size,
+        "sha256": sha256_file(path),
+        "saved": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
 
 
-def load_part_state(model_dir: Path, name: str, entry: dict[str, Any] | None = None) -> dict[str, torch.Tensor]:
+def load_part_state(
+    model_dir: Path, name: str, entry: dict[str, Any] | None = None
+) -> dict[str, torch.Tensor]:
     """The float32 state dict of ``<name>.pt``; one-line errors for missing or corrupt files."""
     path = model_dir / f"{name}.pt"
     if not path.is_file():
-        raise InputFileError(f"model directory '{model_dir}' has no {name}.pt "
-                             f"(train it with: controlmm train {train_command(name)} --out {model_dir})")
+        raise InputFileError(
+            f"model directory '{model_dir}' has no {name}.pt "
+            f"(train it with: controlmm train {train_command(name)} --out {model_dir})"
+        )
     if entry and entry.get("sha256") and sha256_file(path) != entry["sha256"]:
         raise InputFileError(f"checkpoint '{path}' is corrupt: its checksum differs from model.json")
     try:
@@ -244,8 +268,10 @@ class MotionModel:
     def require(self, name: str) -> nn.Module:
         if name not in self.parts:
             where = self.directory or "this model"
-            raise ControlMMError(f"model directory '{where}' has no trained {name} "
-                                 f"(train it with: controlmm train {train_command(name)} --out {where})")
+            raise ControlMMError(
+                f"model directory '{where}' has no trained {name} "
+                f"(train it with: controlmm train {train_command(name)} --out {where})"
+            )
         return self.parts[name]
 
     @property
@@ -254,22 +280,27 @@ class MotionModel:
         if self._text_encoder is None:
             from controlmm.text import load_text_encoder
 
-            self._text_encoder = load_text_encoder(self.config.text_encoder, device=self.device,
-                                                   weights=self.clip_weights)
+            self._text_encoder = load_text_encoder(
+                self.config.text_encoder, device=self.device, weights=self.clip_weights
+            )
         return self._text_encoder
 
     def encode_text(self, texts: list[str]) -> torch.Tensor:
         """(B,) texts -> (B, text_dim) condition vectors on the model's device; (B, L, text_dim) token
         states when the model was trained on them (``config.text_encoder.tokens``)."""
         tokens = self.config.text_encoder.tokens
-        vectors = self.text_encoder.encode_tokens(texts, tokens) if tokens else self.text_encoder.encode(texts)
+        vectors = (
+            self.text_encoder.encode_tokens(texts, tokens) if tokens else self.text_encoder.encode(texts)
+        )
         return self._checked_condition(vectors)
 
     def _checked_condition(self, vectors: torch.Tensor) -> torch.Tensor:
         expected = self.config.transformer.text_dim
         if vectors.shape[-1] != expected:
-            raise ControlMMError(f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "
-                                 f"the model expects {expected}-d (wrong CLIP weights?)")
+            raise ControlMMError(
+                f"text encoder '{self.config.text_encoder.name}' gives {vectors.shape[-1]}-d vectors; "
+                f"the model expects {expected}-d (wrong CLIP weights?)"
+            )
         return vectors.to(self.device)
 
     def encode_token_states(self, texts: list[str]) -> torch.Tensor:
@@ -289,7 +320,7 @@ class MotionModel:
         vectors, states = both(texts, self.config.token_view.tokens)
         return self._checked_condition(vectors), states.to(self.device)
 
-    def to(self, device: str | torch.device) -> "MotionModel":
+    def to(self, device: str | torch.device) -> MotionModel:
         self.device = torch.device(device)
         for module in self.parts.values():
             module.to(self.device)
@@ -308,9 +339,13 @@ def resolve_device(device: str | torch.device | None) -> torch.device:
     return device
 
 
-def load_model(model_dir: str | Path | None = None, device: str | torch.device | None = "cpu",
-               parts: tuple[str, ...] | None = None, clip_weights: str | None = None,
-               skip: tuple[str, ...] = ()) -> MotionModel:
+def load_model(
+    model_dir: str | Path | None = None,
+    device: str | torch.device | None = "cpu",
+    parts: tuple[str, ...] | None = None,
+    clip_weights: str | None = None,
+    skip: tuple[str, ...] = (),
+) -> MotionModel:
     """Load a model directory (``None``: the embedded default, ``controlmm.assets.default_model_dir()``).
 
     Args:
@@ -325,8 +360,10 @@ def load_model(model_dir: str | Path | None = None, device: str | torch.device |
 
         model_dir = default_model_dir()
         if not (Path(model_dir) / "model.json").is_file():
-            raise InputFileError(f"no embedded default model at '{model_dir}'; train one with "
-                                 "'controlmm train tokenizer|transformer|residual --out DIR' and pass --model DIR")
+            raise InputFileError(
+                f"no embedded default model at '{model_dir}'; train one with "
+                "'controlmm train tokenizer|transformer|residual --out DIR' and pass --model DIR"
+            )
     model_dir = Path(model_dir)
     manifest = read_manifest(model_dir)
     config = ModelConfig.from_dict(manifest["config"])
@@ -346,9 +383,17 @@ def load_model(model_dir: str | Path | None = None, device: str | torch.device |
             trained_on = entry.get("trained_on", {}).get(dep)
             current = listed.get(dep, {}).get("sha256")
             if trained_on and current and trained_on != current:
-                raise InputFileError(f"'{model_dir / (name + '.pt')}' was trained on a different {dep}.pt; "
-                                     f"retrain it (controlmm train {name} --out {model_dir} --force)")
+                raise InputFileError(
+                    f"'{model_dir / (name + '.pt')}' was trained on a different {dep}.pt; "
+                    f"retrain it (controlmm train {name} --out {model_dir} --force)"
+                )
         loaded[name] = module.eval().requires_grad_(False)  # inference: gradients only reach inputs
-    model = MotionModel(config=config, normalizer=normalizer, parts=loaded, manifest=manifest,
-                        directory=model_dir, clip_weights=clip_weights)
+    model = MotionModel(
+        config=config,
+        normalizer=normalizer,
+        parts=loaded,
+        manifest=manifest,
+        directory=model_dir,
+        clip_weights=clip_weights,
+    )
     return model.to(resolve_device(device))

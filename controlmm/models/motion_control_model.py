@@ -47,15 +47,23 @@ class MotionControlModel(nn.Module):
         super().__init__()
         tr, tok, ctrl = cfg.transformer, cfg.tokenizer, cfg.control
         self.joint_ids = ctrl.joint_ids
-        self.seqTransEncoder_control = transformer_trunk(tr.latent_dim, tr.num_heads, tr.ff_size, tr.dropout,
-                                                         tr.num_layers)
-        self.encoder_control = Encoder(ctrl.channels, tr.latent_dim, tok.width, down_t=tok.down_t,
-                                       stride_t=tok.stride_t, depth=tok.depth, growth=tok.dilation_growth_rate,
-                                       dropout=ctrl.encoder_dropout)
+        self.seqTransEncoder_control = transformer_trunk(
+            tr.latent_dim, tr.num_heads, tr.ff_size, tr.dropout, tr.num_layers
+        )
+        self.encoder_control = Encoder(
+            ctrl.channels,
+            tr.latent_dim,
+            tok.width,
+            down_t=tok.down_t,
+            stride_t=tok.stride_t,
+            depth=tok.depth,
+            growth=tok.dilation_growth_rate,
+            dropout=ctrl.encoder_dropout,
+        )
         self.first_zero_linear = zero_linear(tr.latent_dim)
         self.mid_zero_linear = nn.ModuleList(zero_linear(tr.latent_dim) for _ in range(tr.num_layers))
 
-    def init_from_base(self, base: MaskTransformer) -> "MotionControlModel":
+    def init_from_base(self, base: MaskTransformer) -> MotionControlModel:
         """Copy the base encoder layers into the control branch (done once, before training)."""
         self.seqTransEncoder_control.load_state_dict(copy.deepcopy(base.seqTransEncoder.state_dict()))
         return self
@@ -64,8 +72,15 @@ class MotionControlModel(nn.Module):
         """(B, C, 4N) control input -> (N, B, D) zero-linear control tokens."""
         return self.first_zero_linear(self.encoder_control(control_input).permute(2, 0, 1))
 
-    def forward(self, base: MaskTransformer, tokens: torch.Tensor, cond: torch.Tensor, padding_mask: torch.Tensor,
-                control_input: torch.Tensor, force_mask: bool = False) -> torch.Tensor:
+    def forward(
+        self,
+        base: MaskTransformer,
+        tokens: torch.Tensor,
+        cond: torch.Tensor,
+        padding_mask: torch.Tensor,
+        control_input: torch.Tensor,
+        force_mask: bool = False,
+    ) -> torch.Tensor:
         """Logits (B, N, K) of the base transformer steered by the control branch.
 
         Args:
@@ -77,7 +92,7 @@ class MotionControlModel(nn.Module):
         """
         h, mask = base.embed(tokens, cond, padding_mask, force_mask)
         c = self.control_tokens(control_input)
-        h = h + torch.cat([torch.zeros_like(h[:h.shape[0] - c.shape[0]]), c], dim=0)  # not on condition rows
+        h = h + torch.cat([torch.zeros_like(h[: h.shape[0] - c.shape[0]]), c], dim=0)  # not on condition rows
         residuals = []
         g = h
         attn = base.attention_mask(mask, c.shape[0], h.dtype)  # the base's relative position bias, if any
@@ -87,14 +102,26 @@ class MotionControlModel(nn.Module):
         out = run_layers(base.seqTransEncoder.layers, h, mask, lambda i, x: x + residuals[i], attn)
         return base.head(out, c.shape[0])
 
-    def cfg_logits(self, base: MaskTransformer, tokens: torch.Tensor, cond: torch.Tensor,
-                   padding_mask: torch.Tensor, control_input: torch.Tensor, scale: float) -> torch.Tensor:
+    def cfg_logits(
+        self,
+        base: MaskTransformer,
+        tokens: torch.Tensor,
+        cond: torch.Tensor,
+        padding_mask: torch.Tensor,
+        control_input: torch.Tensor,
+        scale: float,
+    ) -> torch.Tensor:
         """Classifier-free guidance l_u + s (l_c - l_u); both passes see the control (official)."""
         if scale == 1.0:
             return self(base, tokens, cond, padding_mask, control_input)
         b = cond.shape[0]
-        logits = self(base, torch.cat([tokens, tokens]), torch.cat([cond, torch.zeros_like(cond)]),
-                      torch.cat([padding_mask, padding_mask]), torch.cat([control_input, control_input]))
+        logits = self(
+            base,
+            torch.cat([tokens, tokens]),
+            torch.cat([cond, torch.zeros_like(cond)]),
+            torch.cat([padding_mask, padding_mask]),
+            torch.cat([control_input, control_input]),
+        )
         cond_l, uncond_l = logits[:b], logits[b:]
         return uncond_l + scale * (cond_l - uncond_l)
 
@@ -106,8 +133,9 @@ def zero_linear(dim: int) -> nn.Linear:
     return layer
 
 
-def control_input(targets: torch.Tensor, mask: torch.Tensor, current: torch.Tensor,
-                  joint_ids: tuple[int, ...]) -> torch.Tensor:
+def control_input(
+    targets: torch.Tensor, mask: torch.Tensor, current: torch.Tensor, joint_ids: tuple[int, ...]
+) -> torch.Tensor:
     """The control branch's input (B, 6 |J|, T) (reference §4.2).
 
     Args:

@@ -72,7 +72,7 @@ class QuantizeEMAReset(nn.Module):
     def quantize(self, x: torch.Tensor, temperature: float = 0.0) -> torch.Tensor:
         """Code index of each row of x (n, C): nearest code (eval) or Gumbel choice (training)."""
         code = self.codebook
-        distance = (x.pow(2).sum(-1, keepdim=True) - 2.0 * x @ code.t() + code.pow(2).sum(-1)[None, :])
+        distance = x.pow(2).sum(-1, keepdim=True) - 2.0 * x @ code.t() + code.pow(2).sum(-1)[None, :]
         logits = -distance
         if self.training and temperature > 0:
             logits = logits / temperature + gumbel_noise(logits)
@@ -123,8 +123,9 @@ def _perplexity(code_count: torch.Tensor) -> torch.Tensor:
 class ResidualVQ(nn.Module):
     """``num_quantizers`` :class:`QuantizeEMAReset` layers applied to successive residuals."""
 
-    def __init__(self, num_quantizers: int, nb_code: int, code_dim: int, mu: float,
-                 quantize_dropout_prob: float) -> None:
+    def __init__(
+        self, num_quantizers: int, nb_code: int, code_dim: int, mu: float, quantize_dropout_prob: float
+    ) -> None:
         super().__init__()
         self.num_quantizers = num_quantizers
         self.quantize_dropout_prob = quantize_dropout_prob
@@ -174,8 +175,12 @@ class ResidualVQ(nn.Module):
             indices.append(idx)
             losses.append(loss)
             perplexities.append(perplexity)
-        return (quantized_out, torch.stack(indices, dim=-1), torch.stack(losses).mean(),
-                torch.stack(perplexities).mean())
+        return (
+            quantized_out,
+            torch.stack(indices, dim=-1),
+            torch.stack(losses).mean(),
+            torch.stack(perplexities).mean(),
+        )
 
     @torch.no_grad()
     def quantize(self, x: torch.Tensor) -> torch.Tensor:
@@ -186,7 +191,9 @@ class ResidualVQ(nn.Module):
             b, c, t = residual.shape
             flat = residual.permute(0, 2, 1).reshape(b * t, c)
             code = layer.codebook
-            distance = (flat.pow(2).sum(-1, keepdim=True) - 2.0 * flat @ code.t() + code.pow(2).sum(-1)[None, :])
+            distance = (
+                flat.pow(2).sum(-1, keepdim=True) - 2.0 * flat @ code.t() + code.pow(2).sum(-1)[None, :]
+            )
             idx = distance.argmin(dim=-1)
             residual = residual - layer.dequantize(idx).view(b, t, c).permute(0, 2, 1)
             indices.append(idx.view(b, t))

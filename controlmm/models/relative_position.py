@@ -36,10 +36,14 @@ class RelativePositionBias(nn.Module):
         b, s = padding_mask.shape
         c = s - num_tokens
         pos = torch.arange(num_tokens, device=padding_mask.device)
-        offset = (pos[None, :] - pos[:, None]).clamp(-self.max_distance, self.max_distance) + self.max_distance
+        offset = (pos[None, :] - pos[:, None]).clamp(
+            -self.max_distance, self.max_distance
+        ) + self.max_distance
         bias = self.table.to(dtype)[offset].permute(2, 0, 1)  # (H, N, N)
         full = torch.zeros(self.num_heads, s, s, dtype=dtype, device=padding_mask.device)
         full[:, c:, c:] = bias
-        keys = torch.zeros(b, s, dtype=dtype, device=padding_mask.device).masked_fill(padding_mask, float("-inf"))
+        keys = torch.zeros(b, s, dtype=dtype, device=padding_mask.device).masked_fill(
+            padding_mask, float("-inf")
+        )
         mask = full[None] + keys[:, None, None, :]  # (B, H, S, S)
         return mask.reshape(b * self.num_heads, s, s)

@@ -49,8 +49,9 @@ class ResidualTransformer(nn.Module):
         q, k1, d = cfg.num_quantizers, cfg.nb_code + 1, cfg.code_dim
         self.input_process = InputProcess(cfg.code_dim, cfg.latent_dim)
         self.position_enc = PositionalEncoding(cfg.latent_dim, cfg.dropout, cfg.max_len)
-        self.seqTransEncoder = transformer_trunk(cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout,
-                                                 cfg.num_layers)
+        self.seqTransEncoder = transformer_trunk(
+            cfg.latent_dim, cfg.num_heads, cfg.ff_size, cfg.dropout, cfg.num_layers
+        )
         self.quant_emb = nn.Linear(q, cfg.latent_dim)
         self.text_norm = nn.LayerNorm(cfg.text_dim) if cfg.text_norm else nn.Identity()
         self.cond_emb = nn.Linear(cfg.text_dim, cfg.latent_dim)
@@ -82,8 +83,15 @@ class ResidualTransformer(nn.Module):
         emb = self.token_embed_weight
         return sum(F.embedding(ids[..., j], emb[j]) for j in range(q))
 
-    def forward(self, history: torch.Tensor, q: torch.Tensor, cond: torch.Tensor,
-                padding_mask: torch.Tensor, force_mask: bool = False, hook=None) -> torch.Tensor:
+    def forward(
+        self,
+        history: torch.Tensor,
+        q: torch.Tensor,
+        cond: torch.Tensor,
+        padding_mask: torch.Tensor,
+        force_mask: bool = False,
+        hook=None,
+    ) -> torch.Tensor:
         """Logits (B, N, K+1) of layer q.
 
         Args:
@@ -105,20 +113,32 @@ class ResidualTransformer(nn.Module):
         proj = self.output_proj_weight[q - 1]  # (B, K+1, code_dim)
         return torch.einsum("bnc,bkc->bnk", h, proj)
 
-    def cfg_logits(self, history: torch.Tensor, q: int, cond: torch.Tensor, padding_mask: torch.Tensor,
-                   scale: float) -> torch.Tensor:
+    def cfg_logits(
+        self, history: torch.Tensor, q: int, cond: torch.Tensor, padding_mask: torch.Tensor, scale: float
+    ) -> torch.Tensor:
         """Classifier-free-guided logits (B, N, K+1) of layer ``q`` (both passes in one batch)."""
         b = cond.shape[0]
         if scale == 1.0:
-            return self(history, torch.full((b,), q, dtype=torch.long, device=cond.device), cond, padding_mask)
+            return self(
+                history, torch.full((b,), q, dtype=torch.long, device=cond.device), cond, padding_mask
+            )
         qs = torch.full((2 * b,), q, dtype=torch.long, device=cond.device)
-        logits = self(torch.cat([history, history]), qs, torch.cat([cond, torch.zeros_like(cond)]),
-                      torch.cat([padding_mask, padding_mask]))
+        logits = self(
+            torch.cat([history, history]),
+            qs,
+            torch.cat([cond, torch.zeros_like(cond)]),
+            torch.cat([padding_mask, padding_mask]),
+        )
         cond_l, uncond_l = logits[:b], logits[b:]
         return uncond_l + scale * (cond_l - uncond_l)
 
-    def residual_loss(self, ids: torch.Tensor, cond: torch.Tensor, lengths: torch.Tensor,
-                      generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def residual_loss(
+        self,
+        ids: torch.Tensor,
+        cond: torch.Tensor,
+        lengths: torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Training objective on all-layer ids (B, N, Q) with token lengths (B,): (CE, accuracy)."""
         b, n, num_q = ids.shape
         valid = lengths_to_mask(lengths, n)

@@ -55,15 +55,26 @@ class Resnet1D(nn.Module):
 class Encoder(nn.Module):
     """(B, C_in, T) -> (B, C_out, T / stride**down_t); also the control branch's encoder (C_in 6/36)."""
 
-    def __init__(self, input_dim: int, output_dim: int, width: int, down_t: int = 2, stride_t: int = 2,
-                 depth: int = 3, growth: int = 3, dropout: float = 0.2) -> None:
+    def __init__(
+        self,
+        input_dim: int,
+        output_dim: int,
+        width: int,
+        down_t: int = 2,
+        stride_t: int = 2,
+        depth: int = 3,
+        growth: int = 3,
+        dropout: float = 0.2,
+    ) -> None:
         super().__init__()
         blocks: list[nn.Module] = [nn.Conv1d(input_dim, width, 3, 1, 1), nn.ReLU()]
         for _ in range(down_t):
-            blocks.append(nn.Sequential(
-                nn.Conv1d(width, width, stride_t * 2, stride_t, stride_t // 2),
-                Resnet1D(width, depth, growth, dropout),
-            ))
+            blocks.append(
+                nn.Sequential(
+                    nn.Conv1d(width, width, stride_t * 2, stride_t, stride_t // 2),
+                    Resnet1D(width, depth, growth, dropout),
+                )
+            )
         blocks.append(nn.Conv1d(width, output_dim, 3, 1, 1))
         self.model = nn.Sequential(*blocks)
 
@@ -74,16 +85,27 @@ class Encoder(nn.Module):
 class Decoder(nn.Module):
     """(B, code_dim, N) latents -> (B, N * stride**down_t, output_dim) features (time-major output)."""
 
-    def __init__(self, output_dim: int, code_dim: int, width: int, down_t: int = 2, stride_t: int = 2,
-                 depth: int = 3, growth: int = 3, dropout: float = 0.2) -> None:
+    def __init__(
+        self,
+        output_dim: int,
+        code_dim: int,
+        width: int,
+        down_t: int = 2,
+        stride_t: int = 2,
+        depth: int = 3,
+        growth: int = 3,
+        dropout: float = 0.2,
+    ) -> None:
         super().__init__()
         blocks: list[nn.Module] = [nn.Conv1d(code_dim, width, 3, 1, 1), nn.ReLU()]
         for _ in range(down_t):
-            blocks.append(nn.Sequential(
-                Resnet1D(width, depth, growth, dropout),
-                nn.Upsample(scale_factor=stride_t, mode="nearest"),
-                nn.Conv1d(width, width, 3, 1, 1),
-            ))
+            blocks.append(
+                nn.Sequential(
+                    Resnet1D(width, depth, growth, dropout),
+                    nn.Upsample(scale_factor=stride_t, mode="nearest"),
+                    nn.Conv1d(width, width, 3, 1, 1),
+                )
+            )
         blocks += [nn.Conv1d(width, width, 3, 1, 1), nn.ReLU(), nn.Conv1d(width, output_dim, 3, 1, 1)]
         self.model = nn.Sequential(*blocks)
 
@@ -97,12 +119,19 @@ class RVQVAE(nn.Module):
     def __init__(self, cfg: TokenizerConfig) -> None:
         super().__init__()
         self.cfg = cfg
-        conv = dict(width=cfg.width, down_t=cfg.down_t, stride_t=cfg.stride_t, depth=cfg.depth,
-                    growth=cfg.dilation_growth_rate, dropout=cfg.resnet_dropout)
+        conv = dict(
+            width=cfg.width,
+            down_t=cfg.down_t,
+            stride_t=cfg.stride_t,
+            depth=cfg.depth,
+            growth=cfg.dilation_growth_rate,
+            dropout=cfg.resnet_dropout,
+        )
         self.encoder = Encoder(cfg.input_dim, cfg.code_dim, **conv)
         self.decoder = Decoder(cfg.input_dim, cfg.code_dim, **conv)
-        self.quantizer = ResidualVQ(cfg.num_quantizers, cfg.nb_code, cfg.code_dim, cfg.mu,
-                                    cfg.quantize_dropout_prob)
+        self.quantizer = ResidualVQ(
+            cfg.num_quantizers, cfg.nb_code, cfg.code_dim, cfg.mu, cfg.quantize_dropout_prob
+        )
 
     def forward(self, x: torch.Tensor):
         """Training pass on normalised features (B, T, 263), T a multiple of 4.

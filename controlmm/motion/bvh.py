@@ -10,7 +10,6 @@ Leaf joints (feet, head, wrists) carry their parent's rotation and an End Site.
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +87,9 @@ def write_bvh(path: str | Path, joints: np.ndarray, fps: float = 20.0) -> None:
     local[:, 0] = glob[:, 0]
     for j in range(1, NUM_JOINTS):
         local[:, j] = np.einsum("tji,tjk->tik", glob[:, PARENTS[j]], glob[:, j])
-    euler = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_euler(_EULER, degrees=True).reshape(t, NUM_JOINTS, 3)
+    euler = (
+        Rotation.from_matrix(local.reshape(-1, 3, 3)).as_euler(_EULER, degrees=True).reshape(t, NUM_JOINTS, 3)
+    )
     euler = np.unwrap(euler, period=360.0, axis=0)
 
     lines = ["HIERARCHY"]

@@ -62,7 +62,7 @@ class Motion:
         return self.num_frames / self.fps
 
     @classmethod
-    def from_features(cls, features: np.ndarray, text: str = "", **kwargs: Any) -> "Motion":
+    def from_features(cls, features: np.ndarray, text: str = "", **kwargs: Any) -> Motion:
         """Build from HumanML3D features (T, 263); joints are recovered (20 fps)."""
         from controlmm.motion.recover import features_to_joints_np
 
@@ -75,7 +75,7 @@ class Motion:
         return cls(joints=features_to_joints_np(feats), fps=float(FPS), features=feats, text=text, **kwargs)
 
     @classmethod
-    def from_joints(cls, joints: np.ndarray, fps: float = FPS, text: str = "", **kwargs: Any) -> "Motion":
+    def from_joints(cls, joints: np.ndarray, fps: float = FPS, text: str = "", **kwargs: Any) -> Motion:
         """Import any joint sequence (T, 22, 3), metres, Y up, through HumanML3D processing.
 
         The motion is resampled to 20 fps if needed, re-targeted onto the reference
@@ -90,7 +90,7 @@ class Motion:
         feats, _ = joints_to_features(arr)
         return cls.from_features(feats, text=text, **kwargs)
 
-    def with_features(self) -> "Motion":
+    def with_features(self) -> Motion:
         """This motion with features; computes them (HumanML3D processing) when absent."""
         if self.features is not None:
             return self

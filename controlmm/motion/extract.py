@@ -48,9 +48,13 @@ def _across(joints: np.ndarray, quirk: bool) -> np.ndarray:
     if quirk:
         # HumanML3D's inverse_kinematics_np unpacks the face joints as (l_hip, r_hip, ...):
         # across = (L_hip - R_hip) + (R_sh - L_sh). Reproduced as-is.
-        across = (joints[..., l_hip, :] - joints[..., r_hip, :]) + (joints[..., r_sh, :] - joints[..., l_sh, :])
+        across = (joints[..., l_hip, :] - joints[..., r_hip, :]) + (
+            joints[..., r_sh, :] - joints[..., l_sh, :]
+        )
     else:
-        across = (joints[..., r_hip, :] - joints[..., l_hip, :]) + (joints[..., r_sh, :] - joints[..., l_sh, :])
+        across = (joints[..., r_hip, :] - joints[..., l_hip, :]) + (
+            joints[..., r_sh, :] - joints[..., l_sh, :]
+        )
     return across / np.linalg.norm(across, axis=-1, keepdims=True)
 
 
@@ -167,8 +171,15 @@ def joints_to_features(
     local_vel = qrot(np.repeat(r_rot[:-1, None], NUM_JOINTS, axis=1), positions[1:] - positions[:-1])
 
     features = np.concatenate(
-        [rot_vel, velocity[:, [0, 2]], root_y[:-1], ric[:-1], rot[:-1],
-         local_vel.reshape(len(local_vel), -1), contacts],
+        [
+            rot_vel,
+            velocity[:, [0, 2]],
+            root_y[:-1],
+            ric[:-1],
+            rot[:-1],
+            local_vel.reshape(len(local_vel), -1),
+            contacts,
+        ],
         axis=-1,
     )
     return features.astype(np.float32), positions

@@ -48,12 +48,16 @@ def load_motion(path: str | Path) -> Motion:
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001 - corrupt files are user errors
-        raise InputFileError(f"cannot read '{path}': not a valid {suffix} file ({type(exc).__name__})") from exc
+        raise InputFileError(
+            f"cannot read '{path}': not a valid {suffix} file ({type(exc).__name__})"
+        ) from exc
     if suffix == ".npy":
         return _from_array(np.asarray(data), path)
     with data:
         if "joints" not in data.files:
-            raise InputFileError(f"'{path}' has no 'joints' array; found keys: {', '.join(data.files) or 'none'}")
+            raise InputFileError(
+                f"'{path}' has no 'joints' array; found keys: {', '.join(data.files) or 'none'}"
+            )
         metadata = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
         extras = {k: data[k] for k in data.files if k not in _NPZ_KEYS}
         return Motion(

@@ -56,7 +56,7 @@ class Normalizer:
             raise InputFileError("std must be positive in every dimension")
 
     @classmethod
-    def load(cls, mean_path: str | Path, std_path: str | Path) -> "Normalizer":
+    def load(cls, mean_path: str | Path, std_path: str | Path) -> Normalizer:
         """Load from two ``.npy`` files (e.g. HumanML3D ``Mean.npy`` and ``Std.npy``)."""
         arrays = []
         for path in (mean_path, std_path):
@@ -69,7 +69,7 @@ class Normalizer:
                 raise InputFileError(f"cannot read '{path}': {exc}") from exc
         return cls(*arrays)
 
-    def with_feat_bias(self, feat_bias: float = 5.0, times: int = 2) -> "Normalizer":
+    def with_feat_bias(self, feat_bias: float = 5.0, times: int = 2) -> Normalizer:
         """Divide the std of dims 0-3 and 259-262 by ``feat_bias ** times`` (MoMask's quirk)."""
         std = self.std.copy()
         factor = feat_bias**times
@@ -89,6 +89,8 @@ class Normalizer:
 
     def _like(self, x):
         if isinstance(x, torch.Tensor):
-            return (torch.as_tensor(self.mean, dtype=x.dtype, device=x.device),
-                    torch.as_tensor(self.std, dtype=x.dtype, device=x.device))
+            return (
+                torch.as_tensor(self.mean, dtype=x.dtype, device=x.device),
+                torch.as_tensor(self.std, dtype=x.dtype, device=x.device),
+            )
         return self.mean, self.std

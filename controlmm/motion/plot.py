@@ -60,7 +60,12 @@ def _draw_skeleton(ax, pose: np.ndarray, alpha: float = 1.0, lw: float = 2.0) ->
 
 def _draw_top_view(ax, world: np.ndarray, title: str = "top view") -> None:
     ax.plot(world[:, 0, 0], world[:, 0, 1], "k-", lw=2, label="pelvis")
-    for j, name, style in ((10, "left foot", "b."), (11, "right foot", "r."), (20, "left wrist", "c-"), (21, "right wrist", "m-")):
+    for j, name, style in (
+        (10, "left foot", "b."),
+        (11, "right foot", "r."),
+        (20, "left wrist", "c-"),
+        (21, "right wrist", "m-"),
+    ):
         ax.plot(world[:, j, 0], world[:, j, 1], style, ms=2, lw=0.8, alpha=0.7, label=name)
     ax.plot(world[0, 0, 0], world[0, 0, 1], "go", label="start")
     ax.plot(world[-1, 0, 0], world[-1, 0, 1], "rs", label="end")
@@ -136,4 +141,6 @@ def plot_or_animate(motion: Motion, path: str | Path) -> None:
     elif suffix in (".mp4", ".gif"):
         animate_motion(motion, path)
     else:
-        raise ControlMMError(f"unknown output format '{Path(path).suffix or path}'; allowed: .png, .gif, .mp4")
+        raise ControlMMError(
+            f"unknown output format '{Path(path).suffix or path}'; allowed: .png, .gif, .mp4"
+        )

@@ -17,9 +17,7 @@ def _check_features(features: torch.Tensor) -> None:
     if features.ndim < 2 or features.shape[-1] != FEATURE_DIM:
         from controlmm.errors import ShapeError
 
-        raise ShapeError(
-            f"features must have shape (..., T, {FEATURE_DIM}); got {tuple(features.shape)}"
-        )
+        raise ShapeError(f"features must have shape (..., T, {FEATURE_DIM}); got {tuple(features.shape)}")
 
 
 def recover_root(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

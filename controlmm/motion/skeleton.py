@@ -23,10 +23,28 @@ FEATURE_DIM: int = 263
 NUM_JOINTS: int = 22
 
 JOINT_NAMES: tuple[str, ...] = (
-    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
-    "left_collar", "right_collar", "head", "left_shoulder", "right_shoulder",
-    "left_elbow", "right_elbow", "left_wrist", "right_wrist",
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
 )
 """Joint names in HumanML3D (SMPL body) order."""
 
@@ -46,9 +64,27 @@ KINEMATIC_CHAINS: tuple[tuple[int, ...], ...] = (
 
 RAW_OFFSETS: np.ndarray = np.array(
     [
-        [0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, -1, 0], [0, 1, 0],
-        [0, -1, 0], [0, -1, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1], [0, 1, 0], [1, 0, 0],
-        [-1, 0, 0], [0, 0, 1], [0, -1, 0], [0, -1, 0], [0, -1, 0], [0, -1, 0], [0, -1, 0],
+        [0, 0, 0],
+        [1, 0, 0],
+        [-1, 0, 0],
+        [0, 1, 0],
+        [0, -1, 0],
+        [0, -1, 0],
+        [0, 1, 0],
+        [0, -1, 0],
+        [0, -1, 0],
+        [0, 1, 0],
+        [0, 0, 1],
+        [0, 0, 1],
+        [0, 1, 0],
+        [1, 0, 0],
+        [-1, 0, 0],
+        [0, 0, 1],
+        [0, -1, 0],
+        [0, -1, 0],
+        [0, -1, 0],
+        [0, -1, 0],
+        [0, -1, 0],
         [0, -1, 0],
     ],
     dtype=np.float64,
@@ -57,9 +93,28 @@ RAW_OFFSETS: np.ndarray = np.array(
 
 BONE_LENGTHS: np.ndarray = np.array(
     [
-        0.0, 0.1030740, 0.1098835, 0.1315683, 0.3936233, 0.3901882, 0.1431903, 0.4324335,
-        0.4256438, 0.0573647, 0.1433816, 0.1494192, 0.2193602, 0.1374869, 0.1433830,
-        0.1030391, 0.1316141, 0.1229842, 0.2568398, 0.2630920, 0.2660116, 0.2698759,
+        0.0,
+        0.1030740,
+        0.1098835,
+        0.1315683,
+        0.3936233,
+        0.3901882,
+        0.1431903,
+        0.4324335,
+        0.4256438,
+        0.0573647,
+        0.1433816,
+        0.1494192,
+        0.2193602,
+        0.1374869,
+        0.1433830,
+        0.1030391,
+        0.1316141,
+        0.1229842,
+        0.2568398,
+        0.2630920,
+        0.2660116,
+        0.2698759,
     ],
     dtype=np.float64,
 )
@@ -81,7 +136,30 @@ FOOT_JOINTS_RIGHT: tuple[int, int] = (8, 11)
 CONTROL_JOINTS: tuple[int, ...] = (0, 10, 11, 15, 20, 21)
 """Joints of the ControlMM control branch and evaluation: pelvis, feet, head, wrists."""
 
-LEFT_RIGHT_MIRROR: tuple[int, ...] = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20)
+LEFT_RIGHT_MIRROR: tuple[int, ...] = (
+    0,
+    2,
+    1,
+    3,
+    5,
+    4,
+    6,
+    8,
+    7,
+    9,
+    11,
+    10,
+    12,
+    14,
+    13,
+    15,
+    17,
+    16,
+    19,
+    18,
+    21,
+    20,
+)
 """Index permutation that swaps left and right joints (for mirroring)."""
 
 

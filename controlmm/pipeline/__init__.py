@@ -19,5 +19,13 @@ from controlmm.pipeline.feedback import FeedbackConfig, feedback_terms
 from controlmm.pipeline.outputs import write_plan
 from controlmm.pipeline.plan import PlanResult, PlanRound, plan
 
-__all__ = ["DEFAULT_SCENE", "FeedbackConfig", "PlanConfig", "PlanResult", "PlanRound", "feedback_terms", "plan",
-           "write_plan"]
+__all__ = [
+    "DEFAULT_SCENE",
+    "FeedbackConfig",
+    "PlanConfig",
+    "PlanResult",
+    "PlanRound",
+    "feedback_terms",
+    "plan",
+    "write_plan",
+]

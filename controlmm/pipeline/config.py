@@ -62,7 +62,9 @@ class PlanConfig:
         if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
             raise ControlMMError(f"rounds must be a whole number from 0 to 10; got {self.rounds!r}")
         if self.seconds is not None and not (math.isfinite(self.seconds) and 2.0 <= self.seconds <= 9.8):
-            raise ControlMMError(f"seconds must be from 2 to 9.8 (40..196 frames at 20 fps); got {self.seconds}")
+            raise ControlMMError(
+                f"seconds must be from 2 to 9.8 (40..196 frames at 20 fps); got {self.seconds}"
+            )
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ControlMMError(f"seed must be a whole number >= 0; got {self.seed!r}")
         if not (math.isfinite(self.fps) and 10 <= self.fps <= 1000):

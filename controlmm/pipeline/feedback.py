@@ -51,8 +51,14 @@ Tensor = torch.Tensor
 
 FOOT_JOINTS = {"left": ("left_ankle", "left_foot"), "right": ("right_ankle", "right_foot")}
 TRUNK = [0, 3, 6, 9]  # pelvis and spine: where a whole-body (root wrench) failure is smoothed
-SMOOTH_KINDS = ("residual_force", "residual_moment", "torque_limit", "joint_velocity", "joint_limit",
-                "tracking_fall")
+SMOOTH_KINDS = (
+    "residual_force",
+    "residual_moment",
+    "torque_limit",
+    "joint_velocity",
+    "joint_limit",
+    "tracking_fall",
+)
 
 
 @dataclass(frozen=True)
@@ -73,8 +79,9 @@ class FeedbackConfig:
     obstacle_distance_m: float = 0.03
 
 
-def human_frames(frame_start: int, frame_end: int, robot_fps: float, num_frames: int, pad: int,
-                 fps: float = FPS) -> list[int]:
+def human_frames(
+    frame_start: int, frame_end: int, robot_fps: float, num_frames: int, pad: int, fps: float = FPS
+) -> list[int]:
     """Human frames (at ``fps``) covering robot frames ``frame_start..frame_end`` (inclusive) +- pad."""
     lo = math.floor(frame_start * fps / robot_fps) - pad
     hi = math.ceil(frame_end * fps / robot_fps) + pad
@@ -88,10 +95,18 @@ def body_human_joints(body_joints: dict[str, Sequence[str]], body: str | None) -
     return sorted({joint_index(j) for j in body_joints[body]})
 
 
-def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dict[str, Sequence[str]],
-                   transform: HumanToWorld, robot_fps: float, round_index: int, sdf=None,
-                   config: FeedbackConfig = FeedbackConfig(),
-                   history: dict | None = None) -> list[LossTerm]:
+def feedback_terms(
+    failures: Sequence,
+    previous: np.ndarray,
+    *,
+    body_joints: dict[str, Sequence[str]],
+    transform: HumanToWorld,
+    robot_fps: float,
+    round_index: int,
+    sdf=None,
+    config: FeedbackConfig = FeedbackConfig(),
+    history: dict | None = None,
+) -> list[LossTerm]:
     """Loss terms that ask the next round to fix ``failures``.
 
     Args:
@@ -113,11 +128,15 @@ def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dic
     """
     previous = np.asarray(previous, dtype=np.float32)
     num_frames = previous.shape[0]
-    weight = config.weight * config.growth ** round_index
+    weight = config.weight * config.growth**round_index
     groups: dict[tuple[str, str | None, str | None], tuple[set[int], float]] = {}
     for failure in failures:  # one term per (kind, body, other): the union of their frames, the worst depth
         frames = human_frames(failure.frame_start, failure.frame_end, robot_fps, num_frames, config.frame_pad)
-        key = (failure.kind, failure.robot_body, failure.obstacle_geom if failure.kind == "self_collision" else None)
+        key = (
+            failure.kind,
+            failure.robot_body,
+            failure.obstacle_geom if failure.kind == "self_collision" else None,
+        )
         have, depth = groups.get(key, (set(), 0.0))
         groups[key] = (have | set(frames), max(depth, float(failure.depth)))
     terms: list[LossTerm] = []
@@ -131,21 +150,50 @@ def feedback_terms(failures: Sequence, previous: np.ndarray, *, body_joints: dic
             from scenes.losses import BODY_BONES, body_obstacle_loss
 
             bones = [b for b in BODY_BONES if b.child in joints] or list(BODY_BONES)
-            extra = (history.get(("obstacle", body), 0.0) if history is not None else 0.0) + depth + config.margin_m
+            extra = (
+                (history.get(("obstacle", body), 0.0) if history is not None else 0.0)
+                + depth
+                + config.margin_m
+            )
             if history is not None:
                 history[("obstacle", body)] = extra
             distance = config.obstacle_distance_m + extra
-            terms.append(body_obstacle_loss(sdf, transform, safe_distance=distance, bones=bones, frames=frames,
-                                            weight=weight, name=label))
+            terms.append(
+                body_obstacle_loss(
+                    sdf,
+                    transform,
+                    safe_distance=distance,
+                    bones=bones,
+                    frames=frames,
+                    weight=weight,
+                    name=label,
+                )
+            )
         elif kind == "floor_penetration":
-            terms.append(lift_loss(previous, joints, frames, (depth + config.margin_m) / transform.scale,
-                                   weight=weight, name=label))
+            terms.append(
+                lift_loss(
+                    previous,
+                    joints,
+                    frames,
+                    (depth + config.margin_m) / transform.scale,
+                    weight=weight,
+                    name=label,
+                )
+            )
         elif kind == "self_collision":
             others = body_human_joints(body_joints, other)
             pairs = [(a, b) for a in joints for b in others if a != b and PARENTS[a] != b and PARENTS[b] != a]
             if pairs:
-                terms.append(separation_loss(previous, pairs, frames, (depth + config.margin_m) / transform.scale,
-                                             weight=weight, name=f"{label}:{other}"))
+                terms.append(
+                    separation_loss(
+                        previous,
+                        pairs,
+                        frames,
+                        (depth + config.margin_m) / transform.scale,
+                        weight=weight,
+                        name=f"{label}:{other}",
+                    )
+                )
         elif kind == "foot_sliding":
             side = _side(body)
             feet = [joint_index(j) for s in ((side,) if side else ("left", "right")) for j in FOOT_JOINTS[s]]
@@ -171,8 +219,14 @@ def _index(frames: Sequence[int], num_frames: int, device: torch.device) -> Tens
     return torch.tensor([f for f in frames if f < num_frames], dtype=torch.long, device=device)
 
 
-def lift_loss(previous: np.ndarray, joints: Sequence[int], frames: Sequence[int], lift: float,
-              weight: float = 1.0, name: str = "lift") -> LossTerm:
+def lift_loss(
+    previous: np.ndarray,
+    joints: Sequence[int],
+    frames: Sequence[int],
+    lift: float,
+    weight: float = 1.0,
+    name: str = "lift",
+) -> LossTerm:
     """Joints at least ``lift`` (human m) above their height (Y) in ``previous`` (T, 22, 3): mean relu."""
     target = torch.as_tensor(previous[:, :, 1] + lift)  # (T, 22)
     ids = list(joints)
@@ -185,8 +239,14 @@ def lift_loss(previous: np.ndarray, joints: Sequence[int], frames: Sequence[int]
     return LossTerm(name, fn, weight)
 
 
-def separation_loss(previous: np.ndarray, pairs: Sequence[tuple[int, int]], frames: Sequence[int],
-                    extra: float, weight: float = 1.0, name: str = "separation") -> LossTerm:
+def separation_loss(
+    previous: np.ndarray,
+    pairs: Sequence[tuple[int, int]],
+    frames: Sequence[int],
+    extra: float,
+    weight: float = 1.0,
+    name: str = "separation",
+) -> LossTerm:
     """Joint pairs (a, b) at least ``extra`` (human m) further apart than in ``previous``: mean relu."""
     a = [p[0] for p in pairs]
     b = [p[1] for p in pairs]
@@ -200,8 +260,9 @@ def separation_loss(previous: np.ndarray, pairs: Sequence[tuple[int, int]], fram
     return LossTerm(name, fn, weight)
 
 
-def contact_loss(joints: Sequence[int], frames: Sequence[int], weight: float = 1.0,
-                 name: str = "contact") -> LossTerm:
+def contact_loss(
+    joints: Sequence[int], frames: Sequence[int], weight: float = 1.0, name: str = "contact"
+) -> LossTerm:
     """Stance foot joints do not slide: mean horizontal (XZ) displacement per frame (human m)."""
     ids = list(joints)
 
@@ -215,8 +276,9 @@ def contact_loss(joints: Sequence[int], frames: Sequence[int], weight: float = 1
     return LossTerm(name, fn, weight)
 
 
-def support_loss(joints: Sequence[int], frames: Sequence[int], height: float, weight: float = 1.0,
-                 name: str = "support") -> LossTerm:
+def support_loss(
+    joints: Sequence[int], frames: Sequence[int], height: float, weight: float = 1.0, name: str = "support"
+) -> LossTerm:
     """The lowest of ``joints`` no higher than ``height`` (human m, Y) in every frame: mean relu."""
     ids = list(joints)
 
@@ -228,8 +290,15 @@ def support_loss(joints: Sequence[int], frames: Sequence[int], height: float, we
     return LossTerm(name, fn, weight)
 
 
-def smoothness_loss(previous: np.ndarray, joints: Sequence[int], frames: Sequence[int], ratio: float = 0.5,
-                    weight: float = 1.0, name: str = "smoothness", fps: float = FPS) -> LossTerm:
+def smoothness_loss(
+    previous: np.ndarray,
+    joints: Sequence[int],
+    frames: Sequence[int],
+    ratio: float = 0.5,
+    weight: float = 1.0,
+    name: str = "smoothness",
+    fps: float = FPS,
+) -> LossTerm:
     """Accelerations (m/s^2) of ``joints`` at most ``ratio`` x their value in ``previous``: mean relu / g."""
     ids = list(joints)
     acc = np.zeros(previous.shape[:2], dtype=np.float32)

@@ -24,12 +24,26 @@ from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, MIN_FRAMES
 MAX_SPEED_MPS = 3.0
 """Fastest pelvis travel assumed reachable (human m/s): a run; the corpus' runs stay below it."""
 
-REACH_M = {"pelvis": 0.0, "left_wrist": 0.85, "right_wrist": 0.85, "left_elbow": 0.6, "right_elbow": 0.6,
-           "head": 0.45, "neck": 0.35}
+REACH_M = {
+    "pelvis": 0.0,
+    "left_wrist": 0.85,
+    "right_wrist": 0.85,
+    "left_elbow": 0.6,
+    "right_elbow": 0.6,
+    "head": 0.45,
+    "neck": 0.35,
+}
 """Horizontal reach of a joint from the pelvis (human m); joints not listed: 0.6 (legs, torso)."""
 
-HEIGHT_M = {"pelvis": (0.25, 1.45), "head": (0.35, 2.1), "neck": (0.3, 1.95), "left_wrist": (0.0, 2.35),
-            "right_wrist": (0.0, 2.35), "left_elbow": (0.05, 2.1), "right_elbow": (0.05, 2.1)}
+HEIGHT_M = {
+    "pelvis": (0.25, 1.45),
+    "head": (0.35, 2.1),
+    "neck": (0.3, 1.95),
+    "left_wrist": (0.0, 2.35),
+    "right_wrist": (0.0, 2.35),
+    "left_elbow": (0.05, 2.1),
+    "right_elbow": (0.05, 2.1),
+}
 """Heights (human m, Y) a joint can have; joints not listed: 0 to 1.9 m."""
 
 
@@ -60,9 +74,11 @@ def start_pose_error(scene) -> str | None:
     if not hits:
         return None
     worst = max(hits, key=lambda f: f.depth)
-    return (f"scene '{scene.name}': obstacle '{worst.obstacle_geom}' overlaps the robot's start pose at "
-            f"x={scene.start.x:g}, y={scene.start.y:g} by {worst.depth * 100:.1f} cm; "
-            f"move the obstacle or the start (controlmm.start)")
+    return (
+        f"scene '{scene.name}': obstacle '{worst.obstacle_geom}' overlaps the robot's start pose at "
+        f"x={scene.start.x:g}, y={scene.start.y:g} by {worst.depth * 100:.1f} cm; "
+        f"move the obstacle or the start (controlmm.start)"
+    )
 
 
 def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) -> list[str]:
@@ -75,8 +91,10 @@ def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) ->
         import torch
 
         with torch.no_grad():
-            inside = sdf(torch.as_tensor(world, dtype=torch.float64)[None], torch.zeros(1, dtype=torch.float64)
-                         if getattr(sdf, "is_moving", False) else None)[0].numpy()
+            inside = sdf(
+                torch.as_tensor(world, dtype=torch.float64)[None],
+                torch.zeros(1, dtype=torch.float64) if getattr(sdf, "is_moving", False) else None,
+            )[0].numpy()
     for k, (c, p) in enumerate(zip(spec.constraints, positions)):
         name = JOINT_NAMES[c.joint]
         where = f"{name} at frame {c.frame} ({', '.join(f'{v:.2f}' for v in world[k])})"
@@ -84,14 +102,20 @@ def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) ->
         horizontal = math.hypot(float(p[0]), float(p[2]))
         limit = MAX_SPEED_MPS * t + REACH_M.get(name, 0.6) + 0.1
         if horizontal > limit:
-            warnings.append(f"{where} is {(horizontal - limit) * transform.scale:.2f} m beyond what the body can "
-                            f"reach in {t:.2f} s (at most {MAX_SPEED_MPS:g} m/s); it will likely be missed")
+            warnings.append(
+                f"{where} is {(horizontal - limit) * transform.scale:.2f} m beyond what the body can "
+                f"reach in {t:.2f} s (at most {MAX_SPEED_MPS:g} m/s); it will likely be missed"
+            )
         lo, hi = HEIGHT_M.get(name, (0.0, 1.9))
         if not lo <= p[1] <= hi:
             off = lo - p[1] if p[1] < lo else p[1] - hi
-            warnings.append(f"{where} is {off * transform.scale:.2f} m {'below' if p[1] < lo else 'above'} the "
-                            f"heights a {name} can have ({lo * transform.scale:.2f}..{hi * transform.scale:.2f} m)")
+            warnings.append(
+                f"{where} is {off * transform.scale:.2f} m {'below' if p[1] < lo else 'above'} the "
+                f"heights a {name} can have ({lo * transform.scale:.2f}..{hi * transform.scale:.2f} m)"
+            )
         if inside is not None and inside[k] < 0:
-            warnings.append(f"{where} is {-inside[k]:.2f} m inside an obstacle; the obstacle loss and the target "
-                            f"pull against each other")
+            warnings.append(
+                f"{where} is {-inside[k]:.2f} m inside an obstacle; the obstacle loss and the target "
+                f"pull against each other"
+            )
     return warnings

@@ -32,7 +32,9 @@ from controlmm.atomic import atomic_dir, write_text
 from controlmm.pipeline.plan import PlanResult
 
 
-def write_plan(result: PlanResult, out: str | Path, *, render: bool | None = None, progress: bool = True) -> str | None:
+def write_plan(
+    result: PlanResult, out: str | Path, *, render: bool | None = None, progress: bool = True
+) -> str | None:
     """Write every output of ``result`` into the directory ``out`` (replaced atomically).
 
     Returns the render backend used (``"mujoco"`` or ``"stick"``), or None without a video.
@@ -60,6 +62,13 @@ def write_plan(result: PlanResult, out: str | Path, *, render: bool | None = Non
         plot_motion(result.motion, plots / "motion.png")
         if render:
             width, height = config.render_size
-            backend = render_trajectory(result.trajectory, tmp / "render.mp4", width=width, height=height,
-                                        fps=config.render_fps, progress=progress, scene=result.scene)
+            backend = render_trajectory(
+                result.trajectory,
+                tmp / "render.mp4",
+                width=width,
+                height=height,
+                fps=config.render_fps,
+                progress=progress,
+                scene=result.scene,
+            )
     return backend

@@ -25,7 +25,6 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
 import torch
 
 from controlmm.control.spec import ControlSpec
@@ -72,15 +71,21 @@ class PlanRound:
         kinds: dict[str, int] = {}
         for f in r.errors:
             kinds[f.kind] = kinds.get(f.kind, 0) + 1
-        return {"round": self.index, "passed": self.passed, "constraints_met": self.constraints_met,
-                "failures": len(r.failures), "failure_kinds": kinds,
-                "max_penetration_m": round(float(r.max_penetration_m), 6),
-                "floor_penetration_m": round(float(r.floor_penetration_m), 6),
-                "self_collision_frames": int(r.self_collision_frames),
-                "foot_sliding_m": round(float(r.foot_sliding_m), 6),
-                "constraint_errors_m": [round(e, 5) for e in self.constraint_errors_m],
-                "loss_terms": list(self.terms), "editing": self.editing,
-                "seconds": {k: round(v, 3) for k, v in self.seconds.items()}}
+        return {
+            "round": self.index,
+            "passed": self.passed,
+            "constraints_met": self.constraints_met,
+            "failures": len(r.failures),
+            "failure_kinds": kinds,
+            "max_penetration_m": round(float(r.max_penetration_m), 6),
+            "floor_penetration_m": round(float(r.floor_penetration_m), 6),
+            "self_collision_frames": int(r.self_collision_frames),
+            "foot_sliding_m": round(float(r.foot_sliding_m), 6),
+            "constraint_errors_m": [round(e, 5) for e in self.constraint_errors_m],
+            "loss_terms": list(self.terms),
+            "editing": self.editing,
+            "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
+        }
 
 
 @dataclass
@@ -120,14 +125,25 @@ class PlanResult:
     def to_dict(self) -> dict[str, Any]:
         """``report.json``: the chosen round's simulation report plus the plan and every round."""
         out = self.final.report.to_dict()
-        out["plan"] = {"scene": self.scene.name, "robot": self.config.robot, "text": self.text,
-                       "control": self.spec.to_dict() if self.spec is not None else None,
-                       "seed": self.config.seed, "preset": self.config.preset, "rounds_allowed": self.config.rounds,
-                       "rounds_run": len(self.rounds), "chosen_round": self.best,
-                       "passed_before_feedback": self.rounds[0].passed, "warnings": list(self.warnings),
-                       "transform": {"scale": self.transform.scale, "yaw": self.transform.yaw,
-                                     "translation": list(self.transform.translation)},
-                       "seconds": round(self.seconds, 3)}
+        out["plan"] = {
+            "scene": self.scene.name,
+            "robot": self.config.robot,
+            "text": self.text,
+            "control": self.spec.to_dict() if self.spec is not None else None,
+            "seed": self.config.seed,
+            "preset": self.config.preset,
+            "rounds_allowed": self.config.rounds,
+            "rounds_run": len(self.rounds),
+            "chosen_round": self.best,
+            "passed_before_feedback": self.rounds[0].passed,
+            "warnings": list(self.warnings),
+            "transform": {
+                "scale": self.transform.scale,
+                "yaw": self.transform.yaw,
+                "translation": list(self.transform.translation),
+            },
+            "seconds": round(self.seconds, 3),
+        }
         out["rounds"] = [r.to_dict() for r in self.rounds]
         return out
 
@@ -206,8 +222,17 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
             motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
         else:
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
-            edited = edit_motion(model, latent, motion.num_frames, spec, transform, terms, editing, text,
-                                 metadata=motion.metadata)
+            edited = edit_motion(
+                model,
+                latent,
+                motion.num_frames,
+                spec,
+                transform,
+                terms,
+                editing,
+                text,
+                metadata=motion.metadata,
+            )
             motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
         timer["generate"] = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -219,51 +244,102 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
         blocking = report.errors  # warnings (brief dynamic spikes) do not fail a round
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
-        say(f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
-            f"in {sum(timer.values()):.1f} s")
+        say(
+            f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
+            f"in {sum(timer.values()):.1f} s"
+        )
         # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
         # editing round (more codebook steps toward the targets), not more.
         settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
         if (report.passed and settled) or index == config.rounds:
             break
-        extra = extra + feedback_terms(blocking, motion.joints, body_joints=body_joints, transform=transform,
-                                       robot_fps=traj.fps, round_index=index,
-                                       sdf=sdf,
-                                       config=config.feedback, history=history)
-    best = min(rounds, key=lambda r: (not r.passed, not r.constraints_met, r.failing_frames(),
-                                      max(r.constraint_errors_m, default=0.0))).index
-    return PlanResult(config=config, scene=scene, text=text, spec=spec, transform=transform, rounds=rounds,
-                      best=best, warnings=warnings, seconds=time.perf_counter() - start)
+        extra = extra + feedback_terms(
+            blocking,
+            motion.joints,
+            body_joints=body_joints,
+            transform=transform,
+            robot_fps=traj.fps,
+            round_index=index,
+            sdf=sdf,
+            config=config.feedback,
+            history=history,
+        )
+    best = min(
+        rounds,
+        key=lambda r: (
+            not r.passed,
+            not r.constraints_met,
+            r.failing_frames(),
+            max(r.constraint_errors_m, default=0.0),
+        ),
+    ).index
+    return PlanResult(
+        config=config,
+        scene=scene,
+        text=text,
+        spec=spec,
+        transform=transform,
+        rounds=rounds,
+        best=best,
+        warnings=warnings,
+        seconds=time.perf_counter() - start,
+    )
 
 
-def _generate(model, config: PlanConfig, text: str, spec: ControlSpec | None, terms: list[LossTerm],
-              transform: HumanToWorld, editing: EditingConfig):
+def _generate(
+    model,
+    config: PlanConfig,
+    text: str,
+    spec: ControlSpec | None,
+    terms: list[LossTerm],
+    transform: HumanToWorld,
+    editing: EditingConfig,
+):
     """Round 0: tokens by masked decoding (control model + logits editing), then codebook editing.
 
     Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
     """
     from controlmm.generate import generate_controlled
 
-    out = generate_controlled(model, text, control=spec, terms=terms, preset=replace(editing, codebook_steps=0),
-                              seconds=plan_seconds(config.seconds, spec), seed=config.seed, transform=transform,
-                              progress=False)
+    out = generate_controlled(
+        model,
+        text,
+        control=spec,
+        terms=terms,
+        preset=replace(editing, codebook_steps=0),
+        seconds=plan_seconds(config.seconds, spec),
+        seed=config.seed,
+        transform=transform,
+        progress=False,
+    )
     ids = out.ids[0].to(model.device)
     with torch.no_grad():
         latent = model.tokenizer.ids_to_latent(ids.reshape(1, ids.shape[0], -1))
-    edited = edit_motion(model, latent, out.frames[0], spec, transform, terms, editing, text,
-                         metadata=out.motion.metadata)
-    record = {"logits_steps": out.records[0].logits_steps, "control_model": out.records[0].control_model,
-              **edited.record}
+    edited = edit_motion(
+        model, latent, out.frames[0], spec, transform, terms, editing, text, metadata=out.motion.metadata
+    )
+    record = {
+        "logits_steps": out.records[0].logits_steps,
+        "control_model": out.records[0].control_model,
+        **edited.record,
+    }
     return edited.motion, edited.errors, record, edited.latent
 
 
-def _timeline(model, config: PlanConfig, terms: list[LossTerm], transform: HumanToWorld,
-              editing: EditingConfig) -> tuple[Motion, list[float], dict[str, Any]]:
+def _timeline(
+    model, config: PlanConfig, terms: list[LossTerm], transform: HumanToWorld, editing: EditingConfig
+) -> tuple[Motion, list[float], dict[str, Any]]:
     """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
     from controlmm.timeline import as_timeline, generate_timeline
 
-    motion, info = generate_timeline(model, as_timeline(config.timeline), seed=config.seed, preset=editing,
-                                     terms=terms, transform=transform)
+    motion, info = generate_timeline(
+        model,
+        as_timeline(config.timeline),
+        seed=config.seed,
+        preset=editing,
+        terms=terms,
+        transform=transform,
+    )
     summary = {k: info[k] for k in ("max_drift_cm", "max_boundary_speed_mps") if k in info}
     return motion, [], {"timeline": summary}
 

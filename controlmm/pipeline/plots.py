@@ -42,19 +42,30 @@ def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     fig, ax = plt.subplots(figsize=(9, 6.5))
     if scene.obstacle_geom_ids:
         xs, ys, _, values = occupancy_grid(scene, lo, hi, 0.0, res=160)
-        ax.imshow((values.min(axis=2) < 0).T, origin="lower", extent=(xs[0], xs[-1], ys[0], ys[-1]),
-                  cmap="Oranges", vmin=0, vmax=1.5, aspect="equal")
+        ax.imshow(
+            (values.min(axis=2) < 0).T,
+            origin="lower",
+            extent=(xs[0], xs[-1], ys[0], ys[-1]),
+            cmap="Oranges",
+            vmin=0,
+            vmax=1.5,
+            aspect="equal",
+        )
     if scene.moving_geom_ids:
         ax.text(0.01, 0.01, "moving obstacles drawn at t = 0", transform=ax.transAxes, fontsize=8)
     root = pos[:, 0]  # the floating base (G1, H1: the pelvis)
     ax.plot(root[:, 0], root[:, 1], color="tab:blue", lw=2, label=f"{traj.robot} {names[0]}")
     for side, colour in (("left", "tab:green"), ("right", "tab:red")):
-        foot = [i for i, n in enumerate(names) if side in n and ("ankle_roll" in n or n.endswith("ankle_link"))]
+        foot = [
+            i for i, n in enumerate(names) if side in n and ("ankle_roll" in n or n.endswith("ankle_link"))
+        ]
         if foot:
             p = pos[:, foot[-1]]
             ax.plot(p[:, 0], p[:, 1], color=colour, lw=1, alpha=0.7, label=f"{side} foot")
         wrist = world_joints[:, JOINT_NAMES.index(f"{side}_wrist")]
-        ax.plot(wrist[:, 0], wrist[:, 1], color=colour, lw=1, ls=":", alpha=0.7, label=f"{side} wrist (human)")
+        ax.plot(
+            wrist[:, 0], wrist[:, 1], color=colour, lw=1, ls=":", alpha=0.7, label=f"{side} wrist (human)"
+        )
     if result.spec is not None:
         targets = result.spec.human_positions(result.transform)
         tw = result.transform.to_world(targets.astype(np.float64))
@@ -62,15 +73,30 @@ def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
             got = world_joints[min(c.frame, len(world_joints) - 1), c.joint]
             ax.plot([target[0]], [target[1]], "x", color="black", ms=9, mew=2)
             ax.plot([got[0]], [got[1]], "o", mfc="none", color="black", ms=8)
-            ax.annotate(f"{JOINT_NAMES[c.joint]} @{c.frame}", target[:2], textcoords="offset points", xytext=(5, 5),
-                        fontsize=7)
+            ax.annotate(
+                f"{JOINT_NAMES[c.joint]} @{c.frame}",
+                target[:2],
+                textcoords="offset points",
+                xytext=(5, 5),
+                fontsize=7,
+            )
         ax.plot([], [], "x", color="black", label="target")
         ax.plot([], [], "o", mfc="none", color="black", label="achieved")
     s = scene.start
-    ax.annotate("", xy=(s.x + 0.5 * math.cos(s.yaw), s.y + 0.5 * math.sin(s.yaw)), xytext=(s.x, s.y),
-                arrowprops=dict(arrowstyle="->", color="tab:purple", lw=2))
-    ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), xlabel="x (m)", ylabel="y (m)", aspect="equal",
-           title=f"{scene.name}: {'PASSED' if result.passed else 'FAILED'} (round {result.best}) - {result.text[:70]}")
+    ax.annotate(
+        "",
+        xy=(s.x + 0.5 * math.cos(s.yaw), s.y + 0.5 * math.sin(s.yaw)),
+        xytext=(s.x, s.y),
+        arrowprops=dict(arrowstyle="->", color="tab:purple", lw=2),
+    )
+    ax.set(
+        xlim=(lo[0], hi[0]),
+        ylim=(lo[1], hi[1]),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        aspect="equal",
+        title=f"{scene.name}: {'PASSED' if result.passed else 'FAILED'} (round {result.best}) - {result.text[:70]}",
+    )
     ax.legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()
     with atomic_path(path) as tmp:
@@ -93,8 +119,11 @@ def plot_clearance(result, path: str | os.PathLike[str], dpi: int = 110) -> None
         bottom.plot(t, f["lowest_height_m"], label=label, **style)
     top.axhline(-config.obstacle_penetration_m, color="red", ls="--", lw=1, label="penetration tolerance")
     top.axhline(0.0, color="black", lw=0.5)
-    top.set(ylabel="obstacle clearance (m)", title=f"{result.scene.name}: robot distance to obstacles "
-                                                   "(negative = penetration; gaps = nothing near)")
+    top.set(
+        ylabel="obstacle clearance (m)",
+        title=f"{result.scene.name}: robot distance to obstacles "
+        "(negative = penetration; gaps = nothing near)",
+    )
     bottom.axhline(-config.floor_penetration_m, color="red", ls="--", lw=1, label="floor tolerance")
     bottom.axhline(0.0, color="black", lw=0.5)
     bottom.set(xlabel="time (s)", ylabel="lowest point above floor (m)")

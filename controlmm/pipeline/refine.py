@@ -34,7 +34,9 @@ class EditedMotion:
     record: dict[str, Any]
 
 
-def control_targets(spec: ControlSpec | None, frames: int, transform: HumanToWorld) -> tuple[torch.Tensor, torch.Tensor]:
+def control_targets(
+    spec: ControlSpec | None, frames: int, transform: HumanToWorld
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Dense targets (1, T, 22, 3) and mask (1, T, 22) in the human frame (zeros/False without a spec)."""
     if spec is None:
         return torch.zeros(1, frames, NUM_JOINTS, 3), torch.zeros(1, frames, NUM_JOINTS, dtype=torch.bool)
@@ -42,25 +44,56 @@ def control_targets(spec: ControlSpec | None, frames: int, transform: HumanToWor
     return torch.as_tensor(targets, dtype=torch.float32)[None], torch.as_tensor(mask)[None]
 
 
-def edit_motion(model, latent: torch.Tensor, frames: int, spec: ControlSpec | None, transform: HumanToWorld,
-                terms: list[LossTerm], config: EditingConfig, text: str, metadata: dict | None = None) -> EditedMotion:
+def edit_motion(
+    model,
+    latent: torch.Tensor,
+    frames: int,
+    spec: ControlSpec | None,
+    transform: HumanToWorld,
+    terms: list[LossTerm],
+    config: EditingConfig,
+    text: str,
+    metadata: dict | None = None,
+) -> EditedMotion:
     """Codebook-edit ``latent`` (1, N, code_dim) so the motion's first ``frames`` frames meet the
     spec and the loss terms; returns the edited latent and the decoded :class:`Motion`."""
     from controlmm.generate.controlled import decode_latent, edit_latent
 
     targets, mask = control_targets(spec, frames, transform)
-    objective = Objective(targets=targets, mask=mask, terms=terms, tolerance=config.tolerance,
-                          loss_tolerance=config.loss_tolerance)
+    objective = Objective(
+        targets=targets,
+        mask=mask,
+        terms=terms,
+        tolerance=config.tolerance,
+        loss_tolerance=config.loss_tolerance,
+    )
     latent, edit = edit_latent(model, latent, frames, objective, config)
     joints, features = decode_latent(model, latent, frames)
     errors: list[float] = []
     extras: dict[str, np.ndarray] = {}
     if spec is not None:
         t_np, m_np = targets[0].numpy(), mask[0].numpy()
-        errors = [float(np.linalg.norm(joints[c.frame, c.joint] - t_np[c.frame, c.joint])) for c in spec.constraints]
-        extras = {"control_mask": m_np, "control_targets": t_np, "control_errors": np.asarray(errors, np.float32)}
-    record = {"codebook_steps": edit["steps"], "codebook_budget": config.codebook_steps,
-              "converged": edit["converged"], "max_error_m": max(errors, default=0.0), "losses": edit["losses"]}
-    motion = Motion(joints=joints.astype(np.float32), fps=float(FPS), features=features.astype(np.float32),
-                    text=text, metadata=dict(metadata or {}), extras=extras)
+        errors = [
+            float(np.linalg.norm(joints[c.frame, c.joint] - t_np[c.frame, c.joint])) for c in spec.constraints
+        ]
+        extras = {
+            "control_mask": m_np,
+            "control_targets": t_np,
+            "control_errors": np.asarray(errors, np.float32),
+        }
+    record = {
+        "codebook_steps": edit["steps"],
+        "codebook_budget": config.codebook_steps,
+        "converged": edit["converged"],
+        "max_error_m": max(errors, default=0.0),
+        "losses": edit["losses"],
+    }
+    motion = Motion(
+        joints=joints.astype(np.float32),
+        fps=float(FPS),
+        features=features.astype(np.float32),
+        text=text,
+        metadata=dict(metadata or {}),
+        extras=extras,
+    )
     return EditedMotion(latent=latent, motion=motion, errors=errors, record=record)

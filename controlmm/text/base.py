@@ -44,8 +44,9 @@ def check_texts(texts: Sequence[str]) -> list[str]:
     return out
 
 
-def load_text_encoder(config: TextEncoderConfig | str = "minilm", device: str | torch.device = "cpu",
-                      weights: str | None = None) -> TextEncoder:
+def load_text_encoder(
+    config: TextEncoderConfig | str = "minilm", device: str | torch.device = "cpu", weights: str | None = None
+) -> TextEncoder:
     """Build the encoder a model was trained with.
 
     Args:

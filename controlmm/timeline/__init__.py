@@ -15,7 +15,14 @@ See ``docs/timeline.md`` for the spec format, the body-part table and the algori
 
 from controlmm.timeline.algorithm import as_timeline, generate_timeline
 from controlmm.timeline.parts import BODY_PARTS, moves_root, part_joints, part_name
-from controlmm.timeline.signals import ControlSignal, Entries, boundary_speed, build_signal, held_drift, signal_terms
+from controlmm.timeline.signals import (
+    ControlSignal,
+    Entries,
+    boundary_speed,
+    build_signal,
+    held_drift,
+    signal_terms,
+)
 from controlmm.timeline.spec import Timeline, Track
 
 __all__ = [

@@ -76,14 +76,25 @@ def as_timeline(timeline: Timeline | dict | str | Path) -> Timeline:
         return Timeline.from_dict(timeline)
     if isinstance(timeline, (str, Path)):
         return Timeline.load(timeline)
-    raise ControlMMError(f"a timeline must be a Timeline, a dict or a JSON path; got {type(timeline).__name__}")
+    raise ControlMMError(
+        f"a timeline must be a Timeline, a dict or a JSON path; got {type(timeline).__name__}"
+    )
 
 
-def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: int | None = None,
-                      preset: str | EditingConfig = "accurate", terms: Sequence[LossTerm] = (),
-                      transform: HumanToWorld | None = None, blend_frames: int = 10, blend_rate: float = 0.05,
-                      prompt_weight: float = 0.3, settle_steps: int | None = None,
-                      progress: bool = False) -> tuple[Motion, dict[str, Any]]:
+def generate_timeline(
+    model,
+    timeline: Timeline | dict | str | Path,
+    *,
+    seed: int | None = None,
+    preset: str | EditingConfig = "accurate",
+    terms: Sequence[LossTerm] = (),
+    transform: HumanToWorld | None = None,
+    blend_frames: int = 10,
+    blend_rate: float = 0.05,
+    prompt_weight: float = 0.3,
+    settle_steps: int | None = None,
+    progress: bool = False,
+) -> tuple[Motion, dict[str, Any]]:
     """Generate a motion whose body parts follow their tracks' prompts over their spans.
 
     Args:
@@ -112,13 +123,18 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
     timeline = as_timeline(timeline)
     config = editing_preset(preset)
     if blend_frames < 0 or blend_rate < 0 or prompt_weight < 0:
-        raise ControlMMError(f"blend_frames, blend_rate and prompt_weight must be >= 0; "
-                             f"got {blend_frames}, {blend_rate}, {prompt_weight}")
+        raise ControlMMError(
+            f"blend_frames, blend_rate and prompt_weight must be >= 0; "
+            f"got {blend_frames}, {blend_rate}, {prompt_weight}"
+        )
     seed = secrets.randbits(31) if seed is None else int(seed)
-    if settle_steps is not None and (isinstance(settle_steps, bool) or int(settle_steps) != settle_steps
-                                     or settle_steps < 0):
+    if settle_steps is not None and (
+        isinstance(settle_steps, bool) or int(settle_steps) != settle_steps or settle_steps < 0
+    ):
         raise ControlMMError(f"settle_steps must be a whole number >= 0; got {settle_steps!r}")
-    settle = replace(config, codebook_steps=2 * config.codebook_steps if settle_steps is None else int(settle_steps))
+    settle = replace(
+        config, codebook_steps=2 * config.codebook_steps if settle_steps is None else int(settle_steps)
+    )
     num_frames = timeline.num_frames
     tracks = timeline.tracks
     first = 1 if timeline.base is None and tracks[0].frames(num_frames) == (0, num_frames) else 0
@@ -127,11 +143,26 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
 
     clock = time.perf_counter()
     latent = _generate_latent(model, timeline.base_prompt, num_frames, seed)
-    latent, record = edit_latent(model, latent, num_frames, Objective(terms=tuple(terms), tolerance=config.tolerance,
-                                                                loss_tolerance=config.loss_tolerance), config)
+    latent, record = edit_latent(
+        model,
+        latent,
+        num_frames,
+        Objective(terms=tuple(terms), tolerance=config.tolerance, loss_tolerance=config.loss_tolerance),
+        config,
+    )
     joints, features = decode_latent(model, latent, num_frames)
-    passes = [_pass_record(None, timeline.base_prompt, "whole_body", (0, num_frames), record, 0.0, 0,
-                           time.perf_counter() - clock)]
+    passes = [
+        _pass_record(
+            None,
+            timeline.base_prompt,
+            "whole_body",
+            (0, num_frames),
+            record,
+            0.0,
+            0,
+            time.perf_counter() - clock,
+        )
+    ]
     bar.update(1)
     reference = joints.copy()
     owner = np.full((num_frames, NUM_JOINTS), BASE, dtype=np.int8)
@@ -144,18 +175,41 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         span = track.frames(num_frames)
         root = moves_root(track.part)
         tol = 0.8 * config.tolerance
-        signal = build_signal(num_frames, track.joints, span, root_moves=root, tolerance=tol,
-                              blend_frames=blend_frames, blend_rate=blend_rate)
+        signal = build_signal(
+            num_frames,
+            track.joints,
+            span,
+            root_moves=root,
+            tolerance=tol,
+            blend_frames=blend_frames,
+            blend_rate=blend_rate,
+        )
         clip_frames = max(span[1] - span[0], MIN_FRAMES)
-        clip, _ = decode_latent(model, _generate_latent(model, track.prompt, clip_frames, seed + k + 1), clip_frames)
-        prompt = prompt_entries(signal, track.joints, root_moves=root, attachment=ATTACHMENT[track.part],
-                                blend_frames=blend_frames,
-                                blend_rate=blend_rate) if prompt_weight > 0 else None
-        pass_terms = signal_terms(signal, reference, clip, prompt, tolerance=tol, prompt_weight=prompt_weight,
-                                  prompt_shift=span[0])
-        objective = Objective(targets=torch.as_tensor(reference)[None], mask=torch.as_tensor(signal.mask)[None],
-                              terms=tuple(terms) + tuple(pass_terms), tolerance=config.tolerance,
-                              loss_tolerance=config.loss_tolerance)
+        clip, _ = decode_latent(
+            model, _generate_latent(model, track.prompt, clip_frames, seed + k + 1), clip_frames
+        )
+        prompt = (
+            prompt_entries(
+                signal,
+                track.joints,
+                root_moves=root,
+                attachment=ATTACHMENT[track.part],
+                blend_frames=blend_frames,
+                blend_rate=blend_rate,
+            )
+            if prompt_weight > 0
+            else None
+        )
+        pass_terms = signal_terms(
+            signal, reference, clip, prompt, tolerance=tol, prompt_weight=prompt_weight, prompt_shift=span[0]
+        )
+        objective = Objective(
+            targets=torch.as_tensor(reference)[None],
+            mask=torch.as_tensor(signal.mask)[None],
+            terms=tuple(terms) + tuple(pass_terms),
+            tolerance=config.tolerance,
+            loss_tolerance=config.loss_tolerance,
+        )
         latent, first_record = edit_latent(model, latent, num_frames, objective, config)
         # the held entries, the blend and the caller's terms get the last word (the prompt target is soft);
         # the part may not leave where the first run took it by more than the prompt target's margins
@@ -164,11 +218,22 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         if prompt is not None:
             moved_to, _ = decode_latent(model, latent, num_frames)
             targets = reference_targets(moved_to, prompt)
-            keeps = [(hinge_term("timeline:keep", targets, replace(prompt, margins=prompt.margins + extra),
-                                 prompt_weight),) for extra in KEEP_SLACK] + [()]
+            keeps = [
+                (
+                    hinge_term(
+                        "timeline:keep",
+                        targets,
+                        replace(prompt, margins=prompt.margins + extra),
+                        prompt_weight,
+                    ),
+                )
+                for extra in KEEP_SLACK
+            ] + [()]
         steps = first_record["steps"]
         for keep in keeps:  # looser and looser, until the held entries are met
-            latent, record = edit_latent(model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle)
+            latent, record = edit_latent(
+                model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle
+            )
             steps += record["steps"]
             if record["converged"]:
                 break
@@ -176,8 +241,18 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
         record["losses"]["timeline:prompt"] = first_record["losses"].get("timeline:prompt", 0.0)
         joints, features = decode_latent(model, latent, num_frames)
         drift = held_drift(joints, reference, signal)
-        passes.append(_pass_record(k, track.prompt, track.part, span, record, float(drift.max()),
-                                   int(signal.held.sum()), time.perf_counter() - clock))
+        passes.append(
+            _pass_record(
+                k,
+                track.prompt,
+                track.part,
+                span,
+                record,
+                float(drift.max()),
+                int(signal.held.sum()),
+                time.perf_counter() - clock,
+            )
+        )
         moved = signal.held & ~signal.mask  # held relative to the body: their world position moved with it
         reference[moved] = joints[moved]
         reference[signal.free] = joints[signal.free]
@@ -186,11 +261,20 @@ def generate_timeline(model, timeline: Timeline | dict | str | Path, *, seed: in
     bar.close()
     report = _report(timeline, joints, owner, drift, passes, seed, config, time.perf_counter() - started)
     text = "; ".join(f"{t.part} {t.start:g}-{t.end:g} s: {t.prompt}" for t in tracks)
-    metadata = {"seed": seed, "model": str(getattr(model, "directory", "") or ""),
-                "transform": None if transform is None else repr(transform),
-                "timeline": {"spec": timeline.to_dict(), "report": report}}
-    motion = Motion(joints=joints, fps=float(FPS), features=features, text=text, metadata=metadata,
-                    extras={"timeline_owner": owner, "timeline_drift": drift.astype(np.float32)})
+    metadata = {
+        "seed": seed,
+        "model": str(getattr(model, "directory", "") or ""),
+        "transform": None if transform is None else repr(transform),
+        "timeline": {"spec": timeline.to_dict(), "report": report},
+    }
+    motion = Motion(
+        joints=joints,
+        fps=float(FPS),
+        features=features,
+        text=text,
+        metadata=metadata,
+        extras={"timeline_owner": owner, "timeline_drift": drift.astype(np.float32)},
+    )
     return motion, report
 
 
@@ -202,37 +286,80 @@ def _generate_latent(model, prompt: str, frames: int, seed: int) -> torch.Tensor
     return generate(model, prompt, frames=frames, seed=seed).latent.detach()
 
 
-def _pass_record(track: int | None, prompt: str, part: str, span: tuple[int, int], record: dict, drift: float,
-                 held: int, seconds: float) -> dict[str, Any]:
-    return {"track": track, "prompt": prompt, "part": part, "frames": list(span), "held_entries": held,
-            "drift_cm": round(100 * drift, 3), "converged": record["converged"], "editing_steps": record["steps"],
-            "losses": record["losses"], "seconds": round(seconds, 3)}
+def _pass_record(
+    track: int | None,
+    prompt: str,
+    part: str,
+    span: tuple[int, int],
+    record: dict,
+    drift: float,
+    held: int,
+    seconds: float,
+) -> dict[str, Any]:
+    return {
+        "track": track,
+        "prompt": prompt,
+        "part": part,
+        "frames": list(span),
+        "held_entries": held,
+        "drift_cm": round(100 * drift, 3),
+        "converged": record["converged"],
+        "editing_steps": record["steps"],
+        "losses": record["losses"],
+        "seconds": round(seconds, 3),
+    }
 
 
-def _report(timeline: Timeline, joints: np.ndarray, owner: np.ndarray, drift: np.ndarray, passes: list[dict],
-            seed: int, config: EditingConfig, seconds: float) -> dict[str, Any]:
+def _report(
+    timeline: Timeline,
+    joints: np.ndarray,
+    owner: np.ndarray,
+    drift: np.ndarray,
+    passes: list[dict],
+    seed: int,
+    config: EditingConfig,
+    seconds: float,
+) -> dict[str, Any]:
     from controlmm.eval.probes import probe
 
     num_frames = timeline.num_frames
     tracks = []
     for k, track in enumerate(timeline.tracks):
         s, e = track.frames(num_frames)
-        edges = {name: round(boundary_speed(joints, f), 4) for name, f in (("start", s), ("end", e))
-                 if 0 < f < num_frames}
+        edges = {
+            name: round(boundary_speed(joints, f), 4)
+            for name, f in (("start", s), ("end", e))
+            if 0 < f < num_frames
+        }
         mine = owner == k
-        entry: dict[str, Any] = {"track": k, "part": track.part, "prompt": track.prompt, "frames": [s, e],
-                                 "owned_entries": int(mine.sum()),
-                                 "final_drift_cm": round(100 * float(drift[mine].max()), 3) if mine.any() else 0.0,
-                                 "boundary_speed_mps": edges}
+        entry: dict[str, Any] = {
+            "track": k,
+            "part": track.part,
+            "prompt": track.prompt,
+            "frames": [s, e],
+            "owned_entries": int(mine.sum()),
+            "final_drift_cm": round(100 * float(drift[mine].max()), 3) if mine.any() else 0.0,
+            "boundary_speed_mps": edges,
+        }
         if track.probe is not None:
             result = probe(joints[s:e], track.probe["family"], track.probe.get("claims", {}))
-            entry["probe"] = {"family": track.probe["family"], "passed": result.passed, "checks": result.describe()}
+            entry["probe"] = {
+                "family": track.probe["family"],
+                "passed": result.passed,
+                "checks": result.describe(),
+            }
         tracks.append(entry)
     speeds = [v for t in tracks for v in t["boundary_speed_mps"].values()]
     probed = [t["probe"]["passed"] for t in tracks if "probe" in t]
-    return {"frames": num_frames, "seconds": timeline.seconds, "seed": seed, "preset": config.name,
-            "passes": passes, "tracks": tracks,
-            "max_drift_cm": round(100 * float(drift.max()), 3),
-            "max_boundary_speed_mps": round(max(speeds), 4) if speeds else 0.0,
-            "probes_passed": [int(sum(probed)), len(probed)],
-            "wall_seconds": round(seconds, 2)}
+    return {
+        "frames": num_frames,
+        "seconds": timeline.seconds,
+        "seed": seed,
+        "preset": config.name,
+        "passes": passes,
+        "tracks": tracks,
+        "max_drift_cm": round(100 * float(drift.max()), 3),
+        "max_boundary_speed_mps": round(max(speeds), 4) if speeds else 0.0,
+        "probes_passed": [int(sum(probed)), len(probed)],
+        "wall_seconds": round(seconds, 2),
+    }

@@ -34,12 +34,25 @@ BODY_PARTS: dict[str, tuple[int, ...]] = {
 
 ROOT_JOINT = 0
 
-ATTACHMENT: dict[str, int] = {"legs": 0, "torso": 0, "head": 9, "left_arm": 9, "right_arm": 9, "whole_body": 0}
+ATTACHMENT: dict[str, int] = {
+    "legs": 0,
+    "torso": 0,
+    "head": 9,
+    "left_arm": 9,
+    "right_arm": 9,
+    "whole_body": 0,
+}
 """The joint a part hangs from (spine3 for the arms and head, the pelvis otherwise): a track's prompt
 motion is followed relative to it (see :func:`controlmm.timeline.signals.prompt_entries`)."""
 
-ALIASES: dict[str, str] = {"body": "whole_body", "full_body": "whole_body", "all": "whole_body",
-                           "lower_body": "legs", "arm_left": "left_arm", "arm_right": "right_arm"}
+ALIASES: dict[str, str] = {
+    "body": "whole_body",
+    "full_body": "whole_body",
+    "all": "whole_body",
+    "lower_body": "legs",
+    "arm_left": "left_arm",
+    "arm_right": "right_arm",
+}
 
 
 def part_name(name: str) -> str:

@@ -47,11 +47,11 @@ class Entries:
     origins: np.ndarray | None = None
 
     @classmethod
-    def empty(cls) -> "Entries":
+    def empty(cls) -> Entries:
         z = np.zeros(0, dtype=np.int64)
         return cls(z, z, z, np.zeros(0, dtype=np.float32))
 
-    def shifted(self, shift: int) -> "Entries":
+    def shifted(self, shift: int) -> Entries:
         """The same entries with frames and anchors moved by -shift."""
         anchors = np.where(self.anchors >= 0, self.anchors - shift, self.anchors)
         return Entries(self.frames - shift, self.joints, anchors, self.margins, self.origins)
@@ -84,8 +84,16 @@ class ControlSignal:
         return ~self.free
 
 
-def build_signal(num_frames: int, joints: tuple[int, ...], span: tuple[int, int], *, root_moves: bool,
-                 tolerance: float = 0.008, blend_frames: int = 10, blend_rate: float = 0.05) -> ControlSignal:
+def build_signal(
+    num_frames: int,
+    joints: tuple[int, ...],
+    span: tuple[int, int],
+    *,
+    root_moves: bool,
+    tolerance: float = 0.008,
+    blend_frames: int = 10,
+    blend_rate: float = 0.05,
+) -> ControlSignal:
     """The control signal of a pass regenerating ``joints`` over frames ``span = (s, e)``.
 
     Args:
@@ -117,20 +125,30 @@ def build_signal(num_frames: int, joints: tuple[int, ...], span: tuple[int, int]
             for t in range(e, num_frames):
                 for j in range(NUM_JOINTS):
                     frames.append(t), js.append(j), anchors.append(e)
-        hold = Entries(np.array(frames, dtype=np.int64), np.array(js, dtype=np.int64),
-                       np.array(anchors, dtype=np.int64), np.full(len(frames), tolerance, dtype=np.float32))
+        hold = Entries(
+            np.array(frames, dtype=np.int64),
+            np.array(js, dtype=np.int64),
+            np.array(anchors, dtype=np.int64),
+            np.full(len(frames), tolerance, dtype=np.float32),
+        )
     frames, js, anchors, margins = [], [], [], []
     width = min(blend_frames, e - s)
     for d in range(1, width + 1):
-        for t, edge_anchor, interior in ((s + d - 1, WORLD, s > 0),
-                                         (e - d, e if (root_moves and e < num_frames) else WORLD, e < num_frames)):
+        for t, edge_anchor, interior in (
+            (s + d - 1, WORLD, s > 0),
+            (e - d, e if (root_moves and e < num_frames) else WORLD, e < num_frames),
+        ):
             if not interior:
                 continue
             for j in joints:
                 frames.append(t), js.append(j), anchors.append(edge_anchor)
                 margins.append(tolerance + blend_rate * d)
-    blend = Entries(np.array(frames, dtype=np.int64), np.array(js, dtype=np.int64),
-                    np.array(anchors, dtype=np.int64), np.array(margins, dtype=np.float32))
+    blend = Entries(
+        np.array(frames, dtype=np.int64),
+        np.array(js, dtype=np.int64),
+        np.array(anchors, dtype=np.int64),
+        np.array(margins, dtype=np.float32),
+    )
     return ControlSignal(free=free, mask=mask, hold=hold, blend=blend, span=(s, e))
 
 
@@ -155,7 +173,9 @@ def local_positions(joints: torch.Tensor, entries: Entries) -> torch.Tensor:
     norm = torch.sqrt(cx * cx + cz * cz + 1e-12)
     cx, cz = cx / norm, cz / norm
     v = p - origin
-    local = torch.stack([v[..., 0] * cx + v[..., 2] * cz, v[..., 1], -v[..., 0] * cz + v[..., 2] * cx], dim=-1)
+    local = torch.stack(
+        [v[..., 0] * cx + v[..., 2] * cz, v[..., 1], -v[..., 0] * cz + v[..., 2] * cx], dim=-1
+    )
     return torch.where((anchors >= 0)[..., None], local, p)
 
 
@@ -165,7 +185,9 @@ def entry_distances(joints: torch.Tensor, reference: torch.Tensor, entries: Entr
     return (local_positions(joints, entries) - ref).norm(dim=-1)
 
 
-def hinge_term(name: str, target: np.ndarray | torch.Tensor, entries: Entries, weight: float = 1.0) -> LossTerm:
+def hinge_term(
+    name: str, target: np.ndarray | torch.Tensor, entries: Entries, weight: float = 1.0
+) -> LossTerm:
     """LossTerm ``mean_e relu(distance_e - margin_e)^2`` per sample (0 once every entry is within its margin).
 
     ``target`` (E, 3): the wanted :func:`local_positions` of the entries (see :func:`reference_targets`).
@@ -185,18 +207,32 @@ def hinge_term(name: str, target: np.ndarray | torch.Tensor, entries: Entries, w
 def reference_targets(reference: np.ndarray, entries: Entries, shift: int = 0) -> np.ndarray:
     """(E, 3) local positions of the entries in ``reference`` (T', 22, 3), frames and anchors moved by -shift."""
     with torch.no_grad():
-        return local_positions(torch.as_tensor(np.asarray(reference, dtype=np.float32)), entries.shifted(shift)).numpy()
+        return local_positions(
+            torch.as_tensor(np.asarray(reference, dtype=np.float32)), entries.shifted(shift)
+        ).numpy()
 
 
 def world_entries(mask: np.ndarray, margin: float) -> Entries:
     """The entries of a (T, 22) mask, compared in the world with one margin."""
     frames, js = np.nonzero(mask)
-    return Entries(frames.astype(np.int64), js.astype(np.int64), np.full(len(frames), WORLD, dtype=np.int64),
-                   np.full(len(frames), margin, dtype=np.float32))
+    return Entries(
+        frames.astype(np.int64),
+        js.astype(np.int64),
+        np.full(len(frames), WORLD, dtype=np.int64),
+        np.full(len(frames), margin, dtype=np.float32),
+    )
 
 
-def prompt_entries(signal: ControlSignal, joints: tuple[int, ...], *, root_moves: bool, attachment: int = PELVIS,
-                   margin: float = 0.03, blend_frames: int = 10, blend_rate: float = 0.05) -> Entries:
+def prompt_entries(
+    signal: ControlSignal,
+    joints: tuple[int, ...],
+    *,
+    root_moves: bool,
+    attachment: int = PELVIS,
+    margin: float = 0.03,
+    blend_frames: int = 10,
+    blend_rate: float = 0.05,
+) -> Entries:
     """The free entries of a pass as soft targets from the track's prompt generated alone over the span.
 
     Anchors: the ``attachment`` joint and facing of the entry's own frame (the part's pose relative to
@@ -218,13 +254,25 @@ def prompt_entries(signal: ControlSignal, joints: tuple[int, ...], *, root_moves
         for j in joints:
             frames.append(t), js.append(j), anchors.append(s if root_moves else t)
             margins.append(margin + blend_rate * max(relax, 0))
-    return Entries(np.array(frames, dtype=np.int64), np.array(js, dtype=np.int64), np.array(anchors, dtype=np.int64),
-                   np.array(margins, dtype=np.float32), np.full(len(frames), origin, dtype=np.int64))
+    return Entries(
+        np.array(frames, dtype=np.int64),
+        np.array(js, dtype=np.int64),
+        np.array(anchors, dtype=np.int64),
+        np.array(margins, dtype=np.float32),
+        np.full(len(frames), origin, dtype=np.int64),
+    )
 
 
-def signal_terms(signal: ControlSignal, reference: np.ndarray, prompt_clip: np.ndarray | None = None,
-                 prompt: Entries | None = None, tolerance: float = 0.008, prompt_weight: float = 0.3,
-                 prompt_shift: int | None = None, held_weight: float = 20.0) -> list[LossTerm]:
+def signal_terms(
+    signal: ControlSignal,
+    reference: np.ndarray,
+    prompt_clip: np.ndarray | None = None,
+    prompt: Entries | None = None,
+    tolerance: float = 0.008,
+    prompt_weight: float = 0.3,
+    prompt_shift: int | None = None,
+    held_weight: float = 20.0,
+) -> list[LossTerm]:
     """The loss terms of a pass beside its dense control: world-held outliers, body-held entries, edge
     blending and (with ``prompt_clip`` (L, 22, 3), whose frame 0 is frame ``prompt_shift`` of the motion,
     default the span's first frame) the prompt's part."""
@@ -232,13 +280,23 @@ def signal_terms(signal: ControlSignal, reference: np.ndarray, prompt_clip: np.n
     if signal.mask.any():
         held = world_entries(signal.mask, tolerance)
         terms.append(hinge_term("timeline:held", reference_targets(reference, held), held, held_weight))
-    for name, entries, weight in (("timeline:hold", signal.hold, held_weight), ("timeline:blend", signal.blend, 1.0)):
+    for name, entries, weight in (
+        ("timeline:hold", signal.hold, held_weight),
+        ("timeline:blend", signal.blend, 1.0),
+    ):
         if len(entries):
             terms.append(hinge_term(name, reference_targets(reference, entries), entries, weight))
     if prompt_clip is not None and prompt is not None and len(prompt):
-        terms.append(hinge_term("timeline:prompt", reference_targets(
-            prompt_clip, prompt, shift=signal.span[0] if prompt_shift is None else prompt_shift),
-                                prompt, weight=prompt_weight))
+        terms.append(
+            hinge_term(
+                "timeline:prompt",
+                reference_targets(
+                    prompt_clip, prompt, shift=signal.span[0] if prompt_shift is None else prompt_shift
+                ),
+                prompt,
+                weight=prompt_weight,
+            )
+        )
     return terms
 
 
@@ -250,8 +308,11 @@ def held_drift(joints: np.ndarray, reference: np.ndarray, signal: ControlSignal)
     out[signal.mask] = world[signal.mask]
     if len(signal.hold):
         with torch.no_grad():
-            d = entry_distances(torch.as_tensor(joints, dtype=torch.float32),
-                                torch.as_tensor(reference, dtype=torch.float32), signal.hold).numpy()
+            d = entry_distances(
+                torch.as_tensor(joints, dtype=torch.float32),
+                torch.as_tensor(reference, dtype=torch.float32),
+                signal.hold,
+            ).numpy()
         out[signal.hold.frames, signal.hold.joints] = d
     return out
 

@@ -61,13 +61,17 @@ class Track:
         for name in ("start", "end"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ControlMMError(f"track '{self.part}': {name} must be a number of seconds; got {value!r}")
+                raise ControlMMError(
+                    f"track '{self.part}': {name} must be a number of seconds; got {value!r}"
+                )
             object.__setattr__(self, name, float(value))
         if self.start < 0:
             raise ControlMMError(f"track '{self.part}': start {self.start:g} s is negative; allowed >= 0")
         if self.end - self.start < MIN_SPAN_FRAMES / FPS - 1e-9:
-            raise ControlMMError(f"track '{self.part}': span {self.start:g}..{self.end:g} s is too short; "
-                                 f"end must be at least {MIN_SPAN_FRAMES / FPS:g} s after start")
+            raise ControlMMError(
+                f"track '{self.part}': span {self.start:g}..{self.end:g} s is too short; "
+                f"end must be at least {MIN_SPAN_FRAMES / FPS:g} s after start"
+            )
         if self.probe is not None:
             _check_probe(self.probe, self.part)
 
@@ -111,13 +115,17 @@ class Timeline:
         if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds):
             raise ControlMMError(f"timeline seconds must be a number; got {seconds!r}")
         if not MIN_SECONDS <= seconds <= MAX_SECONDS + 1e-9:
-            raise ControlMMError(f"timeline length {seconds:g} s is out of range; allowed "
-                                 f"{MIN_SECONDS:g}..{MAX_SECONDS:g} s (tracks end by then)")
+            raise ControlMMError(
+                f"timeline length {seconds:g} s is out of range; allowed "
+                f"{MIN_SECONDS:g}..{MAX_SECONDS:g} s (tracks end by then)"
+            )
         object.__setattr__(self, "seconds", float(seconds))
         for k, t in enumerate(tracks):
             if t.end > self.seconds + 1e-9:
-                raise ControlMMError(f"track {k} ('{t.part}') ends at {t.end:g} s, after the timeline's end "
-                                     f"({self.seconds:g} s)")
+                raise ControlMMError(
+                    f"track {k} ('{t.part}') ends at {t.end:g} s, after the timeline's end "
+                    f"({self.seconds:g} s)"
+                )
         if self.base is not None and (not isinstance(self.base, str) or not self.base.strip()):
             raise ControlMMError(f"base must be a non-empty prompt; got {self.base!r}")
 
@@ -131,13 +139,15 @@ class Timeline:
 
     # -- JSON ---------------------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: Any) -> "Timeline":
+    def from_dict(cls, data: Any) -> Timeline:
         """Parse and validate the JSON structure (see the module docstring)."""
         if not isinstance(data, dict):
             raise ControlMMError(f"a timeline spec must be a JSON object; got {type(data).__name__}")
         unknown = sorted(set(data) - set(TIMELINE_KEYS))
         if unknown:
-            raise ControlMMError(f"unknown timeline key(s) {', '.join(unknown)}; allowed: {', '.join(TIMELINE_KEYS)}")
+            raise ControlMMError(
+                f"unknown timeline key(s) {', '.join(unknown)}; allowed: {', '.join(TIMELINE_KEYS)}"
+            )
         items = data.get("tracks")
         if not isinstance(items, list) or not items:
             raise ControlMMError("a timeline spec needs a non-empty 'tracks' list")
@@ -147,19 +157,22 @@ class Timeline:
                 raise ControlMMError(f"track {k} must be a JSON object; got {type(item).__name__}")
             unknown = sorted(set(item) - set(TRACK_KEYS))
             if unknown:
-                raise ControlMMError(f"track {k}: unknown key(s) {', '.join(unknown)}; "
-                                     f"allowed: {', '.join(TRACK_KEYS)}")
+                raise ControlMMError(
+                    f"track {k}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(TRACK_KEYS)}"
+                )
             missing = [key for key in ("part", "prompt", "start", "end") if key not in item]
             if missing:
                 raise ControlMMError(f"track {k} is missing {', '.join(missing)}")
             try:
-                tracks.append(Track(item["part"], item["prompt"], item["start"], item["end"], item.get("probe")))
+                tracks.append(
+                    Track(item["part"], item["prompt"], item["start"], item["end"], item.get("probe"))
+                )
             except ControlMMError as exc:
                 raise ControlMMError(f"track {k}: {exc}") from None
         return cls(tuple(tracks), seconds=data.get("seconds"), base=data.get("base"))
 
     @classmethod
-    def load(cls, path: str | Path) -> "Timeline":
+    def load(cls, path: str | Path) -> Timeline:
         """Read a JSON timeline spec file."""
         path = Path(path)
         if not path.is_file():
@@ -182,9 +195,12 @@ def _check_probe(probe: Any, part: str) -> None:
     from controlmm.eval.probes import PROBES
 
     if not isinstance(probe, dict) or "family" not in probe or set(probe) - {"family", "claims"}:
-        raise ControlMMError(f"track '{part}': probe must be {{\"family\": NAME, \"claims\": {{...}}}}; "
-                             f"got {probe!r}")
+        raise ControlMMError(
+            f'track \'{part}\': probe must be {{"family": NAME, "claims": {{...}}}}; got {probe!r}'
+        )
     if probe["family"] not in PROBES:
-        raise ControlMMError(f"track '{part}': no probe for family '{probe['family']}'; known: {', '.join(PROBES)}")
+        raise ControlMMError(
+            f"track '{part}': no probe for family '{probe['family']}'; known: {', '.join(PROBES)}"
+        )
     if not isinstance(probe.get("claims", {}), dict):
         raise ControlMMError(f"track '{part}': probe claims must be a JSON object; got {probe['claims']!r}")

@@ -53,7 +53,9 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
     try:
         data = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001
-        raise InputFileError(f"training checkpoint '{path}' is corrupt or unreadable ({type(exc).__name__})") from exc
+        raise InputFileError(
+            f"training checkpoint '{path}' is corrupt or unreadable ({type(exc).__name__})"
+        ) from exc
     if not isinstance(data, dict) or "step" not in data or "model" not in data:
         raise InputFileError(f"'{path}' is not a controlmm training checkpoint")
     return data

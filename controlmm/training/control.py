@@ -70,20 +70,34 @@ class ControlTraining:
     cond_drop: float = 0.1
 
     def __post_init__(self) -> None:
-        checks = [(0.0 <= self.alpha <= 1.0, f"alpha must be in [0, 1]; got {self.alpha}"),
-                  (self.estimator in ESTIMATORS, f"unknown estimator '{self.estimator}'; allowed: {', '.join(ESTIMATORS)}"),
-                  (self.tau > 0, f"tau must be positive; got {self.tau}"),
-                  (self.mode in CONTROL_MODES, f"unknown control mode '{self.mode}'; allowed: {', '.join(CONTROL_MODES)}"),
-                  (self.density in DENSITIES, f"unknown density '{self.density}'; allowed: {', '.join(DENSITIES)}"),
-                  (0.0 <= self.cond_drop < 1.0, f"cond_drop must be in [0, 1); got {self.cond_drop}")]
+        checks = [
+            (0.0 <= self.alpha <= 1.0, f"alpha must be in [0, 1]; got {self.alpha}"),
+            (
+                self.estimator in ESTIMATORS,
+                f"unknown estimator '{self.estimator}'; allowed: {', '.join(ESTIMATORS)}",
+            ),
+            (self.tau > 0, f"tau must be positive; got {self.tau}"),
+            (
+                self.mode in CONTROL_MODES,
+                f"unknown control mode '{self.mode}'; allowed: {', '.join(CONTROL_MODES)}",
+            ),
+            (self.density in DENSITIES, f"unknown density '{self.density}'; allowed: {', '.join(DENSITIES)}"),
+            (0.0 <= self.cond_drop < 1.0, f"cond_drop must be in [0, 1); got {self.cond_drop}"),
+        ]
         for ok, message in checks:
             if not ok:
                 raise ControlMMError(message)
 
 
 # -- control masks ----------------------------------------------------------------------------------
-def sample_control_mask(lengths: torch.Tensor, num_frames: int, joint_ids: tuple[int, ...], mode: str,
-                        density: str = "uniform", generator: torch.Generator | None = None) -> torch.Tensor:
+def sample_control_mask(
+    lengths: torch.Tensor,
+    num_frames: int,
+    joint_ids: tuple[int, ...],
+    mode: str,
+    density: str = "uniform",
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Random control masks (B, num_frames, 22) bool for clips of ``lengths`` frames (reference §4.3).
 
     Frames are drawn among each clip's valid frames; see :class:`ControlTraining` for the modes.
@@ -91,8 +105,15 @@ def sample_control_mask(lengths: torch.Tensor, num_frames: int, joint_ids: tuple
     b = len(lengths)
     mask = torch.zeros(b, num_frames, 22, dtype=torch.bool)
     # the draw happens on the generator's device (a CUDA generator cannot fill a CPU tensor)
-    seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator,
-                             device=generator.device if generator is not None else "cpu"))
+    seed = int(
+        torch.randint(
+            0,
+            2**31 - 1,
+            (1,),
+            generator=generator,
+            device=generator.device if generator is not None else "cpu",
+        )
+    )
     rng = np.random.default_rng(seed)
     for i, m in enumerate(int(x) for x in lengths):
         m = max(1, min(m, num_frames))
@@ -126,14 +147,24 @@ def _count(rng: np.random.Generator, available: int, density: str, scale: int) -
 class ControlLoss(nn.Module):
     """Masked consistency training objective; only ``control``'s parameters are registered/trained."""
 
-    def __init__(self, control: MotionControlModel, base, tokenizer, normalizer, settings: ControlTraining) -> None:
+    def __init__(
+        self, control: MotionControlModel, base, tokenizer, normalizer, settings: ControlTraining
+    ) -> None:
         super().__init__()
         self.control = control
         self.frozen = _Frozen(base, tokenizer, normalizer)
         self.settings = settings
 
-    def forward(self, ids: torch.Tensor, targets: torch.Tensor, cond: torch.Tensor, token_lengths: torch.Tensor,
-                frame_lengths: torch.Tensor, generator: torch.Generator | None = None, hard_error: bool = False):
+    def forward(
+        self,
+        ids: torch.Tensor,
+        targets: torch.Tensor,
+        cond: torch.Tensor,
+        token_lengths: torch.Tensor,
+        frame_lengths: torch.Tensor,
+        generator: torch.Generator | None = None,
+        hard_error: bool = False,
+    ):
         """Loss and metrics for base ids (B, N), target joints (B, 4N, 22, 3), text (B, text_dim).
 
         Returns (loss, metrics) with ``ce``, ``acc``, ``ctrl`` (L1, m) and, with ``hard_error``,
@@ -146,8 +177,9 @@ class ControlLoss(nn.Module):
         num_frames = targets.shape[1]
         valid = lengths_to_mask(token_lengths, n)
         ids = torch.where(valid, ids, base.pad_id)
-        sigma = sample_control_mask(frame_lengths, num_frames, self.control.joint_ids, s.mode, s.density,
-                                    generator).to(device)
+        sigma = sample_control_mask(
+            frame_lengths, num_frames, self.control.joint_ids, s.mode, s.density, generator
+        ).to(device)
         # masking with the cosine schedule and BERT corruption (reference §4.3 step 4)
         ratio = cosine_schedule(torch.rand(b, device=device, generator=generator))
         num_masked = (n * ratio).round().clamp(min=1)
@@ -185,8 +217,9 @@ class ControlLoss(nn.Module):
         return loss, metrics
 
 
-def token_probabilities(logits: torch.Tensor, estimator: str, tau: float = 1.0,
-                        generator: torch.Generator | None = None) -> torch.Tensor:
+def token_probabilities(
+    logits: torch.Tensor, estimator: str, tau: float = 1.0, generator: torch.Generator | None = None
+) -> torch.Tensor:
     """Differentiable token choice (B, N, K) for the consistency loss.
 
     ``gumbel``: straight-through Gumbel-softmax (one-hot sample forward, softmax((l + g) / tau)
@@ -223,7 +256,9 @@ class ControlStage(TextConditionedStage):
         opts = dict(ctx.options)
         joints = opts.pop("joints", None) or ctx.config.control.joints
         if joints not in CONTROL_JOINT_SETS:
-            raise ControlMMError(f"unknown control joints '{joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}")
+            raise ControlMMError(
+                f"unknown control joints '{joints}'; allowed: {', '.join(CONTROL_JOINT_SETS)}"
+            )
         self.settings = ControlTraining(**{k: v for k, v in opts.items() if v is not None})
         self._set_control_config(replace(ctx.config.control, joints=joints))
         self.base_transformer = ctx.base.transformer.eval()
@@ -232,8 +267,10 @@ class ControlStage(TextConditionedStage):
         """Record the control branch's configuration in model.json (the part is built from it)."""
         ctx = self.ctx
         if ctx.resume and control != ctx.config.control:
-            raise ControlMMError(f"the checkpoint being resumed trains the '{ctx.config.control.joints}' control "
-                                 f"model; --joints {control.joints} does not match (use --force to start over)")
+            raise ControlMMError(
+                f"the checkpoint being resumed trains the '{ctx.config.control.joints}' control "
+                f"model; --joints {control.joints} does not match (use --force to start over)"
+            )
         ctx.config = replace(ctx.config, control=control)
         if ctx.is_main:
             manifest = read_manifest(ctx.model_dir)
@@ -275,5 +312,7 @@ class ControlStage(TextConditionedStage):
         return {f"val_{k}": v / n for k, v in sums.items()}
 
     def record(self) -> dict[str, Any]:
-        return super().record() | {"control": asdict(self.ctx.config.control),
-                                   "consistency_training": asdict(self.settings)}
+        return super().record() | {
+            "control": asdict(self.ctx.config.control),
+            "consistency_training": asdict(self.settings),
+        }

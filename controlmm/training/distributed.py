@@ -65,7 +65,9 @@ def init_distributed(device: str | None) -> DistContext:
     if world > 1:
         if dev.type == "cuda":
             if torch.cuda.device_count() <= local_rank:
-                raise ControlMMError(f"LOCAL_RANK {local_rank} has no GPU ({torch.cuda.device_count()} visible)")
+                raise ControlMMError(
+                    f"LOCAL_RANK {local_rank} has no GPU ({torch.cuda.device_count()} visible)"
+                )
             torch.cuda.set_device(local_rank)
             dev = torch.device("cuda", local_rank)
         if not dist.is_initialized():

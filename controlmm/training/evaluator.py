@@ -44,7 +44,13 @@ from controlmm.eval.evaluator.modules import EVALUATOR_PRESETS, EvaluatorConfig,
 from controlmm.eval.evaluator.words import Vocabulary
 from controlmm.models.config import StageSchedule
 from controlmm.models.model_dir import resolve_device, save_part, write_statistics
-from controlmm.training.checkpoint import load_checkpoint, rng_state, save_checkpoint, seed_everything, set_rng_state
+from controlmm.training.checkpoint import (
+    load_checkpoint,
+    rng_state,
+    save_checkpoint,
+    seed_everything,
+    set_rng_state,
+)
 from controlmm.training.loop import lr_factor
 from controlmm.training.stage import VALIDATION_SEED
 
@@ -53,8 +59,16 @@ WORD_DROPOUT = 0.1  # training: share of caption words replaced by <unk> (robust
 
 SCHEDULES: dict[str, StageSchedule] = {
     # Sized from the measured throughput on 2 shared CPU cores (docs/BENCHMARKS.md, "Quality evaluation").
-    "default": StageSchedule(iters=1500, batch_size=64, lr=2e-3, weight_decay=1e-4, warmup=100,
-                             milestones=(1150,), gamma=0.2, checkpoint_every=250),
+    "default": StageSchedule(
+        iters=1500,
+        batch_size=64,
+        lr=2e-3,
+        weight_decay=1e-4,
+        warmup=100,
+        milestones=(1150,),
+        gamma=0.2,
+        checkpoint_every=250,
+    ),
     "tiny": StageSchedule(iters=40, batch_size=16, lr=1e-2, warmup=5, checkpoint_every=20),
 }
 
@@ -80,8 +94,13 @@ class EvaluatorTrainOptions:
     command: str | None = None
 
 
-def contrastive_loss(text: torch.Tensor, motion: torch.Tensor, caption_ids: torch.Tensor,
-                     scale: float, temperature: float = TEMPERATURE) -> tuple[torch.Tensor, torch.Tensor]:
+def contrastive_loss(
+    text: torch.Tensor,
+    motion: torch.Tensor,
+    caption_ids: torch.Tensor,
+    scale: float,
+    temperature: float = TEMPERATURE,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Symmetric InfoNCE of (B, D) embeddings on a sphere of radius ``scale``; returns (loss, top-1 accuracy).
 
     Off-diagonal pairs with the same caption (``caption_ids[i] == caption_ids[j]``) are masked out.
@@ -100,7 +119,11 @@ def _schedule(opts: EvaluatorTrainOptions, items: int) -> StageSchedule:
     if opts.preset not in SCHEDULES:
         raise ControlMMError(f"unknown evaluator preset '{opts.preset}'; allowed: {', '.join(SCHEDULES)}")
     s = SCHEDULES[opts.preset]
-    for name, value in (("batch_size", opts.batch_size), ("lr", opts.lr), ("checkpoint_every", opts.checkpoint_every)):
+    for name, value in (
+        ("batch_size", opts.batch_size),
+        ("lr", opts.lr),
+        ("checkpoint_every", opts.checkpoint_every),
+    ):
         if value is not None:
             s = replace(s, **{name: value})
     if s.batch_size < 2:
@@ -112,7 +135,9 @@ def _schedule(opts: EvaluatorTrainOptions, items: int) -> StageSchedule:
             raise ControlMMError(f"--epochs must be positive; got {opts.epochs}")
         s = replace(s, iters=max(1, int(np.ceil(opts.epochs * max(1, items // s.batch_size)))))
     if s.iters < 1 or s.checkpoint_every < 1:
-        raise ControlMMError(f"iterations and checkpoint interval must be at least 1; got {s.iters}, {s.checkpoint_every}")
+        raise ControlMMError(
+            f"iterations and checkpoint interval must be at least 1; got {s.iters}, {s.checkpoint_every}"
+        )
     if not s.lr > 0:
         raise ControlMMError(f"learning rate must be positive; got {s.lr}")
     return s
@@ -127,8 +152,9 @@ class _Captions:
         self.ids, self.lengths = vocabulary.encode(texts)
 
 
-def retrieval(evaluator: TextMotionEvaluator, data: HumanML3D, split: str, repeats: int = 3,
-              seed: int = 0) -> dict[str, float]:
+def retrieval(
+    evaluator: TextMotionEvaluator, data: HumanML3D, split: str, repeats: int = 3, seed: int = 0
+) -> dict[str, float]:
     """Ground-truth R-precision top-1/2/3 and MM-Dist of a split (evaluation passes of
     :mod:`controlmm.eval.quality`), mean over ``repeats`` passes."""
     from controlmm.eval.quality import EvalSet
@@ -145,7 +171,9 @@ def retrieval(evaluator: TextMotionEvaluator, data: HumanML3D, split: str, repea
 def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
     """Train an evaluator on ``opts.data``'s training split into ``opts.out``; see the module docstring."""
     if opts.preset not in EVALUATOR_PRESETS:
-        raise ControlMMError(f"unknown evaluator preset '{opts.preset}'; allowed: {', '.join(EVALUATOR_PRESETS)}")
+        raise ControlMMError(
+            f"unknown evaluator preset '{opts.preset}'; allowed: {', '.join(EVALUATOR_PRESETS)}"
+        )
     if opts.threads is not None:
         if opts.threads < 1:
             raise ControlMMError(f"threads must be at least 1; got {opts.threads}")
@@ -155,8 +183,10 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
     out = Path(opts.out)
     ckpt_path = out / "checkpoints" / f"{WEIGHTS}.pt"
     if not opts.resume and not opts.force and ((out / f"{WEIGHTS}.pt").exists() or ckpt_path.exists()):
-        raise ControlMMError(f"'{out}' already has evaluator training; pass --resume to continue it "
-                             "or --force to start it over")
+        raise ControlMMError(
+            f"'{out}' already has evaluator training; pass --resume to continue it "
+            "or --force to start it over"
+        )
     if opts.resume and not ckpt_path.is_file():
         raise InputFileError(f"nothing to resume: '{ckpt_path}' does not exist")
     device = resolve_device(opts.device)
@@ -177,11 +207,14 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
     schedule = _schedule(opts, len(dataset))
     steps_per_epoch = len(dataset) // schedule.batch_size
     if steps_per_epoch < 1:
-        raise InputFileError(f"the training split of '{data.root}' has {len(dataset)} usable items, fewer than "
-                             f"one batch of {schedule.batch_size}; lower --batch-size")
+        raise InputFileError(
+            f"the training split of '{data.root}' has {len(dataset)} usable items, fewer than "
+            f"one batch of {schedule.batch_size}; lower --batch-size"
+        )
     model = TextMotionEncoder(config).to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=schedule.lr, betas=schedule.betas,
-                                  weight_decay=schedule.weight_decay)
+    optimizer = torch.optim.AdamW(
+        model.parameters(), lr=schedule.lr, betas=schedule.betas, weight_decay=schedule.weight_decay
+    )
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, schedule))
     step, history, best, best_state, elapsed, last_val = 0, [], None, None, 0.0, -1
     if opts.resume:
@@ -196,13 +229,17 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
     else:
         out.mkdir(parents=True, exist_ok=True)
         write_statistics(out, data.normalizer)
-        normalization = {"source": str(data.root.resolve()),
-                         "description": "the training data's Mean.npy/Std.npy (no feat_bias division)"}
+        normalization = {
+            "source": str(data.root.resolve()),
+            "description": "the training data's Mean.npy/Std.npy (no feat_bias division)",
+        }
         write_evaluator_manifest(out, new_manifest(config, vocabulary, normalization))
         if ckpt_path.exists():
             ckpt_path.unlink()
 
-    val_set = TextMotionDataset(val_samples, data.normalizer, captions.index, unit=4, seed=VALIDATION_SEED + 1)
+    val_set = TextMotionDataset(
+        val_samples, data.normalizer, captions.index, unit=4, seed=VALIDATION_SEED + 1
+    )
     val_items = [val_set[(i, 0)] for i in range(len(val_set))]
     ids_all, len_all = captions.ids.to(device), captions.lengths
 
@@ -221,7 +258,7 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
         model.eval()
         t, m, c = [], [], []
         for start in range(0, len(val_items), 128):
-            a, b, cap = embed(torch.utils.data.default_collate(val_items[start:start + 128]))
+            a, b, cap = embed(torch.utils.data.default_collate(val_items[start : start + 128]))
             t.append(a), m.append(b), c.append(cap)
         t, m, c = torch.cat(t), torch.cat(m), torch.cat(c)
         model.train()
@@ -229,36 +266,76 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
         group = min(32, len(t))
         t, m, c = t[order], m[order], c[order]
         match = matching_metrics(t.double().cpu().numpy(), m.double().cpu().numpy(), group=group)
-        losses = [float(contrastive_loss(t[i:i + group], m[i:i + group], c[i:i + group], config.scale)[0])
-                  for i in range(0, len(t) - group + 1, group)]
+        losses = [
+            float(contrastive_loss(t[i : i + group], m[i : i + group], c[i : i + group], config.scale)[0])
+            for i in range(0, len(t) - group + 1, group)
+        ]
         r = match.r_precision
-        return {"val_loss": float(np.mean(losses)), "val_r1": r[0], "val_r2": r[1], "val_r3": r[2],
-                "val_score": float(np.mean(r)), "val_mm_dist": match.mm_dist, "step": step}
+        return {
+            "val_loss": float(np.mean(losses)),
+            "val_r1": r[0],
+            "val_r2": r[1],
+            "val_r3": r[2],
+            "val_score": float(np.mean(r)),
+            "val_mm_dist": match.mm_dist,
+            "step": step,
+        }
 
     def checkpoint() -> None:
-        save_checkpoint(ckpt_path, {
-            "stage": "evaluator", "step": step, "schedule": asdict(schedule), "config": config.to_dict(),
-            "vocabulary": list(vocabulary.words), "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-            "scheduler": scheduler.state_dict(), "rng": rng_state(), "history": history, "best": best,
-            "best_state": best_state, "elapsed": elapsed + time.time() - started, "last_val_step": last_val,
-        })
+        save_checkpoint(
+            ckpt_path,
+            {
+                "stage": "evaluator",
+                "step": step,
+                "schedule": asdict(schedule),
+                "config": config.to_dict(),
+                "vocabulary": list(vocabulary.words),
+                "model": model.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "scheduler": scheduler.state_dict(),
+                "rng": rng_state(),
+                "history": history,
+                "best": best,
+                "best_state": best_state,
+                "elapsed": elapsed + time.time() - started,
+                "last_val_step": last_val,
+            },
+        )
 
     from tqdm import tqdm
 
-    print(f"evaluator: {len(dataset)} training samples, {len(vocabulary)} words, batch {schedule.batch_size} "
-          f"({device}), {steps_per_epoch} steps/epoch, {schedule.iters} iterations "
-          f"({schedule.iters / steps_per_epoch:.1f} epochs), checkpoints in {ckpt_path.parent}", flush=True)
+    print(
+        f"evaluator: {len(dataset)} training samples, {len(vocabulary)} words, batch {schedule.batch_size} "
+        f"({device}), {steps_per_epoch} steps/epoch, {schedule.iters} iterations "
+        f"({schedule.iters / steps_per_epoch:.1f} epochs), checkpoints in {ckpt_path.parent}",
+        flush=True,
+    )
     started = time.time()
-    bar = tqdm(total=schedule.iters, initial=min(step, schedule.iters), desc="train evaluator", unit="it",
-               disable=not opts.progress, dynamic_ncols=True, file=sys.stderr)
+    bar = tqdm(
+        total=schedule.iters,
+        initial=min(step, schedule.iters),
+        desc="train evaluator",
+        unit="it",
+        disable=not opts.progress,
+        dynamic_ncols=True,
+        file=sys.stderr,
+    )
     model.train()
     running: dict[str, float] = {}
     train_time, train_cpu, train_steps = 0.0, 0.0, 0
     while step < schedule.iters:
         epoch, in_epoch = divmod(step, steps_per_epoch)
-        sampler = StepBatchSampler(len(dataset), schedule.batch_size, opts.seed, epoch, start_step=in_epoch,
-                                   end_step=min(steps_per_epoch, in_epoch + schedule.iters - step))
-        loader = DataLoader(dataset, batch_sampler=sampler, generator=torch.Generator().manual_seed(opts.seed + epoch))
+        sampler = StepBatchSampler(
+            len(dataset),
+            schedule.batch_size,
+            opts.seed,
+            epoch,
+            start_step=in_epoch,
+            end_step=min(steps_per_epoch, in_epoch + schedule.iters - step),
+        )
+        loader = DataLoader(
+            dataset, batch_sampler=sampler, generator=torch.Generator().manual_seed(opts.seed + epoch)
+        )
         tick, cpu_tick = time.time(), time.process_time()
         for batch in loader:
             text, motion, caption = embed(batch)
@@ -273,7 +350,9 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
                 running[k] = 0.9 * running.get(k, v) + 0.1 * v
             bar.update(1)
             if step % 10 == 0 or step == schedule.iters:
-                bar.set_postfix({k: f"{v:.3g}" for k, v in running.items()} | {"lr": f"{scheduler.get_last_lr()[0]:.1e}"})
+                bar.set_postfix(
+                    {k: f"{v:.3g}" for k, v in running.items()} | {"lr": f"{scheduler.get_last_lr()[0]:.1e}"}
+                )
             if step % schedule.checkpoint_every == 0 and step % steps_per_epoch:
                 train_time += time.time() - tick
                 train_cpu += time.process_time() - cpu_tick
@@ -288,8 +367,11 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
             if best is None or metrics["val_score"] >= best["val_score"]:
                 best = dict(metrics)
                 best_state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-            bar.write(f"evaluator step {step} (epoch {step / steps_per_epoch:.2f}): "
-                      + ", ".join(f"{k}={v:.4g}" for k, v in metrics.items() if k != "step"), file=sys.stdout)
+            bar.write(
+                f"evaluator step {step} (epoch {step / steps_per_epoch:.2f}): "
+                + ", ".join(f"{k}={v:.4g}" for k, v in metrics.items() if k != "step"),
+                file=sys.stdout,
+            )
             checkpoint()
     bar.close()
     wall = elapsed + time.time() - started
@@ -302,24 +384,45 @@ def train_evaluator(opts: EvaluatorTrainOptions) -> TextMotionEvaluator:
     manifest["part"] = save_part(out, WEIGHTS, export, "float16")
     evaluator = TextMotionEvaluator(export, vocabulary, data.normalizer, manifest, out)
     manifest["training"] = {
-        "data": str(Path(opts.data).resolve()), "preset": opts.preset, "iterations": schedule.iters,
-        "epochs": round(schedule.iters / steps_per_epoch, 3), "steps_per_epoch": steps_per_epoch,
-        "schedule": asdict(schedule), "temperature": TEMPERATURE, "word_dropout": WORD_DROPOUT, "seed": opts.seed,
-        "threads": torch.get_num_threads(), "device": str(device), "wall_time_s": round(wall, 1),
-        "throughput_it_s": round(train_steps / train_time, 3) if train_time > 0 else None,  # this session, wall
-        "cpu_s_per_it": round(train_cpu / train_steps, 4) if train_steps else None,  # all threads of this process
-        "train_samples": len(dataset), "val_samples": len(val_samples), "best": best,
-        "last": history[-1] if history else None, "history": history, "command": opts.command,
+        "data": str(Path(opts.data).resolve()),
+        "preset": opts.preset,
+        "iterations": schedule.iters,
+        "epochs": round(schedule.iters / steps_per_epoch, 3),
+        "steps_per_epoch": steps_per_epoch,
+        "schedule": asdict(schedule),
+        "temperature": TEMPERATURE,
+        "word_dropout": WORD_DROPOUT,
+        "seed": opts.seed,
+        "threads": torch.get_num_threads(),
+        "device": str(device),
+        "wall_time_s": round(wall, 1),
+        "throughput_it_s": round(train_steps / train_time, 3)
+        if train_time > 0
+        else None,  # this session, wall
+        "cpu_s_per_it": round(train_cpu / train_steps, 4)
+        if train_steps
+        else None,  # all threads of this process
+        "train_samples": len(dataset),
+        "val_samples": len(val_samples),
+        "best": best,
+        "last": history[-1] if history else None,
+        "history": history,
+        "command": opts.command,
         "torch": torch.__version__,
     }
     evaluator.manifest = manifest
     manifest["retrieval"] = _final_retrieval(evaluator, data, opts.progress)
     write_evaluator_manifest(out, manifest)
     r = manifest["retrieval"]
-    shown = "; ".join(f"{split}: R@1/2/3 = " + "/".join(f"{v[f'r_precision_top{k}']:.3f}" for k in (1, 2, 3))
-                      for split, v in r.items())
-    print(f"wrote {out / (WEIGHTS + '.pt')} ({manifest['part']['parameters']:,} parameters, "
-          f"{manifest['part']['bytes'] / 2**20:.2f} MiB); ground-truth retrieval {shown}", flush=True)
+    shown = "; ".join(
+        f"{split}: R@1/2/3 = " + "/".join(f"{v[f'r_precision_top{k}']:.3f}" for k in (1, 2, 3))
+        for split, v in r.items()
+    )
+    print(
+        f"wrote {out / (WEIGHTS + '.pt')} ({manifest['part']['parameters']:,} parameters, "
+        f"{manifest['part']['bytes'] / 2**20:.2f} MiB); ground-truth retrieval {shown}",
+        flush=True,
+    )
     return evaluator
 
 

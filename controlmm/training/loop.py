@@ -75,9 +75,13 @@ class TrainOptions:
     text_tokens: int | None = None  # MiniLM token states (TextEncoderConfig.tokens); None = the preset's
     progress: bool = True
     command: str | None = None
-    precision: str = "fp32"  # "bf16": bfloat16 autocast of the training forward pass (CPU with AVX512-BF16, GPUs)
+    precision: str = (
+        "fp32"  # "bf16": bfloat16 autocast of the training forward pass (CPU with AVX512-BF16, GPUs)
+    )
     threads: int | None = None  # torch CPU threads (None: torch's default)
-    stage_options: dict[str, Any] = field(default_factory=dict)  # options of one stage (e.g. control's --joints)
+    stage_options: dict[str, Any] = field(
+        default_factory=dict
+    )  # options of one stage (e.g. control's --joints)
 
 
 @dataclass
@@ -97,32 +101,45 @@ def lr_factor(step: int, schedule: StageSchedule) -> float:
 
 
 # -- model directory ------------------------------------------------------------------------------
-def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: DistContext,
-                    creates: bool, exists: bool) -> tuple[ModelConfig, dict[str, Any]]:
+def _open_model_dir(
+    stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: DistContext, creates: bool, exists: bool
+) -> tuple[ModelConfig, dict[str, Any]]:
     out = Path(opts.out)
     if exists:
         manifest = read_manifest(out)
         config = ModelConfig.from_dict(manifest["config"])
         if opts.preset and opts.preset != config.preset:
-            raise ControlMMError(f"'{out}' holds a '{config.preset}' model; --preset {opts.preset} does not match")
+            raise ControlMMError(
+                f"'{out}' holds a '{config.preset}' model; --preset {opts.preset} does not match"
+            )
         if opts.text_encoder and opts.text_encoder != config.text_encoder.name:
-            raise ControlMMError(f"'{out}' uses text encoder '{config.text_encoder.name}'; "
-                                 f"--text-encoder {opts.text_encoder} does not match")
+            raise ControlMMError(
+                f"'{out}' uses text encoder '{config.text_encoder.name}'; "
+                f"--text-encoder {opts.text_encoder} does not match"
+            )
         if opts.text_tokens is not None and opts.text_tokens != config.text_encoder.tokens:
-            raise ControlMMError(f"'{out}' uses text tokens {config.text_encoder.tokens}; "
-                                 f"--text-tokens {opts.text_tokens} does not match")
+            raise ControlMMError(
+                f"'{out}' uses text tokens {config.text_encoder.tokens}; "
+                f"--text-tokens {opts.text_tokens} does not match"
+            )
         return config, manifest
     if not creates:
-        raise InputFileError(f"'{out}' has no model.json; train the tokenizer first: "
-                             f"controlmm train tokenizer --data {opts.data} --out {out}")
+        raise InputFileError(
+            f"'{out}' has no model.json; train the tokenizer first: "
+            f"controlmm train tokenizer --data {opts.data} --out {out}"
+        )
     config = preset_config(opts.preset or "demo")
     if opts.text_encoder or opts.clip_weights:
         name = opts.text_encoder or config.text_encoder.name
         weights = opts.clip_weights if name == "clip" else None
         if name == "clip" and weights is None:
             weights = config.text_encoder.weights
-        text = TextEncoderConfig(name=name, weights=weights, precision=config.text_encoder.precision,
-                                 tokens=config.text_encoder.tokens if name == "minilm" else 0)
+        text = TextEncoderConfig(
+            name=name,
+            weights=weights,
+            precision=config.text_encoder.precision,
+            tokens=config.text_encoder.tokens if name == "minilm" else 0,
+        )
         if name == "clip":  # the vector size comes from the weights (512 for ViT-B/32)
             from controlmm.text import load_text_encoder
 
@@ -135,7 +152,7 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
     normalization = {
         "source": str(data.root.resolve()),
         "description": f"HumanML3D Mean.npy/Std.npy of the training data; std of dims 0-3 and 259-262 "
-                       f"divided by {config.feat_bias:g}**{config.feat_bias_times} (MoMask feat_bias quirk)",
+        f"divided by {config.feat_bias:g}**{config.feat_bias_times} (MoMask feat_bias quirk)",
         "feat_bias": config.feat_bias,
         "feat_bias_times": config.feat_bias_times,
     }
@@ -148,15 +165,22 @@ def _open_model_dir(stage_name: str, opts: TrainOptions, data: HumanML3D, ctx: D
     return config, manifest
 
 
-def _schedule(config: ModelConfig, stage_name: str, opts: TrainOptions, num_items: int,
-              world: int) -> StageSchedule:
+def _schedule(
+    config: ModelConfig, stage_name: str, opts: TrainOptions, num_items: int, world: int
+) -> StageSchedule:
     """The stage's schedule from the preset, with the command line's overrides."""
     schedule = config.schedules.get(stage_name)
     if schedule is None:  # a model directory created before this stage had a schedule: the preset's
-        schedule = preset_config(config.preset).schedules.get(stage_name) if config.preset in PRESETS else None
+        schedule = (
+            preset_config(config.preset).schedules.get(stage_name) if config.preset in PRESETS else None
+        )
     schedule = schedule or StageSchedule(iters=1000, batch_size=64)
-    for field_name, value in (("batch_size", opts.batch_size), ("lr", opts.lr),
-                              ("checkpoint_every", opts.checkpoint_every), ("iters", opts.iters)):
+    for field_name, value in (
+        ("batch_size", opts.batch_size),
+        ("lr", opts.lr),
+        ("checkpoint_every", opts.checkpoint_every),
+        ("iters", opts.iters),
+    ):
         if value is not None:
             schedule = replace(schedule, **{field_name: value})
     if schedule.batch_size < 1:
@@ -204,13 +228,19 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     data = HumanML3D(opts.data)
     creates = not stage_cls.requires
     # What exists is decided once, by rank 0, before anyone writes (every process takes the same path).
-    found = ctx.broadcast({"part": (out / f"{name}.pt").exists(), "checkpoint": ckpt_path.is_file(),
-                           "manifest": (out / "model.json").is_file()})
+    found = ctx.broadcast(
+        {
+            "part": (out / f"{name}.pt").exists(),
+            "checkpoint": ckpt_path.is_file(),
+            "manifest": (out / "model.json").is_file(),
+        }
+    )
     if opts.resume and opts.force:
         raise ControlMMError("--resume and --force exclude each other")
     if not opts.resume and not opts.force and (found["part"] or found["checkpoint"]):
-        raise ControlMMError(f"'{out}' already has {name} training; pass --resume to continue it "
-                             "or --force to start it over")
+        raise ControlMMError(
+            f"'{out}' already has {name} training; pass --resume to continue it or --force to start it over"
+        )
     if opts.resume and not found["checkpoint"]:
         raise InputFileError(f"nothing to resume: '{ckpt_path}' does not exist")
     config, manifest = _open_model_dir(name, opts, data, ctx, creates, found["manifest"])
@@ -219,28 +249,46 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     ctx.barrier()
     missing = [p for p in stage_cls.requires if p not in manifest.get("parts", {})]
     if missing:
-        raise InputFileError(f"'{out}' has no trained {missing[0]}; train it first: "
-                             f"controlmm train {missing[0]} --data {opts.data} --out {out}")
-    base = load_model(out, device=ctx.device, parts=stage_cls.requires, clip_weights=opts.clip_weights) \
-        if stage_cls.requires else None
+        raise InputFileError(
+            f"'{out}' has no trained {missing[0]}; train it first: "
+            f"controlmm train {missing[0]} --data {opts.data} --out {out}"
+        )
+    base = (
+        load_model(out, device=ctx.device, parts=stage_cls.requires, clip_weights=opts.clip_weights)
+        if stage_cls.requires
+        else None
+    )
     if base is not None:
         for module in base.parts.values():
             module.requires_grad_(False)
     seed_everything(opts.seed + ctx.rank)
-    sctx = StageContext(config=config, data=data, normalizer=read_statistics(out), model_dir=out,
-                        device=ctx.device, seed=opts.seed, progress=opts.progress and ctx.is_main,
-                        base=base, clip_weights=opts.clip_weights, is_main=ctx.is_main,
-                        options=dict(opts.stage_options), resume=opts.resume)
+    sctx = StageContext(
+        config=config,
+        data=data,
+        normalizer=read_statistics(out),
+        model_dir=out,
+        device=ctx.device,
+        seed=opts.seed,
+        progress=opts.progress and ctx.is_main,
+        base=base,
+        clip_weights=opts.clip_weights,
+        is_main=ctx.is_main,
+        options=dict(opts.stage_options),
+        resume=opts.resume,
+    )
     stage = stage_cls(sctx)
     model = stage.build_model().to(ctx.device)
     dataset = stage.train_dataset()
     schedule = _schedule(config, name, opts, len(dataset), ctx.world)
     steps_per_epoch = len(dataset) // schedule.batch_size
     if steps_per_epoch < 1:
-        raise InputFileError(f"the training split of '{data.root}' has {len(dataset)} usable items, fewer "
-                             f"than one batch of {schedule.batch_size}; lower --batch-size")
-    optimizer = torch.optim.AdamW(model.parameters(), lr=schedule.lr, betas=schedule.betas,
-                                  weight_decay=schedule.weight_decay)
+        raise InputFileError(
+            f"the training split of '{data.root}' has {len(dataset)} usable items, fewer "
+            f"than one batch of {schedule.batch_size}; lower --batch-size"
+        )
+    optimizer = torch.optim.AdamW(
+        model.parameters(), lr=schedule.lr, betas=schedule.betas, weight_decay=schedule.weight_decay
+    )
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, schedule))
 
     step, history, best, best_state, elapsed = 0, [], None, None, 0.0
@@ -272,13 +320,25 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     def checkpoint() -> None:
         states = ctx.gather(rng_state())
         if ctx.is_main:
-            save_checkpoint(ckpt_path, {
-                "stage": name, "step": step, "schedule": asdict(schedule), "model": model.state_dict(),
-                "extra": stage.extra_state(model), "optimizer": optimizer.state_dict(),
-                "scheduler": scheduler.state_dict(), "rng": states, "history": history, "best": best,
-                "best_state": best_state, "elapsed": elapsed + (time.time() - started),
-                "last_val_step": last_val_step, "world": ctx.world,
-            })
+            save_checkpoint(
+                ckpt_path,
+                {
+                    "stage": name,
+                    "step": step,
+                    "schedule": asdict(schedule),
+                    "model": model.state_dict(),
+                    "extra": stage.extra_state(model),
+                    "optimizer": optimizer.state_dict(),
+                    "scheduler": scheduler.state_dict(),
+                    "rng": states,
+                    "history": history,
+                    "best": best,
+                    "best_state": best_state,
+                    "elapsed": elapsed + (time.time() - started),
+                    "last_val_step": last_val_step,
+                    "world": ctx.world,
+                },
+            )
 
     def validate() -> dict[str, float]:
         nonlocal best, best_state, last_val_step
@@ -302,24 +362,48 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     from tqdm import tqdm
 
     if ctx.is_main:
-        print(f"{name}: {len(dataset)} training items, batch {schedule.batch_size} on {ctx.world} process(es) "
-              f"({ctx.device}), {steps_per_epoch} steps/epoch, {schedule.iters} iterations "
-              f"({schedule.iters / steps_per_epoch:.1f} epochs), checkpoints in {ckpt_path.parent}", flush=True)
+        print(
+            f"{name}: {len(dataset)} training items, batch {schedule.batch_size} on {ctx.world} process(es) "
+            f"({ctx.device}), {steps_per_epoch} steps/epoch, {schedule.iters} iterations "
+            f"({schedule.iters / steps_per_epoch:.1f} epochs), checkpoints in {ckpt_path.parent}",
+            flush=True,
+        )
     started = time.time()
-    bar = tqdm(total=schedule.iters, initial=min(step, schedule.iters), desc=f"train {name}", unit="it",
-               disable=not (opts.progress and ctx.is_main), dynamic_ncols=True, file=sys.stderr)
+    bar = tqdm(
+        total=schedule.iters,
+        initial=min(step, schedule.iters),
+        desc=f"train {name}",
+        unit="it",
+        disable=not (opts.progress and ctx.is_main),
+        dynamic_ncols=True,
+        file=sys.stderr,
+    )
     model.train()
     train_time, train_cpu, train_steps = 0.0, 0.0, 0
     running: dict[str, float] = {}
     while step < schedule.iters:
         epoch, in_epoch = divmod(step, steps_per_epoch)
         end = min(steps_per_epoch, in_epoch + schedule.iters - step)
-        sampler = StepBatchSampler(len(dataset), schedule.batch_size, opts.seed, epoch, start_step=in_epoch,
-                                   end_step=end, rank=ctx.rank, world=ctx.world,
-                                   lengths=getattr(dataset, "lengths", None), bucket=schedule.bucket)
+        sampler = StepBatchSampler(
+            len(dataset),
+            schedule.batch_size,
+            opts.seed,
+            epoch,
+            start_step=in_epoch,
+            end_step=end,
+            rank=ctx.rank,
+            world=ctx.world,
+            lengths=getattr(dataset, "lengths", None),
+            bucket=schedule.bucket,
+        )
         # Its own generator: creating a loader must not draw from the global RNG (exact resumption).
-        loader = DataLoader(dataset, batch_sampler=sampler, num_workers=opts.workers, collate_fn=stage.collate,
-                            generator=torch.Generator().manual_seed(opts.seed + epoch))
+        loader = DataLoader(
+            dataset,
+            batch_sampler=sampler,
+            num_workers=opts.workers,
+            collate_fn=stage.collate,
+            generator=torch.Generator().manual_seed(opts.seed + epoch),
+        )
         tick, cpu_tick = time.time(), time.process_time()
         for batch in loader:
             inputs = stage.prepare(batch)
@@ -354,24 +438,51 @@ def _train(stage_cls: type[Stage], opts: TrainOptions, ctx: DistContext) -> Trai
     total_elapsed = elapsed + (time.time() - started)
     last = history[-1] if history else {}
     if ctx.is_main:
-        _export(name, stage, model, best_state, best, last, schedule, steps_per_epoch, opts, ctx, out,
-                total_elapsed, train_steps / train_time if train_time > 0 else 0.0,
-                train_cpu / train_steps if train_steps else 0.0)
+        _export(
+            name,
+            stage,
+            model,
+            best_state,
+            best,
+            last,
+            schedule,
+            steps_per_epoch,
+            opts,
+            ctx,
+            out,
+            total_elapsed,
+            train_steps / train_time if train_time > 0 else 0.0,
+            train_cpu / train_steps if train_steps else 0.0,
+        )
     ctx.barrier()
     return TrainResult(model=model, step=step, metrics=last, best=best or {}, model_dir=out)
 
 
-def _export(name: str, stage: Stage, model: nn.Module, best_state, best, last, schedule: StageSchedule,
-            steps_per_epoch: int, opts: TrainOptions, ctx: DistContext, out: Path, wall: float,
-            throughput: float, cpu_per_step: float) -> None:
+def _export(
+    name: str,
+    stage: Stage,
+    model: nn.Module,
+    best_state,
+    best,
+    last,
+    schedule: StageSchedule,
+    steps_per_epoch: int,
+    opts: TrainOptions,
+    ctx: DistContext,
+    out: Path,
+    wall: float,
+    throughput: float,
+    cpu_per_step: float,
+) -> None:
     manifest = read_manifest(out)
     config = ModelConfig.from_dict(manifest["config"])
     export = copy.deepcopy(model).cpu()
     if best_state is not None:
         export.load_state_dict(best_state)
     entry = save_part(out, name, export, config.storage_dtype)
-    entry["trained_on"] = {dep: manifest["parts"][dep]["sha256"] for dep in stage.requires
-                           if dep in manifest.get("parts", {})}
+    entry["trained_on"] = {
+        dep: manifest["parts"][dep]["sha256"] for dep in stage.requires if dep in manifest.get("parts", {})
+    }
     manifest["parts"][name] = entry
     manifest["training"][name] = {
         "data": str(Path(opts.data).resolve()),
@@ -396,8 +507,11 @@ def _export(name: str, stage: Stage, model: nn.Module, best_state, best, last, s
         **stage.record(),
     }
     write_manifest(out, manifest)
-    _log(f"wrote {out / entry['file']} ({entry['parameters']:,} parameters, {entry['bytes'] / 2**20:.2f} MiB, "
-         f"{stage.best_metric}={best.get(stage.best_metric, float('nan')) if best else float('nan'):.4g})", None)
+    _log(
+        f"wrote {out / entry['file']} ({entry['parameters']:,} parameters, {entry['bytes'] / 2**20:.2f} MiB, "
+        f"{stage.best_metric}={best.get(stage.best_metric, float('nan')) if best else float('nan'):.4g})",
+        None,
+    )
 
 
 def _log(message: str, bar) -> None:

@@ -22,7 +22,6 @@ from controlmm.models.config import ModelConfig
 from controlmm.models.model_dir import MotionModel
 from controlmm.motion.normalization import Normalizer
 
-
 VALIDATION_SEED = 0
 """Seed of every stage's validation draws (crops, captions, masks), whatever the training seed: the
 validation metrics of runs with different ``--seed`` are measured on the same draws and comparable.

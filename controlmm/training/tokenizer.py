@@ -25,8 +25,11 @@ RIC = slice(4, 67)
 
 def reconstruction_loss(recon: torch.Tensor, target: torch.Tensor, commit: torch.Tensor) -> torch.Tensor:
     recon = recon.float()
-    return (F.smooth_l1_loss(recon, target) + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
-            + 0.02 * commit)
+    return (
+        F.smooth_l1_loss(recon, target)
+        + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
+        + 0.02 * commit
+    )
 
 
 def mpjpe(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -89,8 +92,12 @@ class TokenizerStage(Stage):
             global_errors.append(float((joints_hat - joints).norm(dim=-1).mean()) * len(x))
             used[ids[..., 0].flatten().cpu()] = True
         n = len(val)
-        return {"val_loss": sum(losses) / n, "val_mpjpe_mm": 1000.0 * sum(errors) / n,
-                "val_global_mpjpe_mm": 1000.0 * sum(global_errors) / n, "code_usage": float(used.float().mean())}
+        return {
+            "val_loss": sum(losses) / n,
+            "val_mpjpe_mm": 1000.0 * sum(errors) / n,
+            "val_global_mpjpe_mm": 1000.0 * sum(global_errors) / n,
+            "code_usage": float(used.float().mean()),
+        }
 
     def extra_state(self, model: nn.Module) -> dict[str, Any]:
         return {"ema": model.quantizer.ema_state()}
@@ -100,8 +107,11 @@ class TokenizerStage(Stage):
             model.quantizer.load_ema_state(state["ema"])
 
     def record(self) -> dict[str, Any]:
-        return {"train_motions": len(self.train_motions), "val_motions": len(self.val_motions),
-                "window": self.window}
+        return {
+            "train_motions": len(self.train_motions),
+            "val_motions": len(self.val_motions),
+            "window": self.window,
+        }
 
 
 @torch.no_grad()
@@ -131,5 +141,8 @@ def reconstruction_metrics(model, data, split: str = "test") -> dict[str, float]
         global_errors.append(float((joints_hat - joints).norm(dim=-1).mean()))
     if not errors:
         return {"motions": 0}
-    return {"mpjpe_mm": 1000.0 * sum(errors) / len(errors),
-            "global_mpjpe_mm": 1000.0 * sum(global_errors) / len(global_errors), "motions": len(errors)}
+    return {
+        "mpjpe_mm": 1000.0 * sum(errors) / len(errors),
+        "global_mpjpe_mm": 1000.0 * sum(global_errors) / len(global_errors),
+        "motions": len(errors),
+    }

@@ -35,19 +35,27 @@ class TextConditionedStage(Stage):
         self.val_samples = data.text_samples("val", progress=ctx.progress)
         captions = [c for s in self.train_samples + self.val_samples for c in s.captions]
         encoder = ctx.base.text_encoder
-        emb = embed_captions(encoder, captions, cache_dir=ctx.model_dir / "cache", progress=ctx.progress,
-                             tokens=ctx.config.text_encoder.tokens)
+        emb = embed_captions(
+            encoder,
+            captions,
+            cache_dir=ctx.model_dir / "cache",
+            progress=ctx.progress,
+            tokens=ctx.config.text_encoder.tokens,
+        )
         if emb.vectors.shape[-1] != ctx.config.transformer.text_dim:
-            raise ControlMMError(f"text encoder '{encoder.name}' gives {emb.vectors.shape[-1]}-d vectors; the "
-                                 f"model expects {ctx.config.transformer.text_dim}-d (wrong CLIP weights?)")
+            raise ControlMMError(
+                f"text encoder '{encoder.name}' gives {emb.vectors.shape[-1]}-d vectors; the "
+                f"model expects {ctx.config.transformer.text_dim}-d (wrong CLIP weights?)"
+            )
         self.caption_index = emb.index
         self.text_vectors = emb.vectors.to(ctx.device)
         self.tokenizer = ctx.base.tokenizer.eval()
         self.unit = ctx.config.tokenizer.downsample
 
     def train_dataset(self):
-        return TextMotionDataset(self.train_samples, self.ctx.normalizer, self.caption_index, unit=self.unit,
-                                 seed=self.ctx.seed)
+        return TextMotionDataset(
+            self.train_samples, self.ctx.normalizer, self.caption_index, unit=self.unit, seed=self.ctx.seed
+        )
 
     def tokens(self, motion: torch.Tensor) -> torch.Tensor:
         """(B, T, 263) normalised motions (T a multiple of 4) -> (B, T/4, Q) ids of the frozen tokenizer."""
@@ -59,20 +67,29 @@ class TextConditionedStage(Stage):
         # Trimmed to the longest clip: the frames beyond it are zero padding in every clip. Only the last
         # few tokens of the longest clip change: they are encoded as the clip alone (the convolutions' own
         # zero padding) instead of next to padded frames, whose activations are not zero.
-        motion = motion[:, :int(lengths.max())].to(self.ctx.device, non_blocking=True)
+        motion = motion[:, : int(lengths.max())].to(self.ctx.device, non_blocking=True)
         ids = self.tokens(motion)
         return ids, self.text_vectors[caption.to(self.ctx.device)], (lengths // self.unit).to(self.ctx.device)
 
     def val_batches(self, batch_size: int = 64):
-        val = TextMotionDataset(self.val_samples, self.ctx.normalizer, self.caption_index, unit=self.unit,
-                                seed=VALIDATION_SEED + 1)
+        val = TextMotionDataset(
+            self.val_samples,
+            self.ctx.normalizer,
+            self.caption_index,
+            unit=self.unit,
+            seed=VALIDATION_SEED + 1,
+        )
         for start in range(0, len(val), batch_size):
             items = [val[(i, 0)] for i in range(start, min(len(val), start + batch_size))]
             yield self.prepare(torch.utils.data.default_collate(items))
 
     def record(self) -> dict[str, Any]:
-        return {"train_samples": len(self.train_samples), "val_samples": len(self.val_samples),
-                "captions": len(self.caption_index), "text_encoder": self.ctx.config.text_encoder.name}
+        return {
+            "train_samples": len(self.train_samples),
+            "val_samples": len(self.val_samples),
+            "captions": len(self.caption_index),
+            "text_encoder": self.ctx.config.text_encoder.name,
+        }
 
 
 class MaskedLoss(nn.Module):
@@ -127,10 +144,14 @@ class TokenTransformerStage(TransformerStage):
     def __init__(self, ctx) -> None:
         view = ctx.config.token_view
         if view is None:
-            raise ControlMMError(f"model directory '{ctx.model_dir}' has no token_view in its configuration "
-                                 "(model directories made with --preset demo or tiny have one)")
+            raise ControlMMError(
+                f"model directory '{ctx.model_dir}' has no token_view in its configuration "
+                "(model directories made with --preset demo or tiny have one)"
+            )
         text = replace(ctx.config.text_encoder, tokens=view.tokens)
-        super().__init__(replace(ctx, config=replace(ctx.config, transformer=view.transformer, text_encoder=text)))
+        super().__init__(
+            replace(ctx, config=replace(ctx.config, transformer=view.transformer, text_encoder=text))
+        )
 
     def build_model(self) -> nn.Module:
         model = super().build_model()
@@ -145,9 +166,12 @@ def warm_start(model: nn.Module, source: nn.Module, skip: tuple[str, ...] = ()) 
     """Copy into ``model`` every tensor of ``source`` with the same name and shape, except names starting
     with a prefix in ``skip``; returns ``model``."""
     own, theirs = model.state_dict(), source.state_dict()
-    shared = {k: v for k, v in theirs.items()
-              if k in own and own[k].shape == v.shape and not k.startswith(skip)}
+    shared = {
+        k: v for k, v in theirs.items() if k in own and own[k].shape == v.shape and not k.startswith(skip)
+    }
     if not shared:
-        raise ControlMMError("warm start: the trained transformer shares no tensor with the token-state transformer")
+        raise ControlMMError(
+            "warm start: the trained transformer shares no tensor with the token-state transformer"
+        )
     model.load_state_dict({**own, **shared})
     return model

@@ -5,6 +5,14 @@ from scenes.sdf.primitives import sdf_box, sdf_capsule, sdf_cylinder, sdf_ellips
 from scenes.sdf.scene_sdf import SceneSDF
 
 __all__ = [
-    "MeshSDF", "SceneSDF", "closed_mesh", "heightfield_mesh",
-    "sdf_box", "sdf_capsule", "sdf_cylinder", "sdf_ellipsoid", "sdf_plane", "sdf_sphere",
+    "MeshSDF",
+    "SceneSDF",
+    "closed_mesh",
+    "heightfield_mesh",
+    "sdf_box",
+    "sdf_capsule",
+    "sdf_cylinder",
+    "sdf_ellipsoid",
+    "sdf_plane",
+    "sdf_sphere",
 ]

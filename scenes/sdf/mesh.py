@@ -87,20 +87,29 @@ class _Grid:
 
     def nodes(self, level: int) -> np.ndarray:
         """(nx * ny * nz, 3) node positions of a level, C order."""
-        scale = 2.0 ** level
-        axes = [self.centre[i] - self.half[i] * scale + self.pitch * scale * np.arange(self.shape[i]) for i in range(3)]
+        scale = 2.0**level
+        axes = [
+            self.centre[i] - self.half[i] * scale + self.pitch * scale * np.arange(self.shape[i])
+            for i in range(3)
+        ]
         return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
-def closed_mesh(vertices: np.ndarray, faces: np.ndarray, convex_hull: bool = False) -> tuple[trimesh.Trimesh, bool]:
+def closed_mesh(
+    vertices: np.ndarray, faces: np.ndarray, convex_hull: bool = False
+) -> tuple[trimesh.Trimesh, bool]:
     """A closed, outward-oriented trimesh of the given triangles, and whether it is their hull.
 
     Duplicate vertices are merged and degenerate faces dropped. When the result is not
     watertight with consistent winding (no inside exists) or ``convex_hull`` is asked, the
     convex hull is returned instead.
     """
-    mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64),
-                           process=True, validate=False)
+    mesh = trimesh.Trimesh(
+        np.asarray(vertices, dtype=np.float64),
+        np.asarray(faces, dtype=np.int64),
+        process=True,
+        validate=False,
+    )
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.remove_unreferenced_vertices()
     if convex_hull or len(mesh.faces) < 4 or not (mesh.is_watertight and mesh.is_winding_consistent):
@@ -120,8 +129,13 @@ class MeshSDF:
         reach: metres beyond the mesh bounds covered by the coarsest level.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, pad: float = DEFAULT_PAD, pitch: float = DEFAULT_PITCH,
-                 reach: float = DEFAULT_REACH) -> None:
+    def __init__(
+        self,
+        mesh: trimesh.Trimesh,
+        pad: float = DEFAULT_PAD,
+        pitch: float = DEFAULT_PITCH,
+        reach: float = DEFAULT_REACH,
+    ) -> None:
         self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
         self.faces = np.asarray(mesh.faces, dtype=np.int64)
         self.triangles = self.vertices[self.faces]  # (F, 3, 3)
@@ -154,8 +168,9 @@ class MeshSDF:
                 "shape": torch.as_tensor(g.shape, device=like.device),
                 "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=like.device).reshape(-1),
                 "ring": torch.as_tensor(self.ring.T.copy(), device=like.device),  # (K, F)
-                "corners": torch.tensor([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)],
-                                        device=like.device),
+                "corners": torch.tensor(
+                    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], device=like.device
+                ),
             }
         return self._cache[key]
 
@@ -238,8 +253,11 @@ def _surface_samples(triangles: np.ndarray, spacing: float) -> tuple[np.ndarray,
         keep = (i + j) <= kk
         v, w = i[keep] / kk, j[keep] / kk  # (S,)
         tri = triangles[ids]  # (n, 3, 3)
-        pts = tri[:, None, 0] + v[None, :, None] * (tri[:, None, 1] - tri[:, None, 0]) \
+        pts = (
+            tri[:, None, 0]
+            + v[None, :, None] * (tri[:, None, 1] - tri[:, None, 0])
             + w[None, :, None] * (tri[:, None, 2] - tri[:, None, 0])
+        )
         points.append(pts.reshape(-1, 3))
         owners.append(np.repeat(ids, len(v)))
     return np.concatenate(points), np.concatenate(owners)
@@ -290,16 +308,17 @@ def _best_of(nodes: Tensor, cand: Tensor, data: Tensor) -> Tensor:
     out = torch.empty(len(nodes), dtype=torch.long)
     step = max(1, _PAIRS // cand.shape[1])
     for s in range(0, len(nodes), step):
-        c = cand[s:s + step]
+        c = cand[s : s + step]
         rows = data.index_select(1, c.reshape(-1)).view(data.shape[0], *c.shape)
-        d2 = triangle_sq_distance(nodes[s:s + step].T[..., None], rows)
-        out[s:s + step] = c.gather(1, d2.argmin(dim=1, keepdim=True))[:, 0]
+        d2 = triangle_sq_distance(nodes[s : s + step].T[..., None], rows)
+        out[s : s + step] = c.gather(1, d2.argmin(dim=1, keepdim=True))[:, 0]
     return out
 
 
 @torch.no_grad()
-def _build_grid(mesh: trimesh.Trimesh, triangles: np.ndarray, ring: np.ndarray, pad: float, pitch: float,
-                reach: float) -> _Grid:
+def _build_grid(
+    mesh: trimesh.Trimesh, triangles: np.ndarray, ring: np.ndarray, pad: float, pitch: float, reach: float
+) -> _Grid:
     """Nested grids and the nearest triangle of their nodes (see the module docstring); ``ring``
     from :func:`_ring_table`."""
     lo, hi = triangles.reshape(-1, 3).min(0), triangles.reshape(-1, 3).max(0)
@@ -311,18 +330,20 @@ def _build_grid(mesh: trimesh.Trimesh, triangles: np.ndarray, ring: np.ndarray, 
     half = (np.asarray(shape) - 1) * pitch / 2  # >= the asked half extents, so levels still reach
 
     base_spacing = max(pitch / 2, math.sqrt(2 * float(mesh.area) / MAX_SAMPLES))
-    data = triangle_data(torch.as_tensor(triangles, dtype=torch.float32))  # float32 picks the nearest well enough
+    data = triangle_data(
+        torch.as_tensor(triangles, dtype=torch.float32)
+    )  # float32 picks the nearest well enough
     vertex_ring = torch.as_tensor(ring)
     nearest = np.zeros((levels, *shape), dtype=np.int32)
     for level in range(levels):
         nodes = _Grid(centre, half, pitch, shape, nearest).nodes(level)
         need = np.ones(len(nodes), dtype=bool)
         if level > 0:  # nodes strictly inside the finer level (by one node) are never used
-            inner = half * 2.0 ** (level - 1) - pitch * 2.0 ** level
+            inner = half * 2.0 ** (level - 1) - pitch * 2.0**level
             need = np.any(np.abs(nodes - centre) > inner, axis=1)
         # The owner of the nearest surface sample (samples half the level's pitch apart, so
         # within that of the best), then the triangles sharing a vertex with it, exactly.
-        samples, owner = _surface_samples(triangles, spacing=base_spacing * 2.0 ** level)
+        samples, owner = _surface_samples(triangles, spacing=base_spacing * 2.0**level)
         _, idx = cKDTree(samples).query(nodes[need])
         best = torch.as_tensor(owner[idx])
         points = torch.as_tensor(nodes[need], dtype=torch.float32)
@@ -341,28 +362,41 @@ def _build_grid(mesh: trimesh.Trimesh, triangles: np.ndarray, ring: np.ndarray, 
 _MESH_CACHE: dict[str, MeshSDF] = {}
 
 
-def cached_mesh_sdf(vertices: np.ndarray, faces: np.ndarray, convex_hull: bool = False,
-                    pad: float = DEFAULT_PAD, pitch: float = DEFAULT_PITCH, name: str = "mesh",
-                    reach: float = DEFAULT_REACH) -> MeshSDF:
+def cached_mesh_sdf(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    convex_hull: bool = False,
+    pad: float = DEFAULT_PAD,
+    pitch: float = DEFAULT_PITCH,
+    name: str = "mesh",
+    reach: float = DEFAULT_REACH,
+) -> MeshSDF:
     """A :class:`MeshSDF` of the given triangles, shared per process by content.
 
     Warns (once per mesh) when the mesh is not closed and its convex hull is used instead.
     """
-    key = hashlib.sha1(np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
-                       + np.ascontiguousarray(faces, dtype=np.int64).tobytes()
-                       + repr((convex_hull, pad, pitch, reach)).encode()).hexdigest()
+    key = hashlib.sha1(
+        np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
+        + np.ascontiguousarray(faces, dtype=np.int64).tobytes()
+        + repr((convex_hull, pad, pitch, reach)).encode()
+    ).hexdigest()
     if key not in _MESH_CACHE:
         mesh, is_hull = closed_mesh(vertices, faces, convex_hull=convex_hull)
         if is_hull and not convex_hull:
-            warnings.warn(f"mesh '{name}' is not closed (watertight, consistently wound); its SDF uses "
-                          "the convex hull, as MuJoCo's collisions do", stacklevel=2)
+            warnings.warn(
+                f"mesh '{name}' is not closed (watertight, consistently wound); its SDF uses "
+                "the convex hull, as MuJoCo's collisions do",
+                stacklevel=2,
+            )
         sdf = MeshSDF(mesh, pad=pad, pitch=pitch, reach=reach)
         sdf.is_hull = is_hull
         _MESH_CACHE[key] = sdf
     return _MESH_CACHE[key]
 
 
-def heightfield_mesh(size: np.ndarray, nrow: int, ncol: int, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def heightfield_mesh(
+    size: np.ndarray, nrow: int, ncol: int, data: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Closed triangle mesh (vertices, faces) of a MuJoCo height field in its geom frame.
 
     MuJoCo's height field spans x in [-size[0], size[0]] (columns), y in [-size[1], size[1]]

@@ -43,7 +43,14 @@ import torch
 
 from controlmm.errors import ControlMMError, ShapeError
 from scenes.sdf import kernels, primitives
-from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, DEFAULT_REACH, MeshSDF, cached_mesh_sdf, heightfield_mesh
+from scenes.sdf.mesh import (
+    DEFAULT_PAD,
+    DEFAULT_PITCH,
+    DEFAULT_REACH,
+    MeshSDF,
+    cached_mesh_sdf,
+    heightfield_mesh,
+)
 from scenes.tracks import MocapTrack, quat_to_mat
 
 Tensor = torch.Tensor
@@ -53,8 +60,16 @@ SUPPORTED = ("plane", "sphere", "capsule", "cylinder", "box", "ellipsoid", "mesh
 BOX, CYLINDER, PLANE, ELLIPSOID, MESH = range(5)
 """Geom kinds, in evaluation order (cheap first, so that the costly ones can be culled). BOX is
 a box grown by a ball: boxes, spheres and capsules."""
-_KIND = {"box": BOX, "sphere": BOX, "capsule": BOX, "cylinder": CYLINDER, "plane": PLANE,
-         "ellipsoid": ELLIPSOID, "mesh": MESH, "hfield": MESH}
+_KIND = {
+    "box": BOX,
+    "sphere": BOX,
+    "capsule": BOX,
+    "cylinder": CYLINDER,
+    "plane": PLANE,
+    "ellipsoid": ELLIPSOID,
+    "mesh": MESH,
+    "hfield": MESH,
+}
 _TABLE = 16
 """Columns of the per-geom table: geom-from-world rotation (9), world origin (3), sdf_round's box
 half-extents (3) and disk radius (1)."""
@@ -95,9 +110,15 @@ class SceneSDF:
             grids (m); the coarser levels reach the scene's extent (see :mod:`scenes.sdf.mesh`).
     """
 
-    def __init__(self, scene, geom_ids: Sequence[int] | None = None,
-                 tracks: Mapping[str, MocapTrack] | None = None, convex_hull_meshes: bool = False,
-                 mesh_pad: float = DEFAULT_PAD, mesh_pitch: float = DEFAULT_PITCH) -> None:
+    def __init__(
+        self,
+        scene,
+        geom_ids: Sequence[int] | None = None,
+        tracks: Mapping[str, MocapTrack] | None = None,
+        convex_hull_meshes: bool = False,
+        mesh_pad: float = DEFAULT_PAD,
+        mesh_pitch: float = DEFAULT_PITCH,
+    ) -> None:
         if isinstance(scene, mujoco.MjModel):
             model = scene
             ids = _model_obstacles(model) if geom_ids is None else geom_ids
@@ -118,28 +139,47 @@ class SceneSDF:
         start = None if isinstance(scene, mujoco.MjModel) else (scene.start.x, scene.start.y)
         self._extent = _scene_extent(model, data, self.geom_ids, tracks, start)
         track_of_body = {model.body(name).id: name for name in tracks}
-        moving = sorted({track_of_body[int(model.geom_bodyid[g])] for g in self.geom_ids
-                         if int(model.geom_bodyid[g]) in track_of_body})
+        moving = sorted(
+            {
+                track_of_body[int(model.geom_bodyid[g])]
+                for g in self.geom_ids
+                if int(model.geom_bodyid[g]) in track_of_body
+            }
+        )
         self._tracks = [tracks[name] for name in moving]  # the tracks that move obstacle geoms
         body_track = {model.body(name).id: k for k, name in enumerate(moving)}
-        geoms = [self._make_geom(col, g, data, body_track, mesh_pad, mesh_pitch) for col, g in enumerate(self.geom_ids)]
+        geoms = [
+            self._make_geom(col, g, data, body_track, mesh_pad, mesh_pitch)
+            for col, g in enumerate(self.geom_ids)
+        ]
         self._geoms = sorted(geoms, key=lambda geom: geom.kind)  # stable: geom_ids order within a kind
         kinds = np.array([geom.kind for geom in self._geoms], dtype=np.int64)
-        self._slices = {k: slice(int(np.searchsorted(kinds, k, "left")), int(np.searchsorted(kinds, k, "right")))
-                        for k in (BOX, CYLINDER, PLANE, ELLIPSOID, MESH)}
+        self._slices = {
+            k: slice(int(np.searchsorted(kinds, k, "left")), int(np.searchsorted(kinds, k, "right")))
+            for k in (BOX, CYLINDER, PLANE, ELLIPSOID, MESH)
+        }
         self._num_round = self._slices[CYLINDER].stop  # BOX and CYLINDER columns come first
         self._consts: dict[tuple[torch.dtype, torch.device], dict[str, Tensor]] = {}
 
     # -- construction ---------------------------------------------------------------------------
 
-    def _make_geom(self, col: int, g: int, data: mujoco.MjData, body_track: dict[int, int],
-                   mesh_pad: float, mesh_pitch: float) -> _Geom:
+    def _make_geom(
+        self,
+        col: int,
+        g: int,
+        data: mujoco.MjData,
+        body_track: dict[int, int],
+        mesh_pad: float,
+        mesh_pitch: float,
+    ) -> _Geom:
         m = self.model
         type_name = geom_type_name(m.geom_type[g])
         if type_name not in _KIND:
             name = m.geom(g).name or f"geom{g}"
-            raise ControlMMError(f"geom '{name}' has type '{type_name}', which the SDF does not support "
-                                 f"(supported: {', '.join(SUPPORTED)})")
+            raise ControlMMError(
+                f"geom '{name}' has type '{type_name}', which the SDF does not support "
+                f"(supported: {', '.join(SUPPORTED)})"
+            )
         body = int(m.geom_bodyid[g])
         if body in body_track:  # pose relative to the mocap body, composed with the track at call time
             rot, pos, track = _quat_mat(m.geom_quat[g]), m.geom_pos[g].copy(), body_track[body]
@@ -147,11 +187,25 @@ class SceneSDF:
             rot, pos, track = data.geom_xmat[g].reshape(3, 3).copy(), data.geom_xpos[g].copy(), -1
         mesh = None
         if _KIND[type_name] == MESH:  # its grids reach every corner of the scene's extent
-            centres = [data.geom_xpos[g]] if track < 0 else [
-                t_pos + np.linalg.norm(pos) * np.array([sx, sy, sz]) for t_pos in self._tracks[track].pos
-                for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-            corners = np.array([[x, y, z] for x in self._extent[:, 0] for y in self._extent[:, 1]
-                                for z in self._extent[:, 2]])
+            centres = (
+                [data.geom_xpos[g]]
+                if track < 0
+                else [
+                    t_pos + np.linalg.norm(pos) * np.array([sx, sy, sz])
+                    for t_pos in self._tracks[track].pos
+                    for sx in (-1, 1)
+                    for sy in (-1, 1)
+                    for sz in (-1, 1)
+                ]
+            )
+            corners = np.array(
+                [
+                    [x, y, z]
+                    for x in self._extent[:, 0]
+                    for y in self._extent[:, 1]
+                    for z in self._extent[:, 2]
+                ]
+            )
             reach = max(DEFAULT_REACH, max(float(np.linalg.norm(corners - c, axis=1).max()) for c in centres))
             mesh = self._mesh(g, mesh_pad, mesh_pitch, reach)
         return _Geom(col, g, type_name, m.geom_size[g].copy(), rot, pos, track, mesh)
@@ -163,14 +217,23 @@ class SceneSDF:
             mid = int(m.geom_dataid[g])
             v0, nv = m.mesh_vertadr[mid], m.mesh_vertnum[mid]
             f0, nf = m.mesh_faceadr[mid], m.mesh_facenum[mid]
-            vertices, faces = m.mesh_vert[v0:v0 + nv], m.mesh_face[f0:f0 + nf]
+            vertices, faces = m.mesh_vert[v0 : v0 + nv], m.mesh_face[f0 : f0 + nf]
         else:
             hid = int(m.geom_dataid[g])
             nrow, ncol = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
             adr = int(m.hfield_adr[hid])
-            vertices, faces = heightfield_mesh(m.hfield_size[hid], nrow, ncol, m.hfield_data[adr:adr + nrow * ncol])
-        return cached_mesh_sdf(vertices, faces, convex_hull=self.convex_hull_meshes, pad=pad, pitch=pitch, name=name,
-                               reach=round(reach, 1))
+            vertices, faces = heightfield_mesh(
+                m.hfield_size[hid], nrow, ncol, m.hfield_data[adr : adr + nrow * ncol]
+            )
+        return cached_mesh_sdf(
+            vertices,
+            faces,
+            convex_hull=self.convex_hull_meshes,
+            pad=pad,
+            pitch=pitch,
+            name=name,
+            reach=round(reach, 1),
+        )
 
     def _tensors(self, like: Tensor) -> dict[str, Tensor]:
         """Stacked geom constants for a dtype and device (built once per pair)."""
@@ -180,7 +243,7 @@ class SceneSDF:
         to = dict(dtype=like.dtype, device=like.device)
         geoms = self._geoms
         box, disk, ball = np.zeros((len(geoms), 3)), np.zeros(len(geoms)), np.zeros(len(geoms))
-        for i, geom in enumerate(geoms[:self._num_round]):
+        for i, geom in enumerate(geoms[: self._num_round]):
             box[i], disk[i], ball[i] = primitives.round_params(geom.type_name, geom.size)
         axes = np.array([geom.size for geom in geoms[self._slices[ELLIPSOID]]]).reshape(-1, 3)
         spheres = [geom.mesh.bounding_sphere() for geom in geoms[self._slices[MESH]]]
@@ -188,22 +251,30 @@ class SceneSDF:
         c = {
             "rot": torch.as_tensor(np.array([geom.rot for geom in geoms]).reshape(-1, 3, 3), **to),
             "pos": torch.as_tensor(np.array([geom.pos for geom in geoms]).reshape(-1, 3), **to),
-            "box": torch.as_tensor(box, **to), "disk": torch.as_tensor(disk, **to), "ball": torch.as_tensor(ball, **to),
+            "box": torch.as_tensor(box, **to),
+            "disk": torch.as_tensor(disk, **to),
+            "ball": torch.as_tensor(ball, **to),
             "axes": torch.as_tensor(axes, **to),
             "axes_max": torch.as_tensor(axes.max(-1) if len(axes) else np.zeros(0), **to),
             "mesh_centre": torch.as_tensor(np.array([s[0] for s in spheres]).reshape(-1, 3), **to),
             "mesh_radius": torch.as_tensor(np.array([s[1] for s in spheres]), **to),
             "moving": torch.as_tensor(moving, dtype=torch.long, device=like.device),
-            "moving_track": torch.as_tensor([geoms[i].track for i in moving], dtype=torch.long, device=like.device),
+            "moving_track": torch.as_tensor(
+                [geoms[i].track for i in moving], dtype=torch.long, device=like.device
+            ),
             # kind-sorted position of each geom_ids column
-            "order": torch.as_tensor(np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device),
+            "order": torch.as_tensor(
+                np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device
+            ),
         }
         sb, sc = self._slices[BOX], self._slices[CYLINDER]
         c["box_half"], c["box_ball"] = c["box"][sb, :, None].contiguous(), c["ball"][sb, None].contiguous()
         c["cyl_half"], c["cyl_radius"] = c["box"][sc, 2:].contiguous(), c["disk"][sc, None].contiguous()
         c["closest_column"] = (torch.arange(len(geoms), device=like.device) - self._num_round).clamp_min(0)
         rot_t = c["rot"].transpose(-1, -2)
-        c["table"] = torch.cat([rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1).T.contiguous()
+        c["table"] = torch.cat(
+            [rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1
+        ).T.contiguous()
         c["frames"] = kernels.stack_frames(rot_t[None], c["pos"][None])
         self._consts[key] = c
         return c
@@ -240,9 +311,19 @@ class SceneSDF:
             value, winner, closest = self._nearest(local, c, need_winner=grad)
             if not grad:
                 return value.reshape(*lead, n)
-            table = c["table"] if rot_t is None else torch.cat(  # (16, L * G), see _TABLE
-                [rot_t.reshape(-1, 9), pos.reshape(-1, 3), c["box"].repeat(rot_t.shape[0], 1),
-                 c["disk"].repeat(rot_t.shape[0])[:, None]], dim=1).T.contiguous()
+            table = (
+                c["table"]
+                if rot_t is None
+                else torch.cat(  # (16, L * G), see _TABLE
+                    [
+                        rot_t.reshape(-1, 9),
+                        pos.reshape(-1, 3),
+                        c["box"].repeat(rot_t.shape[0], 1),
+                        c["disk"].repeat(rot_t.shape[0])[:, None],
+                    ],
+                    dim=1,
+                ).T.contiguous()
+            )
             gradient = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
         return kernels.WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
 
@@ -258,9 +339,15 @@ class SceneSDF:
         p, _, _, frames = self._posed(points, times, c)
         local = kernels.to_local(p, frames)  # (L, 3, G, N')
         r = self._num_round
-        cols = [primitives.sdf_round(local[:, :, :r].permute(0, 2, 3, 1), c["box"][:r, None],
-                                     c["disk"][:r, None], c["ball"][:r, None]),
-                local[:, 2, self._slices[PLANE]]]
+        cols = [
+            primitives.sdf_round(
+                local[:, :, :r].permute(0, 2, 3, 1),
+                c["box"][:r, None],
+                c["disk"][:r, None],
+                c["ball"][:r, None],
+            ),
+            local[:, 2, self._slices[PLANE]],
+        ]
         s = self._slices[ELLIPSOID]
         if s.stop > s.start:
             cols.append(primitives.sdf_ellipsoid(local[:, :, s].permute(0, 2, 3, 1), c["axes"][:, None]))
@@ -337,7 +424,9 @@ class SceneSDF:
             merge(kernels.box_distance(x[:, s], y[:, s], z[:, s], c["box_half"], c["box_ball"]), s.start)
         s = self._slices[CYLINDER]
         if s.stop > s.start:
-            merge(kernels.cylinder_distance(x[:, s], y[:, s], z[:, s], c["cyl_half"], c["cyl_radius"]), s.start)
+            merge(
+                kernels.cylinder_distance(x[:, s], y[:, s], z[:, s], c["cyl_half"], c["cyl_radius"]), s.start
+            )
         s = self._slices[PLANE]
         if s.stop > s.start:
             if need_winner:
@@ -347,11 +436,17 @@ class SceneSDF:
         s = self._slices[ELLIPSOID]
         if s.stop > s.start:
             xe, ye, ze = x[:, s], y[:, s], z[:, s]
-            d = (xe * xe).addcmul_(ye, ye).addcmul_(ze, ze).sqrt_().sub_(c["axes_max"][:, None])  # lower bound
+            d = (
+                (xe * xe).addcmul_(ye, ye).addcmul_(ze, ze).sqrt_().sub_(c["axes_max"][:, None])
+            )  # lower bound
             pts = local[:, :, s].permute(0, 2, 3, 1)  # (L, Ge, N', 3)
             cp = slice(s.start - first_cp, s.stop - first_cp)
             if best is None:  # nothing to cull against: every pair
-                hit, pts, axes = None, pts.reshape(-1, 3), c["axes"][None, :, None].expand_as(pts).reshape(-1, 3)
+                hit, pts, axes = (
+                    None,
+                    pts.reshape(-1, 3),
+                    c["axes"][None, :, None].expand_as(pts).reshape(-1, 3),
+                )
             else:
                 hit = (d <= best[:, None]).nonzero(as_tuple=True)
                 pts, axes = pts[hit], c["axes"].index_select(0, hit[1])
@@ -366,7 +461,9 @@ class SceneSDF:
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
             pts = local[:, :, j].transpose(1, 2)  # (L, N', 3)
             k = j - self._slices[MESH].start
-            d = torch.linalg.vector_norm(pts - c["mesh_centre"][k], dim=-1) - c["mesh_radius"][k]  # lower bound
+            d = (
+                torch.linalg.vector_norm(pts - c["mesh_centre"][k], dim=-1) - c["mesh_radius"][k]
+            )  # lower bound
             hit = None if best is None else (d <= best).nonzero(as_tuple=True)
             pts = pts.reshape(-1, 3) if hit is None else pts[hit]
             if len(pts):
@@ -377,17 +474,28 @@ class SceneSDF:
             merge(d[:, None], j)
         return best, winner, closest
 
-    def _winner_gradient(self, local: Tensor, value: Tensor, winner: Tensor, table: Tensor,
-                         closest: Tensor | None, c: dict[str, Tensor]) -> Tensor:
+    def _winner_gradient(
+        self,
+        local: Tensor,
+        value: Tensor,
+        winner: Tensor,
+        table: Tensor,
+        closest: Tensor | None,
+        c: dict[str, Tensor],
+    ) -> Tensor:
         """World gradient (L, N', 3) of the SDF ``value`` (L, N') from the points in every geom frame
         ``local`` (L, 3, G, N') and the winning geom (L, N'). No autograd."""
         num_l, _, num_g, num_n = local.shape
         lw = local.gather(2, winner[:, None, None, :].expand(-1, 3, 1, -1))[:, :, 0]  # (L, 3, N')
         flat = winner if num_l == 1 else winner + (torch.arange(num_l, device=winner.device) * num_g)[:, None]
-        row = table.index_select(1, flat.reshape(-1)).view(_TABLE, num_l, num_n).transpose(0, 1)  # (L, 16, N')
+        row = (
+            table.index_select(1, flat.reshape(-1)).view(_TABLE, num_l, num_n).transpose(0, 1)
+        )  # (L, 16, N')
         first_cp = self._num_round
         g = kernels.round_gradient(lw, row[:, 12:15], row[:, 15]) if first_cp > 0 else None
-        if closest is not None:  # planes, ellipsoids, meshes: side (p - q) / ||p - q|| = (p - q) value / ||p - q||^2
+        if (
+            closest is not None
+        ):  # planes, ellipsoids, meshes: side (p - q) / ||p - q|| = (p - q) value / ||p - q||^2
             k = c["closest_column"][winner]
             diff = lw - closest.gather(2, k[:, None, None, :].expand(-1, 3, 1, -1))[:, :, 0]
             x, y, z = diff.unbind(1)
@@ -404,11 +512,18 @@ EXTENT_MARGIN = 1.0
 accurate (their grids reach it; see :mod:`scenes.sdf.mesh`)."""
 
 
-def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence[int],
-                  tracks: Mapping[str, MocapTrack], start: tuple[float, float] | None) -> np.ndarray:
+def _scene_extent(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    geom_ids: Sequence[int],
+    tracks: Mapping[str, MocapTrack],
+    start: tuple[float, float] | None,
+) -> np.ndarray:
     """(2, 3) world box holding the obstacles (every key pose of moving ones), the start pose
     (0 to 2 m high) and ``EXTENT_MARGIN`` around them."""
-    points = [] if start is None else [np.array([start[0], start[1], 0.0]), np.array([start[0], start[1], 2.0])]
+    points = (
+        [] if start is None else [np.array([start[0], start[1], 0.0]), np.array([start[0], start[1], 2.0])]
+    )
     for g in geom_ids:
         if model.geom_type[g] == G.mjGEOM_PLANE:
             continue
@@ -418,8 +533,14 @@ def _scene_extent(model: mujoco.MjModel, data: mujoco.MjData, geom_ids: Sequence
         points += [centre - half, centre + half]
     for name, track in tracks.items():
         body = model.body(name).id
-        radius = max([float(model.geom_rbound[g]) + float(np.linalg.norm(model.geom_pos[g]))
-                      for g in geom_ids if model.geom_bodyid[g] == body] or [0.0])
+        radius = max(
+            [
+                float(model.geom_rbound[g]) + float(np.linalg.norm(model.geom_pos[g]))
+                for g in geom_ids
+                if model.geom_bodyid[g] == body
+            ]
+            or [0.0]
+        )
         points += [track.pos.min(0) - radius, track.pos.max(0) + radius]
     if not points:
         return np.zeros((2, 3))
@@ -452,8 +573,10 @@ def _check_times(t, lead: torch.Size, like: Tensor) -> Tensor:
     try:
         return torch.broadcast_to(times, lead)
     except RuntimeError:
-        raise ShapeError(f"frame times of shape {tuple(times.shape)} do not broadcast to the points' leading "
-                         f"shape {tuple(lead)} (points (..., N, 3), times (...))") from None
+        raise ShapeError(
+            f"frame times of shape {tuple(times.shape)} do not broadcast to the points' leading "
+            f"shape {tuple(lead)} (points (..., N, 3), times (...))"
+        ) from None
 
 
 def _model_obstacles(model: mujoco.MjModel) -> tuple[int, ...]:
@@ -469,8 +592,11 @@ def _model_obstacles(model: mujoco.MjModel) -> tuple[int, ...]:
         body = int(model.geom_bodyid[g])
         if int(model.body_rootid[body]) in articulated:
             continue
-        if (model.geom_type[g] == G.mjGEOM_PLANE and model.body_mocapid[body] < 0
-                and data.geom_xmat[g].reshape(3, 3)[2, 2] > 1 - 1e-9):
+        if (
+            model.geom_type[g] == G.mjGEOM_PLANE
+            and model.body_mocapid[body] < 0
+            and data.geom_xmat[g].reshape(3, 3)[2, 2] > 1 - 1e-9
+        ):
             continue
         if model.geom_contype[g] or model.geom_conaffinity[g]:
             ids.append(g)

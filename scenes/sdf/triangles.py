@@ -78,7 +78,9 @@ def triangle_data(triangles: Tensor) -> Tensor:
     n = torch.linalg.cross(ab, ac)
     n = n / torch.linalg.vector_norm(n, dim=-1, keepdim=True).clamp_min(torch.finfo(n.dtype).tiny)
     d00, d01, d11 = (ab * ab).sum(-1), (ab * ac).sum(-1), (ac * ac).sum(-1)
-    return torch.cat([a, ab, ac, n, torch.stack([d00, d01, d11, d00 - 2 * d01 + d11], -1)], dim=-1).T.contiguous()
+    return torch.cat(
+        [a, ab, ac, n, torch.stack([d00, d01, d11, d00 - 2 * d01 + d11], -1)], dim=-1
+    ).T.contiguous()
 
 
 def triangle_sq_distance(p: Tensor, data: Tensor) -> Tensor:

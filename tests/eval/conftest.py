@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from torch_threads import one_thread
 
 FAMILIES = ("walk", "jump_in_place", "wave_left", "turn_right")
@@ -48,7 +47,9 @@ def tiny_evaluator_dir(tmp_path_factory, small_corpus) -> Path:
 
     out = tmp_path_factory.mktemp("evaluator") / "tiny"
     with one_thread():
-        train_evaluator(EvaluatorTrainOptions(data=small_corpus, out=out, preset="tiny", progress=False, device="cpu"))
+        train_evaluator(
+            EvaluatorTrainOptions(data=small_corpus, out=out, preset="tiny", progress=False, device="cpu")
+        )
     return out
 
 
@@ -60,6 +61,10 @@ def tiny_model_dir(tmp_path_factory, eval_corpus) -> Path:
     out = tmp_path_factory.mktemp("model") / "tiny"
     with one_thread():
         for stage, iters in (("tokenizer", 20), ("transformer", 10)):
-            train(stage, TrainOptions(data=eval_corpus, out=out, preset="tiny", iters=iters, progress=False,
-                                      device="cpu"))
+            train(
+                stage,
+                TrainOptions(
+                    data=eval_corpus, out=out, preset="tiny", iters=iters, progress=False, device="cpu"
+                ),
+            )
     return out

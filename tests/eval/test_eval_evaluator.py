@@ -24,7 +24,14 @@ from controlmm.training.evaluator import EvaluatorTrainOptions, contrastive_loss
 
 
 def test_tokenize_and_vocabulary():
-    assert tokenize("Someone waves 3 times, then WALKS.") == ["someone", "waves", "3", "times", "then", "walks"]
+    assert tokenize("Someone waves 3 times, then WALKS.") == [
+        "someone",
+        "waves",
+        "3",
+        "times",
+        "then",
+        "walks",
+    ]
     vocab = Vocabulary.build(["a man walks", "a man runs", "a woman walks"])
     assert vocab.words[:4] == ("<pad>", "<unk>", "<sos>", "<eos>") and vocab.words[4:6] == ("a", "man")
     ids, lengths = vocab.encode(["a man flies", "walks"])
@@ -38,7 +45,9 @@ def test_tokenize_and_vocabulary():
 
 
 def test_contrastive_loss_masks_repeated_captions():
-    emb = torch.eye(4, 8) * 5  # four orthogonal embeddings on the sphere of radius 5 (random ones can be close)
+    emb = (
+        torch.eye(4, 8) * 5
+    )  # four orthogonal embeddings on the sphere of radius 5 (random ones can be close)
     loss, acc = contrastive_loss(emb, emb, torch.tensor([0, 1, 2, 3]), scale=5.0)
     assert acc == 1.0 and loss < 0.1
     # Samples 0 and 1 share a caption: their cross pairs are not negatives, so swapping them costs nothing.
@@ -57,7 +66,9 @@ def test_training_improves_retrieval(tiny_evaluator_dir, small_corpus):
     trained = load_evaluator(tiny_evaluator_dir)
     assert isinstance(trained, TextMotionEvaluator)
     torch.manual_seed(0)
-    untrained = TextMotionEvaluator(TextMotionEncoder(trained.module.cfg), trained.vocabulary, trained.normalizer)
+    untrained = TextMotionEvaluator(
+        TextMotionEncoder(trained.module.cfg), trained.vocabulary, trained.normalizer
+    )
     before, after = _gt_retrieval(untrained, small_corpus), _gt_retrieval(trained, small_corpus)
     # Four families in one group of 32: chance R@3 is 3/32; telling the families apart gives about 3/8.
     assert after > 0.25 and after > before + 0.12, (before, after)
@@ -90,8 +101,16 @@ def test_embeddings_lie_on_the_sphere_and_match_the_module(tiny_evaluator_dir, s
 
 def test_resume_continues_exactly(small_corpus, tmp_path):
     def opts(out, iters, resume=False):
-        return EvaluatorTrainOptions(data=small_corpus, out=out, preset="tiny", iters=iters, resume=resume,
-                                     progress=False, device="cpu", checkpoint_every=5)
+        return EvaluatorTrainOptions(
+            data=small_corpus,
+            out=out,
+            preset="tiny",
+            iters=iters,
+            resume=resume,
+            progress=False,
+            device="cpu",
+            checkpoint_every=5,
+        )
 
     train_evaluator(opts(tmp_path / "a", 12))
     train_evaluator(opts(tmp_path / "b", 6))
@@ -140,11 +159,23 @@ def _one_line_error(capsys, argv, needle):
 
 
 def test_train_evaluator_cli_errors(capsys, tmp_path, tiny_evaluator_dir, small_corpus):
-    _one_line_error(capsys, ["train", "evaluator", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "e")],
-                    "does not exist")
-    _one_line_error(capsys, ["train", "evaluator", "--data", str(small_corpus), "--out", str(tiny_evaluator_dir)],
-                    "already has evaluator training")
-    _one_line_error(capsys, ["train", "evaluator", "--data", str(small_corpus), "--out", str(tmp_path / "e"),
-                             "--preset", "huge"], "unknown evaluator preset 'huge'")
-    _one_line_error(capsys, ["train", "evaluator", "--data", str(small_corpus), "--out", str(tmp_path / "e"),
-                             "--resume"], "nothing to resume")
+    _one_line_error(
+        capsys,
+        ["train", "evaluator", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "e")],
+        "does not exist",
+    )
+    _one_line_error(
+        capsys,
+        ["train", "evaluator", "--data", str(small_corpus), "--out", str(tiny_evaluator_dir)],
+        "already has evaluator training",
+    )
+    _one_line_error(
+        capsys,
+        ["train", "evaluator", "--data", str(small_corpus), "--out", str(tmp_path / "e"), "--preset", "huge"],
+        "unknown evaluator preset 'huge'",
+    )
+    _one_line_error(
+        capsys,
+        ["train", "evaluator", "--data", str(small_corpus), "--out", str(tmp_path / "e"), "--resume"],
+        "nothing to resume",
+    )

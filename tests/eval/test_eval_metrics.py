@@ -29,7 +29,9 @@ def test_fid_is_zero_for_identical_sets_and_known_for_shifted_gaussians():
     p = _exact_gaussian(400, np.zeros(3), np.diag(a), seed=2)
     q = _exact_gaussian(300, np.array([1.0, 0.0, 0.0]), np.diag(b), seed=3)
     assert M.fid(p, q) == pytest.approx(1.0 + 1.0 + 0.0 + 4.0, rel=1e-9)
-    assert M.frechet_distance(np.zeros(3), np.diag(a), np.zeros(3), np.diag(a)) == pytest.approx(0.0, abs=1e-12)
+    assert M.frechet_distance(np.zeros(3), np.diag(a), np.zeros(3), np.diag(a)) == pytest.approx(
+        0.0, abs=1e-12
+    )
 
 
 def test_fid_of_singular_covariances_is_finite():
@@ -48,7 +50,9 @@ def test_r_precision_perfect_shuffled_and_second_nearest():
     # Text i sits nearest to motion i+1 (within its group of 32), second nearest to its own motion.
     base = np.eye(32) * 10.0
     own = np.roll(base, 1, axis=0)  # motion i = 10 e_(i-1)
-    text = 0.6 * base + 0.4 * own  # 4 sqrt(2) from motion i+1 (10 e_i), 6 sqrt(2) from its own, 12.3 from others
+    text = (
+        0.6 * base + 0.4 * own
+    )  # 4 sqrt(2) from motion i+1 (10 e_i), 6 sqrt(2) from its own, 12.3 from others
     m = M.matching_metrics(text, own)
     assert m.r_precision[0] == 0.0 and m.r_precision[1] == 1.0 and m.r_precision[2] == 1.0
     # Random embeddings: chance level 1/32, 2/32, 3/32.

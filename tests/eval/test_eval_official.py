@@ -20,20 +20,48 @@ from controlmm.eval.evaluator import OfficialEvaluator, WordVectorizer, load_eva
 GRU = lambda h_in, h: {  # noqa: E731 - a table helper
     f"gru.{kind}_{part}_l0{rev}": shape
     for rev in ("", "_reverse")
-    for kind, part, shape in (("weight", "ih", (3 * h, h_in)), ("weight", "hh", (3 * h, h)),
-                              ("bias", "ih", (3 * h,)), ("bias", "hh", (3 * h,)))
+    for kind, part, shape in (
+        ("weight", "ih", (3 * h, h_in)),
+        ("weight", "hh", (3 * h, h)),
+        ("bias", "ih", (3 * h,)),
+        ("bias", "hh", (3 * h,)),
+    )
 }
 OFFICIAL = {
-    "movement_encoder": {"main.0.weight": (512, 259, 4), "main.0.bias": (512,), "main.3.weight": (512, 512, 4),
-                         "main.3.bias": (512,), "out_net.weight": (512, 512), "out_net.bias": (512,)},
-    "text_encoder": {"hidden": (2, 1, 512), "pos_emb.weight": (300, 15), "pos_emb.bias": (300,),
-                     "input_emb.weight": (512, 300), "input_emb.bias": (512,), **GRU(512, 512),
-                     "output_net.0.weight": (512, 1024), "output_net.0.bias": (512,), "output_net.1.weight": (512,),
-                     "output_net.1.bias": (512,), "output_net.3.weight": (512, 512), "output_net.3.bias": (512,)},
-    "motion_encoder": {"hidden": (2, 1, 1024), "input_emb.weight": (1024, 512), "input_emb.bias": (1024,),
-                       **GRU(1024, 1024), "output_net.0.weight": (1024, 2048), "output_net.0.bias": (1024,),
-                       "output_net.1.weight": (1024,), "output_net.1.bias": (1024,),
-                       "output_net.3.weight": (512, 1024), "output_net.3.bias": (512,)},
+    "movement_encoder": {
+        "main.0.weight": (512, 259, 4),
+        "main.0.bias": (512,),
+        "main.3.weight": (512, 512, 4),
+        "main.3.bias": (512,),
+        "out_net.weight": (512, 512),
+        "out_net.bias": (512,),
+    },
+    "text_encoder": {
+        "hidden": (2, 1, 512),
+        "pos_emb.weight": (300, 15),
+        "pos_emb.bias": (300,),
+        "input_emb.weight": (512, 300),
+        "input_emb.bias": (512,),
+        **GRU(512, 512),
+        "output_net.0.weight": (512, 1024),
+        "output_net.0.bias": (512,),
+        "output_net.1.weight": (512,),
+        "output_net.1.bias": (512,),
+        "output_net.3.weight": (512, 512),
+        "output_net.3.bias": (512,),
+    },
+    "motion_encoder": {
+        "hidden": (2, 1, 1024),
+        "input_emb.weight": (1024, 512),
+        "input_emb.bias": (1024,),
+        **GRU(1024, 1024),
+        "output_net.0.weight": (1024, 2048),
+        "output_net.0.bias": (1024,),
+        "output_net.1.weight": (1024,),
+        "output_net.1.bias": (1024,),
+        "output_net.3.weight": (512, 1024),
+        "output_net.3.bias": (512,),
+    },
 }
 WORDS = ["unk", "sos", "eos", "a", "person", "walk", "forward", "left", "hand", "wave"]
 
@@ -44,8 +72,10 @@ def _write_official(root, state=None, glove=True):
     (t2m / "text_mot_match" / "model").mkdir(parents=True)
     g = torch.Generator().manual_seed(0)
     if state is None:
-        state = {part: {k: torch.randn(shape, generator=g) * 0.05 for k, shape in names.items()}
-                 for part, names in OFFICIAL.items()}
+        state = {
+            part: {k: torch.randn(shape, generator=g) * 0.05 for k, shape in names.items()}
+            for part, names in OFFICIAL.items()
+        }
     if state == "layout":
         (t2m / "text_mot_match" / "model" / "finest.tar").write_bytes(b"")
     else:
@@ -73,14 +103,23 @@ def test_official_state_dicts_load_strictly_and_embed(tmp_path, sample_features)
         own = getattr(evaluator, part).state_dict()
         assert set(own) == set(OFFICIAL[part])
         assert all(torch.equal(own[k], state[part][k]) for k in own)
-    caption = Caption("a person walks forward", ("a/DET", "person/NOUN", "walk/VERB", "forward/ADV"), 0.0, 0.0)
+    caption = Caption(
+        "a person walks forward", ("a/DET", "person/NOUN", "walk/VERB", "forward/ADV"), 0.0, 0.0
+    )
     with pytest.warns(UserWarning, match="word/POS"):  # plain text has no POS tags: a warning, once
         texts = evaluator.embed_texts([caption, "a person waves the left hand"])
     motions = evaluator.embed_motions([sample_features[:120], sample_features[:80]])
-    assert texts.shape == (2, 512) == motions.shape and np.all(np.isfinite(texts)) and np.all(np.isfinite(motions))
+    assert (
+        texts.shape == (2, 512) == motions.shape
+        and np.all(np.isfinite(texts))
+        and np.all(np.isfinite(motions))
+    )
     # The same checkout found from checkpoints/t2m and from checkpoints/ (GloVe beside the checkout root).
-    assert np.allclose(load_evaluator(tmp_path / "checkpoints" / "t2m").embed_motions([sample_features[:80]]),
-                       motions[1:], atol=1e-5)
+    assert np.allclose(
+        load_evaluator(tmp_path / "checkpoints" / "t2m").embed_motions([sample_features[:80]]),
+        motions[1:],
+        atol=1e-5,
+    )
     # A motion's embedding does not depend on the other motions of its batch (zero padding to 196 frames).
     assert np.allclose(evaluator.embed_motions([sample_features[:80]]), motions[1:], atol=1e-5)
 
@@ -110,13 +149,23 @@ def test_official_layout_errors(tmp_path):
     with pytest.raises(InputFileError, match="our_vab_data.npy") as err:
         load_evaluator(no_glove)
     assert "\n" not in str(err.value)
+
     def state():
-        return {part: {k: torch.zeros(shape) for k, shape in names.items()} for part, names in OFFICIAL.items()}
+        return {
+            part: {k: torch.zeros(shape) for k, shape in names.items()} for part, names in OFFICIAL.items()
+        }
 
     for name, edit, needle in (
-        ("shape", lambda s: s["motion_encoder"].update({"output_net.3.weight": torch.zeros(256, 1024)}),
-         "motion_encoder' does not fit the configured model; wrong shape: output_net.3.weight"),
-        ("extra", lambda s: s["text_encoder"].update({"extra.weight": torch.zeros(3)}), "unexpected: extra.weight"),
+        (
+            "shape",
+            lambda s: s["motion_encoder"].update({"output_net.3.weight": torch.zeros(256, 1024)}),
+            "motion_encoder' does not fit the configured model; wrong shape: output_net.3.weight",
+        ),
+        (
+            "extra",
+            lambda s: s["text_encoder"].update({"extra.weight": torch.zeros(3)}),
+            "unexpected: extra.weight",
+        ),
         ("missing", lambda s: s["movement_encoder"].pop("out_net.bias"), "missing: out_net.bias"),
         ("part", lambda s: s.pop("motion_encoder"), "has no 'motion_encoder' state dict"),
     ):

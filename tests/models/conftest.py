@@ -13,12 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from torch_threads import one_thread
 
 from controlmm.motion import joints_to_features
 from controlmm.motion.container import resample
 from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR
-
-from torch_threads import one_thread
 
 CAPTIONS = [
     "a person bends down and stands back up",
@@ -51,7 +50,7 @@ def build_tiny_dataset(root: Path, features: np.ndarray, joints: np.ndarray, sta
         src = sources[k % 3]
         length = int(rng.integers(48, min(len(src), 180)))
         start = int(rng.integers(0, len(src) - length + 1))
-        clip = src[start:start + length].astype(np.float32)
+        clip = src[start : start + length].astype(np.float32)
         motion_id = f"{k:06d}"
         np.save(root / "new_joint_vecs" / f"{motion_id}.npy", clip)
         lines = [_caption_line(CAPTIONS[(k + j) % len(CAPTIONS)]) for j in range(3)]
@@ -69,8 +68,9 @@ def build_tiny_dataset(root: Path, features: np.ndarray, joints: np.ndarray, sta
 
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory, humanml3d_dir, sample_features, sample_joints) -> Path:
-    return build_tiny_dataset(tmp_path_factory.mktemp("data") / "tiny", sample_features, sample_joints,
-                              humanml3d_dir)
+    return build_tiny_dataset(
+        tmp_path_factory.mktemp("data") / "tiny", sample_features, sample_joints, humanml3d_dir
+    )
 
 
 @pytest.fixture(scope="session")
@@ -81,8 +81,12 @@ def tiny_model_dir(tmp_path_factory, tiny_data) -> Path:
     out = tmp_path_factory.mktemp("model") / "tiny"
     with one_thread():
         for stage, iters in (("tokenizer", 30), ("transformer", 20), ("residual", 20)):
-            train(stage, TrainOptions(data=tiny_data, out=out, preset="tiny", iters=iters, progress=False,
-                                      device="cpu"))
+            train(
+                stage,
+                TrainOptions(
+                    data=tiny_data, out=out, preset="tiny", iters=iters, progress=False, device="cpu"
+                ),
+            )
     return out
 
 
@@ -103,7 +107,9 @@ def subprocess_env() -> dict:
 
 def _byte_vocab() -> dict[str, int]:
     """A byte-level BPE vocabulary without merges (every byte, and every byte ending a word)."""
-    keep = list(range(ord("!"), ord("~") + 1)) + list(range(ord("¡"), ord("¬") + 1)) + list(range(ord("®"), 256))
+    keep = (
+        list(range(ord("!"), ord("~") + 1)) + list(range(ord("¡"), ord("¬") + 1)) + list(range(ord("®"), 256))
+    )
     chars, extra = [], 0
     for b in range(256):
         chars.append(chr(b) if b in keep else chr(256 + extra))
@@ -123,11 +129,25 @@ def tiny_clip_dir(tmp_path_factory):
     vocab = _byte_vocab()
     torch.manual_seed(0)
     config = CLIPConfig(
-        text_config=dict(vocab_size=len(vocab), hidden_size=32, intermediate_size=64, num_hidden_layers=2,
-                         num_attention_heads=2, max_position_embeddings=77, bos_token_id=512, eos_token_id=513,
-                         pad_token_id=513),
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2,
-                           image_size=32, patch_size=16),
+        text_config=dict(
+            vocab_size=len(vocab),
+            hidden_size=32,
+            intermediate_size=64,
+            num_hidden_layers=2,
+            num_attention_heads=2,
+            max_position_embeddings=77,
+            bos_token_id=512,
+            eos_token_id=513,
+            pad_token_id=513,
+        ),
+        vision_config=dict(
+            hidden_size=32,
+            intermediate_size=64,
+            num_hidden_layers=1,
+            num_attention_heads=2,
+            image_size=32,
+            patch_size=16,
+        ),
         projection_dim=24,
     )
     path = tmp_path_factory.mktemp("clip") / "tiny-clip"
@@ -144,6 +164,15 @@ def tiny_control_dir(tmp_path_factory, tiny_data, tiny_model_dir) -> Path:
     out = tmp_path_factory.mktemp("control") / "tiny"
     shutil.copytree(tiny_model_dir, out, ignore=shutil.ignore_patterns("checkpoints"))
     with one_thread():
-        train("control", TrainOptions(data=tiny_data, out=out, iters=20, progress=False, device="cpu",
-                                      stage_options={"joints": "all"}))
+        train(
+            "control",
+            TrainOptions(
+                data=tiny_data,
+                out=out,
+                iters=20,
+                progress=False,
+                device="cpu",
+                stage_options={"joints": "all"},
+            ),
+        )
     return out

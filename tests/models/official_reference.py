@@ -42,9 +42,19 @@ class Dims:
     max_len: int = 64
 
     @classmethod
-    def paper(cls) -> "Dims":
-        return cls(width=512, code_dim=512, nb_code=512, num_q=6, latent=384, ff=1024, layers=8, heads=6,
-                   text_dim=512, max_len=5000)
+    def paper(cls) -> Dims:
+        return cls(
+            width=512,
+            code_dim=512,
+            nb_code=512,
+            num_q=6,
+            latent=384,
+            ff=1024,
+            layers=8,
+            heads=6,
+            text_dim=512,
+            max_len=5000,
+        )
 
 
 class _Filler:
@@ -146,8 +156,14 @@ def official_residual_state(d: Dims, seed: int = 2, empty: bool = False) -> dict
     return sd
 
 
-def official_control_state(d: Dims, channels: int, seed: int = 3, empty: bool = False,
-                           base: dict | None = None, vq: dict | None = None) -> dict[str, torch.Tensor]:
+def official_control_state(
+    d: Dims,
+    channels: int,
+    seed: int = 3,
+    empty: bool = False,
+    base: dict | None = None,
+    vq: dict | None = None,
+) -> dict[str, torch.Tensor]:
     """MaskControl ``ControlTransformer`` state_dict (``ct2m_transformer``; 326 tensors released)."""
     fill = _Filler(seed, empty)
     sd = dict(base if base is not None else official_mask_state(d, seed + 10, empty))
@@ -167,33 +183,84 @@ def write_opt(path: Path, options: dict) -> None:
     path.write_text("\n".join(lines + ["-------------- End ----------------"]) + "\n")
 
 
-def write_official_checkpoints(root: Path, d: Dims, control_channels: int | None = 36,
-                               control_vq_same: bool = True) -> dict:
+def write_official_checkpoints(
+    root: Path, d: Dims, control_channels: int | None = 36, control_vq_same: bool = True
+) -> dict:
     """Write ``root/checkpoints/t2m/...`` as the official download scripts leave it; return the state_dicts."""
     t2m = root / "checkpoints" / "t2m"
     vq, base, res = official_vq_state(d), official_mask_state(d), official_residual_state(d)
     common = dict(dataset_name="t2m", checkpoints_dir="./checkpoints", gpu_id=0, milestones=[50000])
     folders = {
-        "rvq_nq6_dc512_nc512_noshare_qdp0.2": ("net_best_fid.tar", {"vq_model": vq, "ep": 49}, dict(
-            nb_code=d.nb_code, code_dim=d.code_dim, output_emb_width=d.code_dim, down_t=d.down_t, stride_t=2,
-            width=d.width, depth=d.depth, dilation_growth_rate=d.growth, vq_act="relu", vq_norm=None,
-            num_quantizers=d.num_q, shared_codebook=False, quantize_dropout_prob=0.2, mu=0.99)),
-        "t2m_nlayer8_nhead6_ld384_ff1024_cdp0.1_rvq6ns": ("latest.tar", {"t2m_transformer": base, "ep": 499}, dict(
-            latent_dim=d.latent, n_heads=d.heads, n_layers=d.layers, ff_size=d.ff, dropout=0.2, cond_drop_prob=0.1,
-            share_weight=False, vq_name="rvq_nq6_dc512_nc512_noshare_qdp0.2")),
-        "tres_nlayer8_ld384_ff1024_rvq6ns_cdp0.2_sw": ("net_best_fid.tar", {"res_transformer": res, "ep": 480}, dict(
-            latent_dim=d.latent, n_heads=d.heads, n_layers=d.layers, ff_size=d.ff, dropout=0.2, cond_drop_prob=0.2,
-            share_weight=True, vq_name="rvq_nq6_dc512_nc512_noshare_qdp0.2")),
+        "rvq_nq6_dc512_nc512_noshare_qdp0.2": (
+            "net_best_fid.tar",
+            {"vq_model": vq, "ep": 49},
+            dict(
+                nb_code=d.nb_code,
+                code_dim=d.code_dim,
+                output_emb_width=d.code_dim,
+                down_t=d.down_t,
+                stride_t=2,
+                width=d.width,
+                depth=d.depth,
+                dilation_growth_rate=d.growth,
+                vq_act="relu",
+                vq_norm=None,
+                num_quantizers=d.num_q,
+                shared_codebook=False,
+                quantize_dropout_prob=0.2,
+                mu=0.99,
+            ),
+        ),
+        "t2m_nlayer8_nhead6_ld384_ff1024_cdp0.1_rvq6ns": (
+            "latest.tar",
+            {"t2m_transformer": base, "ep": 499},
+            dict(
+                latent_dim=d.latent,
+                n_heads=d.heads,
+                n_layers=d.layers,
+                ff_size=d.ff,
+                dropout=0.2,
+                cond_drop_prob=0.1,
+                share_weight=False,
+                vq_name="rvq_nq6_dc512_nc512_noshare_qdp0.2",
+            ),
+        ),
+        "tres_nlayer8_ld384_ff1024_rvq6ns_cdp0.2_sw": (
+            "net_best_fid.tar",
+            {"res_transformer": res, "ep": 480},
+            dict(
+                latent_dim=d.latent,
+                n_heads=d.heads,
+                n_layers=d.layers,
+                ff_size=d.ff,
+                dropout=0.2,
+                cond_drop_prob=0.2,
+                share_weight=True,
+                vq_name="rvq_nq6_dc512_nc512_noshare_qdp0.2",
+            ),
+        ),
     }
     out = {"vq": vq, "base": base, "res": res}
     if control_channels is not None:
         ctrl_vq = vq if control_vq_same else official_vq_state(d, seed=7)
         ctrl = official_control_state(d, control_channels, base=base, vq=ctrl_vq)
-        name = ("z2024-08-27-21-07-55_CtrlNet_randCond1-196_l1.5XEnt.5TTT__cross" if control_channels == 36
-                else "z2024-08-23-01-27-51_CtrlNet_randCond1-196_l1.1XEnt.9TTT__fixRandCond")
-        folders[name] = ("latest.tar", {"ct2m_transformer": ctrl, "ep": 55, "total_it": 100000}, dict(
-            latent_dim=d.latent, n_heads=d.heads, n_layers=d.layers, ff_size=d.ff, dropout=0.2,
-            control="cross" if control_channels == 36 else "trajectory"))
+        name = (
+            "z2024-08-27-21-07-55_CtrlNet_randCond1-196_l1.5XEnt.5TTT__cross"
+            if control_channels == 36
+            else "z2024-08-23-01-27-51_CtrlNet_randCond1-196_l1.1XEnt.9TTT__fixRandCond"
+        )
+        folders[name] = (
+            "latest.tar",
+            {"ct2m_transformer": ctrl, "ep": 55, "total_it": 100000},
+            dict(
+                latent_dim=d.latent,
+                n_heads=d.heads,
+                n_layers=d.layers,
+                ff_size=d.ff,
+                dropout=0.2,
+                control="cross" if control_channels == 36 else "trajectory",
+            ),
+        )
         out["ctrl"], out["control_dir"] = ctrl, t2m / name
     for name, (file, payload, options) in folders.items():
         (t2m / name / "model").mkdir(parents=True)
@@ -212,7 +279,9 @@ def write_official_checkpoints(root: Path, d: Dims, control_channels: int | None
 
 # -- the official forward passes, re-implemented on raw state_dicts -----------------------------------
 def _c(x, sd, name, stride=1, padding=1, dilation=1):
-    return F.conv1d(x, sd[f"{name}.weight"], sd[f"{name}.bias"], stride=stride, padding=padding, dilation=dilation)
+    return F.conv1d(
+        x, sd[f"{name}.weight"], sd[f"{name}.bias"], stride=stride, padding=padding, dilation=dilation
+    )
 
 
 def _res_blocks(x, sd, prefix, d: Dims):
@@ -298,7 +367,10 @@ def ref_residual_logits(sd, ids, q: int, cond, pad, d: Dims):
     emb = torch.cat([sd["token_embed_weight_"], sd["embed_proj_shared_weight"]])
     proj = torch.cat([sd["embed_proj_shared_weight"], sd["output_proj_weight_"]])
     history = sum(emb[j][ids[..., j]] for j in range(q))
-    x = _lin(history, sd, "input_process.poseEmbedding").permute(1, 0, 2) + sd["position_enc.pe"][: ids.shape[1]]
+    x = (
+        _lin(history, sd, "input_process.poseEmbedding").permute(1, 0, 2)
+        + sd["position_enc.pe"][: ids.shape[1]]
+    )
     onehot = F.one_hot(torch.full((ids.shape[0],), q), d.num_q).to(cond.dtype)
     h = torch.cat([_lin(cond, sd, "cond_emb")[None], _lin(onehot, sd, "quant_emb")[None], x])
     mask = torch.cat([torch.zeros_like(pad[:, :2]), pad], dim=1)

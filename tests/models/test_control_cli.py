@@ -22,17 +22,41 @@ from controlmm.generate import generate, load_model
 def spec_path(tiny_control_dir, tmp_path_factory):
     joints = generate(load_model(tiny_control_dir), "a person squats", frames=60, seed=0).motion.joints
     path = tmp_path_factory.mktemp("spec") / "spec.json"
-    path.write_text(json.dumps({"coords": "human", "constraints": [
-        {"joint": "pelvis", "frame": 20, "position": joints[20, 0].tolist()},
-        {"joint": "left_wrist", "frame_range": [40, 41], "positions": joints[40:42, 20].tolist()},
-    ]}))
+    path.write_text(
+        json.dumps(
+            {
+                "coords": "human",
+                "constraints": [
+                    {"joint": "pelvis", "frame": 20, "position": joints[20, 0].tolist()},
+                    {"joint": "left_wrist", "frame_range": [40, 41], "positions": joints[40:42, 20].tolist()},
+                ],
+            }
+        )
+    )
     return path
 
 
 def test_generate_with_control_prints_and_stores_every_error(tiny_control_dir, spec_path, tmp_path, capsys):
     out = tmp_path / "m.npz"
-    code = main(["generate", "--text", "a person squats", "--frames", "60", "--seed", "0", "--control",
-                 str(spec_path), "--preset", "fast", "--out", str(out), "--model", str(tiny_control_dir)])
+    code = main(
+        [
+            "generate",
+            "--text",
+            "a person squats",
+            "--frames",
+            "60",
+            "--seed",
+            "0",
+            "--control",
+            str(spec_path),
+            "--preset",
+            "fast",
+            "--out",
+            str(out),
+            "--model",
+            str(tiny_control_dir),
+        ]
+    )
     printed = capsys.readouterr().out
     assert code == 0, printed
     lines = [line for line in printed.splitlines() if " error " in line]
@@ -60,35 +84,87 @@ def _one_line_error(capsys, argv, needle):
     assert err.count("\n") == 1 and needle in err, err
 
 
-@pytest.mark.parametrize("spec, needle", [
-    ({"constraints": [{"joint": "left_hand", "frame": 3, "position": [0, 1, 0]}]}, "unknown joint 'left_hand'"),
-    ({"constraints": [{"joint": "pelvis", "frame": 70, "position": [0, 1, 0]}]}, "frame 70 is outside the motion"),
-    ({"constraints": [{"joint": "pelvis", "frame": 3, "position": [0, "nan", 0]}]}, "NaN"),
-    ({"constraints": [{"joint": "pelvis", "frame": 3, "position": [0, 1]}]}, "position must be 3 numbers"),
-    ({"constraints": [{"joint": 0, "frame": 3, "position": [0, 1, 0]},
-                      {"joint": "pelvis", "frame": 3, "position": [0, 1, 0]}]}, "duplicate constraint"),
-    ({"constraints": []}, "has no constraints"),
-    ({"coords": "robot", "constraints": []}, "coords must be one of human, world"),
-])
+@pytest.mark.parametrize(
+    "spec, needle",
+    [
+        (
+            {"constraints": [{"joint": "left_hand", "frame": 3, "position": [0, 1, 0]}]},
+            "unknown joint 'left_hand'",
+        ),
+        (
+            {"constraints": [{"joint": "pelvis", "frame": 70, "position": [0, 1, 0]}]},
+            "frame 70 is outside the motion",
+        ),
+        ({"constraints": [{"joint": "pelvis", "frame": 3, "position": [0, "nan", 0]}]}, "NaN"),
+        (
+            {"constraints": [{"joint": "pelvis", "frame": 3, "position": [0, 1]}]},
+            "position must be 3 numbers",
+        ),
+        (
+            {
+                "constraints": [
+                    {"joint": 0, "frame": 3, "position": [0, 1, 0]},
+                    {"joint": "pelvis", "frame": 3, "position": [0, 1, 0]},
+                ]
+            },
+            "duplicate constraint",
+        ),
+        ({"constraints": []}, "has no constraints"),
+        ({"coords": "robot", "constraints": []}, "coords must be one of human, world"),
+    ],
+)
 def test_bad_specs_are_one_line(tiny_control_dir, tmp_path, capsys, spec, needle):
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(spec).replace('"nan"', "NaN"))
-    _one_line_error(capsys, ["generate", "--text", "a person squats", "--frames", "60", "--control", str(path),
-                             "--out", str(tmp_path / "x.npz"), "--model", str(tiny_control_dir)], needle)
+    _one_line_error(
+        capsys,
+        [
+            "generate",
+            "--text",
+            "a person squats",
+            "--frames",
+            "60",
+            "--control",
+            str(path),
+            "--out",
+            str(tmp_path / "x.npz"),
+            "--model",
+            str(tiny_control_dir),
+        ],
+        needle,
+    )
     assert not (tmp_path / "x.npz").exists()
 
 
 def test_control_flags_need_a_spec_and_sane_values(tiny_control_dir, spec_path, tmp_path, capsys):
-    base = ["generate", "--text", "a person squats", "--out", str(tmp_path / "x.npz"), "--model", str(tiny_control_dir)]
+    base = [
+        "generate",
+        "--text",
+        "a person squats",
+        "--out",
+        str(tmp_path / "x.npz"),
+        "--model",
+        str(tiny_control_dir),
+    ]
     _one_line_error(capsys, base + ["--preset", "fast"], "--preset needs --control SPEC.json")
-    _one_line_error(capsys, base + ["--control", str(spec_path), "--tolerance", "0"], "--tolerance must be positive")
+    _one_line_error(
+        capsys, base + ["--control", str(spec_path), "--tolerance", "0"], "--tolerance must be positive"
+    )
     _one_line_error(capsys, base + ["--contact-steps", "50"], "--contact-steps needs --control SPEC.json")
-    _one_line_error(capsys, base + ["--control", str(spec_path), "--contact-steps", "-1"],
-                    "contact_steps must be a whole number >= 0; got -1")
+    _one_line_error(
+        capsys,
+        base + ["--control", str(spec_path), "--contact-steps", "-1"],
+        "contact_steps must be a whole number >= 0; got -1",
+    )
     _one_line_error(capsys, base + ["--control", str(tmp_path / "none.json")], "does not exist")
-    _one_line_error(capsys, base + ["--control", str(spec_path), "--preset", "slow"], "invalid choice: 'slow'")
-    _one_line_error(capsys, ["train", "control", "--data", "x", "--out", "y", "--joints", "hands"],
-                    "invalid choice: 'hands'")
+    _one_line_error(
+        capsys, base + ["--control", str(spec_path), "--preset", "slow"], "invalid choice: 'slow'"
+    )
+    _one_line_error(
+        capsys,
+        ["train", "control", "--data", "x", "--out", "y", "--joints", "hands"],
+        "invalid choice: 'hands'",
+    )
 
 
 # -- evaluation protocol ----------------------------------------------------------------------------
@@ -120,7 +196,9 @@ def test_cross_combinations_and_cases(tiny_data):
     assert CROSS_COMBINATIONS[0] == (0,) and CROSS_COMBINATIONS[-1] == (0, 10, 11, 15, 20, 21)
     cases = build_cases(tiny_data, "cross", samples=10, seed=0)
     for i, c in enumerate(cases):
-        assert c.frames % 4 == 0 and c.targets.shape == (c.frames, 22, 3) and c.joints == CROSS_COMBINATIONS[i]
+        assert (
+            c.frames % 4 == 0 and c.targets.shape == (c.frames, 22, 3) and c.joints == CROSS_COMBINATIONS[i]
+        )
         frames = np.flatnonzero(c.mask.any(-1))
         expected = c.density if c.density <= 5 else int(c.frames * c.density / 196)
         assert len(frames) == expected and c.density == (1, 2, 5, 49, 196)[i % 5]
@@ -132,8 +210,27 @@ def test_cross_combinations_and_cases(tiny_data):
 
 def test_eval_control_prints_the_table(tiny_control_dir, tiny_data, tmp_path, capsys):
     report = tmp_path / "eval.json"
-    code = main(["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data), "--preset", "fast",
-                 "--joints", "pelvis,cross", "--samples", "2", "--density", "1,196", "--quiet", "--json", str(report)])
+    code = main(
+        [
+            "eval",
+            "control",
+            "--model",
+            str(tiny_control_dir),
+            "--data",
+            str(tiny_data),
+            "--preset",
+            "fast",
+            "--joints",
+            "pelvis,cross",
+            "--samples",
+            "2",
+            "--density",
+            "1,196",
+            "--quiet",
+            "--json",
+            str(report),
+        ]
+    )
     printed = capsys.readouterr().out
     assert code == 0, printed
     assert printed.count("Traj.err") == 2 and "joints cross" in printed
@@ -143,7 +240,13 @@ def test_eval_control_prints_the_table(tiny_control_dir, tiny_data, tmp_path, ca
     assert set(summary) == {"1", "196", "all"} and np.isfinite(summary["all"]["avg"])
     assert 0 <= summary["all"]["traj"] <= 1 and summary["all"]["cases"] == 2
     assert len(data[1]["cases"]) == 2 and data[1]["cases"][1]["joints"] == ["left_foot"]
-    _one_line_error(capsys, ["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data),
-                             "--joints", "elbow"], "unknown --joints 'elbow'")
-    _one_line_error(capsys, ["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data),
-                             "--density", "7"], "unknown --density '7'")
+    _one_line_error(
+        capsys,
+        ["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data), "--joints", "elbow"],
+        "unknown --joints 'elbow'",
+    )
+    _one_line_error(
+        capsys,
+        ["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data), "--density", "7"],
+        "unknown --density '7'",
+    )

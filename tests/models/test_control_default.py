@@ -9,8 +9,9 @@ from controlmm.assets import default_model_dir
 from controlmm.control import ControlSpec
 from controlmm.motion.recover import features_to_joints_np
 
-pytestmark = pytest.mark.skipif(not (default_model_dir() / "model.json").is_file(),
-                                reason="no embedded default model in this checkout")
+pytestmark = pytest.mark.skipif(
+    not (default_model_dir() / "model.json").is_file(), reason="no embedded default model in this checkout"
+)
 
 
 def test_embedded_default_meets_a_real_multi_joint_spec(sample_features):
@@ -22,18 +23,30 @@ def test_embedded_default_meets_a_real_multi_joint_spec(sample_features):
     model = load_model()
     assert {"tokenizer", "transformer", "residual", "control"} <= set(model.parts)
     j = features_to_joints_np(sample_features[:120])  # real HumanML3D clip 012314, its own joints
-    spec = ControlSpec.from_dict({"coords": "human", "constraints": [
-        {"joint": "pelvis", "frame_range": [0, 39], "positions": j[0:40, 0].tolist()},  # dense
-        {"joint": "right_wrist", "frame": 60, "position": j[60, 21].tolist()},       # sparse
-        {"joint": "left_foot", "frame": 90, "position": j[90, 10].tolist()},
-        {"joint": "head", "frame": 110, "position": j[110, 15].tolist()},
-    ]})
-    out = generate_controlled(model, "a person walks forward and turns around", control=spec, frames=120,
-                              preset="medium", seed=0)
+    spec = ControlSpec.from_dict(
+        {
+            "coords": "human",
+            "constraints": [
+                {"joint": "pelvis", "frame_range": [0, 39], "positions": j[0:40, 0].tolist()},  # dense
+                {"joint": "right_wrist", "frame": 60, "position": j[60, 21].tolist()},  # sparse
+                {"joint": "left_foot", "frame": 90, "position": j[90, 10].tolist()},
+                {"joint": "head", "frame": 110, "position": j[110, 15].tolist()},
+            ],
+        }
+    )
+    out = generate_controlled(
+        model, "a person walks forward and turns around", control=spec, frames=120, preset="medium", seed=0
+    )
     errors = out.errors[0]
     assert errors.shape == (43,) and float(errors.max()) <= 0.02
-    uncontrolled = generate_controlled(model, "a person walks forward and turns around", control=spec, frames=120,
-                                       preset=model_free_preset(), seed=0)
+    uncontrolled = generate_controlled(
+        model,
+        "a person walks forward and turns around",
+        control=spec,
+        frames=120,
+        preset=model_free_preset(),
+        seed=0,
+    )
     assert float(np.mean(uncontrolled.errors[0])) > 10 * float(np.mean(errors))
 
 
@@ -56,11 +69,27 @@ def test_foot_contact_run_stops_planted_feet_sliding_and_keeps_the_spec():
     text = "a person walks forward"
     walk = generate(model, text, frames=120, seed=0).motion.joints
     # the model's own walk, its pelvis moved 15 cm sideways at three frames: editing makes the feet slide
-    spec = ControlSpec.from_dict({"coords": "human", "constraints": [
-        {"joint": "pelvis", "frame": f, "position": (walk[f, 0] + np.array([0.15, 0.0, 0.0])).tolist()}
-        for f in (30, 60, 90)]})
-    without = generate_controlled(model, text, control=spec, frames=120, seed=0,
-                                  preset=PRESETS["accurate"].with_overrides(contact_steps=0))
+    spec = ControlSpec.from_dict(
+        {
+            "coords": "human",
+            "constraints": [
+                {
+                    "joint": "pelvis",
+                    "frame": f,
+                    "position": (walk[f, 0] + np.array([0.15, 0.0, 0.0])).tolist(),
+                }
+                for f in (30, 60, 90)
+            ],
+        }
+    )
+    without = generate_controlled(
+        model,
+        text,
+        control=spec,
+        frames=120,
+        seed=0,
+        preset=PRESETS["accurate"].with_overrides(contact_steps=0),
+    )
     with_run = generate_controlled(model, text, control=spec, frames=120, seed=0, preset="accurate")
     assert not without.records[0].contact_kept and with_run.records[0].contact_kept
     assert float(without.errors[0].max()) <= 0.01 and float(with_run.errors[0].max()) <= 0.01

@@ -56,7 +56,9 @@ def test_presets_follow_the_paper():
     assert (PRESETS["accurate"].logits_steps, PRESETS["accurate"].codebook_steps) == (100, 600)
     assert all(p.control_model and p.tolerance == 0.01 for p in PRESETS.values())
     assert (PRESETS["accurate"].lr, PRESETS["accurate"].betas) == (0.06, (0.5, 0.9))
-    with pytest.raises(ControlMMError, match="unknown editing preset 'slow'; allowed: fast, medium, accurate"):
+    with pytest.raises(
+        ControlMMError, match="unknown editing preset 'slow'; allowed: fast, medium, accurate"
+    ):
         editing_preset("slow")
     with pytest.raises(ControlMMError, match="codebook_steps"):
         EditingConfig(codebook_steps=-1)
@@ -92,12 +94,14 @@ def test_codebook_editing_meets_a_reachable_target_and_stops_early(model, refere
     err = (edited - targets).norm(dim=-1)[mask]
     assert bool(outcome.done[0]) and float(err.max()) <= 0.01
     assert 0 < int(outcome.steps[0]) < 400  # stopped as soon as every constraint was within 1 cm
-    full = codebook_editing(latent, _decode(model, 64), objective,
-                            EditingConfig(codebook_steps=10, early_stop=False))
+    full = codebook_editing(
+        latent, _decode(model, 64), objective, EditingConfig(codebook_steps=10, early_stop=False)
+    )
     assert int(full.steps[0]) == 10 and not bool(full.done[0])
     # the paper's first-order optimiser (AdamW) behind the same interface
-    adam = codebook_editing(latent, _decode(model, 64), objective,
-                            EditingConfig(codebook_steps=400, codebook_optimizer="adam"))
+    adam = codebook_editing(
+        latent, _decode(model, 64), objective, EditingConfig(codebook_steps=400, codebook_optimizer="adam")
+    )
     assert float(adam.loss[0]) < 0.05 * float(objective.evaluate(joints)[0])
     with pytest.raises(ControlMMError, match="codebook_optimizer must be adam or lbfgs; got 'sgd'"):
         EditingConfig(codebook_optimizer="sgd")
@@ -117,27 +121,40 @@ def test_editing_stops_on_a_plateau_and_on_the_mean_error(model, reference):
     assert not bool(done_max[0]) and bool(done_mean[0])
     # the hinge only pulls on constraints over half the tolerance: 5 cm over 10 entries -> (0.045^2) / 10
     hinge = Objective(targets=targets, mask=mask, tolerance=0.01, hinge_weight=10.0)
-    torch.testing.assert_close(hinge.control_hinge(joints), torch.tensor([0.045 ** 2 / 10]), atol=1e-6, rtol=1e-3)
+    torch.testing.assert_close(
+        hinge.control_hinge(joints), torch.tensor([0.045**2 / 10]), atol=1e-6, rtol=1e-3
+    )
     plain = Objective(targets=targets, mask=mask, tolerance=0.01).term_values(joints)["control"]
-    torch.testing.assert_close(hinge.term_values(joints)["control"], plain + 10.0 * 0.045 ** 2 / 10,
-                               atol=1e-6, rtol=1e-3)
+    torch.testing.assert_close(
+        hinge.term_values(joints)["control"], plain + 10.0 * 0.045**2 / 10, atol=1e-6, rtol=1e-3
+    )
 
 
 def test_codebook_editing_takes_any_loss_term(model, reference):
     latent, joints = reference
     height = float(joints[0, :, 15, 1].max())
-    duck = LossTerm("duck", lambda j: torch.relu(j[:, :, 15, 1] - (height - 0.05)).square().sum(-1), weight=10.0)
+    duck = LossTerm(
+        "duck", lambda j: torch.relu(j[:, :, 15, 1] - (height - 0.05)).square().sum(-1), weight=10.0
+    )
     objective = Objective(terms=[duck], loss_tolerance=1e-7)
     outcome = codebook_editing(latent, _decode(model, 64), objective, EditingConfig(codebook_steps=300))
     edited = latent_to_joints(model, outcome.param)
     assert float(duck(edited)) < 0.01 * float(duck(joints)) and bool(outcome.done[0])
     assert float(edited[0, :, 15, 1].max()) < height - 0.04
     # several samples stop independently: a sample with nothing to do takes no step
-    both = Objective(targets=joints.expand(2, -1, -1, -1).clone(),
-                     mask=torch.stack([torch.zeros_like(joints[0, ..., 0], dtype=torch.bool),
-                                       torch.ones_like(joints[0, ..., 0], dtype=torch.bool)]))
+    both = Objective(
+        targets=joints.expand(2, -1, -1, -1).clone(),
+        mask=torch.stack(
+            [
+                torch.zeros_like(joints[0, ..., 0], dtype=torch.bool),
+                torch.ones_like(joints[0, ..., 0], dtype=torch.bool),
+            ]
+        ),
+    )
     both.targets[1, 30:, 0, 0] += 0.05
-    two = codebook_editing(latent.expand(2, -1, -1), _decode(model, 64), both, EditingConfig(codebook_steps=200))
+    two = codebook_editing(
+        latent.expand(2, -1, -1), _decode(model, 64), both, EditingConfig(codebook_steps=200)
+    )
     assert int(two.steps[0]) == 0 and int(two.steps[1]) > 0
     torch.testing.assert_close(two.param[0], latent[0])
 
@@ -159,11 +176,27 @@ def test_logits_editing_reduces_the_loss(model, reference):
 
     def expected_loss(x):
         gen = torch.Generator().manual_seed(5)
-        return np.mean([float(objective.evaluate(_decode(model, 64)(
-            soft_latent(x, codebook, editable, fixed, 1.0, gen)))[0]) for _ in range(8)])
+        return np.mean(
+            [
+                float(
+                    objective.evaluate(
+                        _decode(model, 64)(soft_latent(x, codebook, editable, fixed, 1.0, gen))
+                    )[0]
+                )
+                for _ in range(8)
+            ]
+        )
 
-    outcome = logits_editing(logits, editable, fixed, codebook, _decode(model, 64), objective, config,
-                             torch.Generator().manual_seed(0))
+    outcome = logits_editing(
+        logits,
+        editable,
+        fixed,
+        codebook,
+        _decode(model, 64),
+        objective,
+        config,
+        torch.Generator().manual_seed(0),
+    )
     assert int(outcome.steps[0]) == 60
     torch.testing.assert_close(outcome.param[0, :3], logits[0, :3], atol=1e-3, rtol=0)  # no gradient there
     assert expected_loss(outcome.param) < 0.5 * expected_loss(logits)
@@ -174,15 +207,22 @@ def spec(model, reference):
     """Six constraints (pelvis, right wrist, a dense left-knee range) on a reachable motion."""
     latent, _ = reference
     j = _reachable(model, latent, [], seed=1)[0][0].numpy()
-    return ControlSpec.from_dict({"coords": "human", "constraints": [
-        {"joint": "pelvis", "frame": 30, "position": j[30, 0].tolist()},
-        {"joint": "right_wrist", "frame": 50, "position": j[50, 21].tolist()},
-        {"joint": "left_knee", "frame_range": [60, 63], "positions": j[60:64, 4].tolist()},
-    ]})
+    return ControlSpec.from_dict(
+        {
+            "coords": "human",
+            "constraints": [
+                {"joint": "pelvis", "frame": 30, "position": j[30, 0].tolist()},
+                {"joint": "right_wrist", "frame": 50, "position": j[50, 21].tolist()},
+                {"joint": "left_knee", "frame_range": [60, 63], "positions": j[60:64, 4].tolist()},
+            ],
+        }
+    )
 
 
 def test_controlled_generation_meets_the_spec(model, spec):
-    out = generate_controlled(model, "a person squats slowly", control=spec, frames=64, preset="medium", seed=0)
+    out = generate_controlled(
+        model, "a person squats slowly", control=spec, frames=64, preset="medium", seed=0
+    )
     motion, errors, record = out.motion, out.errors[0], out.records[0]
     assert motion.joints.shape == (64, 22, 3) and errors.shape == (6,)
     np.testing.assert_allclose(errors, constraint_errors(motion.joints, spec), atol=1e-6)
@@ -194,16 +234,23 @@ def test_controlled_generation_meets_the_spec(model, spec):
     assert motion.extras["control_mask"].sum() == 6 and motion.extras["control_errors"].shape == (6,)
     # the same targets as arrays give the same result
     targets, mask = spec.dense(64)
-    again = generate_controlled(model, "a person squats slowly", targets=targets, mask=mask, preset="medium",
-                                seed=0)
+    again = generate_controlled(
+        model, "a person squats slowly", targets=targets, mask=mask, preset="medium", seed=0
+    )
     assert again.motion.num_frames == 64  # the length covers the last controlled frame
     np.testing.assert_allclose(sorted(again.errors[0]), sorted(errors), atol=1e-6)
 
 
 def test_accurate_preset_edits_logits_and_keeps_residual_layers_consistent(model, spec):
     accurate = PRESETS["accurate"].with_overrides(logits_steps=8)  # fewer steps: a quick test
-    out = generate_controlled(model, ["a person squats slowly", "someone bends over"], control=[spec, None],
-                              frames=[64, 48], preset=accurate, seed=3)
+    out = generate_controlled(
+        model,
+        ["a person squats slowly", "someone bends over"],
+        control=[spec, None],
+        frames=[64, 48],
+        preset=accurate,
+        seed=3,
+    )
     record = out.records[0]
     assert len(record.logits_steps) == 10 and 0 < sum(record.logits_steps) <= 80
     assert float(out.errors[0].max()) <= 0.01 and out.errors[1].shape == (0,)
@@ -223,9 +270,12 @@ def test_extra_loss_terms_and_early_stopping_in_generation(model, spec):
     plain = generate_controlled(model, "a person squats slowly", control=spec, frames=64, seed=1, preset=none)
     assert plain.records[0].total_steps == 0 and not plain.records[0].control_model
     head = float(plain.motion.joints[:, 15, 1].max())
-    duck = LossTerm("duck", lambda j: torch.relu(j[:, :, 15, 1] - (head - 0.03)).square().sum(-1), weight=10.0)
-    out = generate_controlled(model, "a person squats slowly", control=spec, terms=[duck], frames=64,
-                              preset="medium", seed=1)
+    duck = LossTerm(
+        "duck", lambda j: torch.relu(j[:, :, 15, 1] - (head - 0.03)).square().sum(-1), weight=10.0
+    )
+    out = generate_controlled(
+        model, "a person squats slowly", control=spec, terms=[duck], frames=64, preset="medium", seed=1
+    )
     record = out.records[0]
     assert set(record.losses) == {"control", "duck"}
     assert record.converged and record.losses["duck"] <= 1e-6 and record.codebook_steps < 600

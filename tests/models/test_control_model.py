@@ -32,8 +32,12 @@ def test_paper_preset_matches_the_official_control_branch():
         cfg = replace(preset_config("paper"), control=ControlConfig(joints=joints))
         state = MotionControlModel(cfg).state_dict()
         assert len(state) == 96 + 32 + 2 + 16
-        assert {k.split(".")[0] for k in state} == {"seqTransEncoder_control", "encoder_control",
-                                                     "first_zero_linear", "mid_zero_linear"}
+        assert {k.split(".")[0] for k in state} == {
+            "seqTransEncoder_control",
+            "encoder_control",
+            "first_zero_linear",
+            "mid_zero_linear",
+        }
         assert state["encoder_control.model.0.weight"].shape == (512, channels, 3)
         assert state["encoder_control.model.2.0.weight"].shape == (512, 512, 4)
         assert state["encoder_control.model.3.1.model.2.conv2.weight"].shape == (512, 512, 1)
@@ -60,8 +64,10 @@ def test_zero_initialised_model_equals_the_base(model):
     with torch.no_grad():
         for text in (cond, states):
             assert torch.equal(control(base, ids, text, padding, ctrl), base(ids, text, padding))
-            assert torch.equal(control.cfg_logits(base, ids, text, padding, ctrl, 4.0),
-                               base.cfg_logits(ids, text, padding, 4.0))
+            assert torch.equal(
+                control.cfg_logits(base, ids, text, padding, ctrl, 4.0),
+                base.cfg_logits(ids, text, padding, 4.0),
+            )
         # trained zero linears make the control matter
         torch.nn.init.normal_(control.first_zero_linear.weight, std=0.1)
         assert not torch.allclose(control(base, ids, cond, padding, ctrl), base(ids, cond, padding))
@@ -122,15 +128,22 @@ def test_control_masks_follow_the_modes():
 def test_control_masks_take_a_cuda_generator():
     """The control stage validates with a generator on its device; on CUDA that once crashed here."""
     lengths = torch.tensor([40, 196], device="cuda")
-    first = sample_control_mask(lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0))
-    again = sample_control_mask(lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0))
+    first = sample_control_mask(
+        lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0)
+    )
+    again = sample_control_mask(
+        lengths, 196, CONTROL, "mixed", "mixed", torch.Generator("cuda").manual_seed(0)
+    )
     assert first.device.type == "cuda" and torch.equal(first, again) and bool(first.any())
 
 
 def test_straight_through_gumbel_is_one_hot_forward_and_soft_backward():
     logits = torch.randn(2, 5, 7, requires_grad=True)
     p = token_probabilities(logits, "gumbel", 1.0, torch.Generator().manual_seed(0))
-    assert torch.equal(p.detach().sum(-1), torch.ones(2, 5)) and set(p.detach().unique().tolist()) <= {0.0, 1.0}
+    assert torch.equal(p.detach().sum(-1), torch.ones(2, 5)) and set(p.detach().unique().tolist()) <= {
+        0.0,
+        1.0,
+    }
     (p * torch.arange(7.0)).sum().backward()
     assert logits.grad.abs().sum() > 0
     soft = token_probabilities(logits.detach(), "softmax")
@@ -158,9 +171,16 @@ def test_one_training_step_reduces_the_consistency_loss(model, tiny_data):
     for estimator, steps in (("softmax", 1), ("gumbel", 3)):
         torch.manual_seed(0)
         control = MotionControlModel(model.config).init_from_base(model.transformer)
-        loss_fn = ControlLoss(control, model.transformer, model.tokenizer, model.normalizer,
-                              replace(settings, estimator=estimator))
-        assert [n for n, _ in loss_fn.named_parameters()] == [f"control.{n}" for n, _ in control.named_parameters()]
+        loss_fn = ControlLoss(
+            control,
+            model.transformer,
+            model.tokenizer,
+            model.normalizer,
+            replace(settings, estimator=estimator),
+        )
+        assert [n for n, _ in loss_fn.named_parameters()] == [
+            f"control.{n}" for n, _ in control.named_parameters()
+        ]
         # measured with the deterministic expectation (the straight-through forward is piecewise constant)
         probe = ControlLoss(control, model.transformer, model.tokenizer, model.normalizer, settings)
 
@@ -186,8 +206,10 @@ def test_control_stage_writes_a_loadable_part(tiny_control_dir, tiny_model_dir, 
     assert set(manifest["parts"]) == {"tokenizer", "transformer", "residual", "control"}
     assert manifest["config"]["control"]["joints"] == "all"
     part = manifest["parts"]["control"]
-    assert part["trained_on"] == {"tokenizer": manifest["parts"]["tokenizer"]["sha256"],
-                                  "transformer": manifest["parts"]["transformer"]["sha256"]}
+    assert part["trained_on"] == {
+        "tokenizer": manifest["parts"]["tokenizer"]["sha256"],
+        "transformer": manifest["parts"]["transformer"]["sha256"],
+    }
     record = manifest["training"]["control"]
     assert record["consistency_training"]["estimator"] == "gumbel" and record["iterations"] == 20
     assert "val_hard_err_cm" in record["best"]
@@ -198,7 +220,16 @@ def test_control_stage_writes_a_loadable_part(tiny_control_dir, tiny_model_dir, 
     with pytest.raises(ControlMMError, match="--resume"):
         train("control", TrainOptions(data=tiny_data, out=tiny_control_dir, iters=1, progress=False))
     with pytest.raises(ControlMMError, match="--joints pelvis does not match"):
-        train("control", TrainOptions(data=tiny_data, out=tiny_control_dir, iters=21, progress=False, resume=True,
-                                      stage_options={"joints": "pelvis"}))
+        train(
+            "control",
+            TrainOptions(
+                data=tiny_data,
+                out=tiny_control_dir,
+                iters=21,
+                progress=False,
+                resume=True,
+                stage_options={"joints": "pelvis"},
+            ),
+        )
     with pytest.raises(ControlMMError, match="unknown estimator 'argmax'"):
         ControlTraining(estimator="argmax")

@@ -55,7 +55,12 @@ def test_rvqvae_tensor_names_and_shapes(paper):
         assert tuple(sd[name].shape) == shape, name
     # Reversed dilations (9, 3, 1) in encoder and decoder residual stacks; Upsample at decoder.model.{2,3}.1.
     vq = paper[1]
-    for stack in (vq.encoder.model[2][1], vq.encoder.model[3][1], vq.decoder.model[2][0], vq.decoder.model[3][0]):
+    for stack in (
+        vq.encoder.model[2][1],
+        vq.encoder.model[3][1],
+        vq.decoder.model[2][0],
+        vq.decoder.model[3][0],
+    ):
         assert [blk.conv1.dilation[0] for blk in stack.model] == [9, 3, 1]
     assert isinstance(vq.decoder.model[2][1], torch.nn.Upsample)
 
@@ -111,8 +116,15 @@ def test_residual_transformer_tensor_names_and_tied_projections(paper):
 
 def test_demo_preset_is_small_enough_to_ship():
     cfg = preset_config("demo")
-    total = sum(_params(m) for m in (RVQVAE(cfg.tokenizer), MaskTransformer(cfg.transformer),
-                                     MaskTransformer(cfg.token_view.transformer), ResidualTransformer(cfg.residual)))
+    total = sum(
+        _params(m)
+        for m in (
+            RVQVAE(cfg.tokenizer),
+            MaskTransformer(cfg.transformer),
+            MaskTransformer(cfg.token_view.transformer),
+            ResidualTransformer(cfg.residual),
+        )
+    )
     assert cfg.storage_dtype == "float16" and cfg.text_encoder.name == "minilm"
     assert total * 2 / 2**20 < 16  # MiB as float16: room left for the control branch and the evaluator
     assert cfg.transformer.text_dim == 384
@@ -213,8 +225,9 @@ def test_text_norm_lifts_unit_length_text_vectors_to_unit_variance():
     assert demo.transformer.text_norm and demo.residual.text_norm
     assert not paper.transformer.text_norm and not paper.residual.text_norm  # MoMask has no such layer
     plain_cfg = preset_config("tiny").transformer
-    normed_cfg = ModelConfig.from_dict({**preset_config("tiny").to_dict(),
-                                        "transformer": {**plain_cfg.__dict__, "text_norm": True}}).transformer
+    normed_cfg = ModelConfig.from_dict(
+        {**preset_config("tiny").to_dict(), "transformer": {**plain_cfg.__dict__, "text_norm": True}}
+    ).transformer
     torch.manual_seed(0)
     plain = MaskTransformer(plain_cfg).eval()
     normed = MaskTransformer(normed_cfg).eval()
@@ -232,9 +245,13 @@ def test_text_norm_lifts_unit_length_text_vectors_to_unit_variance():
     ratio = float(c_normed.norm() / c_plain.norm())
     assert 0.5 * plain_cfg.text_dim**0.5 < ratio < 2 * plain_cfg.text_dim**0.5
     # The unconditional pass does not depend on the text.
-    assert torch.allclose(normed(ids, text, pad, force_mask=True), normed(ids, text.flip(0), pad, force_mask=True))
+    assert torch.allclose(
+        normed(ids, text, pad, force_mask=True), normed(ids, text.flip(0), pad, force_mask=True)
+    )
     tiny = preset_config("tiny")
-    res_cfg = ModelConfig.from_dict({**tiny.to_dict(), "residual": {**tiny.residual.__dict__, "text_norm": True}}).residual
+    res_cfg = ModelConfig.from_dict(
+        {**tiny.to_dict(), "residual": {**tiny.residual.__dict__, "text_norm": True}}
+    ).residual
     assert "text_norm.weight" in ResidualTransformer(res_cfg).state_dict()
 
 
@@ -266,7 +283,9 @@ def test_text_token_states_are_condition_rows_and_padding_is_ignored():
     q_ids = torch.randint(0, cfg.nb_code, (2, 6, 3))
     history = res.history(q_ids, 1)
     q = torch.ones(2, dtype=torch.long)
-    assert torch.allclose(res(history, q, states, pad), res(history, q, pool_text_tokens(states), pad), atol=1e-6)
+    assert torch.allclose(
+        res(history, q, states, pad), res(history, q, pool_text_tokens(states), pad), atol=1e-6
+    )
 
 
 def test_pooled_row_adds_the_sentence_vector_of_the_token_states():

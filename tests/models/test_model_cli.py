@@ -18,10 +18,30 @@ from .conftest import subprocess_env
 
 def test_generate_writes_a_motion_and_a_plot(tiny_model_dir, tmp_path):
     out = tmp_path / "walk.npz"
-    res = subprocess.run([sys.executable, "-m", "controlmm", "generate", "--text", "a person squats slowly",
-                          "--seconds", "3", "--seed", "0", "--out", str(out), "--plot", str(tmp_path / "walk.png"),
-                          "--model", str(tiny_model_dir)], capture_output=True, text=True, env=subprocess_env(),
-                         timeout=300)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "controlmm",
+            "generate",
+            "--text",
+            "a person squats slowly",
+            "--seconds",
+            "3",
+            "--seed",
+            "0",
+            "--out",
+            str(out),
+            "--plot",
+            str(tmp_path / "walk.png"),
+            "--model",
+            str(tiny_model_dir),
+        ],
+        capture_output=True,
+        text=True,
+        env=subprocess_env(),
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert "wrote" in res.stdout and (tmp_path / "walk.png").stat().st_size > 1000
     with np.load(out) as data:
@@ -32,8 +52,23 @@ def test_generate_writes_a_motion_and_a_plot(tiny_model_dir, tmp_path):
 
 
 def test_generate_batch_numbers_outputs(tiny_model_dir, tmp_path, capsys):
-    code = main(["generate", "--text", "a person squats", "--text", "someone bends over", "--frames", "44",
-                 "--seed", "1", "--out", str(tmp_path / "m.npz"), "--model", str(tiny_model_dir)])
+    code = main(
+        [
+            "generate",
+            "--text",
+            "a person squats",
+            "--text",
+            "someone bends over",
+            "--frames",
+            "44",
+            "--seed",
+            "1",
+            "--out",
+            str(tmp_path / "m.npz"),
+            "--model",
+            str(tiny_model_dir),
+        ]
+    )
     assert code == 0
     assert (tmp_path / "m_0.npz").is_file() and (tmp_path / "m_1.npz").is_file()
     with np.load(tmp_path / "m_1.npz") as data:
@@ -51,35 +86,76 @@ def test_generate_bad_input(tiny_model_dir, tmp_path, capsys):
     base = ["generate", "--out", str(tmp_path / "o.npz"), "--model", str(tiny_model_dir)]
     _one_line_error(capsys, base + ["--text", "  "], "text must not be empty")
     _one_line_error(capsys, base + ["--text", "a person squats", "--seconds", "20"], "out of range")
-    _one_line_error(capsys, ["generate", "--text", "hi", "--out", str(tmp_path / "o.txt")], "unknown output format")
-    _one_line_error(capsys, ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model",
-                             str(tmp_path / "none")], "does not exist")
+    _one_line_error(
+        capsys, ["generate", "--text", "hi", "--out", str(tmp_path / "o.txt")], "unknown output format"
+    )
+    _one_line_error(
+        capsys,
+        ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model", str(tmp_path / "none")],
+        "does not exist",
+    )
     broken = tmp_path / "broken"
     shutil.copytree(tiny_model_dir, broken, ignore=shutil.ignore_patterns("checkpoints", "cache"))
     (broken / "tokenizer.pt").write_bytes(b"\x00" * 100)
-    _one_line_error(capsys, ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model", str(broken)],
-                    "corrupt")
+    _one_line_error(
+        capsys,
+        ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model", str(broken)],
+        "corrupt",
+    )
     (broken / "tokenizer.pt").unlink()
-    _one_line_error(capsys, ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model", str(broken)],
-                    "has no tokenizer.pt")
+    _one_line_error(
+        capsys,
+        ["generate", "--text", "hi", "--out", str(tmp_path / "o.npz"), "--model", str(broken)],
+        "has no tokenizer.pt",
+    )
 
 
 def test_train_help_and_bad_input(tiny_data, tmp_path, capsys):
-    assert TRAIN_SUBCOMMANDS == ("tokenizer", "transformer", "token_transformer", "residual", "control", "evaluator")
+    assert TRAIN_SUBCOMMANDS == (
+        "tokenizer",
+        "transformer",
+        "token_transformer",
+        "residual",
+        "control",
+        "evaluator",
+    )
     for stage in TRAIN_SUBCOMMANDS:
         with pytest.raises(SystemExit) as info:
             main(["train", stage.replace("_", "-"), "--help"])
         assert info.value.code == 0
         assert "--resume" in capsys.readouterr().out
     _one_line_error(capsys, ["train"], "choose a stage")
-    _one_line_error(capsys, ["train", "tokenizer", "--data", str(tiny_data), "--out", str(tmp_path / "m"),
-                             "--preset", "huge"], "unknown preset 'huge'; allowed: paper, demo, tiny")
-    _one_line_error(capsys, ["train", "transformer", "--data", str(tiny_data), "--out", str(tmp_path / "m")],
-                    "train the tokenizer first")
-    _one_line_error(capsys, ["train", "tokenizer", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "m")],
-                    "does not exist")
-    _one_line_error(capsys, ["train", "tokenizer", "--data", str(tiny_data), "--out", str(tmp_path / "m"),
-                             "--preset", "tiny", "--iters", "0"], "iters must be at least 1")
+    _one_line_error(
+        capsys,
+        ["train", "tokenizer", "--data", str(tiny_data), "--out", str(tmp_path / "m"), "--preset", "huge"],
+        "unknown preset 'huge'; allowed: paper, demo, tiny",
+    )
+    _one_line_error(
+        capsys,
+        ["train", "transformer", "--data", str(tiny_data), "--out", str(tmp_path / "m")],
+        "train the tokenizer first",
+    )
+    _one_line_error(
+        capsys,
+        ["train", "tokenizer", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "m")],
+        "does not exist",
+    )
+    _one_line_error(
+        capsys,
+        [
+            "train",
+            "tokenizer",
+            "--data",
+            str(tiny_data),
+            "--out",
+            str(tmp_path / "m"),
+            "--preset",
+            "tiny",
+            "--iters",
+            "0",
+        ],
+        "iters must be at least 1",
+    )
     with pytest.raises(SystemExit) as info:
         main(["train", "tokenizer", "--data", str(tiny_data)])  # argparse usage error: one line, exit 2
     assert info.value.code == 2 and capsys.readouterr().err.count("\n") == 1

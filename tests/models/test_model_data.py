@@ -25,10 +25,18 @@ def quirky(tmp_path, humanml3d_dir, sample_features):
     (root / "new_joint_vecs").mkdir(parents=True)
     (root / "texts").mkdir()
     long = np.concatenate([sample_features, sample_features])  # 340 frames
-    _write(root, "whole", 120, ["a person walks#a/DET person/NOUN walks/VERB#0.0#0.0",
-                                "someone walks#someone/PRON walks/VERB#nan#nan",
-                                "a person stops#a/DET person/NOUN stops/VERB#1.0#4.0",  # span: frames 20..80
-                                "a person blinks#a/DET#0.5#1.0"], long)  # span of 10 frames: dropped
+    _write(
+        root,
+        "whole",
+        120,
+        [
+            "a person walks#a/DET person/NOUN walks/VERB#0.0#0.0",
+            "someone walks#someone/PRON walks/VERB#nan#nan",
+            "a person stops#a/DET person/NOUN stops/VERB#1.0#4.0",  # span: frames 20..80
+            "a person blinks#a/DET#0.5#1.0",
+        ],
+        long,
+    )  # span of 10 frames: dropped
     _write(root, "spanonly", 150, ["a person turns#x#2.0#6.0"], long)  # no whole caption: only the span
     _write(root, "short", 39, ["too short#x#0#0"], long)
     _write(root, "toolong", 200, ["too long#x#0#0", "long span#x#0.0#3.0"], long)  # skipped entirely
@@ -69,7 +77,7 @@ def test_text_motion_items_round_pad_and_normalise(quirky):
         # The crop is a normalised window of the source motion.
         window = motion[:m].numpy()
         raw = norm.denormalize(window)
-        starts = [s for s in range(0, 120 - m + 1) if np.allclose(long[s:s + m], raw, atol=1e-4)]
+        starts = [s for s in range(0, 120 - m + 1) if np.allclose(long[s : s + m], raw, atol=1e-4)]
         assert starts
     assert set(lengths) == {120, 116}  # single: 120; double: 116
     assert 0.25 < lengths.count(116) / len(lengths) < 0.42
@@ -105,8 +113,10 @@ def test_length_bucketing_keeps_the_epoch_and_groups_similar_lengths():
     # a pure function of (seed, epoch): resumption, several processes and later epochs
     again = list(StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5, start_step=3))
     assert again == [[(int(i), 2) for i in b] for b in bucketed[3:]]
-    shards = [list(StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5, rank=r, world=2))
-              for r in range(2)]
+    shards = [
+        list(StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths, bucket=5, rank=r, world=2))
+        for r in range(2)
+    ]
     assert sorted(shards[0][0] + shards[1][0]) == sorted((int(i), 2) for i in bucketed[0])
     other = StepBatchSampler(200, 8, seed=1, epoch=3, lengths=lengths, bucket=5).batches()
     assert any(not np.array_equal(a, b) for a, b in zip(bucketed, other))
@@ -123,19 +133,27 @@ def test_bucketing_only_where_batches_are_trimmed():
         replace(cfg, schedules={**cfg.schedules, "residual": replace(cfg.schedules["residual"], bucket=-1)})
 
 
-@pytest.mark.parametrize("breakage,needle", [
-    (lambda r: shutil.rmtree(r / "new_joint_vecs"), "no 'new_joint_vecs/' folder"),
-    (lambda r: (r / "Std.npy").unlink(), "has no Std.npy"),
-    (lambda r: np.save(r / "Mean.npy", np.zeros(10)), "Mean.npy' must hold a finite (263,) array"),
-    (lambda r: (r / "train.txt").unlink(), "has no train.txt"),
-    (lambda r: (r / "train.txt").write_text("whole\nghost\n"), "'ghost' is listed but"),
-    (lambda r: (r / "texts" / "spanonly.txt").unlink(), "spanonly.txt' does not exist"),
-    (lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.zeros((50, 22, 3))), "must hold (T, 263) features"),
-    (lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.full((50, 263), np.nan)), "non-finite"),
-    (lambda r: (r / "texts" / "whole.txt").write_text("just a caption\n"),
-     "line 1: expected 'caption#tokens#start#end'"),
-    (lambda r: (r / "texts" / "whole.txt").write_text("a#b#x#y\n"), "are not numbers"),
-])
+@pytest.mark.parametrize(
+    "breakage,needle",
+    [
+        (lambda r: shutil.rmtree(r / "new_joint_vecs"), "no 'new_joint_vecs/' folder"),
+        (lambda r: (r / "Std.npy").unlink(), "has no Std.npy"),
+        (lambda r: np.save(r / "Mean.npy", np.zeros(10)), "Mean.npy' must hold a finite (263,) array"),
+        (lambda r: (r / "train.txt").unlink(), "has no train.txt"),
+        (lambda r: (r / "train.txt").write_text("whole\nghost\n"), "'ghost' is listed but"),
+        (lambda r: (r / "texts" / "spanonly.txt").unlink(), "spanonly.txt' does not exist"),
+        (
+            lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.zeros((50, 22, 3))),
+            "must hold (T, 263) features",
+        ),
+        (lambda r: np.save(r / "new_joint_vecs" / "short.npy", np.full((50, 263), np.nan)), "non-finite"),
+        (
+            lambda r: (r / "texts" / "whole.txt").write_text("just a caption\n"),
+            "line 1: expected 'caption#tokens#start#end'",
+        ),
+        (lambda r: (r / "texts" / "whole.txt").write_text("a#b#x#y\n"), "are not numbers"),
+    ],
+)
 def test_malformed_directories_name_the_problem(quirky, breakage, needle):
     root, _ = quirky
     breakage(root)

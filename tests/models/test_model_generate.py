@@ -37,10 +37,12 @@ def test_lengths_from_seconds_or_frames():
     assert frames_for(2, seconds=6) == [120, 120]
     assert frames_for(2, frames=[40, 196]) == [40, 196]
     assert frames_for(1) == [120]
-    for kwargs, needle in [(dict(seconds=12), "length 12 s (240 frames) is out of range"),
-                           (dict(frames=39), "allowed 40..196 frames"),
-                           (dict(frames=[50]), "1 lengths given for 2 prompts"),
-                           (dict(seconds=3, frames=60), "not both")]:
+    for kwargs, needle in [
+        (dict(seconds=12), "length 12 s (240 frames) is out of range"),
+        (dict(frames=39), "allowed 40..196 frames"),
+        (dict(frames=[50]), "1 lengths given for 2 prompts"),
+        (dict(seconds=3, frames=60), "not both"),
+    ]:
         with pytest.raises(ControlMMError, match=needle.replace("(", r"\(").replace(")", r"\)")):
             frames_for(2, **kwargs)
 
@@ -103,8 +105,14 @@ def test_logits_hook_controls_every_iteration(model):
         edited[..., 3] += 100.0
         return edited
 
-    out = masked_decode(model.transformer, cond, lengths, DecodeOptions(iterations=5), torch.Generator().manual_seed(0),
-                        logits_hook=force_code_3)
+    out = masked_decode(
+        model.transformer,
+        cond,
+        lengths,
+        DecodeOptions(iterations=5),
+        torch.Generator().manual_seed(0),
+        logits_hook=force_code_3,
+    )
     assert steps == [0, 1, 2, 3, 4]
     assert torch.all(out.ids[0] == 3) and torch.all(out.ids[1, :7] == 3) and torch.all(out.ids[1, 7:] == -1)
     assert out.logits[0, 0, 3] > 50  # the returned logits are the edited ones

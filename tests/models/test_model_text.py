@@ -90,5 +90,6 @@ def test_minilm_token_states_pool_to_the_sentence_vector(minilm, tmp_path):
     cached = embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64)
     assert cached.vectors.shape == states.shape and len(list(tmp_path.glob("text-minilm-tok64-*.pt"))) == 1
     assert torch.allclose(cached.vectors, states, atol=2e-3 * float(states.abs().max()))  # float16 on disk
-    assert torch.equal(embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64).vectors,
-                       cached.vectors)
+    assert torch.equal(
+        embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64).vectors, cached.vectors
+    )

@@ -64,13 +64,32 @@ def test_refuses_to_clobber_and_checks_prerequisites(tiny_data, tiny_model_dir, 
     with pytest.raises(ControlMMError, match="unknown preset 'huge'"):
         train("tokenizer", TrainOptions(data=tiny_data, out=tmp_path / "x", preset="huge", progress=False))
     with pytest.raises(ControlMMError, match="--preset demo does not match"):
-        train("residual", TrainOptions(data=tiny_data, out=tiny_model_dir, preset="demo", resume=True,
-                                       progress=False))
+        train(
+            "residual",
+            TrainOptions(data=tiny_data, out=tiny_model_dir, preset="demo", resume=True, progress=False),
+        )
 
 
 def _cli_train(data, out, *extra):
-    return [sys.executable, "-m", "controlmm", "train", "tokenizer", "--data", str(data), "--out", str(out),
-            "--preset", "tiny", "--batch-size", "4", "--no-progress", "--device", "cpu", *extra]
+    return [
+        sys.executable,
+        "-m",
+        "controlmm",
+        "train",
+        "tokenizer",
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--preset",
+        "tiny",
+        "--batch-size",
+        "4",
+        "--no-progress",
+        "--device",
+        "cpu",
+        *extra,
+    ]
 
 
 def _weights(path):
@@ -80,12 +99,21 @@ def _weights(path):
 def test_sigkill_then_resume_matches_an_uninterrupted_run(tiny_data, tmp_path):
     iters = "36"
     env = subprocess_env()
-    straight = subprocess.run(_cli_train(tiny_data, tmp_path / "a", "--iters", iters, "--checkpoint-every", "3"),
-                              capture_output=True, text=True, env=env, timeout=300)
+    straight = subprocess.run(
+        _cli_train(tiny_data, tmp_path / "a", "--iters", iters, "--checkpoint-every", "3"),
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert straight.returncode == 0, straight.stderr
     ckpt = tmp_path / "b" / "checkpoints" / "tokenizer.pt"
-    proc = subprocess.Popen(_cli_train(tiny_data, tmp_path / "b", "--iters", iters, "--checkpoint-every", "3"),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    proc = subprocess.Popen(
+        _cli_train(tiny_data, tmp_path / "b", "--iters", iters, "--checkpoint-every", "3"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
     killed_at = None
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None:
@@ -101,8 +129,13 @@ def test_sigkill_then_resume_matches_an_uninterrupted_run(tiny_data, tmp_path):
     assert not (tmp_path / "b" / "tokenizer.pt").exists()
     saved = torch.load(ckpt, weights_only=False)["step"]
     assert saved < int(iters)
-    resumed = subprocess.run(_cli_train(tiny_data, tmp_path / "b", "--iters", iters, "--checkpoint-every", "3",
-                                        "--resume"), capture_output=True, text=True, env=env, timeout=300)
+    resumed = subprocess.run(
+        _cli_train(tiny_data, tmp_path / "b", "--iters", iters, "--checkpoint-every", "3", "--resume"),
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert resumed.returncode == 0, resumed.stderr
     assert f"resumed tokenizer from step {saved}" in resumed.stdout
     a, b = _weights(tmp_path / "a" / "tokenizer.pt"), _weights(tmp_path / "b" / "tokenizer.pt")
@@ -118,19 +151,41 @@ def _free_port() -> int:
 
 
 def _ddp_worker(rank: int, world: int, port: int, data: str, out: str, result_dir: str) -> None:
-    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), RANK=str(rank), WORLD_SIZE=str(world),
-                      LOCAL_RANK=str(rank))
+    os.environ.update(
+        MASTER_ADDR="127.0.0.1",
+        MASTER_PORT=str(port),
+        RANK=str(rank),
+        WORLD_SIZE=str(world),
+        LOCAL_RANK=str(rank),
+    )
     torch.set_num_threads(1)
     from pathlib import Path
 
-    result = train("tokenizer", TrainOptions(data=Path(data), out=Path(out), preset="tiny", iters=6, batch_size=4,
-                                             checkpoint_every=2, progress=False, device="cpu"))
-    torch.save({k: v.clone() for k, v in result.model.state_dict().items()}, Path(result_dir) / f"rank{rank}.pt")
+    result = train(
+        "tokenizer",
+        TrainOptions(
+            data=Path(data),
+            out=Path(out),
+            preset="tiny",
+            iters=6,
+            batch_size=4,
+            checkpoint_every=2,
+            progress=False,
+            device="cpu",
+        ),
+    )
+    torch.save(
+        {k: v.clone() for k, v in result.model.state_dict().items()}, Path(result_dir) / f"rank{rank}.pt"
+    )
 
 
 def test_distributed_data_parallel_on_two_gloo_processes(tiny_data, tmp_path):
-    context = mp.spawn(_ddp_worker, args=(2, _free_port(), str(tiny_data), str(tmp_path / "ddp"), str(tmp_path)),
-                       nprocs=2, join=False)
+    context = mp.spawn(
+        _ddp_worker,
+        args=(2, _free_port(), str(tiny_data), str(tmp_path / "ddp"), str(tmp_path)),
+        nprocs=2,
+        join=False,
+    )
     deadline = time.time() + 180
     while not context.join(timeout=1):
         if time.time() > deadline:  # a collective mismatch would hang forever: fail instead
@@ -152,8 +207,18 @@ def test_clip_conditioned_model_trains_and_generates(tiny_data, tiny_clip_dir, t
     from controlmm.generate import generate, load_model
 
     out = tmp_path / "clip-model"
-    train("tokenizer", TrainOptions(data=tiny_data, out=out, preset="tiny", iters=4, progress=False,
-                                    text_encoder="clip", clip_weights=str(tiny_clip_dir)))
+    train(
+        "tokenizer",
+        TrainOptions(
+            data=tiny_data,
+            out=out,
+            preset="tiny",
+            iters=4,
+            progress=False,
+            text_encoder="clip",
+            clip_weights=str(tiny_clip_dir),
+        ),
+    )
     manifest = json.loads((out / "model.json").read_text())
     assert manifest["text_encoder"]["name"] == "clip" and manifest["config"]["transformer"]["text_dim"] == 24
     train("transformer", TrainOptions(data=tiny_data, out=out, iters=3, progress=False))
@@ -167,7 +232,10 @@ def test_text_token_model_trains_every_stage_and_generates(tiny_data, tmp_path):
     from controlmm.generate import generate, load_model
 
     out = tmp_path / "token-model"
-    train("tokenizer", TrainOptions(data=tiny_data, out=out, preset="tiny", iters=4, progress=False, text_tokens=12))
+    train(
+        "tokenizer",
+        TrainOptions(data=tiny_data, out=out, preset="tiny", iters=4, progress=False, text_tokens=12),
+    )
     assert json.loads((out / "model.json").read_text())["config"]["text_encoder"]["tokens"] == 12
     with pytest.raises(ControlMMError, match="uses text tokens 12; --text-tokens 0 does not match"):
         train("transformer", TrainOptions(data=tiny_data, out=out, iters=2, progress=False, text_tokens=0))
@@ -184,8 +252,9 @@ def test_text_token_model_trains_every_stage_and_generates(tiny_data, tmp_path):
     from controlmm.generate import generate_controlled
 
     target = result.motions[0].joints[20, 0].tolist()
-    spec = ControlSpec.from_dict({"coords": "human", "constraints": [{"joint": "pelvis", "frame": 20,
-                                                                      "position": target}]})
+    spec = ControlSpec.from_dict(
+        {"coords": "human", "constraints": [{"joint": "pelvis", "frame": 20, "position": target}]}
+    )
     out = generate_controlled(model, "a person squats slowly", control=spec, frames=48, preset="fast", seed=1)
     assert out.motion.joints.shape == (48, 22, 3) and out.records[0].control_model
     assert float(out.errors[0].max()) < 0.05
@@ -203,10 +272,20 @@ def test_validation_draws_do_not_depend_on_the_training_seed(tiny_data, tiny_mod
     model = load_model(tiny_model_dir)
     metrics = {}
     for seed in (0, 5):
-        ctx = StageContext(config=model.config, data=HumanML3D(tiny_data), normalizer=model.normalizer,
-                           model_dir=tiny_model_dir, device=torch.device("cpu"), seed=seed, progress=False,
-                           base=load_model(tiny_model_dir, parts=("tokenizer",)))
+        ctx = StageContext(
+            config=model.config,
+            data=HumanML3D(tiny_data),
+            normalizer=model.normalizer,
+            model_dir=tiny_model_dir,
+            device=torch.device("cpu"),
+            seed=seed,
+            progress=False,
+            base=load_model(tiny_model_dir, parts=("tokenizer",)),
+        )
         torch.manual_seed(seed)  # the global generator must not matter either
-        metrics[seed] = (TransformerStage(ctx).validate(model.transformer), ResidualStage(ctx).validate(model.residual))
+        metrics[seed] = (
+            TransformerStage(ctx).validate(model.transformer),
+            ResidualStage(ctx).validate(model.residual),
+        )
     assert metrics[0] == metrics[5]
     assert metrics[0][0]["val_loss"] > 0 and metrics[0][1]["val_loss"] > 0

@@ -49,8 +49,15 @@ def _one_thread():
 def _write_evaluator(root):
     t2m = root / "checkpoints" / "t2m"
     (t2m / "text_mot_match" / "model").mkdir(parents=True)
-    torch.save({"movement_encoder": {"w": torch.zeros(2)}, "text_encoder": {"w": torch.zeros(2)},
-                "motion_encoder": {"w": torch.zeros(2)}, "epoch": 1}, t2m / "text_mot_match" / "model" / "finest.tar")
+    torch.save(
+        {
+            "movement_encoder": {"w": torch.zeros(2)},
+            "text_encoder": {"w": torch.zeros(2)},
+            "motion_encoder": {"w": torch.zeros(2)},
+            "epoch": 1,
+        },
+        t2m / "text_mot_match" / "model" / "finest.tar",
+    )
     (t2m / "Comp_v6_KLD005" / "meta").mkdir(parents=True)
     np.save(t2m / "Comp_v6_KLD005" / "meta" / "mean.npy", np.zeros(263, np.float32))
     np.save(t2m / "Comp_v6_KLD005" / "meta" / "std.npy", np.ones(263, np.float32))
@@ -83,11 +90,28 @@ def _inputs(n=6, b=3, seed=0):
 
 def test_opt_txt_values(tmp_path):
     path = tmp_path / "opt.txt"
-    write_opt(path, {"n_heads": 6, "dropout": 0.2, "share_weight": True, "vq_norm": None, "milestones": [50000],
-                     "name": "t2m_nlayer8", "clip_version": "ViT-B/32"})
+    write_opt(
+        path,
+        {
+            "n_heads": 6,
+            "dropout": 0.2,
+            "share_weight": True,
+            "vq_norm": None,
+            "milestones": [50000],
+            "name": "t2m_nlayer8",
+            "clip_version": "ViT-B/32",
+        },
+    )
     opt = read_opt(path)
-    assert opt == {"clip_version": "ViT-B/32", "dropout": 0.2, "milestones": [50000], "n_heads": 6,
-                   "name": "t2m_nlayer8", "share_weight": True, "vq_norm": None}
+    assert opt == {
+        "clip_version": "ViT-B/32",
+        "dropout": 0.2,
+        "milestones": [50000],
+        "n_heads": 6,
+        "name": "t2m_nlayer8",
+        "share_weight": True,
+        "vq_norm": None,
+    }
     path.write_text("------------ Options -------------\nno separator here\n")
     with pytest.raises(InputFileError, match="line 2"):
         read_opt(path)
@@ -96,8 +120,11 @@ def test_opt_txt_values(tmp_path):
 def test_released_sizes_load_strictly_into_the_paper_preset():
     """Official trees at the released sizes: the tensor counts of reference §9 and a strict load."""
     d = Dims.paper()
-    vq, base, res = (official_vq_state(d, empty=True), official_mask_state(d, empty=True),
-                     official_residual_state(d, empty=True))
+    vq, base, res = (
+        official_vq_state(d, empty=True),
+        official_mask_state(d, empty=True),
+        official_residual_state(d, empty=True),
+    )
     ctrl = official_control_state(d, 6, empty=True, base=base, vq=vq)
     assert (len(vq), len(base), len(res), len(ctrl)) == (72, 108, 112, 326)
     split = map_official_state("control", ctrl)  # every ct2m tensor lands in exactly one part
@@ -127,9 +154,13 @@ def test_import_reproduces_the_official_forward(official):
         ref = ref_mask_logits(tree["base"], ids, cond, pad, D)
         torch.testing.assert_close(ours[valid], ref[valid], atol=TOL, rtol=0)
         probs = torch.softmax(torch.randn(3, 6, D.nb_code, generator=gen), -1)
-        soft = probs @ tree["base"]["token_emb.weight"][:D.nb_code]
-        torch.testing.assert_close(model.transformer(soft, cond, pad)[valid],
-                                   ref_mask_logits(tree["base"], soft, cond, pad, D)[valid], atol=TOL, rtol=0)
+        soft = probs @ tree["base"]["token_emb.weight"][: D.nb_code]
+        torch.testing.assert_close(
+            model.transformer(soft, cond, pad)[valid],
+            ref_mask_logits(tree["base"], soft, cond, pad, D)[valid],
+            atol=TOL,
+            rtol=0,
+        )
         # Residual transformer, every layer q, with the shared/tied projections.
         res_ids = torch.where(pad[..., None], D.nb_code, all_ids.clamp(min=0))
         for q in range(1, D.num_q):
@@ -142,12 +173,15 @@ def test_import_reproduces_the_official_forward(official):
         current = torch.randn(3, 24, 22, 3, generator=gen)
         mask = torch.rand(3, 24, 22, generator=gen) < 0.3
         ctrl_in = control_input(targets, mask, current, model.parts["control"].joint_ids)
-        torch.testing.assert_close(ctrl_in, ref_control_input(targets, mask, current, trajectory=False),
-                                   atol=0, rtol=0)
+        torch.testing.assert_close(
+            ctrl_in, ref_control_input(targets, mask, current, trajectory=False), atol=0, rtol=0
+        )
         ours = model.parts["control"](model.transformer, ids, cond, pad, ctrl_in)
         ref = ref_control_logits(tree["ctrl"], ids, cond, pad, ctrl_in, D)
         torch.testing.assert_close(ours[valid], ref[valid], atol=TOL, rtol=0)
-        assert (ref - ref_mask_logits(tree["base"], ids, cond, pad, D))[valid].abs().max() > 1e-2  # control matters
+        assert (ref - ref_mask_logits(tree["base"], ids, cond, pad, D))[
+            valid
+        ].abs().max() > 1e-2  # control matters
 
 
 def test_import_writes_a_paper_model_directory(official):
@@ -158,7 +192,10 @@ def test_import_writes_a_paper_model_directory(official):
     assert model.config.text_encoder.name == "clip" and model.config.text_encoder.precision == "float16"
     assert model.config.text_encoder.dim == D.text_dim and model.config.transformer.num_heads == D.heads
     assert sorted(manifest["parts"]) == ["control", "residual", "tokenizer", "transformer"]
-    assert manifest["parts"]["control"]["trained_on"]["transformer"] == manifest["parts"]["transformer"]["sha256"]
+    assert (
+        manifest["parts"]["control"]["trained_on"]["transformer"]
+        == manifest["parts"]["transformer"]["sha256"]
+    )
     assert manifest["official"]["sources"]["control"]["control"] == "cross"
     assert "transformer.num_layers: paper 8 -> 2" in manifest["official"]["differs_from_paper_preset"]
     # Normalisation: the VQ folder's meta files, unchanged (they already hold the Std/25 quirk).
@@ -168,25 +205,35 @@ def test_import_writes_a_paper_model_directory(official):
     assert (out / "evaluator" / "text_mot_match" / "model" / "finest.tar").is_file()
     assert (out / "evaluator" / "glove" / "our_vab_idx.pkl").is_file()
     assert manifest["official"]["evaluator"]["path"] == "evaluator"
-    assert any(n.startswith("evaluator Comp_v6_KLD005/meta vs the VQ meta") for n in manifest["official"]["notes"])
+    assert any(
+        n.startswith("evaluator Comp_v6_KLD005/meta vs the VQ meta") for n in manifest["official"]["notes"]
+    )
 
 
 def test_pelvis_model_and_control_checkpoint_copies_win(tmp_path):
     """6-channel (pelvis) control; a control checkpoint whose VQ differs from MoMask's is used as is."""
     tree = write_official_checkpoints(tmp_path, D, control_channels=6, control_vq_same=False)
-    out = import_official(tree["t2m"], tmp_path / "model", control=tree["control_dir"] / "model" / "latest.tar")
+    out = import_official(
+        tree["t2m"], tmp_path / "model", control=tree["control_dir"] / "model" / "latest.tar"
+    )
     model = load_model(out)
     assert model.config.control.joints == "pelvis" and model.parts["control"].joint_ids == (0,)
-    ctrl_vq = {k[len("vq_model."):]: v for k, v in tree["ctrl"].items() if k.startswith("vq_model.")}
-    torch.testing.assert_close(model.tokenizer.codebooks[1], ctrl_vq["quantizer.layers.1.codebook"], atol=0, rtol=0)
-    assert any("tokenizer: taken from the control checkpoint" in n and "max |diff|" in n
-               for n in model.manifest["official"]["notes"])
+    ctrl_vq = {k[len("vq_model.") :]: v for k, v in tree["ctrl"].items() if k.startswith("vq_model.")}
+    torch.testing.assert_close(
+        model.tokenizer.codebooks[1], ctrl_vq["quantizer.layers.1.codebook"], atol=0, rtol=0
+    )
+    assert any(
+        "tokenizer: taken from the control checkpoint" in n and "max |diff|" in n
+        for n in model.manifest["official"]["notes"]
+    )
     assert model.manifest["official"]["sources"]["tokenizer"]["weights_from"].endswith("latest.tar")
     ids, pad, cond, gen = _inputs(n=4, b=2, seed=1)
     targets, current = torch.randn(2, 16, 22, 3, generator=gen), torch.randn(2, 16, 22, 3, generator=gen)
     mask = torch.rand(2, 16, 22, generator=gen) < 0.5
     ctrl_in = control_input(targets, mask, current, (0,))
-    torch.testing.assert_close(ctrl_in, ref_control_input(targets, mask, current, trajectory=True), atol=0, rtol=0)
+    torch.testing.assert_close(
+        ctrl_in, ref_control_input(targets, mask, current, trajectory=True), atol=0, rtol=0
+    )
     with torch.no_grad():
         ours = model.parts["control"](model.transformer, ids, cond, pad, ctrl_in)
         ref = ref_control_logits(tree["ctrl"], ids, cond, pad, ctrl_in, D)
@@ -198,7 +245,7 @@ def _expect_error(match, **kwargs):
         import_official(**kwargs)
     message = str(info.value)
     assert "\n" not in message
-    for m in ([match] if isinstance(match, str) else match):
+    for m in [match] if isinstance(match, str) else match:
         assert m in message, message
 
 
@@ -211,8 +258,11 @@ def test_mismatches_are_one_line_errors(tmp_path):
     bad["extra.weight"] = torch.zeros(1)
     del bad["output_process.dense.bias"]
     torch.save({"res_transformer": bad}, res_file)
-    _expect_error(["missing: output_process.dense.bias", "unexpected: extra.weight", "wrong shape: quant_emb.bias"],
-                  momask=tmp_path, out=tmp_path / "m")
+    _expect_error(
+        ["missing: output_process.dense.bias", "unexpected: extra.weight", "wrong shape: quant_emb.bias"],
+        momask=tmp_path,
+        out=tmp_path / "m",
+    )
     torch.save({"something": {}}, res_file)
     _expect_error("has no 'res_transformer' entry", momask=tmp_path, out=tmp_path / "m")
     res_file.write_bytes(b"not a checkpoint")
@@ -224,8 +274,12 @@ def test_mismatches_are_one_line_errors(tmp_path):
     payload = torch.load(ctrl_file, weights_only=True)
     payload["ct2m_transformer"]["vq_model.decoder.model.0.bias"] = torch.zeros(3)
     torch.save(payload, ctrl_file)
-    _expect_error([f"{ctrl_file} (tokenizer)", "wrong shape: decoder.model.0.bias"], momask=ctrl_tree["t2m"],
-                  out=tmp_path / "m", control=ctrl_tree["control_dir"])
+    _expect_error(
+        [f"{ctrl_file} (tokenizer)", "wrong shape: decoder.model.0.bias"],
+        momask=ctrl_tree["t2m"],
+        out=tmp_path / "m",
+        control=ctrl_tree["control_dir"],
+    )
     vq_dir = tree["t2m"] / "rvq_nq6_dc512_nc512_noshare_qdp0.2"
     _expect_error("expected one tokenizer folder", momask=vq_dir, out=tmp_path / "m")
     (vq_dir / "meta" / "std.npy").unlink()
@@ -236,15 +290,40 @@ def test_mismatches_are_one_line_errors(tmp_path):
 def test_cli_import_then_generate(official, tmp_path, tiny_clip_dir, capsys):
     tree, _ = official
     out = tmp_path / "imported"
-    args = ["import-official", "--momask", str(tree["t2m"]), "--control", str(tree["control_dir"]), "--out", str(out)]
+    args = [
+        "import-official",
+        "--momask",
+        str(tree["t2m"]),
+        "--control",
+        str(tree["control_dir"]),
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     assert "wrote" in capsys.readouterr().out
     assert main(args) == 2  # exists: needs --force
     assert "--force" in capsys.readouterr().err
     assert main(args + ["--force", "--clip-precision", "float32"]) == 0
     motion = tmp_path / "m.npz"
-    code = main(["generate", "--model", str(out), "--clip-weights", str(tiny_clip_dir), "--text", "a person walks",
-                 "--frames", "40", "--seed", "0", "--out", str(motion), "--iterations", "2"])
+    code = main(
+        [
+            "generate",
+            "--model",
+            str(out),
+            "--clip-weights",
+            str(tiny_clip_dir),
+            "--text",
+            "a person walks",
+            "--frames",
+            "40",
+            "--seed",
+            "0",
+            "--out",
+            str(motion),
+            "--iterations",
+            "2",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     from controlmm.motion import load_motion
 
@@ -266,7 +345,9 @@ def test_clip_float16_as_the_official_code(tiny_clip_dir):
     a, b = half.encode(texts), full.encode(texts)
     assert a.dtype == torch.float32 and a.shape == b.shape == (2, 24)
     assert 0 < (a - b).abs().max() < 2e-2 * b.abs().max()  # float16 rounding only
-    torch.testing.assert_close(full.encode(["a person walks & waves", "someone jumps twice"]), b, atol=0, rtol=0)
+    torch.testing.assert_close(
+        full.encode(["a person walks & waves", "someone jumps twice"]), b, atol=0, rtol=0
+    )
 
 
 def test_float64_forward_matches_to_rounding(official):
@@ -278,13 +359,15 @@ def test_float64_forward_matches_to_rounding(official):
     sd = {name: {k: v.double() for k, v in tree[name].items()} for name in ("vq", "res", "ctrl")}
     with torch.no_grad():
         all_ids = torch.randint(0, D.nb_code, (3, 6, D.num_q), generator=gen)
-        torch.testing.assert_close(model.tokenizer.double().decode(all_ids), ref_vq_decode(sd["vq"], all_ids, D),
-                                   atol=1e-10, rtol=0)
+        torch.testing.assert_close(
+            model.tokenizer.double().decode(all_ids), ref_vq_decode(sd["vq"], all_ids, D), atol=1e-10, rtol=0
+        )
         res_ids = torch.where(pad[..., None], D.nb_code, all_ids)
         res = model.residual.double()
         ours = res(res.history(res_ids, 2), torch.full((3,), 2), cond, pad)
-        torch.testing.assert_close(ours[valid], ref_residual_logits(sd["res"], res_ids, 2, cond, pad, D)[valid],
-                                   atol=1e-10, rtol=0)
+        torch.testing.assert_close(
+            ours[valid], ref_residual_logits(sd["res"], res_ids, 2, cond, pad, D)[valid], atol=1e-10, rtol=0
+        )
         ctrl_in = torch.randn(3, 36, 24, generator=gen, dtype=torch.float64)
         ours = model.parts["control"].double()(model.transformer.double(), ids, cond, pad, ctrl_in)
         ref = ref_control_logits(sd["ctrl"], ids, cond, pad, ctrl_in, D)

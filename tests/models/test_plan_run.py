@@ -18,8 +18,16 @@ STRICT = CheckConfig(max_sustained_residual_force_ratio=0.0)
 
 @pytest.fixture(scope="module")
 def strict_plan(tiny_model_dir):
-    config = PlanConfig(scene="table", rounds=1, preset="fast", model=str(tiny_model_dir), seed=3, check=STRICT,
-                        render_fps=4.0, render_size=(96, 72))
+    config = PlanConfig(
+        scene="table",
+        rounds=1,
+        preset="fast",
+        model=str(tiny_model_dir),
+        seed=3,
+        check=STRICT,
+        render_fps=4.0,
+        render_size=(96, 72),
+    )
     return plan(config, progress=False)
 
 
@@ -44,12 +52,33 @@ def test_outputs_are_complete_and_consistent(strict_plan, tmp_path):
     out = tmp_path / "nested" / "plan"
     backend = write_plan(strict_plan, out, progress=False)
     names = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()}
-    assert {"motion.npz", "robot.csv", "robot.npz", "robot.json", "report.json", "plan.json", "render.mp4",
-            "plots/top_view.png", "plots/clearance.png", "plots/report.png", "plots/motion.png"} <= names
+    assert {
+        "motion.npz",
+        "robot.csv",
+        "robot.npz",
+        "robot.json",
+        "report.json",
+        "plan.json",
+        "render.mp4",
+        "plots/top_view.png",
+        "plots/clearance.png",
+        "plots/report.png",
+        "plots/motion.png",
+    } <= names
     assert backend in ("mujoco", "stick")
     report = json.loads((out / "report.json").read_text())
-    for key in ("passed", "max_penetration_m", "floor_penetration_m", "self_collision_frames",
-                "joint_limit_violations", "foot_sliding_m", "residual_force", "failures", "rounds", "plan"):
+    for key in (
+        "passed",
+        "max_penetration_m",
+        "floor_penetration_m",
+        "self_collision_frames",
+        "joint_limit_violations",
+        "foot_sliding_m",
+        "residual_force",
+        "failures",
+        "rounds",
+        "plan",
+    ):
         assert key in report
     assert report["passed"] is False and report["plan"]["rounds_run"] == 2 == len(report["rounds"])
     assert report["plan"]["chosen_round"] == strict_plan.best
@@ -64,18 +93,35 @@ def test_outputs_are_complete_and_consistent(strict_plan, tmp_path):
 
 
 def test_same_seed_same_plan(strict_plan, tiny_model_dir):
-    again = plan(PlanConfig(scene="table", rounds=0, preset="fast", model=str(tiny_model_dir), seed=3, check=STRICT),
-                 progress=False)
+    again = plan(
+        PlanConfig(scene="table", rounds=0, preset="fast", model=str(tiny_model_dir), seed=3, check=STRICT),
+        progress=False,
+    )
     np.testing.assert_allclose(again.rounds[0].motion.joints, strict_plan.rounds[0].motion.joints, atol=1e-5)
 
 
 def test_plan_with_a_timeline(tiny_model_dir, tmp_path):
     spec = tmp_path / "timeline.json"
-    spec.write_text(json.dumps({"seconds": 3.0, "tracks": [
-        {"part": "whole_body", "prompt": "a person walks forward", "start": 0.0, "end": 3.0},
-        {"part": "right_arm", "prompt": "a person waves the right hand", "start": 1.0, "end": 2.0}]}))
-    result = plan(PlanConfig(scene="empty", timeline=str(spec), rounds=0, preset="fast", model=str(tiny_model_dir)),
-                  progress=False)
+    spec.write_text(
+        json.dumps(
+            {
+                "seconds": 3.0,
+                "tracks": [
+                    {"part": "whole_body", "prompt": "a person walks forward", "start": 0.0, "end": 3.0},
+                    {
+                        "part": "right_arm",
+                        "prompt": "a person waves the right hand",
+                        "start": 1.0,
+                        "end": 2.0,
+                    },
+                ],
+            }
+        )
+    )
+    result = plan(
+        PlanConfig(scene="empty", timeline=str(spec), rounds=0, preset="fast", model=str(tiny_model_dir)),
+        progress=False,
+    )
     assert result.spec is None and "right_arm 1-2 s" in result.text
     assert result.motion.num_frames == 60 and "timeline" in result.final.editing
     assert result.trajectory.qpos.shape[0] == result.report.num_frames

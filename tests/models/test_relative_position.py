@@ -42,7 +42,9 @@ def test_a_zero_table_is_momask_and_a_trained_one_depends_only_on_offsets():
     with torch.no_grad():
         for text in (cond, states):
             assert torch.equal(biased(ids, text, padding), plain(ids, text, padding))
-            assert torch.equal(biased.cfg_logits(ids, text, padding, 4.0), plain.cfg_logits(ids, text, padding, 4.0))
+            assert torch.equal(
+                biased.cfg_logits(ids, text, padding, 4.0), plain.cfg_logits(ids, text, padding, 4.0)
+            )
         biased.relative_bias.table.normal_()
         assert not torch.allclose(biased(ids, cond, padding), plain(ids, cond, padding))
 
@@ -56,8 +58,10 @@ def test_a_zero_table_is_momask_and_a_trained_one_depends_only_on_offsets():
             assert torch.equal(mask[:2, :, 1 + i, 1 + j], table[offset].expand(2, heads))
     assert torch.equal(mask[0, :, 0, :], torch.zeros(heads, n + 1))  # the condition row: no bias
     assert torch.equal(mask[0, :, 1:, 0], torch.zeros(heads, n))
-    assert torch.isinf(mask[1, :, :, 1 + 7:]).all() and torch.isinf(mask[2, :, :, 1 + 3:]).all()  # padded keys
-    assert torch.isfinite(mask[2, :, :, :1 + 3]).all()
+    assert (
+        torch.isinf(mask[1, :, :, 1 + 7 :]).all() and torch.isinf(mask[2, :, :, 1 + 3 :]).all()
+    )  # padded keys
+    assert torch.isfinite(mask[2, :, :, : 1 + 3]).all()
 
 
 def test_the_table_learns_and_the_base_raises_without_num_tokens():

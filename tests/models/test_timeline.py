@@ -43,7 +43,9 @@ def random_model_dir(tmp_path_factory, humanml3d_dir):
     manifest = new_manifest(cfg, {})
     for name in ("tokenizer", "transformer", "residual"):
         manifest["parts"][name] = save_part(out, name, PARTS[name].build(cfg), "float32")
-    write_statistics(out, Normalizer.load(humanml3d_dir / "Mean.npy", humanml3d_dir / "Std.npy").with_feat_bias())
+    write_statistics(
+        out, Normalizer.load(humanml3d_dir / "Mean.npy", humanml3d_dir / "Std.npy").with_feat_bias()
+    )
     write_manifest(out, manifest)
     return out
 
@@ -62,9 +64,18 @@ def test_parts_partition_the_skeleton():
 
 
 def test_spec_round_trip_and_defaults(tmp_path):
-    data = {"tracks": [{"part": "legs", "prompt": "walk", "start": 0, "end": 4},
-                       {"part": "right arm", "prompt": "wave", "start": 1, "end": 3,
-                        "probe": {"family": "wave_right", "claims": {"hand": "right"}}}]}
+    data = {
+        "tracks": [
+            {"part": "legs", "prompt": "walk", "start": 0, "end": 4},
+            {
+                "part": "right arm",
+                "prompt": "wave",
+                "start": 1,
+                "end": 3,
+                "probe": {"family": "wave_right", "claims": {"hand": "right"}},
+            },
+        ]
+    }
     timeline = Timeline.from_dict(data)
     assert timeline.seconds == 4.0 and timeline.num_frames == 80 and timeline.base_prompt == "walk"
     assert timeline.tracks[1].part == "right_arm" and timeline.tracks[1].frames(80) == (20, 60)
@@ -74,25 +85,39 @@ def test_spec_round_trip_and_defaults(tmp_path):
     assert Timeline([Track("head", "nod", 0, 2.5)], seconds=3, base="stand").to_dict()["base"] == "stand"
 
 
-@pytest.mark.parametrize("data, message", [
-    ({"tracks": []}, "non-empty 'tracks' list"),
-    ({"tracks": [{"part": "tail", "prompt": "x", "start": 0, "end": 3}]},
-     "track 0: unknown body part 'tail'; allowed: legs, torso"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3}], "seconds": 2.5},
-     "ends at 3 s, after the timeline's end"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": -1, "end": 3}]}, "start -1 s is negative"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 1, "end": 1.1}], "seconds": 3}, "too short"),
-    ({"tracks": [{"part": "legs", "prompt": "", "start": 0, "end": 3}]}, "non-empty prompt"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": "0", "end": 3}]}, "start must be a number"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0}]}, "track 0 is missing end"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "speed": 1}]}, "unknown key(s) speed"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 12}]},
-     "length 12 s is out of range; allowed 2..9.8"),
-    ({"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "probe": {"family": "fly"}}]},
-     "no probe for family 'fly'"),
-    ({"track": []}, "unknown timeline key(s) track"),
-    ([1], "must be a JSON object"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"tracks": []}, "non-empty 'tracks' list"),
+        (
+            {"tracks": [{"part": "tail", "prompt": "x", "start": 0, "end": 3}]},
+            "track 0: unknown body part 'tail'; allowed: legs, torso",
+        ),
+        (
+            {"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3}], "seconds": 2.5},
+            "ends at 3 s, after the timeline's end",
+        ),
+        ({"tracks": [{"part": "legs", "prompt": "x", "start": -1, "end": 3}]}, "start -1 s is negative"),
+        ({"tracks": [{"part": "legs", "prompt": "x", "start": 1, "end": 1.1}], "seconds": 3}, "too short"),
+        ({"tracks": [{"part": "legs", "prompt": "", "start": 0, "end": 3}]}, "non-empty prompt"),
+        ({"tracks": [{"part": "legs", "prompt": "x", "start": "0", "end": 3}]}, "start must be a number"),
+        ({"tracks": [{"part": "legs", "prompt": "x", "start": 0}]}, "track 0 is missing end"),
+        (
+            {"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "speed": 1}]},
+            "unknown key(s) speed",
+        ),
+        (
+            {"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 12}]},
+            "length 12 s is out of range; allowed 2..9.8",
+        ),
+        (
+            {"tracks": [{"part": "legs", "prompt": "x", "start": 0, "end": 3, "probe": {"family": "fly"}}]},
+            "no probe for family 'fly'",
+        ),
+        ({"track": []}, "unknown timeline key(s) track"),
+        ([1], "must be a JSON object"),
+    ],
+)
 def test_spec_errors_are_one_line(data, message):
     with pytest.raises(ControlMMError) as info:
         Timeline.from_dict(data)
@@ -101,7 +126,9 @@ def test_spec_errors_are_one_line(data, message):
 
 # -- the control signal (pure functions) --------------------------------------------------------------
 def test_signal_of_an_arm_track_holds_everything_else_in_the_world():
-    signal = build_signal(40, part_joints("right_arm"), (10, 30), root_moves=False, blend_frames=5, blend_rate=0.05)
+    signal = build_signal(
+        40, part_joints("right_arm"), (10, 30), root_moves=False, blend_frames=5, blend_rate=0.05
+    )
     assert signal.free.sum() == 20 * 4 and (signal.mask == ~signal.free).all() and len(signal.hold) == 0
     assert set(signal.blend.frames.tolist()) == set(range(10, 15)) | set(range(25, 30))
     first = signal.blend.margins[signal.blend.frames == 10]
@@ -140,9 +167,15 @@ def test_hinge_term_is_zero_inside_its_margins_and_pulls_outside(sample_joints):
     far = ref.clone()[None].requires_grad_(True)
     loss = term(far + torch.tensor([0.0, 0.3, 0.0]))
     loss.sum().backward()
-    assert float(loss[0].detach()) > 0 and far.grad[0, 10, 20].abs().sum() > 0 and far.grad[0, 20, 20].abs().sum() == 0
+    assert (
+        float(loss[0].detach()) > 0
+        and far.grad[0, 10, 20].abs().sum() > 0
+        and far.grad[0, 20, 20].abs().sum() == 0
+    )
     world = ref[signal.blend.frames, signal.blend.joints]
-    np.testing.assert_allclose(local_positions(ref, signal.blend).numpy(), world)  # world entries stay as they are
+    np.testing.assert_allclose(
+        local_positions(ref, signal.blend).numpy(), world
+    )  # world entries stay as they are
 
 
 def test_boundary_speed_sees_a_jump():
@@ -166,11 +199,15 @@ def test_tracks_keep_what_earlier_passes_fixed(model):
     plain = generate(model, "a person walks forward", frames=48, seed=3).motion
     height = float(plain.joints[20:30, 21, 1].max()) + 0.3
     terms = [_wrist_up(height)]
-    base, base_report = generate_timeline(model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms,
-                                          settle_steps=400)
-    assert len(base_report["passes"]) == 1 and base_report["passes"][0]["editing_steps"] > 0  # the base made track 0
-    motion, report = generate_timeline(model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms,
-                                       settle_steps=400)
+    base, base_report = generate_timeline(
+        model, {"tracks": [legs]}, seed=3, preset=STEPS, terms=terms, settle_steps=400
+    )
+    assert (
+        len(base_report["passes"]) == 1 and base_report["passes"][0]["editing_steps"] > 0
+    )  # the base made track 0
+    motion, report = generate_timeline(
+        model, {"tracks": [legs, arm]}, seed=3, preset=STEPS, terms=terms, settle_steps=400
+    )
     assert motion.joints.shape == (48, 22, 3) and motion.features.shape == (48, 263)
     assert motion.joints[20:30, 21, 1].min() > height - 0.02  # the extra term holds in every pass
     assert report["passes"][1]["editing_steps"] > 0
@@ -189,8 +226,13 @@ def test_tracks_keep_what_earlier_passes_fixed(model):
 
 
 def test_a_legs_track_carries_the_held_parts_along(model):
-    timeline = Timeline([Track("left_arm", "a person raises the left arm", 0, 2.4),
-                         Track("legs", "a person jumps forward", 0.6, 1.6)], base="a person stands")
+    timeline = Timeline(
+        [
+            Track("left_arm", "a person raises the left arm", 0, 2.4),
+            Track("legs", "a person jumps forward", 0.6, 1.6),
+        ],
+        base="a person stands",
+    )
     motion, report = generate_timeline(model, timeline, seed=1, preset=STEPS, settle_steps=400)
     assert [p["track"] for p in report["passes"]] == [None, 0, 1]
     # the legs pass holds the frames before its span in the world and everything else relative to the body
@@ -203,11 +245,32 @@ def test_a_legs_track_carries_the_held_parts_along(model):
 
 def test_cli_writes_motion_report_and_rejects_bad_specs(random_model_dir, tmp_path, capsys):
     spec = tmp_path / "spec.json"
-    spec.write_text(json.dumps({"seconds": 2.4, "base": "a person stands", "tracks": [
-        {"part": "head", "prompt": "a person nods", "start": 0.4, "end": 2.0}]}))
+    spec.write_text(
+        json.dumps(
+            {
+                "seconds": 2.4,
+                "base": "a person stands",
+                "tracks": [{"part": "head", "prompt": "a person nods", "start": 0.4, "end": 2.0}],
+            }
+        )
+    )
     out, report = tmp_path / "out.npz", tmp_path / "report.json"
-    code = main(["timeline", str(spec), "--out", str(out), "--report", str(report), "--model", str(random_model_dir),
-                 "--seed", "0", "--codebook-steps", "100"])
+    code = main(
+        [
+            "timeline",
+            str(spec),
+            "--out",
+            str(out),
+            "--report",
+            str(report),
+            "--model",
+            str(random_model_dir),
+            "--seed",
+            "0",
+            "--codebook-steps",
+            "100",
+        ]
+    )
     assert code == 0
     motion = load_motion(out)
     assert motion.num_frames == 48 and motion.metadata["timeline"]["spec"]["base"] == "a person stands"
@@ -216,5 +279,11 @@ def test_cli_writes_motion_report_and_rejects_bad_specs(random_model_dir, tmp_pa
     spec.write_text(json.dumps({"tracks": [{"part": "tail", "prompt": "x", "start": 0, "end": 3}]}))
     assert main(["timeline", str(spec), "--out", str(tmp_path / "bad.npz")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("controlmm: error: track 0: unknown body part 'tail'; allowed: legs, torso, head, left_arm, "
-                   "right_arm, whole_body") and not (tmp_path / "bad.npz").exists()
+    assert (
+        err
+        == (
+            "controlmm: error: track 0: unknown body part 'tail'; allowed: legs, torso, head, left_arm, "
+            "right_arm, whole_body"
+        )
+        and not (tmp_path / "bad.npz").exists()
+    )

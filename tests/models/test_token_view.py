@@ -12,7 +12,14 @@ import torch
 from controlmm.cli.main import main
 from controlmm.data import HumanML3D
 from controlmm.errors import ControlMMError
-from controlmm.generate import DecodeOptions, DecodeState, generate, load_model, masked_decode, token_view_logits_fn
+from controlmm.generate import (
+    DecodeOptions,
+    DecodeState,
+    generate,
+    load_model,
+    masked_decode,
+    token_view_logits_fn,
+)
 from controlmm.models.config import ModelConfig, TextEncoderConfig, preset_config
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.motion import load_motion
@@ -35,10 +42,14 @@ def test_config_round_trip_and_errors():
     assert cfg.token_view is not None and ModelConfig.from_dict(cfg.to_dict()) == cfg
     assert preset_config("paper").token_view is None
     data = cfg.to_dict()
-    for change, needle in [({"weight": 1.0}, "weight must be between 0 and 1"),
-                           ({"tokens": 0}, "1..128 tokens"),
-                           ({"transformer": {**data["token_view"]["transformer"], "text_dim": 512}},
-                            "must match the tokenizer and the text encoder")]:
+    for change, needle in [
+        ({"weight": 1.0}, "weight must be between 0 and 1"),
+        ({"tokens": 0}, "1..128 tokens"),
+        (
+            {"transformer": {**data["token_view"]["transformer"], "text_dim": 512}},
+            "must match the tokenizer and the text encoder",
+        ),
+    ]:
         with pytest.raises(ControlMMError, match=needle):
             ModelConfig.from_dict({**data, "token_view": {**data["token_view"], **change}})
     # switching to CLIP drops the view (token states are MiniLM's); old model.json files have none
@@ -55,15 +66,20 @@ def test_stage_writes_part_trained_on_the_tokenizer(view_dir):
     member, cfg = model.token_transformer, model.config.token_view
     assert member is not None and member.cfg == cfg.transformer
     states = model.encode_token_states(["a person squats slowly", "someone bends"])
-    assert states.ndim == 3 and states.shape[0] == 2 and states.shape[1] <= cfg.tokens  # (B, L <= tokens, 384)
+    assert (
+        states.ndim == 3 and states.shape[0] == 2 and states.shape[1] <= cfg.tokens
+    )  # (B, L <= tokens, 384)
     assert load_model(view_dir, parts=("tokenizer", "transformer")).token_transformer is None
 
 
 def test_one_text_pass_gives_both_views_exactly(view_dir):
     model = load_model(view_dir)
-    texts = ["jump", "a person squats slowly",
-             "someone walks forward a few steps, turns around to the left, waves the right hand twice "
-             "and then walks back to where they started from before sitting down on the floor"]  # > the token limit
+    texts = [
+        "jump",
+        "a person squats slowly",
+        "someone walks forward a few steps, turns around to the left, waves the right hand twice "
+        "and then walks back to where they started from before sitting down on the floor",
+    ]  # > the token limit
     cond, states = model.encode_text_views(texts)
     assert torch.equal(cond, model.encode_text(texts))
     assert torch.equal(states, model.encode_token_states(texts))
@@ -93,12 +109,19 @@ def test_decoding_mixes_both_views(view_dir):
     # generate(): the view is used by default and recorded; token_view=False equals the model without it
     both = generate(model, texts, frames=[60, 48], seed=3)
     alone = generate(model, texts, frames=[60, 48], seed=3, token_view=False)
-    without = generate(load_model(view_dir, parts=("tokenizer", "transformer", "residual")), texts,
-                       frames=[60, 48], seed=3)
+    without = generate(
+        load_model(view_dir, parts=("tokenizer", "transformer", "residual")), texts, frames=[60, 48], seed=3
+    )
     assert both.motion.metadata["token_view"] and not alone.motion.metadata["token_view"]
     assert torch.equal(alone.ids, without.ids) and not torch.equal(both.ids, alone.ids)
-    base = masked_decode(model.transformer, cond, torch.tensor([15, 12]), DecodeOptions(),
-                         torch.Generator().manual_seed(3), logits_fn=fn)
+    base = masked_decode(
+        model.transformer,
+        cond,
+        torch.tensor([15, 12]),
+        DecodeOptions(),
+        torch.Generator().manual_seed(3),
+        logits_fn=fn,
+    )
     assert torch.equal(base.ids, both.ids[..., 0])  # generate() decodes the base layer exactly so
 
 
@@ -108,8 +131,18 @@ def test_cli_stage_and_missing_view(view_dir, tiny_data, tmp_path, capsys):
     manifest = json.loads((out / "model.json").read_text())
     del manifest["config"]["token_view"]
     (out / "model.json").write_text(json.dumps(manifest))
-    code = main(["train", "token-transformer", "--data", str(tiny_data), "--out", str(out), "--force",
-                 "--no-progress"])
+    code = main(
+        [
+            "train",
+            "token-transformer",
+            "--data",
+            str(tiny_data),
+            "--out",
+            str(out),
+            "--force",
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "has no token_view in its configuration" in err, err
 
@@ -138,9 +171,16 @@ def test_warm_start_copies_all_but_the_attention_layers(view_dir, tiny_model_dir
     assert not torch.equal(partial[layers[0]], theirs[layers[0]])
     # the stage builds its member that way from the model directory's trained transformer
     model = load_model(view_dir)
-    ctx = StageContext(config=model.config, data=HumanML3D(tiny_data), normalizer=model.normalizer,
-                       model_dir=view_dir, device=torch.device("cpu"), seed=0, progress=False,
-                       base=load_model(view_dir, parts=TokenTransformerStage.requires))
+    ctx = StageContext(
+        config=model.config,
+        data=HumanML3D(tiny_data),
+        normalizer=model.normalizer,
+        model_dir=view_dir,
+        device=torch.device("cpu"),
+        seed=0,
+        progress=False,
+        base=load_model(view_dir, parts=TokenTransformerStage.requires),
+    )
     built = TokenTransformerStage(ctx).build_model().state_dict()
     for k, v in built.items():
         assert k in layers or torch.equal(v, theirs[k]), k
@@ -154,7 +194,21 @@ def test_warm_start_copies_all_but_the_attention_layers(view_dir, tiny_model_dir
 def test_cli_generate_uses_the_view_unless_told_not_to(view_dir, tmp_path, capsys):
     for flag, used in (([], True), (["--no-token-view"], False)):
         out = tmp_path / f"m{used}.npz"
-        code = main(["generate", "--text", "a person squats slowly", "--frames", "48", "--seed", "1",
-                     "--model", str(view_dir), "--out", str(out)] + flag)
+        code = main(
+            [
+                "generate",
+                "--text",
+                "a person squats slowly",
+                "--frames",
+                "48",
+                "--seed",
+                "1",
+                "--model",
+                str(view_dir),
+                "--out",
+                str(out),
+            ]
+            + flag
+        )
         assert code == 0, capsys.readouterr().err
         assert load_motion(out).metadata["token_view"] is used

@@ -48,7 +48,7 @@ class Person:
     yaw0: float
 
     @classmethod
-    def sample(cls, rng: np.random.Generator) -> "Person":
+    def sample(cls, rng: np.random.Generator) -> Person:
         return cls(
             width=rng.uniform(0.16, 0.26),
             toe_out=rng.uniform(0.02, 0.14),
@@ -87,8 +87,9 @@ def idle_arms(rng: np.random.Generator, t: np.ndarray) -> dict[str, ArmPlan]:
     return arms
 
 
-def standing_plan(rng: np.random.Generator, person: Person, t: np.ndarray,
-                  stances: dict[str, list[Stance]] | None = None) -> BodyPlan:
+def standing_plan(
+    rng: np.random.Generator, person: Person, t: np.ndarray, stances: dict[str, list[Stance]] | None = None
+) -> BodyPlan:
     """A person standing in place (feet planted, breathing, small sway of head and arms).
 
     ``stances`` overrides the feet (e.g. a step back before kneeling)."""
@@ -102,10 +103,16 @@ def standing_plan(rng: np.random.Generator, person: Person, t: np.ndarray,
     root = gaussian_filter1d(root, 3.0, axis=0, mode="nearest")
     height = np.full(n, person.stand_height) + gentle_noise(rng, t, 0.004, (0.2, 0.4))
     return BodyPlan(
-        fps=float(FPS), root_xz=root, yaw=yaw, feet=feet, pelvis_height=height, arms=idle_arms(rng, t),
+        fps=float(FPS),
+        root_xz=root,
+        yaw=yaw,
+        feet=feet,
+        pelvis_height=height,
+        arms=idle_arms(rng, t),
         pelvis_pitch=np.full(n, 0.5 * person.lean) + gentle_noise(rng, t, 0.01),
         spine_pitch=np.full(n, 0.5 * person.lean) + gentle_noise(rng, t, 0.015),
-        spine_roll=gentle_noise(rng, t, 0.015), spine_twist=gentle_noise(rng, t, 0.03),
+        spine_roll=gentle_noise(rng, t, 0.015),
+        spine_twist=gentle_noise(rng, t, 0.03),
         head_pitch=np.full(n, person.head_pitch) + gentle_noise(rng, t, 0.04),
         head_yaw=gentle_noise(rng, t, 0.08),
     )
@@ -115,19 +122,28 @@ def standing_plan(rng: np.random.Generator, person: Person, t: np.ndarray,
 class Style:
     """How a locomotion looks: gait kind and body attitude."""
 
-    kind: str = "walk"          # walk | jog | run | crouch
-    bob: float = 0.03           # vertical pelvis oscillation (m)
-    drop: float = 0.015         # pelvis lowered while moving (m)
-    lean: float = 0.04          # forward lean while moving (rad)
-    arm_swing: float = 1.0      # multiplies the person's arm swing
-    elbow: float = 0.0          # extra elbow flexion while moving (rad)
+    kind: str = "walk"  # walk | jog | run | crouch
+    bob: float = 0.03  # vertical pelvis oscillation (m)
+    drop: float = 0.015  # pelvis lowered while moving (m)
+    lean: float = 0.04  # forward lean while moving (rad)
+    arm_swing: float = 1.0  # multiplies the person's arm swing
+    elbow: float = 0.0  # extra elbow flexion while moving (rad)
 
 
-def locomotion_plan(rng: np.random.Generator, person: Person, t: np.ndarray, path: RootPath, gait: Gait,
-                    style: Style, stances: dict[str, list[Stance]] | None = None) -> BodyPlan:
+def locomotion_plan(
+    rng: np.random.Generator,
+    person: Person,
+    t: np.ndarray,
+    path: RootPath,
+    gait: Gait,
+    style: Style,
+    stances: dict[str, list[Stance]] | None = None,
+) -> BodyPlan:
     """A person travelling along ``path`` with ``gait``; returns the plan (not yet assembled)."""
     if stances is None:
-        stances = plan_footholds(path, gait, float(FPS), initial=person.initial_feet(path.xz[0], float(path.yaw[0])))
+        stances = plan_footholds(
+            path, gait, float(FPS), initial=person.initial_feet(path.xz[0], float(path.yaw[0]))
+        )
     feet = {s: foot_track(s, stances[s], t) for s in SIDES}
     plan = standing_plan(rng, person, t, stances=stances)
     plan.root_xz = path.xz
@@ -170,8 +186,14 @@ def finish(plan: BodyPlan) -> np.ndarray:
     return assemble(plan)
 
 
-def set_ik(arm: ArmPlan, weight: np.ndarray, target: np.ndarray, pole: np.ndarray | None = None,
-           elevation: np.ndarray | None = None, arc: tuple[float, float, float] | None = None) -> None:
+def set_ik(
+    arm: ArmPlan,
+    weight: np.ndarray,
+    target: np.ndarray,
+    pole: np.ndarray | None = None,
+    elevation: np.ndarray | None = None,
+    arc: tuple[float, float, float] | None = None,
+) -> None:
     """Blend an arm towards a wrist target (chest frame, relative to the shoulder) with
     ``weight`` (T,) in [0, 1]; keeps the existing target where the weight is 0. ``arc``
     (chest frame, m) bows the path while the weight changes (e.g. raise the arm in front

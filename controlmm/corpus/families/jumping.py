@@ -14,8 +14,8 @@ from scipy.interpolate import CubicHermiteSpline
 from controlmm.corpus.curves import keyframes
 from controlmm.corpus.families.base import Person, finish, frames_for, standing_plan, times
 from controlmm.corpus.feet import Stance, foot_track
-from controlmm.corpus.rig import SIDE_SIGN, heading_vectors
 from controlmm.corpus.registry import Family, register
+from controlmm.corpus.rig import SIDE_SIGN, heading_vectors
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import FORWARD, counted_slot, times_slot
 
@@ -36,8 +36,14 @@ def _sample(rng, count_choices, forward: bool):
     idle = rng.uniform(0.3, 0.9)
     total = idle + sum(PREP + PUSH + 2 * np.sqrt(2 * h / G) + ABSORB + g for h, g in zip(heights, gaps))
     total += RECOVER + rng.uniform(0.4, 1.0)
-    return {"count": n, "heights": [_r(h) for h in heights], "distances": [_r(d) for d in dists],
-            "gaps": [_r(g) for g in gaps], "idle": _r(idle), "seconds": _r(max(min(total, 9.8), 2.2))}
+    return {
+        "count": n,
+        "heights": [_r(h) for h in heights],
+        "distances": [_r(d) for d in dists],
+        "gaps": [_r(g) for g in gaps],
+        "idle": _r(idle),
+        "seconds": _r(max(min(total, 9.8), 2.2)),
+    }
 
 
 def build_jumps(p: dict, rng: np.random.Generator) -> np.ndarray:
@@ -149,46 +155,60 @@ def _hermite(knots: list[tuple[float, float, float]], t: np.ndarray) -> np.ndarr
 
 
 def _in_place_slots(p):
-    return {"times": times_slot(p["count"]), "jumps": counted_slot(p["count"], "jump", "jumps"),
-            "hops": counted_slot(p["count"], "hop", "hops")}
+    return {
+        "times": times_slot(p["count"]),
+        "jumps": counted_slot(p["count"], "jump", "jumps"),
+        "hops": counted_slot(p["count"], "hop", "hops"),
+    }
 
 
-register(Family(
-    name="jump_in_place", group="jumping", sample=lambda rng: _sample(rng, [1, 2, 3, 4], False),
-    build=build_jumps,
-    templates=(
-        Template("{subj} jumps {times}"),
-        Template("{subj} jumps in place {times}"),
-        Template("{subj} jumps up and down {times}"),
-        Template("{subj} does {jumps} on the spot"),
-        Template("{subj} makes {jumps} in place"),
-        Template("standing still, {subj} hops {times}"),
-        Template("{subj} performs {hops} without moving from the spot", held=True),
-        Template("{subj} leaps straight up {times}", held=True),
-    ),
-    slots=_in_place_slots,
-    core=lambda p: {"count": p["count"], "in_place": True},
-))
+register(
+    Family(
+        name="jump_in_place",
+        group="jumping",
+        sample=lambda rng: _sample(rng, [1, 2, 3, 4], False),
+        build=build_jumps,
+        templates=(
+            Template("{subj} jumps {times}"),
+            Template("{subj} jumps in place {times}"),
+            Template("{subj} jumps up and down {times}"),
+            Template("{subj} does {jumps} on the spot"),
+            Template("{subj} makes {jumps} in place"),
+            Template("standing still, {subj} hops {times}"),
+            Template("{subj} performs {hops} without moving from the spot", held=True),
+            Template("{subj} leaps straight up {times}", held=True),
+        ),
+        slots=_in_place_slots,
+        core=lambda p: {"count": p["count"], "in_place": True},
+    )
+)
 
 
 def _forward_slots(p):
-    return {"times": times_slot(p["count"]), "jumps": counted_slot(p["count"], "jump", "jumps"),
-            "forward": FORWARD,
-            "leap": Slot(("jumps",), ("leaps", "bounds"))}
+    return {
+        "times": times_slot(p["count"]),
+        "jumps": counted_slot(p["count"], "jump", "jumps"),
+        "forward": FORWARD,
+        "leap": Slot(("jumps",), ("leaps", "bounds")),
+    }
 
 
-register(Family(
-    name="jump_forward", group="jumping", sample=lambda rng: _sample(rng, [1, 1, 2], True),
-    build=build_jumps,
-    templates=(
-        Template("{subj} {leap} {forward} {times}"),
-        Template("{subj} does {jumps} {forward}"),
-        Template("{subj} {leap} {forward} with both feet {times}"),
-        Template("{subj} makes {jumps} {forward}"),
-        Template("{subj} does a standing long jump {times}"),
-        Template("from a standing position {subj} {leap} {forward} {times}", held=True),
-        Template("{subj} hops {forward} on both feet {times}", held=True),
-    ),
-    slots=_forward_slots,
-    core=lambda p: {"count": p["count"], "travel": "forward"},
-))
+register(
+    Family(
+        name="jump_forward",
+        group="jumping",
+        sample=lambda rng: _sample(rng, [1, 1, 2], True),
+        build=build_jumps,
+        templates=(
+            Template("{subj} {leap} {forward} {times}"),
+            Template("{subj} does {jumps} {forward}"),
+            Template("{subj} {leap} {forward} with both feet {times}"),
+            Template("{subj} makes {jumps} {forward}"),
+            Template("{subj} does a standing long jump {times}"),
+            Template("from a standing position {subj} {leap} {forward} {times}", held=True),
+            Template("{subj} hops {forward} on both feet {times}", held=True),
+        ),
+        slots=_forward_slots,
+        core=lambda p: {"count": p["count"], "travel": "forward"},
+    )
+)

@@ -7,8 +7,8 @@ import numpy as np
 from controlmm.corpus.curves import keyframes
 from controlmm.corpus.families.base import Person, finish, frames_for, standing_plan, times
 from controlmm.corpus.feet import Stance, foot_track
-from controlmm.corpus.rig import KNEE_INDEX, SIDE_SIGN, heading_vectors
 from controlmm.corpus.registry import Family, register
+from controlmm.corpus.rig import KNEE_INDEX, SIDE_SIGN, heading_vectors
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import counted_slot, times_slot
 
@@ -22,19 +22,32 @@ def _r(x: float) -> float:
 
 # squat ------------------------------------------------------------------------------------
 
+
 def _squat_sample(rng):
     n = int(rng.choice([1, 2, 3], p=[0.45, 0.35, 0.2]))
     for _ in range(50):
-        down, hold, up, rest = (rng.uniform(0.6, 1.1), rng.uniform(0.1, 0.7), rng.uniform(0.5, 0.9),
-                                rng.uniform(0.15, 0.5))
+        down, hold, up, rest = (
+            rng.uniform(0.6, 1.1),
+            rng.uniform(0.1, 0.7),
+            rng.uniform(0.5, 0.9),
+            rng.uniform(0.15, 0.5),
+        )
         idle = rng.uniform(0.3, 1.0)
         seconds = idle + n * (down + hold + up) + (n - 1) * rest + rng.uniform(0.4, 1.0)
         if seconds <= 9.7:
             break
         n = max(1, n - 1)
-    return {"count": n, "depth": _r(rng.uniform(0.3, 0.48)), "down": _r(down), "hold": _r(hold), "up": _r(up),
-            "rest": _r(rest), "idle": _r(idle), "seconds": _r(max(seconds, 2.2)),
-            "arms": str(rng.choice(["forward", "low"]))}
+    return {
+        "count": n,
+        "depth": _r(rng.uniform(0.3, 0.48)),
+        "down": _r(down),
+        "hold": _r(hold),
+        "up": _r(up),
+        "rest": _r(rest),
+        "idle": _r(idle),
+        "seconds": _r(max(seconds, 2.2)),
+        "arms": str(rng.choice(["forward", "low"])),
+    }
 
 
 def squat_keys(p: dict, start: float, stand: float) -> tuple[list[float], list[float], list[float]]:
@@ -84,32 +97,48 @@ def apply_squats(plan, p: dict, t: np.ndarray, start: float, person: Person) -> 
             arm.elbow = arm.elbow + 0.6 * frac
 
 
-register(Family(
-    name="squat", group="lowering", sample=_squat_sample, build=_squat_build,
-    templates=(
-        Template("{subj} squats {times}"),
-        Template("{subj} does {squats}"),
-        Template("{subj} squats down and stands back up {times}"),
-        Template("{subj} bends {poss} knees and squats {times}"),
-        Template("{subj} performs {squats}"),
-        Template("{subj} lowers into a deep squat and rises {times}", held=True),
-        Template("{subj} completes {squats} in place", held=True),
-    ),
-    slots=lambda p: {"times": times_slot(p["count"]), "squats": counted_slot(p["count"], "squat", "squats")},
-    core=lambda p: {"count": p["count"]},
-))
+register(
+    Family(
+        name="squat",
+        group="lowering",
+        sample=_squat_sample,
+        build=_squat_build,
+        templates=(
+            Template("{subj} squats {times}"),
+            Template("{subj} does {squats}"),
+            Template("{subj} squats down and stands back up {times}"),
+            Template("{subj} bends {poss} knees and squats {times}"),
+            Template("{subj} performs {squats}"),
+            Template("{subj} lowers into a deep squat and rises {times}", held=True),
+            Template("{subj} completes {squats} in place", held=True),
+        ),
+        slots=lambda p: {
+            "times": times_slot(p["count"]),
+            "squats": counted_slot(p["count"], "squat", "squats"),
+        },
+        core=lambda p: {"count": p["count"]},
+    )
+)
 
 
 # kneel ------------------------------------------------------------------------------------
+
 
 def _kneel_sample(rng):
     stand_up = bool(rng.random() < 0.5)
     idle, step, down, hold = rng.uniform(0.3, 0.9), 0.55, rng.uniform(0.8, 1.3), rng.uniform(0.8, 2.5)  # s
     up = rng.uniform(0.8, 1.2) if stand_up else 0.0
     seconds = idle + step + down + hold + up + (0.9 if stand_up else 0.2)
-    return {"knee": str(rng.choice(["left", "right"])), "stand_up": stand_up, "idle": _r(idle),
-            "back": _r(rng.uniform(0.55, 0.7)), "down": _r(down), "hold": _r(hold), "up": _r(up),
-            "seconds": _r(min(seconds, 9.8))}
+    return {
+        "knee": str(rng.choice(["left", "right"])),
+        "stand_up": stand_up,
+        "idle": _r(idle),
+        "back": _r(rng.uniform(0.55, 0.7)),
+        "down": _r(down),
+        "hold": _r(hold),
+        "up": _r(up),
+        "seconds": _r(min(seconds, 9.8)),
+    }
 
 
 def _kneel_build(p, rng):
@@ -136,7 +165,9 @@ def _kneel_build(p, rng):
         keys += [(t_rise, tuck), (t_up - 0.2, -0.5)]
         back.t_off = t_up - 0.2
         rear.append(back)
-        rear.append(Stance(t_up + 0.25, np.inf, rear_home, rear_yaw, land_pitch=0.15, land_time=0.1, clearance=0.07))
+        rear.append(
+            Stance(t_up + 0.25, np.inf, rear_home, rear_yaw, land_pitch=0.15, land_time=0.1, clearance=0.07)
+        )
     else:
         rear.append(back)
     back.pitch_keys = keys
@@ -148,8 +179,11 @@ def _kneel_build(p, rng):
     stand = person.stand_height
     key_t = [t_lift, t_land, t_bottom, t_rise, t_up]
     back_shift = p["back"] - 0.5  # the hip ends ~0.4 m ahead of the tucked rear ankle
-    shift_z = [0.0, -0.15, -back_shift, -back_shift, 0.0] if p["stand_up"] else [0.0, -0.15, -back_shift,
-                                                                                   -back_shift, -back_shift]
+    shift_z = (
+        [0.0, -0.15, -back_shift, -back_shift, 0.0]
+        if p["stand_up"]
+        else [0.0, -0.15, -back_shift, -back_shift, -back_shift]
+    )
     frac = keyframes(t, key_t, [0.0, 0.1, 1.0, 1.0, 0.0 if p["stand_up"] else 1.0])
     shift = np.zeros((n, 3))
     shift[:, 2] = keyframes(t, key_t, shift_z)
@@ -171,23 +205,34 @@ def _kneel_build(p, rng):
     return finish(plan)
 
 
-register(Family(
-    name="kneel", group="lowering", sample=_kneel_sample, build=_kneel_build,
-    templates=(
-        Template("{subj} kneels down on {poss} {knee}{rise}"),
-        Template("{subj} steps back and goes down on {poss} {knee}{rise}"),
-        Template("{subj} drops to {poss} {knee}{rise}"),
-        Template("{subj} gets down on one knee, the {knee_side} one{rise}"),
-        Template("{subj} lowers {poss} {knee} to the ground{rise}"),
-        Template("{subj} takes a knee, resting on {poss} {knee}{rise}", held=True),
-        Template("{subj} sinks onto {poss} {knee}{rise}", held=True),
-    ),
-    slots=lambda p: {
-        "knee": Slot((f"{p['knee']} knee",), (), ("knee", p["knee"])),
-        "knee_side": Slot((p["knee"],), (), ("knee", p["knee"])),
-        "rise": (Slot((" and then stands back up", " and gets up again", ", then rises"),
-                      (" before standing up again",), ("stand_up", True)) if p["stand_up"] else
-                 Slot(("", " and stays there"), (" and remains kneeling",), ("stand_up", False))),
-    },
-    core=lambda p: {"knee": p["knee"]},
-))
+register(
+    Family(
+        name="kneel",
+        group="lowering",
+        sample=_kneel_sample,
+        build=_kneel_build,
+        templates=(
+            Template("{subj} kneels down on {poss} {knee}{rise}"),
+            Template("{subj} steps back and goes down on {poss} {knee}{rise}"),
+            Template("{subj} drops to {poss} {knee}{rise}"),
+            Template("{subj} gets down on one knee, the {knee_side} one{rise}"),
+            Template("{subj} lowers {poss} {knee} to the ground{rise}"),
+            Template("{subj} takes a knee, resting on {poss} {knee}{rise}", held=True),
+            Template("{subj} sinks onto {poss} {knee}{rise}", held=True),
+        ),
+        slots=lambda p: {
+            "knee": Slot((f"{p['knee']} knee",), (), ("knee", p["knee"])),
+            "knee_side": Slot((p["knee"],), (), ("knee", p["knee"])),
+            "rise": (
+                Slot(
+                    (" and then stands back up", " and gets up again", ", then rises"),
+                    (" before standing up again",),
+                    ("stand_up", True),
+                )
+                if p["stand_up"]
+                else Slot(("", " and stays there"), (" and remains kneeling",), ("stand_up", False))
+            ),
+        },
+        core=lambda p: {"knee": p["knee"]},
+    )
+)

@@ -24,6 +24,7 @@ def _r(x: float) -> float:
 
 # reach ------------------------------------------------------------------------------------
 
+
 def _reach_sample(rng, both: bool = False):
     p = gesture_timing(rng, rng.uniform(0.4, 1.6))
     p["hand"] = str(rng.choice(["left", "right", "both"] if both else ["left", "right"]))
@@ -54,14 +55,26 @@ def _reach_builder(kind: str):
                 plan.spine_pitch = plan.get("spine_pitch") + 0.2 * w / len(hands)
                 plan.pelvis_pitch = plan.get("pelvis_pitch") + 0.1 * w / len(hands)
             elif kind == "up":
-                set_ik(plan.arms[side], w, target(side, 0.05, 0.51, 0.1, n), pole(side, 1.0, 0.0, -0.4, n),
-                       elevation=np.full(n, 0.35), arc=(0, 0, 0.3))
+                set_ik(
+                    plan.arms[side],
+                    w,
+                    target(side, 0.05, 0.51, 0.1, n),
+                    pole(side, 1.0, 0.0, -0.4, n),
+                    elevation=np.full(n, 0.35),
+                    arc=(0, 0, 0.3),
+                )
             else:
-                set_ik(plan.arms[side], w, target(side, 0.51, 0.02, 0.06, n), pole(side, 0.0, -0.3, -1.0, n),
-                       elevation=np.full(n, 0.15))
+                set_ik(
+                    plan.arms[side],
+                    w,
+                    target(side, 0.51, 0.02, 0.06, n),
+                    pole(side, 0.0, -0.3, -1.0, n),
+                    elevation=np.full(n, 0.15),
+                )
                 plan.spine_roll = plan.get("spine_roll") + s * 0.22 * w
                 plan.pelvis_roll = plan.get("pelvis_roll") + s * 0.05 * w
         return finish(plan)
+
     return build
 
 
@@ -69,57 +82,77 @@ REACH = Slot(("reaches", "stretches", "extends"), ("stretches out",))
 
 
 def _reach_slots(p):
-    hand = Slot(("both arms", "both hands"), (), ("hand", "both")) if p["hand"] == "both" else hand_slot(p["hand"])
+    hand = (
+        Slot(("both arms", "both hands"), (), ("hand", "both"))
+        if p["hand"] == "both"
+        else hand_slot(p["hand"])
+    )
     return {"reach": REACH, "hand": hand}
 
 
-register(Family(
-    name="reach_forward", group="reaching", sample=_reach_sample, build=_reach_builder("forward"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} forward"),
-        Template("{subj} reaches forward with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} out in front to grab something"),
-        Template("{subj} leans forward and reaches out with {poss} {hand}"),
-        Template("{subj} extends {poss} {hand} straight ahead"),
-        Template("{subj} tries to touch something in front using {poss} {hand}", held=True),
-        Template("{subj} stretches out {poss} {hand} toward an object ahead", held=True),
-    ),
-    slots=_reach_slots,
-    core=lambda p: {"hand": p["hand"], "reach": "forward"},
-))
+register(
+    Family(
+        name="reach_forward",
+        group="reaching",
+        sample=_reach_sample,
+        build=_reach_builder("forward"),
+        templates=(
+            Template("{subj} {reach} {poss} {hand} forward"),
+            Template("{subj} reaches forward with {poss} {hand}"),
+            Template("{subj} {reach} {poss} {hand} out in front to grab something"),
+            Template("{subj} leans forward and reaches out with {poss} {hand}"),
+            Template("{subj} extends {poss} {hand} straight ahead"),
+            Template("{subj} tries to touch something in front using {poss} {hand}", held=True),
+            Template("{subj} stretches out {poss} {hand} toward an object ahead", held=True),
+        ),
+        slots=_reach_slots,
+        core=lambda p: {"hand": p["hand"], "reach": "forward"},
+    )
+)
 
-register(Family(
-    name="reach_up", group="reaching", sample=lambda rng: _reach_sample(rng, both=True), build=_reach_builder("up"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} up high"),
-        Template("{subj} reaches up with {poss} {hand}"),
-        Template("{subj} stands on tiptoes and reaches up with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} upward to get something from a shelf"),
-        Template("{subj} reaches for something above {poss} head with {poss} {hand}"),
-        Template("on {poss} toes, {subj} stretches {poss} {hand} toward the ceiling", held=True),
-        Template("{subj} grabs at something overhead using {poss} {hand}", held=True),
-    ),
-    slots=_reach_slots,
-    core=lambda p: {"hand": p["hand"], "reach": "up"},
-))
+register(
+    Family(
+        name="reach_up",
+        group="reaching",
+        sample=lambda rng: _reach_sample(rng, both=True),
+        build=_reach_builder("up"),
+        templates=(
+            Template("{subj} {reach} {poss} {hand} up high"),
+            Template("{subj} reaches up with {poss} {hand}"),
+            Template("{subj} stands on tiptoes and reaches up with {poss} {hand}"),
+            Template("{subj} {reach} {poss} {hand} upward to get something from a shelf"),
+            Template("{subj} reaches for something above {poss} head with {poss} {hand}"),
+            Template("on {poss} toes, {subj} stretches {poss} {hand} toward the ceiling", held=True),
+            Template("{subj} grabs at something overhead using {poss} {hand}", held=True),
+        ),
+        slots=_reach_slots,
+        core=lambda p: {"hand": p["hand"], "reach": "up"},
+    )
+)
 
-register(Family(
-    name="reach_sideways", group="reaching", sample=_reach_sample, build=_reach_builder("side"),
-    templates=(
-        Template("{subj} {reach} {poss} {hand} out to the side"),
-        Template("{subj} reaches sideways with {poss} {hand}"),
-        Template("{subj} leans to the {side} and reaches out with {poss} {hand}"),
-        Template("{subj} {reach} {poss} {hand} out to the {side}"),
-        Template("{subj} extends {poss} {hand} sideways"),
-        Template("{subj} bends to the {side} stretching {poss} {hand} away from the body", held=True),
-        Template("{subj} reaches for something at {poss} {side} side with {poss} {hand}", held=True),
-    ),
-    slots=lambda p: dict(_reach_slots(p), side=Slot((p["hand"],), (), ("side", p["hand"]))),
-    core=lambda p: {"hand": p["hand"], "reach": "side"},
-))
+register(
+    Family(
+        name="reach_sideways",
+        group="reaching",
+        sample=_reach_sample,
+        build=_reach_builder("side"),
+        templates=(
+            Template("{subj} {reach} {poss} {hand} out to the side"),
+            Template("{subj} reaches sideways with {poss} {hand}"),
+            Template("{subj} leans to the {side} and reaches out with {poss} {hand}"),
+            Template("{subj} {reach} {poss} {hand} out to the {side}"),
+            Template("{subj} extends {poss} {hand} sideways"),
+            Template("{subj} bends to the {side} stretching {poss} {hand} away from the body", held=True),
+            Template("{subj} reaches for something at {poss} {side} side with {poss} {hand}", held=True),
+        ),
+        slots=lambda p: dict(_reach_slots(p), side=Slot((p["hand"],), (), ("side", p["hand"]))),
+        core=lambda p: {"hand": p["hand"], "reach": "side"},
+    )
+)
 
 
 # punch ------------------------------------------------------------------------------------
+
 
 def _punch_sample(rng):
     count = int(rng.integers(1, 5))
@@ -155,18 +188,26 @@ def _punch_build(p, rng):
     return finish(plan)
 
 
-register(Family(
-    name="punch", group="reaching", sample=_punch_sample, build=_punch_build,
-    templates=(
-        Template("{subj} punches {times} with {poss} {hand}"),
-        Template("{subj} throws {punches} with {poss} {hand}"),
-        Template("{subj} raises {poss} fists and punches {times} with the {hand}"),
-        Template("{subj} boxes, hitting forward {times} with {poss} {hand}"),
-        Template("{subj} jabs {times} using {poss} {hand}"),
-        Template("in a fighting stance, {subj} strikes {times} with {poss} {hand}", held=True),
-        Template("{subj} lands {punches} with {poss} {hand} fist", held=True),
-    ),
-    slots=lambda p: {"times": times_slot(p["count"]), "punches": counted_slot(p["count"], "punch", "punches"),
-                     "hand": hand_slot(p["hand"])},
-    core=lambda p: {"hand": p["hand"], "count": p["count"]},
-))
+register(
+    Family(
+        name="punch",
+        group="reaching",
+        sample=_punch_sample,
+        build=_punch_build,
+        templates=(
+            Template("{subj} punches {times} with {poss} {hand}"),
+            Template("{subj} throws {punches} with {poss} {hand}"),
+            Template("{subj} raises {poss} fists and punches {times} with the {hand}"),
+            Template("{subj} boxes, hitting forward {times} with {poss} {hand}"),
+            Template("{subj} jabs {times} using {poss} {hand}"),
+            Template("in a fighting stance, {subj} strikes {times} with {poss} {hand}", held=True),
+            Template("{subj} lands {punches} with {poss} {hand} fist", held=True),
+        ),
+        slots=lambda p: {
+            "times": times_slot(p["count"]),
+            "punches": counted_slot(p["count"], "punch", "punches"),
+            "hand": hand_slot(p["hand"]),
+        },
+        core=lambda p: {"hand": p["hand"], "count": p["count"]},
+    )
+)

@@ -22,22 +22,46 @@ def _r(x: float) -> float:
 
 # turn in place ----------------------------------------------------------------------------
 
-ANGLE_DEG = {90: ("90 degrees", "ninety degrees"), 180: ("180 degrees",), 270: ("270 degrees",),
-             360: ("360 degrees",)}
-ANGLE_NOUN = {90: (("a quarter turn", "a ninety degree turn"), ("a right angle turn",)),
-              180: (("a half turn", "a u-turn", "a 180 degree turn"), ("a turnaround",)),
-              270: (("a three quarter turn",), ("a 270 degree turn",)),
-              360: (("a full turn", "a complete turn", "a full circle"), ("a 360 degree spin",))}
+ANGLE_DEG = {
+    90: ("90 degrees", "ninety degrees"),
+    180: ("180 degrees",),
+    270: ("270 degrees",),
+    360: ("360 degrees",),
+}
+ANGLE_NOUN = {
+    90: (("a quarter turn", "a ninety degree turn"), ("a right angle turn",)),
+    180: (("a half turn", "a u-turn", "a 180 degree turn"), ("a turnaround",)),
+    270: (("a three quarter turn",), ("a 270 degree turn",)),
+    360: (("a full turn", "a complete turn", "a full circle"), ("a 360 degree spin",)),
+}
 
 
-def turn_in_place(rng: np.random.Generator, person: Person, t: np.ndarray, side: str, angle_deg: float,
-                  start: float, duration: float, path_xz: np.ndarray | None = None):
+def turn_in_place(
+    rng: np.random.Generator,
+    person: Person,
+    t: np.ndarray,
+    side: str,
+    angle_deg: float,
+    start: float,
+    duration: float,
+    path_xz: np.ndarray | None = None,
+):
     """Plan a stepping turn of ``angle_deg`` to ``side`` between ``start`` and ``start + duration``."""
     yaw = person.yaw0 + SIGN[side] * np.radians(angle_deg) * ramp(t, start, start + duration)
     xz = np.zeros((len(t), 2)) if path_xz is None else path_xz
     path = RootPath(t=t, xz=xz, yaw=yaw)
-    gait = Gait(cadence=2.6, duty=0.55, width=person.width, step_ref=0.3, toe_out=person.toe_out,
-                first=side, start=max(start - 0.15, 0.0), clearance=0.05, ref_frac=0.5, min_turn=0.1)
+    gait = Gait(
+        cadence=2.6,
+        duty=0.55,
+        width=person.width,
+        step_ref=0.3,
+        toe_out=person.toe_out,
+        first=side,
+        start=max(start - 0.15, 0.0),
+        clearance=0.05,
+        ref_frac=0.5,
+        min_turn=0.1,
+    )
     return path, gait
 
 
@@ -47,7 +71,13 @@ def _turn_sample(rng):
     duration = angle / rate
     idle = rng.uniform(0.2, 1.2)
     seconds = max(idle + duration + rng.uniform(1.0, 1.6), 2.2)
-    return {"angle": angle, "rate": _r(rate), "duration": _r(duration), "idle": _r(idle), "seconds": _r(seconds)}
+    return {
+        "angle": angle,
+        "rate": _r(rate),
+        "duration": _r(duration),
+        "idle": _r(idle),
+        "seconds": _r(seconds),
+    }
 
 
 def _turn_builder(side: str):
@@ -56,37 +86,48 @@ def _turn_builder(side: str):
         t = times(n)
         person = Person.sample(rng)
         path, gait = turn_in_place(rng, person, t, side, p["angle"], p["idle"], p["duration"])
-        plan = locomotion_plan(rng, person, t, path, gait, Style(kind="walk", bob=0.01, drop=0.01, lean=0.0,
-                                                                     arm_swing=0.3))
+        plan = locomotion_plan(
+            rng, person, t, path, gait, Style(kind="walk", bob=0.01, drop=0.01, lean=0.0, arm_swing=0.3)
+        )
         return finish(plan)
+
     return build
 
 
 def _turn_slots(p, side):
     deg, (noun, noun_held) = ANGLE_DEG[p["angle"]], ANGLE_NOUN[p["angle"]]
-    return {"dir": side_slot(side), "deg": Slot(deg, (), ("angle", p["angle"])),
-            "noun": Slot(noun, noun_held, ("angle", p["angle"]))}
+    return {
+        "dir": side_slot(side),
+        "deg": Slot(deg, (), ("angle", p["angle"])),
+        "noun": Slot(noun, noun_held, ("angle", p["angle"])),
+    }
 
 
 for _side in ("left", "right"):
-    register(Family(
-        name=f"turn_{_side}", group="turning", sample=_turn_sample, build=_turn_builder(_side),
-        templates=(
-            Template("{subj} turns {dir}"),
-            Template("{subj} turns {deg} {dir}"),
-            Template("{subj} makes {noun} {dir}"),
-            Template("{subj} turns {dir} in place"),
-            Template("standing in place, {subj} turns {deg} {dir}"),
-            Template("{subj} does {noun} {dir} on the spot"),
-            Template("{subj} pivots {deg} {dir}", held=True),
-            Template("{subj} rotates {poss} body {dir} by {deg}", held=True),
-        ),
-        slots=lambda p, s=_side: _turn_slots(p, s),
-        core=lambda p, s=_side: {"direction": s, "in_place": True},
-    ))
+    register(
+        Family(
+            name=f"turn_{_side}",
+            group="turning",
+            sample=_turn_sample,
+            build=_turn_builder(_side),
+            templates=(
+                Template("{subj} turns {dir}"),
+                Template("{subj} turns {deg} {dir}"),
+                Template("{subj} makes {noun} {dir}"),
+                Template("{subj} turns {dir} in place"),
+                Template("standing in place, {subj} turns {deg} {dir}"),
+                Template("{subj} does {noun} {dir} on the spot"),
+                Template("{subj} pivots {deg} {dir}", held=True),
+                Template("{subj} rotates {poss} body {dir} by {deg}", held=True),
+            ),
+            slots=lambda p, s=_side: _turn_slots(p, s),
+            core=lambda p, s=_side: {"direction": s, "in_place": True},
+        )
+    )
 
 
 # circle -----------------------------------------------------------------------------------
+
 
 def _circle_sample(rng):
     for _ in range(100):
@@ -97,8 +138,16 @@ def _circle_sample(rng):
         cruise = (2 * np.pi * radius * laps) / v - ease
         seconds = idle + cruise + 2 * ease + rng.uniform(0.8, 1.2)
         if seconds <= 9.7:
-            return {"radius": _r(radius), "speed": _r(v), "laps": _r(laps), "idle": _r(idle), "ease": _r(ease),
-                    "cruise": _r(cruise), "seconds": _r(seconds), "first": str(rng.choice(["left", "right"]))}
+            return {
+                "radius": _r(radius),
+                "speed": _r(v),
+                "laps": _r(laps),
+                "idle": _r(idle),
+                "ease": _r(ease),
+                "cruise": _r(cruise),
+                "seconds": _r(seconds),
+                "first": str(rng.choice(["left", "right"])),
+            }
     raise RuntimeError("no circle fits in 9.8 s")
 
 
@@ -116,50 +165,76 @@ def _circle_builder(rotation: str):
         path = RootPath.from_velocity(t, speed, 0.0, yaw, FPS)
         v = p["speed"]
         cad = cadence("walk", v)
-        gait = Gait(cadence=cad, duty=0.63, width=person.width, step_ref=v / cad, toe_out=person.toe_out,
-                    first=p["first"], start=max(a - 0.05, 0.0))
+        gait = Gait(
+            cadence=cad,
+            duty=0.63,
+            width=person.width,
+            step_ref=v / cad,
+            toe_out=person.toe_out,
+            first=p["first"],
+            start=max(a - 0.05, 0.0),
+        )
         plan = locomotion_plan(rng, person, t, path, gait, Style(kind="walk", bob=0.03, lean=0.04))
         return finish(plan)
+
     return build
 
 
 ROTATION = {
-    "clockwise": Slot(("clockwise", "in a clockwise direction"), ("in the same direction as a clock",),
-                      ("rotation", "clockwise")),
-    "counterclockwise": Slot(("counterclockwise", "counter-clockwise", "anticlockwise"),
-                             ("against the clock", "in an anticlockwise direction"), ("rotation", "counterclockwise")),
+    "clockwise": Slot(
+        ("clockwise", "in a clockwise direction"),
+        ("in the same direction as a clock",),
+        ("rotation", "clockwise"),
+    ),
+    "counterclockwise": Slot(
+        ("counterclockwise", "counter-clockwise", "anticlockwise"),
+        ("against the clock", "in an anticlockwise direction"),
+        ("rotation", "counterclockwise"),
+    ),
 }
 TURN_SIDE = {"clockwise": "right", "counterclockwise": "left"}
 
 for _rot in ("clockwise", "counterclockwise"):
-    register(Family(
-        name="circle_cw" if _rot == "clockwise" else "circle_ccw", group="turning",
-        sample=_circle_sample, build=_circle_builder(_rot),
-        templates=(
-            Template("{subj} {walk} in a circle {rot}"),
-            Template("{subj} {walk} {rot} in a circle"),
-            Template("{subj} walks around in a full circle {rot}"),
-            Template("{subj} {walk} in a circle, turning {side}"),
-            Template("{subj} circles {rot}"),
-            Template("{subj} makes a complete loop {rot}", held=True),
-            Template("{subj} {walk} in a round path, always turning {side}", held=True),
-        ),
-        slots=lambda p, r=_rot: {"walk": WALK, "rot": ROTATION[r], "side": side_slot(TURN_SIDE[r])},
-        core=lambda p, r=_rot: {"rotation": r},
-    ))
+    register(
+        Family(
+            name="circle_cw" if _rot == "clockwise" else "circle_ccw",
+            group="turning",
+            sample=_circle_sample,
+            build=_circle_builder(_rot),
+            templates=(
+                Template("{subj} {walk} in a circle {rot}"),
+                Template("{subj} {walk} {rot} in a circle"),
+                Template("{subj} walks around in a full circle {rot}"),
+                Template("{subj} {walk} in a circle, turning {side}"),
+                Template("{subj} circles {rot}"),
+                Template("{subj} makes a complete loop {rot}", held=True),
+                Template("{subj} {walk} in a round path, always turning {side}", held=True),
+            ),
+            slots=lambda p, r=_rot: {"walk": WALK, "rot": ROTATION[r], "side": side_slot(TURN_SIDE[r])},
+            core=lambda p, r=_rot: {"rotation": r},
+        )
+    )
 
 
 # curve ------------------------------------------------------------------------------------
+
 
 def _curve_sample(rng):
     v = rng.uniform(0.9, 1.5)
     angle = rng.uniform(60.0, 150.0)
     walk = rng.uniform(4.0, 8.5)
     idle = rng.uniform(0.0, 0.5)
-    return {"speed": _r(v), "angle": _r(angle), "walk": _r(walk), "idle": _r(idle),
-            "curve_start": _r(rng.uniform(0.15, 0.35)), "curve_len": _r(rng.uniform(0.3, 0.5)),
-            "seconds": _r(min(idle + walk + rng.uniform(0.0, 1.0), 9.8)),
-            "first": str(rng.choice(["left", "right"])), "stops": bool(rng.random() < 0.5)}
+    return {
+        "speed": _r(v),
+        "angle": _r(angle),
+        "walk": _r(walk),
+        "idle": _r(idle),
+        "curve_start": _r(rng.uniform(0.15, 0.35)),
+        "curve_len": _r(rng.uniform(0.3, 0.5)),
+        "seconds": _r(min(idle + walk + rng.uniform(0.0, 1.0), 9.8)),
+        "first": str(rng.choice(["left", "right"])),
+        "stops": bool(rng.random() < 0.5),
+    }
 
 
 def _curve_builder(side: str):
@@ -176,31 +251,45 @@ def _curve_builder(side: str):
         path = RootPath.from_velocity(t, speed, 0.0, yaw, FPS)
         v = p["speed"]
         cad = cadence("walk", v)
-        gait = Gait(cadence=cad, duty=0.63, width=person.width, step_ref=v / cad, toe_out=person.toe_out,
-                    first=p["first"], start=max(a - 0.05, 0.0))
+        gait = Gait(
+            cadence=cad,
+            duty=0.63,
+            width=person.width,
+            step_ref=v / cad,
+            toe_out=person.toe_out,
+            first=p["first"],
+            start=max(a - 0.05, 0.0),
+        )
         plan = locomotion_plan(rng, person, t, path, gait, Style(kind="walk", bob=0.03, lean=0.04))
         return finish(plan)
+
     return build
 
 
 for _side in ("left", "right"):
-    register(Family(
-        name=f"curve_{_side}", group="turning", sample=_curve_sample, build=_curve_builder(_side),
-        templates=(
-            Template("{subj} {walk} {forward} and curves {dir}"),
-            Template("{subj} {walk} along a curve {dir}"),
-            Template("{subj} {walk} in an arc {dir}"),
-            Template("{subj} {walk} {forward}, gradually bending {dir}"),
-            Template("{subj} follows a curved path {dir}"),
-            Template("{subj} veers {dir} while walking", held=True),
-            Template("walking {forward}, {subj} drifts {dir} in a wide arc", held=True),
-        ),
-        slots=lambda p, s=_side: {"walk": WALK, "forward": FORWARD, "dir": side_slot(s)},
-        core=lambda p, s=_side: {"direction": s},
-    ))
+    register(
+        Family(
+            name=f"curve_{_side}",
+            group="turning",
+            sample=_curve_sample,
+            build=_curve_builder(_side),
+            templates=(
+                Template("{subj} {walk} {forward} and curves {dir}"),
+                Template("{subj} {walk} along a curve {dir}"),
+                Template("{subj} {walk} in an arc {dir}"),
+                Template("{subj} {walk} {forward}, gradually bending {dir}"),
+                Template("{subj} follows a curved path {dir}"),
+                Template("{subj} veers {dir} while walking", held=True),
+                Template("walking {forward}, {subj} drifts {dir} in a wide arc", held=True),
+            ),
+            slots=lambda p, s=_side: {"walk": WALK, "forward": FORWARD, "dir": side_slot(s)},
+            core=lambda p, s=_side: {"direction": s},
+        )
+    )
 
 
 # zigzag -----------------------------------------------------------------------------------
+
 
 def _zigzag_sample(rng):
     legs = int(rng.choice([3, 4, 5]))
@@ -208,9 +297,16 @@ def _zigzag_sample(rng):
     idle = rng.uniform(0.0, 0.4)
     while idle + legs * leg_time + 1.0 > 9.6:
         legs -= 1
-    return {"legs": legs, "leg_time": _r(leg_time), "angle": _r(rng.uniform(30.0, 50.0)),
-            "speed": _r(rng.uniform(0.9, 1.4)), "idle": _r(idle), "first_side": str(rng.choice(["left", "right"])),
-            "seconds": _r(idle + legs * leg_time + rng.uniform(0.7, 1.2)), "first": str(rng.choice(["left", "right"]))}
+    return {
+        "legs": legs,
+        "leg_time": _r(leg_time),
+        "angle": _r(rng.uniform(30.0, 50.0)),
+        "speed": _r(rng.uniform(0.9, 1.4)),
+        "idle": _r(idle),
+        "first_side": str(rng.choice(["left", "right"])),
+        "seconds": _r(idle + legs * leg_time + rng.uniform(0.7, 1.2)),
+        "first": str(rng.choice(["left", "right"])),
+    }
 
 
 def _zigzag_build(p, rng):
@@ -232,23 +328,35 @@ def _zigzag_build(p, rng):
     path = RootPath.from_velocity(t, speed, 0.0, yaw, FPS)
     v = p["speed"]
     cad = cadence("walk", v)
-    gait = Gait(cadence=cad, duty=0.63, width=person.width, step_ref=v / cad, toe_out=person.toe_out,
-                first=p["first"], start=max(a - 0.05, 0.0))
+    gait = Gait(
+        cadence=cad,
+        duty=0.63,
+        width=person.width,
+        step_ref=v / cad,
+        toe_out=person.toe_out,
+        first=p["first"],
+        start=max(a - 0.05, 0.0),
+    )
     plan = locomotion_plan(rng, person, t, path, gait, Style(kind="walk", bob=0.03, lean=0.04))
     return finish(plan)
 
 
-register(Family(
-    name="zigzag", group="turning", sample=_zigzag_sample, build=_zigzag_build,
-    templates=(
-        Template("{subj} {walk} {forward} in a zigzag"),
-        Template("{subj} {walk} in a zigzag pattern"),
-        Template("{subj} zigzags {forward}"),
-        Template("{subj} {walk} {forward}, weaving left and right"),
-        Template("{subj} moves in a zig zag line"),
-        Template("{subj} {walk} {forward} changing direction from side to side", held=True),
-        Template("{subj} takes a zigzagging route {forward}", held=True),
-    ),
-    slots=lambda p: {"walk": WALK, "forward": FORWARD},
-    core=lambda p: {"zigzag": True},
-))
+register(
+    Family(
+        name="zigzag",
+        group="turning",
+        sample=_zigzag_sample,
+        build=_zigzag_build,
+        templates=(
+            Template("{subj} {walk} {forward} in a zigzag"),
+            Template("{subj} {walk} in a zigzag pattern"),
+            Template("{subj} zigzags {forward}"),
+            Template("{subj} {walk} {forward}, weaving left and right"),
+            Template("{subj} moves in a zig zag line"),
+            Template("{subj} {walk} {forward} changing direction from side to side", held=True),
+            Template("{subj} takes a zigzagging route {forward}", held=True),
+        ),
+        slots=lambda p: {"walk": WALK, "forward": FORWARD},
+        core=lambda p: {"zigzag": True},
+    )
+)

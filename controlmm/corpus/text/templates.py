@@ -55,16 +55,34 @@ class Caption:
         return f"{self.text}#{self.tokens}#0.0#0.0"
 
     def to_json(self) -> dict[str, Any]:
-        return {"text": self.text, "template": self.template, "held_out": self.held_out, "claims": self.claims}
+        return {
+            "text": self.text,
+            "template": self.template,
+            "held_out": self.held_out,
+            "claims": self.claims,
+        }
 
 
-SUBJECTS = (("a person", "their"), ("someone", "their"), ("a man", "his"), ("the person", "their"),
-            ("a woman", "her"), ("a human", "their"))
+SUBJECTS = (
+    ("a person", "their"),
+    ("someone", "their"),
+    ("a man", "his"),
+    ("the person", "their"),
+    ("a woman", "her"),
+    ("a human", "their"),
+)
 HELD_SUBJECTS = (("an individual", "their"), ("the man", "his"), ("a guy", "his"), ("the woman", "her"))
 
 
-def render(family: str, templates: tuple[Template, ...], slots: dict[str, Slot], rng: np.random.Generator,
-           held_out: bool, count: int, core: dict[str, Any] | None = None) -> list[Caption]:
+def render(
+    family: str,
+    templates: tuple[Template, ...],
+    slots: dict[str, Slot],
+    rng: np.random.Generator,
+    held_out: bool,
+    count: int,
+    core: dict[str, Any] | None = None,
+) -> list[Caption]:
     """Write ``count`` different captions.
 
     Args:
@@ -93,8 +111,15 @@ def render(family: str, templates: tuple[Template, ...], slots: dict[str, Slot],
     return out
 
 
-def _fill(family: str, index: int, tp: Template, slots: dict[str, Slot], rng: np.random.Generator,
-          held_out: bool, core: dict[str, Any]) -> Caption | None:
+def _fill(
+    family: str,
+    index: int,
+    tp: Template,
+    slots: dict[str, Slot],
+    rng: np.random.Generator,
+    held_out: bool,
+    core: dict[str, Any],
+) -> Caption | None:
     subjects = SUBJECTS + (HELD_SUBJECTS if held_out else ())
     subj_i = int(rng.integers(len(subjects)))
     values: dict[str, str] = {}
@@ -112,8 +137,10 @@ def _fill(family: str, index: int, tp: Template, slots: dict[str, Slot], rng: np
         if slot.claim is not None:
             key, value = slot.claim
             if claims.get(key, value) != value:
-                raise ValueError(f"template {family}/{index}: slot '{name}' claims {key}={value!r}, "
-                                 f"another part claims {claims[key]!r}")
+                raise ValueError(
+                    f"template {family}/{index}: slot '{name}' claims {key}={value!r}, "
+                    f"another part claims {claims[key]!r}"
+                )
             claims[key] = value
     if held_out and not used_held:
         # Force one held-out phrasing: the subject, or a slot that has held-out options.
@@ -133,7 +160,9 @@ def _fill(family: str, index: int, tp: Template, slots: dict[str, Slot], rng: np
     text = text[0].lower() + text[1:]
     if not text.endswith("."):
         text += "."
-    return Caption(text=text, tokens=tag(text), template=f"{family}/{index}", held_out=held_out, claims=claims)
+    return Caption(
+        text=text, tokens=tag(text), template=f"{family}/{index}", held_out=held_out, claims=claims
+    )
 
 
 def phrase_words(templates: tuple[Template, ...], slots: dict[str, Slot]) -> set[str]:

@@ -29,9 +29,22 @@ from controlmm.eval.evaluator.modules import EVALUATOR_PRESETS, EvaluatorConfig,
 from controlmm.eval.evaluator.official import OfficialEvaluator, WordVectorizer, load_official_evaluator
 from controlmm.eval.evaluator.words import Vocabulary, tokenize
 
-__all__ = ["EVALUATOR_PRESETS", "Evaluator", "EvaluatorConfig", "OfficialEvaluator", "TextMotionEncoder",
-           "TextMotionEvaluator", "Vocabulary", "WordVectorizer", "default_evaluator_dir", "load_evaluator",
-           "load_evaluator_dir", "load_official_evaluator", "model_evaluator", "tokenize"]
+__all__ = [
+    "EVALUATOR_PRESETS",
+    "Evaluator",
+    "EvaluatorConfig",
+    "OfficialEvaluator",
+    "TextMotionEncoder",
+    "TextMotionEvaluator",
+    "Vocabulary",
+    "WordVectorizer",
+    "default_evaluator_dir",
+    "load_evaluator",
+    "load_evaluator_dir",
+    "load_official_evaluator",
+    "model_evaluator",
+    "tokenize",
+]
 
 
 def model_evaluator(model_dirs) -> Path | None:
@@ -55,16 +68,22 @@ def load_evaluator(path: str | Path | None = None, device: str | torch.device = 
     if path is None:
         path = default_evaluator_dir()
         if not (path / "evaluator.json").is_file():
-            raise InputFileError(f"no shipped evaluator at '{path}'; train one with 'controlmm train evaluator "
-                                 "--data DIR --out EVAL_DIR' and pass --evaluator EVAL_DIR")
+            raise InputFileError(
+                f"no shipped evaluator at '{path}'; train one with 'controlmm train evaluator "
+                "--data DIR --out EVAL_DIR' and pass --evaluator EVAL_DIR"
+            )
         return load_evaluator_dir(path, device)
     path = Path(path)
     if not path.is_dir():
-        raise InputFileError(f"evaluator '{path}' is not a directory (an evaluator directory with evaluator.json, "
-                             "or a folder with the official HumanML3D evaluator)")
+        raise InputFileError(
+            f"evaluator '{path}' is not a directory (an evaluator directory with evaluator.json, "
+            "or a folder with the official HumanML3D evaluator)"
+        )
     if (path / "evaluator.json").is_file():
         return load_evaluator_dir(path, device)
     if any((d / "text_mot_match").is_dir() for d in (path, path / "t2m", path / "checkpoints" / "t2m")):
         return load_official_evaluator(path, device)
-    raise InputFileError(f"'{path}' is neither an evaluator directory (no evaluator.json) nor the official "
-                         "HumanML3D evaluator layout (no text_mot_match/ under it, t2m/ or checkpoints/t2m/)")
+    raise InputFileError(
+        f"'{path}' is neither an evaluator directory (no evaluator.json) nor the official "
+        "HumanML3D evaluator layout (no text_mot_match/ under it, t2m/ or checkpoints/t2m/)"
+    )

@@ -62,8 +62,9 @@ def motion_features(motion: MotionLike) -> np.ndarray:
     return features
 
 
-def pad_normalized(motions: Sequence[MotionLike], normalizer: Normalizer, unit: int = 4,
-                   max_frames: int = MAX_FRAMES) -> tuple[torch.Tensor, torch.Tensor]:
+def pad_normalized(
+    motions: Sequence[MotionLike], normalizer: Normalizer, unit: int = 4, max_frames: int = MAX_FRAMES
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Normalise motions and zero-pad them after normalisation (as the official eval loader).
 
     Motions longer than ``max_frames`` keep their first ``max_frames`` frames; shorter than ``unit``

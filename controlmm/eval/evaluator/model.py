@@ -49,9 +49,15 @@ def default_evaluator_dir() -> Path:
 class TextMotionEvaluator:
     """The project's evaluator: vocabulary, normalisation and the two encoders (eval mode, CPU)."""
 
-    def __init__(self, module: TextMotionEncoder, vocabulary: Vocabulary, normalizer: Normalizer,
-                 manifest: dict[str, Any] | None = None, directory: Path | None = None,
-                 device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        module: TextMotionEncoder,
+        vocabulary: Vocabulary,
+        normalizer: Normalizer,
+        manifest: dict[str, Any] | None = None,
+        directory: Path | None = None,
+        device: str | torch.device = "cpu",
+    ) -> None:
         self.module = module.eval().requires_grad_(False).to(device)
         self.vocabulary, self.normalizer = vocabulary, normalizer
         self.manifest = manifest or {}
@@ -66,7 +72,7 @@ class TextMotionEvaluator:
         """Captions (strings, or objects with ``.text``) -> (N, dim) float64 embeddings."""
         out = []
         for start in range(0, len(captions), batch_size):
-            texts = [caption_text(c) for c in captions[start:start + batch_size]]
+            texts = [caption_text(c) for c in captions[start : start + batch_size]]
             ids, lengths = self.vocabulary.encode(texts)
             out.append(self.module.encode_text(ids.to(self.device), lengths).double().cpu().numpy())
         return np.concatenate(out) if out else np.zeros((0, self.dim))
@@ -76,8 +82,10 @@ class TextMotionEvaluator:
         """Motions (raw features, up to 196 frames; longer ones are cut) -> (N, dim) float64 embeddings."""
         out = []
         for start in range(0, len(motions), batch_size):
-            x, lengths = pad_normalized(motions[start:start + batch_size], self.normalizer)
-            out.append(self.module.encode_motion(x.to(self.device), lengths.to(self.device)).double().cpu().numpy())
+            x, lengths = pad_normalized(motions[start : start + batch_size], self.normalizer)
+            out.append(
+                self.module.encode_motion(x.to(self.device), lengths.to(self.device)).double().cpu().numpy()
+            )
         return np.concatenate(out) if out else np.zeros((0, self.dim))
 
     def unknown_word_share(self, captions: Sequence[TextLike]) -> float:
@@ -86,10 +94,19 @@ class TextMotionEvaluator:
 
 
 # -- the directory --------------------------------------------------------------------------------
-def new_manifest(config: EvaluatorConfig, vocabulary: Vocabulary, normalization: dict[str, Any]) -> dict[str, Any]:
-    return {"format": FORMAT, "format_version": FORMAT_VERSION, "config": config.to_dict(),
-            "vocabulary": list(vocabulary.words), "normalization": normalization, "part": None,
-            "training": {}, "retrieval": {}}
+def new_manifest(
+    config: EvaluatorConfig, vocabulary: Vocabulary, normalization: dict[str, Any]
+) -> dict[str, Any]:
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "config": config.to_dict(),
+        "vocabulary": list(vocabulary.words),
+        "normalization": normalization,
+        "part": None,
+        "training": {},
+        "retrieval": {},
+    }
 
 
 def read_evaluator_manifest(directory: str | Path) -> dict[str, Any]:
@@ -107,11 +124,15 @@ def read_evaluator_manifest(directory: str | Path) -> dict[str, Any]:
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise InputFileError(f"'{path}' is not a controlmm evaluator description (format '{FORMAT}')")
     if manifest.get("format_version") != FORMAT_VERSION:
-        raise InputFileError(f"'{path}' has format version {manifest.get('format_version')}; "
-                             f"this controlmm reads version {FORMAT_VERSION}")
+        raise InputFileError(
+            f"'{path}' has format version {manifest.get('format_version')}; "
+            f"this controlmm reads version {FORMAT_VERSION}"
+        )
     for key in ("config", "vocabulary", "part"):
         if not manifest.get(key):
-            raise InputFileError(f"'{path}' has no {key}" + (" (training has not finished)" if key == "part" else ""))
+            raise InputFileError(
+                f"'{path}' has no {key}" + (" (training has not finished)" if key == "part" else "")
+            )
     return manifest
 
 

@@ -64,7 +64,9 @@ EVALUATOR_PRESETS: dict[str, EvaluatorConfig] = {
 
 
 def _head(hidden: int, out: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(2 * hidden, hidden), nn.LayerNorm(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out))
+    return nn.Sequential(
+        nn.Linear(2 * hidden, hidden), nn.LayerNorm(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out)
+    )
 
 
 def _bigru_last(gru: nn.GRU, h0: nn.Parameter, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
@@ -80,8 +82,12 @@ class MovementEncoder(nn.Module):
     def __init__(self, hidden: int, dropout: float) -> None:
         super().__init__()
         self.main = nn.Sequential(
-            nn.Conv1d(MOTION_DIM, hidden, 4, 2, 1), nn.Dropout(dropout), nn.LeakyReLU(0.2),
-            nn.Conv1d(hidden, hidden, 4, 2, 1), nn.Dropout(dropout), nn.LeakyReLU(0.2),
+            nn.Conv1d(MOTION_DIM, hidden, 4, 2, 1),
+            nn.Dropout(dropout),
+            nn.LeakyReLU(0.2),
+            nn.Conv1d(hidden, hidden, 4, 2, 1),
+            nn.Dropout(dropout),
+            nn.LeakyReLU(0.2),
         )
         self.out = nn.Linear(hidden, hidden)
 
@@ -134,7 +140,9 @@ class TextMotionEncoder(nn.Module):
         """Normalised features (B, T, 263 or 259), T a multiple of 4, valid frames (B,) -> (B, D)."""
         x = features[..., :MOTION_DIM]
         if x.shape[1] % UNIT:
-            raise ControlMMError(f"motion batches must be padded to a multiple of {UNIT} frames; got {x.shape[1]}")
+            raise ControlMMError(
+                f"motion batches must be padded to a multiple of {UNIT} frames; got {x.shape[1]}"
+            )
         steps = torch.div(lengths, UNIT, rounding_mode="floor").clamp(1, x.shape[1] // UNIT)
         return F.normalize(self.motion(self.movement(x), steps), dim=-1) * self.cfg.scale
 

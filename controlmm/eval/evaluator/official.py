@@ -47,19 +47,115 @@ from controlmm.eval.evaluator.base import MotionLike, TextLike, pad_normalized
 from controlmm.eval.evaluator.words import tokenize
 from controlmm.motion.normalization import Normalizer
 
-POS_ENUMERATOR = {"VERB": 0, "NOUN": 1, "DET": 2, "ADP": 3, "NUM": 4, "AUX": 5, "PRON": 6, "ADJ": 7, "ADV": 8,
-                  "Loc_VIP": 9, "Body_VIP": 10, "Obj_VIP": 11, "Act_VIP": 12, "Desc_VIP": 13, "OTHER": 14}
+POS_ENUMERATOR = {
+    "VERB": 0,
+    "NOUN": 1,
+    "DET": 2,
+    "ADP": 3,
+    "NUM": 4,
+    "AUX": 5,
+    "PRON": 6,
+    "ADJ": 7,
+    "ADV": 8,
+    "Loc_VIP": 9,
+    "Body_VIP": 10,
+    "Obj_VIP": 11,
+    "Act_VIP": 12,
+    "Desc_VIP": 13,
+    "OTHER": 14,
+}
 VIP_WORDS = {
-    "Loc_VIP": ("left", "right", "clockwise", "counterclockwise", "anticlockwise", "forward", "back", "backward",
-                "up", "down", "straight", "curve"),
-    "Body_VIP": ("arm", "chin", "foot", "feet", "face", "hand", "mouth", "leg", "waist", "eye", "knee", "shoulder",
-                 "thigh"),
-    "Obj_VIP": ("stair", "dumbbell", "chair", "window", "floor", "car", "ball", "handrail", "baseball", "basketball"),
-    "Act_VIP": ("walk", "run", "swing", "pick", "bring", "kick", "put", "squat", "throw", "hop", "dance", "jump",
-                "turn", "stumble", "stop", "sit", "lift", "lower", "raise", "wash", "stand", "kneel", "stroll", "rub",
-                "bend", "balance", "flap", "jog", "shuffle", "lean", "rotate", "spin", "spread", "climb"),
-    "Desc_VIP": ("slowly", "carefully", "fast", "careful", "slow", "quickly", "happy", "angry", "sad", "happily",
-                 "angrily", "sadly"),
+    "Loc_VIP": (
+        "left",
+        "right",
+        "clockwise",
+        "counterclockwise",
+        "anticlockwise",
+        "forward",
+        "back",
+        "backward",
+        "up",
+        "down",
+        "straight",
+        "curve",
+    ),
+    "Body_VIP": (
+        "arm",
+        "chin",
+        "foot",
+        "feet",
+        "face",
+        "hand",
+        "mouth",
+        "leg",
+        "waist",
+        "eye",
+        "knee",
+        "shoulder",
+        "thigh",
+    ),
+    "Obj_VIP": (
+        "stair",
+        "dumbbell",
+        "chair",
+        "window",
+        "floor",
+        "car",
+        "ball",
+        "handrail",
+        "baseball",
+        "basketball",
+    ),
+    "Act_VIP": (
+        "walk",
+        "run",
+        "swing",
+        "pick",
+        "bring",
+        "kick",
+        "put",
+        "squat",
+        "throw",
+        "hop",
+        "dance",
+        "jump",
+        "turn",
+        "stumble",
+        "stop",
+        "sit",
+        "lift",
+        "lower",
+        "raise",
+        "wash",
+        "stand",
+        "kneel",
+        "stroll",
+        "rub",
+        "bend",
+        "balance",
+        "flap",
+        "jog",
+        "shuffle",
+        "lean",
+        "rotate",
+        "spin",
+        "spread",
+        "climb",
+    ),
+    "Desc_VIP": (
+        "slowly",
+        "carefully",
+        "fast",
+        "careful",
+        "slow",
+        "quickly",
+        "happy",
+        "angry",
+        "sad",
+        "happily",
+        "angrily",
+        "sadly",
+    ),
 }
 MAX_TEXT_LEN = 20
 WORD_DIM, POS_DIM, TEXT_HIDDEN, MOTION_HIDDEN, MOVEMENT_HIDDEN, EMBED_DIM = 300, 15, 512, 1024, 512, 512
@@ -69,12 +165,20 @@ UNIT = 4
 
 # -- the modules (official structure and names) -----------------------------------------------------
 class MovementConvEncoder(nn.Module):
-    def __init__(self, input_size: int = DIM_POSE - 4, hidden_size: int = MOVEMENT_HIDDEN,
-                 output_size: int = MOVEMENT_HIDDEN) -> None:
+    def __init__(
+        self,
+        input_size: int = DIM_POSE - 4,
+        hidden_size: int = MOVEMENT_HIDDEN,
+        output_size: int = MOVEMENT_HIDDEN,
+    ) -> None:
         super().__init__()
         self.main = nn.Sequential(
-            nn.Conv1d(input_size, hidden_size, 4, 2, 1), nn.Dropout(0.2), nn.LeakyReLU(0.2),
-            nn.Conv1d(hidden_size, output_size, 4, 2, 1), nn.Dropout(0.2), nn.LeakyReLU(0.2),
+            nn.Conv1d(input_size, hidden_size, 4, 2, 1),
+            nn.Dropout(0.2),
+            nn.LeakyReLU(0.2),
+            nn.Conv1d(hidden_size, output_size, 4, 2, 1),
+            nn.Dropout(0.2),
+            nn.LeakyReLU(0.2),
         )
         self.out_net = nn.Linear(output_size, output_size)
 
@@ -84,7 +188,9 @@ class MovementConvEncoder(nn.Module):
 
 
 def _output_net(hidden: int, out: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(hidden * 2, hidden), nn.LayerNorm(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out))
+    return nn.Sequential(
+        nn.Linear(hidden * 2, hidden), nn.LayerNorm(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out)
+    )
 
 
 def _bigru(gru: nn.GRU, hidden: nn.Parameter, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
@@ -94,8 +200,13 @@ def _bigru(gru: nn.GRU, hidden: nn.Parameter, x: torch.Tensor, lengths: torch.Te
 
 
 class TextEncoderBiGRUCo(nn.Module):
-    def __init__(self, word_size: int = WORD_DIM, pos_size: int = POS_DIM, hidden_size: int = TEXT_HIDDEN,
-                 output_size: int = EMBED_DIM) -> None:
+    def __init__(
+        self,
+        word_size: int = WORD_DIM,
+        pos_size: int = POS_DIM,
+        hidden_size: int = TEXT_HIDDEN,
+        output_size: int = EMBED_DIM,
+    ) -> None:
         super().__init__()
         self.pos_emb = nn.Linear(pos_size, word_size)
         self.input_emb = nn.Linear(word_size, hidden_size)
@@ -103,15 +214,21 @@ class TextEncoderBiGRUCo(nn.Module):
         self.output_net = _output_net(hidden_size, output_size)
         self.hidden = nn.Parameter(torch.randn(2, 1, hidden_size))
 
-    def forward(self, word_embs: torch.Tensor, pos_onehot: torch.Tensor, cap_lens: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, word_embs: torch.Tensor, pos_onehot: torch.Tensor, cap_lens: torch.Tensor
+    ) -> torch.Tensor:
         """(B, 22, 300), (B, 22, 15), (B,) -> (B, 512)."""
         x = self.input_emb(word_embs + self.pos_emb(pos_onehot))
         return self.output_net(_bigru(self.gru, self.hidden, x, cap_lens))
 
 
 class MotionEncoderBiGRUCo(nn.Module):
-    def __init__(self, input_size: int = MOVEMENT_HIDDEN, hidden_size: int = MOTION_HIDDEN,
-                 output_size: int = EMBED_DIM) -> None:
+    def __init__(
+        self,
+        input_size: int = MOVEMENT_HIDDEN,
+        hidden_size: int = MOTION_HIDDEN,
+        output_size: int = EMBED_DIM,
+    ) -> None:
         super().__init__()
         self.input_emb = nn.Linear(input_size, hidden_size)
         self.gru = nn.GRU(hidden_size, hidden_size, batch_first=True, bidirectional=True)
@@ -151,16 +268,21 @@ class WordVectorizer:
         try:
             vectors = np.load(glove_dir / f"{prefix}_data.npy", allow_pickle=False)
         except Exception as exc:  # noqa: BLE001
-            raise InputFileError(f"cannot read '{glove_dir / f'{prefix}_data.npy'}': {type(exc).__name__}") from None
+            raise InputFileError(
+                f"cannot read '{glove_dir / f'{prefix}_data.npy'}': {type(exc).__name__}"
+            ) from None
         words = _read_pickle(glove_dir / f"{prefix}_words.pkl")
         index = _read_pickle(glove_dir / f"{prefix}_idx.pkl")
         if vectors.ndim != 2 or vectors.shape[1] != WORD_DIM:
-            raise InputFileError(f"'{glove_dir / f'{prefix}_data.npy'}' must hold (V, {WORD_DIM}) vectors; "
-                                 f"got {vectors.shape}")
+            raise InputFileError(
+                f"'{glove_dir / f'{prefix}_data.npy'}' must hold (V, {WORD_DIM}) vectors; got {vectors.shape}"
+            )
         try:
             self.word2vec = {w: vectors[int(index[w])].astype(np.float32) for w in words}
         except (KeyError, IndexError, TypeError, ValueError) as exc:
-            raise InputFileError(f"GloVe files in '{glove_dir}' disagree (word list vs index): {exc}") from None
+            raise InputFileError(
+                f"GloVe files in '{glove_dir}' disagree (word list vs index): {exc}"
+            ) from None
         if "unk" not in self.word2vec:
             raise InputFileError(f"GloVe vocabulary in '{glove_dir}' has no 'unk' entry")
 
@@ -190,9 +312,16 @@ class WordVectorizer:
 class OfficialEvaluator:
     """The HumanML3D evaluator's three modules with its word vectorizer and normalisation."""
 
-    def __init__(self, movement: MovementConvEncoder, text: TextEncoderBiGRUCo, motion: MotionEncoderBiGRUCo,
-                 words: WordVectorizer, normalizer: Normalizer, root: Path | None = None,
-                 device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        movement: MovementConvEncoder,
+        text: TextEncoderBiGRUCo,
+        motion: MotionEncoderBiGRUCo,
+        words: WordVectorizer,
+        normalizer: Normalizer,
+        root: Path | None = None,
+        device: str | torch.device = "cpu",
+    ) -> None:
         self.device = torch.device(device)
         self.movement_encoder = movement.eval().requires_grad_(False).to(self.device)
         self.text_encoder = text.eval().requires_grad_(False).to(self.device)
@@ -207,8 +336,11 @@ class OfficialEvaluator:
         if tokens:
             return list(tokens)
         if not self._warned:
-            warnings.warn("the official evaluator reads HumanML3D 'word/POS' tokens; captions given as plain text "
-                          "are split into words tagged OTHER (less faithful)", stacklevel=3)
+            warnings.warn(
+                "the official evaluator reads HumanML3D 'word/POS' tokens; captions given as plain text "
+                "are split into words tagged OTHER (less faithful)",
+                stacklevel=3,
+            )
             self._warned = True
         return [f"{w}/OTHER" for w in tokenize(str(getattr(caption, "text", caption)))]
 
@@ -216,7 +348,7 @@ class OfficialEvaluator:
     def embed_texts(self, captions: Sequence[TextLike], batch_size: int = 256) -> np.ndarray:
         out = []
         for start in range(0, len(captions), batch_size):
-            rows = [self.words.sentence(self._tokens(c)) for c in captions[start:start + batch_size]]
+            rows = [self.words.sentence(self._tokens(c)) for c in captions[start : start + batch_size]]
             word = torch.from_numpy(np.stack([r[0] for r in rows])).to(self.device)
             pos = torch.from_numpy(np.stack([r[1] for r in rows])).to(self.device)
             lengths = torch.tensor([r[2] for r in rows])
@@ -227,7 +359,7 @@ class OfficialEvaluator:
     def embed_motions(self, motions: Sequence[MotionLike], batch_size: int = 256) -> np.ndarray:
         out = []
         for start in range(0, len(motions), batch_size):
-            x, lengths = pad_normalized(motions[start:start + batch_size], self.normalizer, UNIT)
+            x, lengths = pad_normalized(motions[start : start + batch_size], self.normalizer, UNIT)
             movements = self.movement_encoder(x[..., :-4].to(self.device))
             steps = torch.div(lengths, UNIT, rounding_mode="floor")
             out.append(self.motion_encoder(movements, steps).double().cpu().numpy())
@@ -244,24 +376,32 @@ def official_layout(root: str | Path) -> dict[str, Path]:
     t2m_dirs = [root, root / "t2m", root / "checkpoints" / "t2m"]
     finest = _first([d / "text_mot_match" / "model" / "finest.tar" for d in t2m_dirs])
     if finest is None:
-        raise InputFileError(f"official HumanML3D evaluator: no text_mot_match/model/finest.tar under '{root}' "
-                             f"(looked in {', '.join(str(d) for d in t2m_dirs)})")
+        raise InputFileError(
+            f"official HumanML3D evaluator: no text_mot_match/model/finest.tar under '{root}' "
+            f"(looked in {', '.join(str(d) for d in t2m_dirs)})"
+        )
     t2m = finest.parents[2]
     files = {"finest": finest}
     for name in ("mean", "std"):
         path = t2m / "Comp_v6_KLD005" / "meta" / f"{name}.npy"
         if not path.is_file():
-            raise InputFileError(f"official HumanML3D evaluator: missing {path} (the evaluator's normalisation)")
+            raise InputFileError(
+                f"official HumanML3D evaluator: missing {path} (the evaluator's normalisation)"
+            )
         files[name] = path
-    glove_dirs = list(dict.fromkeys([root / "glove", t2m / "glove", t2m.parent / "glove", t2m.parent.parent / "glove"]))
+    glove_dirs = list(
+        dict.fromkeys([root / "glove", t2m / "glove", t2m.parent / "glove", t2m.parent.parent / "glove"])
+    )
     names = ("our_vab_data.npy", "our_vab_words.pkl", "our_vab_idx.pkl")
     glove = next((d for d in glove_dirs if all((d / n).is_file() for n in names)), None)
     if glove is None:
         partial = next((d for d in glove_dirs if d.is_dir()), None)
         missing = [n for n in names if partial is None or not (partial / n).is_file()]
         where = f"'{partial}' lacks" if partial else "no glove/ folder with"
-        raise InputFileError(f"official HumanML3D evaluator: {where} {', '.join(missing)} (looked in "
-                             f"{', '.join(str(d) for d in glove_dirs)})")
+        raise InputFileError(
+            f"official HumanML3D evaluator: {where} {', '.join(missing)} (looked in "
+            f"{', '.join(str(d) for d in glove_dirs)})"
+        )
     files["glove"] = glove
     return files
 
@@ -275,14 +415,26 @@ def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu"
         ckpt = torch.load(files["finest"], map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001
         raise InputFileError(f"'{files['finest']}' is corrupt or unreadable ({type(exc).__name__})") from None
-    modules = {"movement_encoder": MovementConvEncoder(), "text_encoder": TextEncoderBiGRUCo(),
-               "motion_encoder": MotionEncoderBiGRUCo()}
+    modules = {
+        "movement_encoder": MovementConvEncoder(),
+        "text_encoder": TextEncoderBiGRUCo(),
+        "motion_encoder": MotionEncoderBiGRUCo(),
+    }
     for key, module in modules.items():
         if not isinstance(ckpt, dict) or key not in ckpt:
-            raise InputFileError(f"'{files['finest']}' has no '{key}' state dict (keys: "
-                                 f"{', '.join(map(str, ckpt)) if isinstance(ckpt, dict) else type(ckpt).__name__})")
+            raise InputFileError(
+                f"'{files['finest']}' has no '{key}' state dict (keys: "
+                f"{', '.join(map(str, ckpt)) if isinstance(ckpt, dict) else type(ckpt).__name__})"
+            )
         load_state_strict(module, {k: v.float() for k, v in ckpt[key].items()}, f"{files['finest']}:{key}")
     normalizer = Normalizer.load(files["mean"], files["std"])
     words = WordVectorizer(files["glove"])
-    return OfficialEvaluator(modules["movement_encoder"], modules["text_encoder"], modules["motion_encoder"],
-                             words, normalizer, Path(root), device)
+    return OfficialEvaluator(
+        modules["movement_encoder"],
+        modules["text_encoder"],
+        modules["motion_encoder"],
+        words,
+        normalizer,
+        Path(root),
+        device,
+    )

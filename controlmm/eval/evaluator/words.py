@@ -37,7 +37,7 @@ class Vocabulary:
     max_words: int = 20
 
     def __post_init__(self) -> None:
-        if tuple(self.words[:len(SPECIALS)]) != SPECIALS:
+        if tuple(self.words[: len(SPECIALS)]) != SPECIALS:
             raise ControlMMError(f"a vocabulary must start with {', '.join(SPECIALS)}")
         if len(set(self.words)) != len(self.words):
             raise ControlMMError("the vocabulary lists a word twice")

@@ -7,7 +7,12 @@
 """
 
 from controlmm.models.official.convert import import_official, load_official_checkpoint, official_model
-from controlmm.models.official.folders import RELEASED_CONTROL_NAMES, RELEASED_NAMES, find_control, find_momask
+from controlmm.models.official.folders import (
+    RELEASED_CONTROL_NAMES,
+    RELEASED_NAMES,
+    find_control,
+    find_momask,
+)
 from controlmm.models.official.names import map_official_state, split_control_state
 from controlmm.models.official.opt import read_opt
 

@@ -60,13 +60,17 @@ def load_official_checkpoint(path: Path, kind: str) -> tuple[State, dict[str, An
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - corrupt, truncated or unsafe pickles raise many types
         reason = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
-        raise InputFileError(f"cannot read official checkpoint '{path}' ({type(exc).__name__}: {reason})") from None
+        raise InputFileError(
+            f"cannot read official checkpoint '{path}' ({type(exc).__name__}: {reason})"
+        ) from None
     if not isinstance(data, dict):
         raise InputFileError(f"'{path}' is not an official checkpoint (a dict); got {type(data).__name__}")
     key = next((k for k in CHECKPOINT_KEYS[kind] if k in data), None)
     if key is None:
-        raise InputFileError(f"'{path}' has no '{CHECKPOINT_KEYS[kind][0]}' entry (keys: "
-                             f"{', '.join(map(str, data)) or 'none'}); is it the {kind} checkpoint?")
+        raise InputFileError(
+            f"'{path}' has no '{CHECKPOINT_KEYS[kind][0]}' entry (keys: "
+            f"{', '.join(map(str, data)) or 'none'}); is it the {kind} checkpoint?"
+        )
     state = data[key]
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise InputFileError(f"'{path}' entry '{key}' is not a state_dict of tensors")
@@ -101,22 +105,34 @@ def tokenizer_config(state: State, folder: OfficialFolder, notes: list[str]) -> 
     depth = _indices(state, r"encoder\.model\.\d+\.1\.model\.(\d+)\.conv1\.weight")
     layers = _indices(state, r"quantizer\.layers\.(\d+)\.codebook")
     if not down or not depth or not layers:
-        raise InputFileError(f"{where}: not an RVQ-VAE state_dict (no strided convs, residual blocks or codebooks)")
+        raise InputFileError(
+            f"{where}: not an RVQ-VAE state_dict (no strided convs, residual blocks or codebooks)"
+        )
     codebook = state["quantizer.layers.0.codebook"]
     opt = folder.opt
     for key, allowed in (("vq_act", "relu"), ("vq_norm", None), ("shared_codebook", False)):
         if key in opt and opt[key] != allowed:
-            raise InputFileError(f"{folder.folder / 'opt.txt'}: {key} = {opt[key]!r} is not supported "
-                                 f"(the paper modules implement {key} = {allowed!r})")
+            raise InputFileError(
+                f"{folder.folder / 'opt.txt'}: {key} = {opt[key]!r} is not supported "
+                f"(the paper modules implement {key} = {allowed!r})"
+            )
     if first.shape[1] != FEATURE_DIM:
-        raise InputFileError(f"{where}: motion features are {first.shape[1]}-d; only HumanML3D ({FEATURE_DIM}-d) "
-                             "models can be imported (KIT-ML models are not supported)")
+        raise InputFileError(
+            f"{where}: motion features are {first.shape[1]}-d; only HumanML3D ({FEATURE_DIM}-d) "
+            "models can be imported (KIT-ML models are not supported)"
+        )
     growth = int(_opt(folder, "dilation_growth_rate", 3, notes))
     return TokenizerConfig(
-        input_dim=int(first.shape[1]), width=int(first.shape[0]), code_dim=int(codebook.shape[1]),
-        nb_code=int(codebook.shape[0]), num_quantizers=len(layers), down_t=len(down),
-        stride_t=int(state[f"encoder.model.{down[0]}.0.weight"].shape[-1]) // 2, depth=len(depth),
-        dilation_growth_rate=growth, mu=float(_opt(folder, "mu", 0.99, notes)),
+        input_dim=int(first.shape[1]),
+        width=int(first.shape[0]),
+        code_dim=int(codebook.shape[1]),
+        nb_code=int(codebook.shape[0]),
+        num_quantizers=len(layers),
+        down_t=len(down),
+        stride_t=int(state[f"encoder.model.{down[0]}.0.weight"].shape[-1]) // 2,
+        depth=len(depth),
+        dilation_growth_rate=growth,
+        mu=float(_opt(folder, "mu", 0.99, notes)),
         quantize_dropout_prob=float(_opt(folder, "quantize_dropout_prob", 0.2, notes)),
     )
 
@@ -125,34 +141,45 @@ def _trunk_sizes(state: State, where: str) -> dict[str, int]:
     layers = _indices(state, r"seqTransEncoder\.layers\.(\d+)\.linear1\.weight")
     if not layers:
         raise InputFileError(f"{where}: no seqTransEncoder layers")
-    return {"num_layers": len(layers), "ff_size": int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
-            "latent_dim": int(_need(state, "cond_emb.weight", where).shape[0]),
-            "text_dim": int(state["cond_emb.weight"].shape[1]),
-            "max_len": int(_need(state, "position_enc.pe", where).shape[0])}
+    return {
+        "num_layers": len(layers),
+        "ff_size": int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
+        "latent_dim": int(_need(state, "cond_emb.weight", where).shape[0]),
+        "text_dim": int(state["cond_emb.weight"].shape[1]),
+        "max_len": int(_need(state, "position_enc.pe", where).shape[0]),
+    }
 
 
 def transformer_config(state: State, folder: OfficialFolder, notes: list[str]) -> TransformerConfig:
     where = str(folder.checkpoint)
     token_emb = _need(state, "token_emb.weight", where)
     return TransformerConfig(
-        nb_code=int(token_emb.shape[0]) - 2, code_dim=int(token_emb.shape[1]),
-        num_heads=int(_opt(folder, "n_heads", 6, notes)), dropout=float(_opt(folder, "dropout", 0.2, notes)),
-        cond_drop_prob=float(_opt(folder, "cond_drop_prob", 0.1, notes)), **_trunk_sizes(state, where),
+        nb_code=int(token_emb.shape[0]) - 2,
+        code_dim=int(token_emb.shape[1]),
+        num_heads=int(_opt(folder, "n_heads", 6, notes)),
+        dropout=float(_opt(folder, "dropout", 0.2, notes)),
+        cond_drop_prob=float(_opt(folder, "cond_drop_prob", 0.1, notes)),
+        **_trunk_sizes(state, where),
     )
 
 
 def residual_config(state: State, folder: OfficialFolder, notes: list[str]) -> ResidualConfig:
     where = str(folder.checkpoint)
     if folder.opt.get("share_weight") is False or "embed_proj_shared_weight" not in state:
-        raise InputFileError(f"{where}: only residual transformers trained with share_weight (the released "
-                             "'..._sw' model: embed_proj_shared_weight, token_embed_weight_, output_proj_weight_) "
-                             "can be imported")
+        raise InputFileError(
+            f"{where}: only residual transformers trained with share_weight (the released "
+            "'..._sw' model: embed_proj_shared_weight, token_embed_weight_, output_proj_weight_) "
+            "can be imported"
+        )
     token = _need(state, "token_embed_weight_", where)
     return ResidualConfig(
-        nb_code=int(token.shape[1]) - 1, code_dim=int(token.shape[2]),
+        nb_code=int(token.shape[1]) - 1,
+        code_dim=int(token.shape[2]),
         num_quantizers=int(_need(state, "quant_emb.weight", where).shape[1]),
-        num_heads=int(_opt(folder, "n_heads", 6, notes)), dropout=float(_opt(folder, "dropout", 0.2, notes)),
-        cond_drop_prob=float(_opt(folder, "cond_drop_prob", 0.2, notes)), **_trunk_sizes(state, where),
+        num_heads=int(_opt(folder, "n_heads", 6, notes)),
+        dropout=float(_opt(folder, "dropout", 0.2, notes)),
+        cond_drop_prob=float(_opt(folder, "cond_drop_prob", 0.2, notes)),
+        **_trunk_sizes(state, where),
     )
 
 
@@ -160,11 +187,15 @@ def control_config(state: State, tokenizer: TokenizerConfig, where: str) -> Cont
     first = _need(state, "encoder_control.model.0.weight", where)
     channels = int(first.shape[1])
     if channels not in CONTROL_CHANNELS:
-        raise InputFileError(f"{where}: encoder_control takes {channels} channels; supported: 6 (pelvis, MaskControl "
-                             "control 'trajectory') or 36 (joints 0, 10, 11, 15, 20, 21)")
+        raise InputFileError(
+            f"{where}: encoder_control takes {channels} channels; supported: 6 (pelvis, MaskControl "
+            "control 'trajectory') or 36 (joints 0, 10, 11, 15, 20, 21)"
+        )
     if int(first.shape[0]) != tokenizer.width:
-        raise InputFileError(f"{where}: encoder_control is {first.shape[0]} wide but the RVQ-VAE is {tokenizer.width} "
-                             "wide; the paper modules use the tokenizer's width for both")
+        raise InputFileError(
+            f"{where}: encoder_control is {first.shape[0]} wide but the RVQ-VAE is {tokenizer.width} "
+            "wide; the paper modules use the tokenizer's width for both"
+        )
     return ControlConfig(joints=CONTROL_CHANNELS[channels])
 
 
@@ -186,8 +217,12 @@ def _max_difference(a: State, b: State) -> float | None:
 
 
 # -- the import -------------------------------------------------------------------------------------
-def official_model(momask: str | Path, control: str | Path | None = None, clip_weights: str | None = None,
-                   clip_precision: str = "float16") -> tuple[ModelConfig, dict[str, torch.nn.Module], dict[str, Any]]:
+def official_model(
+    momask: str | Path,
+    control: str | Path | None = None,
+    clip_weights: str | None = None,
+    clip_precision: str = "float16",
+) -> tuple[ModelConfig, dict[str, torch.nn.Module], dict[str, Any]]:
     """Read the official folders and build the loaded modules.
 
     Returns (config, {part: module with the official weights}, record for ``model.json``).
@@ -203,45 +238,79 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
         raw, extras = load_official_checkpoint(folder.checkpoint, kind)
         states.update(map_official_state(kind, raw))
         origin[kind] = folder.checkpoint
-        sources[kind] = {"folder": str(folder.folder.resolve()), "checkpoint": folder.checkpoint.name,
-                         "opt_txt": folder.has_opt, **extras}
+        sources[kind] = {
+            "folder": str(folder.folder.resolve()),
+            "checkpoint": folder.checkpoint.name,
+            "opt_txt": folder.has_opt,
+            **extras,
+        }
     if control is not None:
         ctrl_folder = find_control(control)
         raw, extras = load_official_checkpoint(ctrl_folder.checkpoint, "control")
         split = map_official_state("control", raw)
         for part in ("tokenizer", "transformer"):
             diff = _max_difference(states[part], split[part])
-            what = ("different names/shapes" if diff is None
-                    else "identical" if diff == 0.0 else f"max |diff| {diff:.3g}")
-            notes.append(f"{part}: taken from the control checkpoint (as the official control scripts do); "
-                         f"the MoMask folder's copy is {what}")
+            what = (
+                "different names/shapes"
+                if diff is None
+                else "identical"
+                if diff == 0.0
+                else f"max |diff| {diff:.3g}"
+            )
+            notes.append(
+                f"{part}: taken from the control checkpoint (as the official control scripts do); "
+                f"the MoMask folder's copy is {what}"
+            )
             sources[part]["weights_from"] = str(ctrl_folder.checkpoint.resolve())
         states.update(split)
         origin.update({part: ctrl_folder.checkpoint for part in split})
-        sources["control"] = {"folder": str(ctrl_folder.folder.resolve()), "checkpoint": ctrl_folder.checkpoint.name,
-                              "opt_txt": ctrl_folder.has_opt, "control": ctrl_folder.opt.get("control"), **extras}
+        sources["control"] = {
+            "folder": str(ctrl_folder.folder.resolve()),
+            "checkpoint": ctrl_folder.checkpoint.name,
+            "opt_txt": ctrl_folder.has_opt,
+            "control": ctrl_folder.opt.get("control"),
+            **extras,
+        }
         folders["control"] = ctrl_folder
     tok = tokenizer_config(states["tokenizer"], folders["tokenizer"], notes)
     tr = transformer_config(states["transformer"], folders["transformer"], notes)
     res = residual_config(states["residual"], folders["residual"], notes)
     if tr.text_dim != res.text_dim:
-        raise InputFileError(f"the masked transformer takes {tr.text_dim}-d text vectors but the residual transformer "
-                             f"{res.text_dim}-d; they must come from the same text encoder")
-    text = TextEncoderConfig(name="clip", weights=clip_weights or CLIP_MODEL_ID, precision=clip_precision,
-                             size=None if tr.text_dim == 512 else tr.text_dim)
+        raise InputFileError(
+            f"the masked transformer takes {tr.text_dim}-d text vectors but the residual transformer "
+            f"{res.text_dim}-d; they must come from the same text encoder"
+        )
+    text = TextEncoderConfig(
+        name="clip",
+        weights=clip_weights or CLIP_MODEL_ID,
+        precision=clip_precision,
+        size=None if tr.text_dim == 512 else tr.text_dim,
+    )
     paper = preset_config("paper")
-    ctrl = control_config(states["control"], tok, str(folders["control"].checkpoint)) if "control" in states \
+    ctrl = (
+        control_config(states["control"], tok, str(folders["control"].checkpoint))
+        if "control" in states
         else paper.control
+    )
     try:
-        config = replace(paper, tokenizer=tok, transformer=tr, residual=res, text_encoder=text, control=ctrl,
-                         storage_dtype="float32")
+        config = replace(
+            paper,
+            tokenizer=tok,
+            transformer=tr,
+            residual=res,
+            text_encoder=text,
+            control=ctrl,
+            storage_dtype="float32",
+        )
     except ControlMMError as exc:
         raise InputFileError(f"the official checkpoints do not fit together: {exc}") from None
     modules: dict[str, torch.nn.Module] = {}
     for part, state in states.items():
         module = PARTS[part].build(config)
         where = f"{origin[part]} ({part})"
-        load_state_strict(module, {k: v.float() if v.is_floating_point() else v for k, v in state.items()}, where)
+        load_state_strict(
+            module, {k: v.float() if v.is_floating_point() else v for k, v in state.items()}, where
+        )
         modules[part] = module.eval()
     record = {"sources": sources, "differs_from_paper_preset": paper_differences(config), "notes": notes}
     return config, modules, record
@@ -250,22 +319,39 @@ def official_model(momask: str | Path, control: str | Path | None = None, clip_w
 def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
     """Copy the HumanML3D evaluator's files (MoMask layout) under ``dest``; return their record."""
     root = Path(root).expanduser()
-    t2m = next((d for d in (root, root / "t2m", root / "checkpoints" / "t2m")
-                if (d / "text_mot_match" / "model" / "finest.tar").is_file()), None)
+    t2m = next(
+        (
+            d
+            for d in (root, root / "t2m", root / "checkpoints" / "t2m")
+            if (d / "text_mot_match" / "model" / "finest.tar").is_file()
+        ),
+        None,
+    )
     if t2m is None:
-        raise InputFileError(f"--evaluator '{root}': no text_mot_match/model/finest.tar under it (looked in "
-                             f"{root}, {root / 't2m'}, {root / 'checkpoints' / 't2m'})")
+        raise InputFileError(
+            f"--evaluator '{root}': no text_mot_match/model/finest.tar under it (looked in "
+            f"{root}, {root / 't2m'}, {root / 'checkpoints' / 't2m'})"
+        )
     finest = t2m / "text_mot_match" / "model" / "finest.tar"
     try:
         data = torch.load(finest, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001
         raise InputFileError(f"cannot read '{finest}' ({type(exc).__name__})") from None
-    missing = [k for k in ("movement_encoder", "text_encoder", "motion_encoder")
-               if not isinstance(data, dict) or not isinstance(data.get(k), dict)]
+    missing = [
+        k
+        for k in ("movement_encoder", "text_encoder", "motion_encoder")
+        if not isinstance(data, dict) or not isinstance(data.get(k), dict)
+    ]
     if missing:
         raise InputFileError(f"'{finest}' is not the HumanML3D evaluator: no {', '.join(missing)} state_dict")
-    glove = next((d for d in (root / "glove", t2m / "glove", t2m.parent / "glove", t2m.parent.parent / "glove")
-                  if (d / "our_vab_data.npy").is_file()), None)
+    glove = next(
+        (
+            d
+            for d in (root / "glove", t2m / "glove", t2m.parent / "glove", t2m.parent.parent / "glove")
+            if (d / "our_vab_data.npy").is_file()
+        ),
+        None,
+    )
     files = {finest: Path("text_mot_match/model/finest.tar")}
     for name in ("mean.npy", "std.npy"):
         src = t2m / "Comp_v6_KLD005" / "meta" / name
@@ -275,8 +361,10 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
     if (t2m / "Comp_v6_KLD005" / "opt.txt").is_file():
         files[t2m / "Comp_v6_KLD005" / "opt.txt"] = Path("Comp_v6_KLD005/opt.txt")
     if glove is None:
-        raise InputFileError(f"--evaluator '{root}': no glove/our_vab_data.npy beside it (the GloVe files of "
-                             "MoMask's prepare/download_glove.sh)")
+        raise InputFileError(
+            f"--evaluator '{root}': no glove/our_vab_data.npy beside it (the GloVe files of "
+            "MoMask's prepare/download_glove.sh)"
+        )
     for name in ("our_vab_data.npy", "our_vab_words.pkl", "our_vab_idx.pkl"):
         if not (glove / name).is_file():
             raise InputFileError(f"--evaluator: '{glove / name}' is missing")
@@ -284,10 +372,14 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
     for src, rel in files.items():
         (dest / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(src, dest / rel)
-    return {"format": "official-humanml3d-evaluator", "path": dest.name, "source": str(t2m.resolve()),
-            "files": sorted(str(p) for p in files.values()),
-            "note": "the official Guo et al. 2022 evaluator in MoMask's checkpoints/t2m layout; load it with "
-                    "controlmm.eval.evaluator.official.load_official_evaluator(MODEL_DIR / 'evaluator')"}
+    return {
+        "format": "official-humanml3d-evaluator",
+        "path": dest.name,
+        "source": str(t2m.resolve()),
+        "files": sorted(str(p) for p in files.values()),
+        "note": "the official Guo et al. 2022 evaluator in MoMask's checkpoints/t2m layout; load it with "
+        "controlmm.eval.evaluator.official.load_official_evaluator(MODEL_DIR / 'evaluator')",
+    }
 
 
 def _compare_statistics(normalizer, meta: Path) -> str:
@@ -299,14 +391,22 @@ def _compare_statistics(normalizer, meta: Path) -> str:
     other = Normalizer.load(meta / "mean.npy", meta / "std.npy")
     mean_gap = float(np.abs(other.mean - normalizer.mean).max())
     std_gap = float(np.abs(other.std / normalizer.std - 1.0).max())
-    return (f"evaluator Comp_v6_KLD005/meta vs the VQ meta: max |mean diff| {mean_gap:.3g}, max |std ratio - 1| "
-            f"{std_gap:.3g} (the model directory uses the VQ meta)")
+    return (
+        f"evaluator Comp_v6_KLD005/meta vs the VQ meta: max |mean diff| {mean_gap:.3g}, max |std ratio - 1| "
+        f"{std_gap:.3g} (the model directory uses the VQ meta)"
+    )
 
 
-def import_official(momask: str | Path, out: str | Path, control: str | Path | None = None,
-                    evaluator: str | Path | None = None, clip_weights: str | None = None,
-                    clip_precision: str = "float16", force: bool = False,
-                    log: Callable[[str], None] | None = None) -> Path:
+def import_official(
+    momask: str | Path,
+    out: str | Path,
+    control: str | Path | None = None,
+    evaluator: str | Path | None = None,
+    clip_weights: str | None = None,
+    clip_precision: str = "float16",
+    force: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> Path:
     """Convert the official checkpoint folders into the model directory ``out`` (see the module docstring)."""
     from controlmm.models.model_dir import new_manifest, save_part, write_manifest, write_statistics
     from controlmm.motion.normalization import Normalizer
@@ -323,30 +423,38 @@ def import_official(momask: str | Path, out: str | Path, control: str | Path | N
     normalization = {
         "source": str(meta),
         "description": "the official RVQ-VAE folder's meta/mean.npy and meta/std.npy, unchanged (their std of dims "
-                       "0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
+        "0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
         "feat_bias": config.feat_bias,
         "feat_bias_times": config.feat_bias_times,
     }
     manifest = new_manifest(config, normalization)
     order = [p for p in ("tokenizer", "transformer", "residual", "control") if p in modules]
-    requires = {"transformer": ("tokenizer",), "residual": ("tokenizer",), "control": ("tokenizer", "transformer")}
+    requires = {
+        "transformer": ("tokenizer",),
+        "residual": ("tokenizer",),
+        "control": ("tokenizer", "transformer"),
+    }
     with atomic_dir(out) as tmp:
         write_statistics(tmp, normalizer)
         for name in order:
             entry = save_part(tmp, name, modules[name], config.storage_dtype)
-            entry["trained_on"] = {dep: manifest["parts"][dep]["sha256"] for dep in requires.get(name, ())
-                                   if dep in manifest["parts"]}
+            entry["trained_on"] = {
+                dep: manifest["parts"][dep]["sha256"]
+                for dep in requires.get(name, ())
+                if dep in manifest["parts"]
+            }
             entry["source"] = "official"
             manifest["parts"][name] = entry
             manifest["training"][name] = {"source": "official", **record["sources"][name]}
             log(f"{name}: {entry['parameters']:,} parameters from {record['sources'][name]['folder']}")
         if evaluator is not None:
             record["evaluator"] = _copy_evaluator(evaluator, tmp / "evaluator")
-            record["notes"].append(_compare_statistics(normalizer, tmp / "evaluator" / "Comp_v6_KLD005" / "meta"))
+            record["notes"].append(
+                _compare_statistics(normalizer, tmp / "evaluator" / "Comp_v6_KLD005" / "meta")
+            )
             log(f"evaluator: copied to {out / 'evaluator'}")
         manifest["official"] = record
         write_manifest(tmp, manifest)
     for note in record["notes"]:
         log(f"note: {note}")
     return out
-

@@ -66,8 +66,10 @@ def _t2m_dirs(root: Path) -> list[Path]:
 
 
 def _checkpoint(kind: str, folder: Path) -> Path | None:
-    return next((folder / "model" / name for name in CHECKPOINT_FILES[kind] if (folder / "model" / name).is_file()),
-                None)
+    return next(
+        (folder / "model" / name for name in CHECKPOINT_FILES[kind] if (folder / "model" / name).is_file()),
+        None,
+    )
 
 
 def _folder(kind: str, folder: Path) -> OfficialFolder:
@@ -90,19 +92,28 @@ def find_momask(root: str | Path) -> dict[str, OfficialFolder]:
         if exact is not None:
             found[kind] = _folder(kind, exact)
             continue
-        candidates = sorted({c for d in dirs for c in d.iterdir()
-                             if c.is_dir() and c.name.startswith(NAME_PREFIXES[kind]) and _checkpoint(kind, c)})
+        candidates = sorted(
+            {
+                c
+                for d in dirs
+                for c in d.iterdir()
+                if c.is_dir() and c.name.startswith(NAME_PREFIXES[kind]) and _checkpoint(kind, c)
+            }
+        )
         if len(candidates) != 1:
             what = "none" if not candidates else ", ".join(c.name for c in candidates)
             raise InputFileError(
                 f"--momask '{root}': expected one {kind} folder '{released}' (or one '{NAME_PREFIXES[kind]}*' folder "
-                f"with model/{CHECKPOINT_FILES[kind][0]}) in {', '.join(str(d) for d in dirs) or root}; found {what}")
+                f"with model/{CHECKPOINT_FILES[kind][0]}) in {', '.join(str(d) for d in dirs) or root}; found {what}"
+            )
         found[kind] = _folder(kind, candidates[0])
     meta = found["tokenizer"].folder / "meta"
     for name in ("mean.npy", "std.npy"):
         if not (meta / name).is_file():
-            raise InputFileError(f"'{meta / name}' is missing: the RVQ-VAE folder's normalisation (MoMask saves it "
-                                 "with the VQ checkpoint; the transformers use the same file)")
+            raise InputFileError(
+                f"'{meta / name}' is missing: the RVQ-VAE folder's normalisation (MoMask saves it "
+                "with the VQ checkpoint; the transformers use the same file)"
+            )
     return found
 
 
@@ -119,12 +130,19 @@ def find_control(path: str | Path) -> OfficialFolder:
         path = path.parent
     if _checkpoint("control", path):
         return _folder("control", path)
-    runs = sorted(c for c in path.iterdir() if c.is_dir() and _checkpoint("control", c)
-                  and not c.name.startswith(tuple(NAME_PREFIXES.values())))
+    runs = sorted(
+        c
+        for c in path.iterdir()
+        if c.is_dir() and _checkpoint("control", c) and not c.name.startswith(tuple(NAME_PREFIXES.values()))
+    )
     if len(runs) == 1:
         return _folder("control", runs[0])
     if runs:
-        raise InputFileError(f"--control '{path}' holds several control runs ({', '.join(r.name for r in runs)}); "
-                             "name one of them")
-    raise InputFileError(f"--control '{path}' has no model/latest.tar (expected a MaskControl run folder such as "
-                         f"'{RELEASED_CONTROL_NAMES['all']}')")
+        raise InputFileError(
+            f"--control '{path}' holds several control runs ({', '.join(r.name for r in runs)}); "
+            "name one of them"
+        )
+    raise InputFileError(
+        f"--control '{path}' has no model/latest.tar (expected a MaskControl run folder such as "
+        f"'{RELEASED_CONTROL_NAMES['all']}')"
+    )

@@ -31,8 +31,12 @@ from controlmm.errors import InputFileError
 
 CLIP_PREFIX = "clip_model."
 VQ_PREFIX = "vq_model."
-CONTROL_PREFIXES: tuple[str, ...] = ("seqTransEncoder_control.", "encoder_control.", "first_zero_linear.",
-                                     "mid_zero_linear.")
+CONTROL_PREFIXES: tuple[str, ...] = (
+    "seqTransEncoder_control.",
+    "encoder_control.",
+    "first_zero_linear.",
+    "mid_zero_linear.",
+)
 """Prefixes of the motion control model's tensors inside ``ct2m_transformer`` (-> ``control.pt``)."""
 
 CHECKPOINT_KEYS: dict[str, tuple[str, ...]] = {
@@ -60,15 +64,17 @@ def split_control_state(state: State) -> dict[str, State]:
     parts: dict[str, State] = {"tokenizer": {}, "transformer": {}, "control": {}}
     for key, value in without_clip(state).items():
         if key.startswith(VQ_PREFIX):
-            parts["tokenizer"][key[len(VQ_PREFIX):]] = value
+            parts["tokenizer"][key[len(VQ_PREFIX) :]] = value
         elif key.startswith(CONTROL_PREFIXES):
             parts["control"][key] = value
         else:
             parts["transformer"][key] = value
     if not parts["control"]:
-        raise InputFileError("the control checkpoint holds no motion control model tensors "
-                             f"({', '.join(p.rstrip('.') for p in CONTROL_PREFIXES)}); is it a MaskControl "
-                             "ct2m_transformer?")
+        raise InputFileError(
+            "the control checkpoint holds no motion control model tensors "
+            f"({', '.join(p.rstrip('.') for p in CONTROL_PREFIXES)}); is it a MaskControl "
+            "ct2m_transformer?"
+        )
     return parts
 
 
