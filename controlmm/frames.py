@@ -17,15 +17,23 @@ Everything that converts between the two frames calls this module, NumPy or torc
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
-import torch
+
+from controlmm.errors import ControlMMError
+
+if TYPE_CHECKING:
+    import torch
 
 # Axis permutation human (x, y, z) -> world (z, x, y).
 HUMAN_TO_WORLD_AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
-Array = np.ndarray | torch.Tensor
+Array: TypeAlias = "np.ndarray | torch.Tensor"
+"""A NumPy array or a torch tensor. torch is not imported here (it is heavy and a tensor can
+only exist once torch is loaded): :meth:`HumanToWorld._consts` finds it in ``sys.modules``."""
 
 
 def human_to_world_axes(points: Array) -> Array:
@@ -53,8 +61,6 @@ class HumanToWorld:
     translation: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0))
 
     def __post_init__(self) -> None:
-        from controlmm.errors import ControlMMError
-
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise ControlMMError(f"scale must be a positive number; got {self.scale}")
         if not math.isfinite(self.yaw) or not all(math.isfinite(v) for v in self.translation):
@@ -85,7 +91,8 @@ class HumanToWorld:
     def _consts(self, like: Array) -> tuple[Array, Array]:
         rot = self.rotation
         trans = np.asarray(self.translation)
-        if isinstance(like, torch.Tensor):
+        torch = sys.modules.get("torch")
+        if torch is not None and isinstance(like, torch.Tensor):
             return (
                 torch.as_tensor(rot, dtype=like.dtype, device=like.device),
                 torch.as_tensor(trans, dtype=like.dtype, device=like.device),

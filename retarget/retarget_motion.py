@@ -22,7 +22,7 @@ from threadpoolctl import ThreadpoolController
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
-from controlmm.motion.skeleton import FPS, NUM_JOINTS
+from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
@@ -61,6 +61,7 @@ def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray
         info = {}
     if isinstance(motion, Motion):
         joints, fps = motion.joints, motion.fps
+        info.setdefault("path", motion.metadata.get("source"))
         if motion.text:
             info["text"] = motion.text
     else:
@@ -72,6 +73,7 @@ def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray
         raise ShapeError("the motion has no frames")
     if not np.all(np.isfinite(joints)):
         raise ShapeError("motion joints contain NaN/inf values")
+    check_metre_scale(joints, f"motion '{info['path']}'" if info.get("path") else "motion")
     if not (np.isfinite(fps) and fps > 0):
         raise ShapeError(f"motion fps must be a positive number; got {fps}")
     info.update({"fps": float(fps), "frames": int(joints.shape[0])})

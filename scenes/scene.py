@@ -252,10 +252,14 @@ def _tracks(spec: mujoco.MjSpec, path: Path) -> dict[str, MocapTrack]:
 
 
 def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
-    """Attach the robot's body tree (names unchanged); return the name of its root body."""
+    """Attach the robot's body tree (names unchanged); return the name of its root body.
+
+    ``robot`` is a packaged robot name or the path of a robot MJCF (``.xml``).
+    """
     from retarget.robots import robot_mjcf
 
-    robot_spec = mujoco.MjSpec.from_file(str(robot_mjcf(robot)))
+    path = Path(robot) if str(robot).lower().endswith(".xml") else robot_mjcf(robot)
+    robot_spec = mujoco.MjSpec.from_file(str(path))
     default_opt, scene_opt, robot_opt = mujoco.MjSpec().option, spec.option, robot_spec.option
     for attr in (
         "timestep",

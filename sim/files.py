@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from controlmm.errors import InputFileError
+from controlmm.errors import InputFileError, ShapeError
+from controlmm.files import input_file, load_array
+from controlmm.motion.container import check_finite
 
 TRAJECTORY_SUFFIXES = (".npz", ".csv")
 
@@ -29,8 +31,7 @@ def load_qpos(path: str | Path, fps: float | None = None) -> tuple[np.ndarray, f
     suffix = path.suffix.lower()
     if suffix not in TRAJECTORY_SUFFIXES:
         raise InputFileError(f"unknown trajectory format '{path.suffix or path.name}'; allowed: .npz, .csv")
-    if not path.is_file():
-        raise InputFileError(f"trajectory file '{path}' does not exist")
+    path = input_file(path, "trajectory file")
     if suffix == ".csv":
         if fps is None:
             raise InputFileError(
@@ -45,24 +46,25 @@ def load_qpos(path: str | Path, fps: float | None = None) -> tuple[np.ndarray, f
                 f"'{path}' has {rows.shape[1]} columns; expected root xyz, qx qy qz qw, joints"
             )
         qpos = np.concatenate([rows[:, 0:3], rows[:, [6, 3, 4, 5]], rows[:, 7:]], axis=1)
-        return qpos, float(fps), None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if "qpos" not in data.files:
-                raise InputFileError(
-                    f"'{path}' has no 'qpos' array; found: {', '.join(data.files) or 'none'}"
-                )
+        rate, robot = float(fps), None
+    else:
+        data = load_array(path, "trajectory file")
+        if not isinstance(data, dict) or "qpos" not in data:
+            found = ", ".join(data) if isinstance(data, dict) else "a single array"
+            raise InputFileError(f"'{path}' has no 'qpos' array; found: {found or 'none'}")
+        try:
             qpos = np.asarray(data["qpos"], dtype=np.float64)
-            rate = (
-                fps
-                if fps is not None
-                else (float(np.asarray(data["fps"]).reshape(-1)[0]) if "fps" in data.files else None)
-            )
-            robot = str(data["robot"]) if "robot" in data.files else None
-    except InputFileError:
-        raise
-    except (ValueError, OSError) as exc:
-        raise InputFileError(f"cannot read '{path}': {exc}") from None
-    if rate is None:
-        raise InputFileError(f"'{path}' has no 'fps' entry: pass --fps")
+            file_fps = float(np.asarray(data["fps"]).reshape(-1)[0]) if "fps" in data else None
+        except (ValueError, TypeError, IndexError) as exc:
+            raise InputFileError(f"cannot read '{path}': {exc}") from None
+        rate = fps if fps is not None else file_fps
+        robot = str(data["robot"]) if "robot" in data else None
+        if rate is None:
+            raise InputFileError(f"'{path}' has no 'fps' entry: pass --fps")
+    if qpos.ndim != 2 or len(qpos) < 1:
+        raise ShapeError(f"trajectory file '{path}': qpos must be (T, nq) with T >= 1; got {qpos.shape}")
+    try:
+        check_finite(qpos, "qpos")
+    except ShapeError as exc:
+        raise ShapeError(f"trajectory file '{path}': {exc}") from None
     return qpos, float(rate), robot

@@ -1,4 +1,9 @@
-"""Shared fixtures: the real HumanML3D sample in ``../shared/data/humanml3d``."""
+"""Shared fixtures: the real HumanML3D sample in ``../shared/data/humanml3d``.
+
+The sample is beside the repository on development machines and in CI, not in a user's clone:
+there the tests that need it are skipped with a one-line reason. CI sets
+``CONTROLMM_REQUIRE_SHARED=1`` (``.ci/run``), which turns a missing sample into a failure.
+"""
 
 from __future__ import annotations
 
@@ -17,7 +22,10 @@ SAMPLE_ID = "012314"
 @pytest.fixture(scope="session")
 def humanml3d_dir() -> Path:
     if not (HUMANML3D / "new_joint_vecs" / f"{SAMPLE_ID}.npy").is_file():
-        pytest.fail(f"the real HumanML3D sample is missing under {HUMANML3D} (set CONTROLMM_SHARED)")
+        reason = f"the real HumanML3D sample is not under {HUMANML3D} (set CONTROLMM_SHARED)"
+        if os.environ.get("CONTROLMM_REQUIRE_SHARED") == "1":
+            pytest.fail(reason)
+        pytest.skip(reason)
     return HUMANML3D
 
 

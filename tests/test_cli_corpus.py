@@ -4,26 +4,28 @@ from __future__ import annotations
 
 import json
 
-from controlmm.cli.main import main
+from tests.cli_helpers import run_cli
 
 
 def test_corpus_then_probes_end_to_end(tmp_path, capsys):
     out = tmp_path / "c"
     assert (
-        main(["corpus", "--out", str(out), "--clips", "6", "--seed", "3", "--workers", "1", "--quiet"]) == 0
+        run_cli(["corpus", "--out", str(out), "--clips", "6", "--seed", "3", "--workers", "1", "--quiet"])
+        == 0
     )
     assert "wrote" in capsys.readouterr().out
     assert len((out / "all.txt").read_text().split()) == 6
     report = tmp_path / "probes.json"
     assert (
-        main(["eval", "probes", "--data", str(out), "--split", "all", "--quiet", "--json", str(report)]) == 0
+        run_cli(["eval", "probes", "--data", str(out), "--split", "all", "--quiet", "--json", str(report)])
+        == 0
     )
     text = capsys.readouterr().out
     assert "100.0%" in text.splitlines()[-2] or "100.0%" in text
     assert json.loads(report.read_text())["rate"] == 1.0
     # A corpus directory may be regenerated in place; anything else is never replaced.
     assert (
-        main(
+        run_cli(
             [
                 "corpus",
                 "--out",
@@ -47,7 +49,7 @@ def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
     tokenizer: the shipped one reproduces walks (their probes pass), and the report says what it ran."""
     out = tmp_path / "c"
     assert (
-        main(
+        run_cli(
             [
                 "corpus",
                 "--out",
@@ -68,7 +70,7 @@ def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
     capsys.readouterr()
     report = tmp_path / "tok.json"
     assert (
-        main(
+        run_cli(
             [
                 "eval",
                 "probes",
@@ -90,7 +92,7 @@ def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
     assert "through the tokenizer" in data["source"] and "all layer" in data["source"]
     assert data["families"]["walk"]["passed"] == data["families"]["walk"]["total"] > 0
     assert (
-        main(
+        run_cli(
             [
                 "eval",
                 "probes",
@@ -115,7 +117,7 @@ def test_probes_through_the_shipped_tokenizer(tmp_path, capsys):
         ["--model", "default", "--tokenizer-only", "--layers", "9"],
         ["--model", "default", "--layers", "2"],
     ):
-        assert main(["eval", "probes", "--data", str(out), "--quiet", *argv]) == 2, argv
+        assert run_cli(["eval", "probes", "--data", str(out), "--quiet", *argv]) == 2, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "error" in err, (argv, err)
 
@@ -136,9 +138,9 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
         ["eval", "probes", "--data", str(tmp_path)],
     ]
     for argv in bad:
-        assert main(argv) == 2, argv
+        assert run_cli(argv) == 2, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "error" in err, (argv, err)
     assert (other / "thesis.tex").read_text() == "precious"
     assert not (tmp_path / "o").exists()
-    assert main(["eval"]) == 2
+    assert run_cli(["eval"]) == 2

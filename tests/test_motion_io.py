@@ -68,7 +68,7 @@ def test_bad_inputs(tmp_path):
     with pytest.raises(ShapeError, match=r"\(10, 5\)"):
         load_motion(tmp_path / "bad.npy")
     (tmp_path / "corrupt.npz").write_bytes(b"not a zip")
-    with pytest.raises(InputFileError, match="cannot read"):
+    with pytest.raises(InputFileError, match="not a valid NPZ file"):
         load_motion(tmp_path / "corrupt.npz")
     with pytest.raises(ShapeError, match="NaN"):
         Motion(np.full((3, 22, 3), np.nan))

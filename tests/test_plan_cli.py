@@ -7,6 +7,7 @@ import json
 import pytest
 
 from controlmm.cli.main import main
+from tests.cli_helpers import run_cli
 from controlmm.control.spec import ControlSpec
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from scenes import load_scene
@@ -41,7 +42,7 @@ BLOCKED_START = """<mujoco model="blocked">
 )
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
     out = tmp_path / "plan"
-    assert main(["plan", "--out", str(out), "--no-render", "--no-progress", *args]) == 2
+    assert run_cli(["plan", "--out", str(out), "--no-render", "--no-progress", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err and "Traceback" not in err
     assert not out.exists()

@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from controlmm.cli.main import SUBCOMMANDS, main
+from controlmm.cli.main import SUBCOMMANDS
+from tests.cli_helpers import run_cli
 
 
 def run(*args):
@@ -18,7 +19,7 @@ def run(*args):
 
 def test_scene_is_a_subcommand_and_list_names_every_scene(capsys):
     assert "scene" in SUBCOMMANDS
-    assert main(["scene", "list", "-v"]) == 0
+    assert run_cli(["scene", "list", "-v"]) == 0
     out = capsys.readouterr().out
     for name in (
         "empty",
@@ -47,14 +48,16 @@ def test_show_falls_back_to_matplotlib_without_gl(tmp_path, capsys, monkeypatch)
         raise RuntimeError("no OpenGL context")
 
     monkeypatch.setattr(mujoco, "Renderer", no_gl)  # as on a machine where no GL backend loads
-    assert main(["scene", "show", "moving_obstacle", "--out", str(tmp_path / "m.png"), "--time", "2.5"]) == 0
+    assert (
+        run_cli(["scene", "show", "moving_obstacle", "--out", str(tmp_path / "m.png"), "--time", "2.5"]) == 0
+    )
     out = capsys.readouterr().out
     assert "MuJoCo rendering failed" in out and "no OpenGL context" in out and "matplotlib" in out
     assert (tmp_path / "m.png").stat().st_size > 10_000
 
 
 def test_sdf_slice(tmp_path, capsys):
-    assert main(["scene", "sdf", "low_beam", "--out", str(tmp_path / "s.png"), "--height", "1.05"]) == 0
+    assert run_cli(["scene", "sdf", "low_beam", "--out", str(tmp_path / "s.png"), "--height", "1.05"]) == 0
     assert (tmp_path / "s.png").stat().st_size > 10_000
 
 
@@ -73,7 +76,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
         '<mujoco>\n<worldbody>\n<geom type="boxx" size="1 1 1"/>\n</worldbody>\n</mujoco>\n'
     )
     before = set(tmp_path.iterdir())
-    assert main([a.format(d=tmp_path) for a in args]) == 2
+    assert run_cli([a.format(d=tmp_path) for a in args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0], err
     assert set(tmp_path.iterdir()) == before

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force
 
 HELP = """Convert a motion between formats (chosen by file suffix):
   .npz  this project's Motion file (joints, fps, features, text, metadata)
@@ -35,16 +39,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--process", action="store_true", help="run the HumanML3D processing on joint input (adds features)"
     )
+    add_force(p, "OUTPUT")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from controlmm.motion import load_motion, save_motion
-    from controlmm.motion.io import check_output_format
+    # heavy (torch): imported when the command runs, so that --help stays fast
+    from controlmm.motion.io import check_output_format, load_motion, save_motion
 
     check_output_format(Path(args.output))
+    check_output_file(args.output, force=args.force)
     motion = load_motion(args.input)
     if args.process:
         motion = motion.with_features()

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.atomic import check_output_dir
+from controlmm.cli.args import add_force, integer, seed
+from controlmm.errors import ControlMMError
+
 HELP = """Generate the procedural motion corpus in HumanML3D format: kinematically planned
 human motion (foot placement + two-bone IK on the HumanML3D skeleton, 20 fps, 2-9.8 s) of
 32 families (walk, jog, run, walk backwards, sidestep, turns, circles, curves, zigzag,
@@ -13,7 +17,8 @@ punches, claps and compositions), each clip with >= 3 captions whose words match
 Writes DIR/new_joint_vecs, new_joints, texts, train/val/test/all.txt, Mean.npy, Std.npy,
 plus meta/<id>.json (family, parameters, captions with their claims) and corpus.json.
 Test-split captions use held-out phrasings. The output is the same for a given seed and
-clip count, whatever the number of workers; DIR appears only when complete.
+clip count, whatever the number of workers; DIR appears only when complete. DIR may be
+new, empty or a previous corpus; anything else needs --force.
 
 examples:
   controlmm corpus --out corpus --clips 5000 --seed 0
@@ -30,20 +35,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", help="output dataset directory")
     p.add_argument(
-        "--clips", type=int, default=6400, help="number of clips (default 6400, the default corpus)"
+        "--clips", type=integer(1), default=6400, help="number of clips (default 6400, the default corpus)"
     )
-    p.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
-    p.add_argument("--workers", type=int, default=0, help="worker processes (default: all CPU cores)")
+    p.add_argument("--seed", type=seed, default=0, help="corpus seed (default 0)")
+    p.add_argument(
+        "--workers", type=integer(0), default=0, help="worker processes (default 0: all CPU cores)"
+    )
     p.add_argument("--families", default=None, help="comma-separated family names (default: all)")
     p.add_argument("--captions", type=int, default=3, help="captions per clip (>= 3, default 3)")
     p.add_argument("--list", action="store_true", help="list the motion families and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_force(p, "--out whatever it holds (never a regular file)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    # heavy (torch): imported when the command runs, so that --help stays fast
     from controlmm.corpus import CorpusConfig, family_names, get_family, write_corpus
-    from controlmm.errors import ControlMMError
 
     if args.list:
         for name in family_names():
@@ -51,17 +59,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise ControlMMError("--out is required (the dataset directory to write)")
-    if args.clips < 1:
-        raise ControlMMError(f"--clips must be >= 1; got {args.clips}")
-    if args.workers < 0:
-        raise ControlMMError(f"--workers must be >= 0 (0 = all cores); got {args.workers}")
+    check_output_dir(args.out, kind="corpus", force=args.force)
     families = None
     if args.families:
         families = tuple(f.strip() for f in args.families.split(",") if f.strip())
         for name in families:
             get_family(name)
     config = CorpusConfig(clips=args.clips, seed=args.seed, families=families, captions=args.captions)
-    summary = write_corpus(args.out, config, workers=args.workers, progress=not args.quiet)
+    summary = write_corpus(args.out, config, workers=args.workers, progress=not args.quiet, force=args.force)
     splits = ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
     print(
         f"wrote {args.out}: {summary['clips']} clips ({splits}), {summary['frames']} frames, "

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.atomic import check_output_file, write_text
+from controlmm.cli.args import add_force, add_threads, integer, positive, seed
+
 HELP = """Evaluate spatial control the way OmniControl and ControlMM do: targets taken from held-out motions
 (the test split of --data, default the data the model was trained on), controlled joints at 1, 2 or 5
 frames or 25 % / 100 % of the frames (--density 1, 2, 5, 49, 196; default: the five in turn), one
@@ -59,13 +62,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="all",
         help="controlled frames: 1, 2, 5, 49 (25%%), 196 (100%%) or all (the five in turn; default)",
     )
-    p.add_argument("--samples", type=int, default=50, help="cases per joint mode (default 50)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the cases and of generation (default 0)")
+    p.add_argument("--samples", type=integer(1), default=50, help="cases per joint mode (default 50)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the cases and of generation (default 0)")
     p.add_argument(
-        "--batch-size", type=int, default=1, help="cases generated together (default 1: per-motion timings)"
+        "--batch-size",
+        type=integer(1),
+        default=1,
+        help="cases generated together (default 1: per-motion timings)",
     )
     p.add_argument(
-        "--tolerance", type=float, default=None, metavar="CM", help="editing tolerance in cm (default 1)"
+        "--tolerance", type=positive, default=None, metavar="CM", help="editing tolerance in cm (default 1)"
     )
     p.add_argument("--no-control-model", action="store_true", help="editing only, without the control model")
     p.add_argument(
@@ -83,7 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--repeats",
-        type=int,
+        type=integer(1),
         default=1,
         help="draws of the cases (seed + r), for mean and 95%% CI of every column (default 1)",
     )
@@ -103,7 +109,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="add a row generated without control model or editing (errors against the first mode's targets)",
     )
     p.add_argument("--json", default=None, help="also write the per-case results to this JSON file")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_force(p, "--json")
+    add_threads(p, None)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -158,26 +165,17 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from controlmm.atomic import write_text
     from controlmm.editing import editing_preset
     from controlmm.errors import ControlMMError
     from controlmm.generate import load_model
 
     modes = parse_modes(args.joints)
     densities = parse_densities(args.density)
-    if args.samples < 1:
-        raise ControlMMError(f"--samples must be at least 1; got {args.samples}")
-    if args.batch_size < 1:
-        raise ControlMMError(f"--batch-size must be at least 1; got {args.batch_size}")
-    if args.repeats < 1:
-        raise ControlMMError(f"--repeats must be at least 1; got {args.repeats}")
     if args.samples < 2 and not args.no_quality:
         raise ControlMMError("the quality columns need --samples 2 or more (or pass --no-quality)")
-    if args.tolerance is not None and not args.tolerance > 0:
-        raise ControlMMError(f"--tolerance must be positive (cm); got {args.tolerance}")
+    if args.json:
+        check_output_file(args.json, force=args.force)
     if args.threads is not None:
-        if args.threads < 1:
-            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
         torch.set_num_threads(args.threads)
     model = load_model(args.model)
     data = args.data or default_data(model)

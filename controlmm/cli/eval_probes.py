@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.atomic import check_output_file, write_text
+from controlmm.cli.args import add_force, integer, seed
+
 HELP = """Check that motions do what their captions say, family by family, with simple geometry
 in the person's frame (e.g. "walks backwards": the pelvis moves against the facing
 direction; "waves right hand": the right wrist is above the head and swings side to side;
@@ -49,16 +52,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--samples",
-        type=int,
+        type=integer(1),
         default=None,
         metavar="N",
         help="at most N captions per family (a seeded random choice; default all)",
     )
     p.add_argument("--families", default=None, help="comma-separated families to check (default all)")
     p.add_argument(
-        "--seed", type=int, default=0, help="seed of the caption choice and the generation (default 0)"
+        "--seed", type=seed, default=0, help="seed of the caption choice and the generation (default 0)"
     )
-    p.add_argument("--batch-size", type=int, default=32, help="captions generated together (default 32)")
+    p.add_argument(
+        "--batch-size", type=integer(1), default=32, help="captions generated together (default 32)"
+    )
     p.add_argument("--device", default="cpu", help="cpu or cuda, for --model (default cpu)")
     p.add_argument(
         "--tokenizer-only",
@@ -66,12 +71,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --model: probe the ground truth reconstructed by the model's tokenizer",
     )
     p.add_argument(
-        "--layers", type=int, default=None, help="with --tokenizer-only: quantizer layers kept (default all)"
+        "--layers",
+        type=integer(1),
+        default=None,
+        help="with --tokenizer-only: quantizer layers kept (default all)",
     )
     p.add_argument(
         "--json", default=None, help="also write the report (with failed checks) to this JSON file"
     )
-    p.add_argument("--show-failures", type=int, default=10, help="print up to N failed captions (default 10)")
+    add_force(p, "--json")
+    p.add_argument(
+        "--show-failures", type=integer(0), default=10, help="print up to N failed captions (default 10)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -79,11 +90,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
     from controlmm.eval.model_probes import generated_motions, select_cases, tokenized_motions
     from controlmm.eval.probes import evaluate, ground_truth, list_cases
 
+    if args.json:
+        check_output_file(args.json, force=args.force)
     if (args.tokenizer_only or args.layers is not None) and args.model is None:
         raise ControlMMError("--tokenizer-only and --layers need --model")
     if args.layers is not None and not args.tokenizer_only:

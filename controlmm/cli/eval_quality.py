@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from controlmm.atomic import check_output_file, write_text
+from controlmm.cli.args import add_force, add_threads, integer, seed
+
 HELP = """Evaluate text-to-motion quality as the paper does: R-precision top-1/2/3 (groups of 32), FID,
 MM-Dist, Diversity (300 pairs) and Multimodality, measured by a text-motion evaluator, over REPEATS
 evaluation passes of a split (random caption, length and crop per sample), reported as mean and 95%
@@ -16,7 +19,7 @@ FID is between two independent passes).
 or checkpoints/t2m folder with text_mot_match/, Comp_v6_KLD005/meta/ and glove/ beside it).
 
 examples:
-  controlmm eval quality --data /work/data/corpus-default --repeats 10
+  controlmm eval quality --data data/corpus-default --repeats 10
   controlmm eval quality --model MODEL_DIR --data DIR --split test --repeats 3 --json quality.json
   controlmm eval quality --model A --model B --data DIR          (one row per model)
   controlmm eval quality --real-only --data HumanML3D/ --evaluator momask-codes/"""
@@ -42,38 +45,43 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--split", default="test", choices=("train", "val", "test"), help="split to evaluate (default test)"
     )
-    p.add_argument("--repeats", type=int, default=10, help="evaluation passes (default 10, as the paper)")
+    p.add_argument(
+        "--repeats", type=integer(1), default=10, help="evaluation passes (default 10, as the paper)"
+    )
     p.add_argument(
         "--evaluator", default=None, metavar="E", help="evaluator directory (default: the shipped one)"
     )
     p.add_argument(
         "--limit",
-        type=int,
+        type=integer(2),
         default=None,
         metavar="N",
         help="at most N samples per pass, whole groups of 32 (default: the whole split)",
     )
     p.add_argument(
         "--mm-texts",
-        type=int,
+        type=integer(0),
         default=32,
         help="captions for Multimodality per pass (default 32; paper 100; 0 = skip)",
     )
     p.add_argument(
         "--mm-repeats",
-        type=int,
+        type=integer(1),
         default=12,
         help="generations per caption for Multimodality (default 12; paper 30)",
     )
     p.add_argument(
-        "--mm-pairs", type=int, default=10, help="pairs per caption for Multimodality (default 10)"
+        "--mm-pairs", type=integer(1), default=10, help="pairs per caption for Multimodality (default 10)"
     )
     p.add_argument("--real-only", action="store_true", help="only the Real row (no model needed)")
-    p.add_argument("--seed", type=int, default=0, help="seed of pass r is SEED + r (default 0)")
-    p.add_argument("--batch-size", type=int, default=64, help="prompts generated together (default 64)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of pass r is SEED + r (default 0)")
+    p.add_argument(
+        "--batch-size", type=integer(1), default=64, help="prompts generated together (default 64)"
+    )
     p.add_argument("--device", default="cpu", help="cpu or cuda (default cpu)")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(p, None)
     p.add_argument("--json", default=None, help="also write every per-pass value to this JSON file")
+    add_force(p, "--json")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -84,21 +92,13 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
     from controlmm.eval.evaluator import load_evaluator, model_evaluator
     from controlmm.eval.quality import EvalSet, evaluate_quality, model_generator
 
-    if args.repeats < 1:
-        raise ControlMMError(f"--repeats must be at least 1; got {args.repeats}")
-    if args.limit is not None and args.limit < 2:
-        raise ControlMMError(f"--limit must be at least 2; got {args.limit}")
-    for name in ("mm_texts", "mm_repeats", "mm_pairs", "batch_size"):
-        if getattr(args, name) < (0 if name == "mm_texts" else 1):
-            raise ControlMMError(f"--{name.replace('_', '-')} must be positive; got {getattr(args, name)}")
+    if args.json:
+        check_output_file(args.json, force=args.force)
     if args.threads is not None:
-        if args.threads < 1:
-            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
         torch.set_num_threads(args.threads)
     if args.real_only and args.model:
         raise ControlMMError("--real-only evaluates no model; drop --model or --real-only")

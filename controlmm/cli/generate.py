@@ -3,6 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force, add_threads, integer, number, positive, seed
+from controlmm.errors import ControlMMError
+
+if TYPE_CHECKING:
+    from controlmm.control import ControlSpec
+    from controlmm.generate import DecodeOptions, MotionModel
 
 HELP = """Generate motion from text with the masked motion model (MoMask base: iterative masked decoding
 of the base token layer, residual layers, RVQ-VAE decoder), optionally under spatial control
@@ -36,9 +47,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     length.add_argument("--seconds", type=float, default=None, help="length in seconds, 2.0..9.8 (default 6)")
     length.add_argument("--frames", type=int, default=None, help="length in frames at 20 fps, 40..196")
     p.add_argument(
-        "--seed", type=int, default=None, help="random seed (default: random, stored in the output)"
+        "--seed",
+        type=seed,
+        default=None,
+        help="random seed, 0 to 2^63 - 1 (default: random, stored in the output)",
     )
     p.add_argument("--out", required=True, help="output .npz")
+    add_force(p, "--out and --plot files")
     p.add_argument("--plot", default=None, help="also write a plot/animation (.png, .gif or .mp4)")
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
@@ -53,11 +68,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--topk",
-        type=float,
+        type=number(0.0, below=1.0),
         default=0.9,
         help="top-k filter threshold: keep ceil((1 - topk) x 512) logits (default 0.9)",
     )
-    p.add_argument("--iterations", type=int, default=10, help="masked-decoding iterations (default 10)")
+    p.add_argument(
+        "--iterations", type=integer(1), default=10, help="masked-decoding iterations (default 10)"
+    )
     p.add_argument("--no-residual", action="store_true", help="decode the base layer only")
     p.add_argument(
         "--residual-layers",
@@ -90,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     ctrl.add_argument(
         "--tolerance",
-        type=float,
+        type=positive,
         default=None,
         metavar="CM",
         help="stop editing when every constraint is this close, in cm (default 1)",
@@ -120,53 +137,47 @@ def register(sub: argparse._SubParsersAction) -> None:
     ctrl.add_argument(
         "--no-control-model", action="store_true", help="do not use the motion control model (editing only)"
     )
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(p, None)
     p.set_defaults(func=run)
 
 
-def output_paths(out: str, count: int, suffixes: tuple[str, ...]) -> list[str]:
-    """``out`` for one prompt; ``stem_i.suffix`` for several."""
-    from pathlib import Path
-
-    from controlmm.errors import ControlMMError
-
+def output_paths(out: str, count: int, suffixes: tuple[str, ...], force: bool) -> list[str]:
+    """``out`` for one prompt; ``stem_i.suffix`` for several; each checked writable (and new
+    unless ``force``)."""
     path = Path(out)
     if path.suffix.lower() not in suffixes:
         raise ControlMMError(f"unknown output format '{path.suffix or out}'; allowed: {', '.join(suffixes)}")
-    if count == 1:
-        return [out]
-    return [str(path.with_name(f"{path.stem}_{i}{path.suffix}")) for i in range(count)]
+    outs = (
+        [out] if count == 1 else [str(path.with_name(f"{path.stem}_{i}{path.suffix}")) for i in range(count)]
+    )
+    for name in outs:
+        check_output_file(name, force=force)
+    return outs
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    # heavy (torch, the models): imported when the command runs, so that --help stays fast
+    import torch
 
-    from controlmm.errors import ControlMMError
+    from controlmm.control import ControlSpec
+    from controlmm.control.reach import reach_warnings
     from controlmm.generate import DecodeOptions, generate, load_model
     from controlmm.motion import save_motion
+    from controlmm.motion.plot import plot_or_animate
     from controlmm.text.base import check_texts
 
     texts = check_texts(args.text)
-    outs = output_paths(args.out, len(texts), (".npz",))
-    plots = output_paths(args.plot, len(texts), (".png", ".gif", ".mp4")) if args.plot else []
-    for path in outs + plots:
-        if not Path(path).parent.is_dir():
-            raise ControlMMError(f"cannot write '{path}': directory '{Path(path).parent}' does not exist")
+    outs = output_paths(args.out, len(texts), (".npz",), args.force)
+    plots = output_paths(args.plot, len(texts), (".png", ".gif", ".mp4"), args.force) if args.plot else []
     if args.threads is not None:
-        if args.threads < 1:
-            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
-        import torch
-
         torch.set_num_threads(args.threads)
-    if args.topk is not None and not 0.0 <= args.topk < 1.0:
-        raise ControlMMError(f"--topk must be in [0, 1); got {args.topk}")
     spec = None
     if args.control is not None:
-        from controlmm.control import ControlSpec
-
         spec = ControlSpec.load(args.control)
         if not spec.constraints:
             raise ControlMMError(f"control spec '{args.control}' has no constraints")
+        for warning in spec.pinned_frame0_warnings() + sum(reach_warnings(spec), []):
+            print(f"controlmm: warning: {warning}", file=sys.stderr)
     else:
         for flag, value in (
             ("--preset", args.preset),
@@ -202,24 +213,27 @@ def run(args: argparse.Namespace) -> int:
             f"'{motion.text}'"
         )
         if plots:
-            from controlmm.motion.plot import plot_or_animate
-
             plot_or_animate(motion, plots[i])
             print(f"wrote {plots[i]}")
     return 0
 
 
-def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
+def _run_controlled(
+    args: argparse.Namespace,
+    model: MotionModel,
+    texts: list[str],
+    spec: ControlSpec,
+    options: DecodeOptions,
+    outs: list[str],
+    plots: list[str],
+) -> int:
     """``generate --control``: ControlMM generation, per-constraint errors printed and stored."""
-    import sys
-
+    # heavy (torch): imported when the command runs, so that --help stays fast
     from controlmm.editing import editing_preset
-    from controlmm.errors import ControlMMError
     from controlmm.generate import generate_controlled
     from controlmm.motion import save_motion
+    from controlmm.motion.plot import plot_or_animate
 
-    if args.tolerance is not None and not args.tolerance > 0:
-        raise ControlMMError(f"--tolerance must be positive (cm); got {args.tolerance}")
     preset = args.preset or "accurate"
     config = editing_preset(preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
@@ -228,8 +242,6 @@ def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
         contact_steps=args.contact_steps,
         control_model=False if args.no_control_model else None,
     )
-    for warning in spec.pinned_frame0_warnings():
-        print(f"controlmm: warning: {warning}", file=sys.stderr)
     if config.control_model and "control" not in model.parts:
         print(
             f"controlmm: warning: model '{model.directory}' has no motion control model (control.pt); "
@@ -263,7 +275,7 @@ def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
             f"{steps}, codebook editing {record.codebook_steps} steps, {record.seconds:.1f} s"
         )
         width = max(len(spec.constraints[k].joint_name) for k in range(len(errors)))
-        for c, e in zip(spec.constraints, errors):
+        for c, e in zip(spec.constraints, errors, strict=True):
             flag = "" if e <= tolerance_cm else f"  (over {tolerance_cm:g} cm)"
             print(f"  {c.joint_name:<{width}}  frame {c.frame:>3}  error {e:6.2f} cm{flag}")
         over = int((errors > tolerance_cm).sum())
@@ -276,8 +288,6 @@ def _run_controlled(args, model, texts, spec, options, outs, plots) -> int:
             )
         )
         if plots:
-            from controlmm.motion.plot import plot_or_animate
-
             plot_or_animate(motion, plots[i])
             print(f"wrote {plots[i]}")
     return 0

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import platform
+
+from controlmm import __version__
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,13 +27,11 @@ def _version(module: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import platform
-
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm import __version__
     from controlmm.assets import CHECKPOINT_ROOT, available_models
-    from retarget.robots import available_robots
+    from retarget import available_robots, packaged_mappings
 
     rows = [("controlmm", __version__), ("python", platform.python_version())]
     rows += [(m, _version(m)) for m in ("torch", "mujoco", "numpy", "scipy", "trimesh", "matplotlib")]
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     rows.append(("device", device))
     models = available_models()
     rows.append(("models", ", ".join(models) if models else f"none embedded under {CHECKPOINT_ROOT}"))
-    robots = available_robots()
+    # the robots retarget, plan and scene show accept by name: a shipped mapping and the MJCF installed
+    robots = sorted(set(packaged_mappings()) & set(available_robots()))
     rows.append(
         (
             "robots",

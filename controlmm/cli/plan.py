@@ -4,6 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
+
+from controlmm.atomic import check_output_dir
+from controlmm.cli.args import add_force, add_threads
+from controlmm.cli.gl import import_mujoco
+
+if TYPE_CHECKING:
+    from controlmm.pipeline import PlanResult
 
 HELP = """Plan a humanoid robot motion in a MuJoCo scene, check it in simulation and export it.
 
@@ -11,7 +19,8 @@ Generates a human motion from the prompt with ControlMM (spatial constraints met
 codebook editing, obstacles avoided through SDF losses of the scene), retargets it to the robot,
 replays it in MuJoCo (obstacle/floor penetration, self-collision, joint limits, foot sliding,
 inverse dynamics) and, when a check fails, turns every failure into an extra editing loss and
-generates again, up to --rounds times. Writes into OUT (complete or not at all):
+generates again, up to --rounds times. Writes into OUT (complete or not at all; OUT may be new,
+empty or a previous plan output, anything else needs --force):
 
   motion.npz        human motion (HumanML3D joints/features, 20 fps)
   robot.csv         root xyz, root quaternion xyzw, joint angles (rad) per frame (Unitree/BeyondMimic)
@@ -41,7 +50,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--out", required=True, help="output directory (replaced atomically when complete)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output directory: new, empty or a previous plan's (replaced atomically when complete)",
+    )
     p.add_argument("--scene", default=None, help="packaged scene name or scene .xml (default: table)")
     p.add_argument("--text", default=None, help="prompt (default: the scene's suggested prompt)")
     p.add_argument(
@@ -64,40 +77,42 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="motion length, 2 to 9.8 s (default: 6 s; with constraints, 0.5 s past the last one, "
         "at least 2 s and at most 6 s unless a constraint comes later)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--rounds", type=int, default=3, help="feedback rounds after the first try (default 3)")
+    p.add_argument("--seed", type=int, default=0, help="random seed, 0 to 2^63 - 1 (default 0)")
+    p.add_argument(
+        "--rounds", type=int, default=3, help="feedback rounds after the first try, 0 to 10 (default 3)"
+    )
     p.add_argument("--preset", default="accurate", help="editing preset: fast, medium, accurate (default)")
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
-    p.add_argument("--fps", type=float, default=50.0, help="robot trajectory rate in Hz (default 50)")
+    p.add_argument(
+        "--fps", type=float, default=50.0, help="robot trajectory rate, 10 to 1000 Hz (default 50)"
+    )
     p.add_argument(
         "--safe-distance",
         type=float,
         default=0.03,
         help="clearance to keep from obstacles in metres (default 0.03)",
     )
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=1,
-        help="torch CPU threads (default 1: the editing loops are small and sequential; on a busy "
-        "machine more threads spin-wait and run slower)",
+    add_threads(
+        p,
+        1,
+        "; the editing loops are small and sequential: on a busy machine more threads spin-wait "
+        "and run slower",
     )
     p.add_argument("--no-render", action="store_true", help="skip render.mp4 (the slowest output)")
+    p.add_argument("--no-plots", action="store_true", help="skip plots/*.png")
+    add_force(p, "OUT whatever it holds (never a regular file)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines or bars")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.gl import import_mujoco
-
+    check_output_dir(args.out, kind="plan", force=args.force, make_parents=True)  # before any work
     import_mujoco("egl")
+    # heavy (torch, MuJoCo, the models): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm.errors import ControlMMError
     from controlmm.pipeline import DEFAULT_SCENE, PlanConfig, plan, write_plan
 
-    if args.threads < 1:
-        raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
     torch.set_num_threads(args.threads)
     config = PlanConfig(
         scene=args.scene or DEFAULT_SCENE,
@@ -112,26 +127,27 @@ def run(args: argparse.Namespace) -> int:
         fps=args.fps,
         safe_distance_m=args.safe_distance,
         render=not args.no_render,
+        plots=not args.no_plots,
         timeline=args.timeline,
     )
     progress = not args.no_progress
     result = plan(config, progress=progress)
-    backend = write_plan(result, args.out, progress=progress)
+    backend = write_plan(result, args.out, progress=progress, force=args.force)
     print(result.report.summary())
     rounds = len(result.rounds)
     print(
         f"plan: {'PASSED' if result.passed else 'FAILED'} in round {result.best} of {rounds} "
         f"({'passed' if result.rounds[0].passed else 'failed'} before feedback), {result.seconds:.1f} s; "
         f"wrote {args.out}/ (motion.npz, robot.csv, robot.npz, report.json"
-        f"{', render.mp4 (' + backend + ')' if backend else ''}, plots/)"
+        f"{', render.mp4 (' + backend + ')' if backend else ''}{'' if args.no_plots else ', plots/'})"
     )
-    for name, err in zip(_constraint_names(result), result.final.constraint_errors_m):
+    for name, err in zip(_constraint_names(result), result.final.constraint_errors_m, strict=True):
         print(f"  constraint {name}: {err * 100:.2f} cm")
     sys.stdout.flush()
     return 0 if result.passed else 1
 
 
-def _constraint_names(result) -> list[str]:
+def _constraint_names(result: PlanResult) -> list[str]:
     if result.spec is None:
         return []
     return [f"{c.joint_name}@{c.frame}" for c in result.spec.constraints]

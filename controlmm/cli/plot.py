@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force
+from controlmm.errors import ControlMMError
 
 HELP = """Plot a motion (.npz, .npy, .bvh).
   .png  skeleton snapshots over time (3-D) and a top view of pelvis, feet and wrists
@@ -19,20 +24,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("motion", help="motion file (.npz, .npy, .bvh)")
     p.add_argument("--out", required=True, help="output .png, .gif or .mp4")
+    add_force(p, "--out")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from controlmm.errors import ControlMMError
-    from controlmm.motion import load_motion
+    # heavy (torch, matplotlib): imported when the command runs, so that --help stays fast
+    from controlmm.motion.io import load_motion
     from controlmm.motion.plot import plot_or_animate
 
     if Path(args.out).suffix.lower() not in (".png", ".gif", ".mp4"):
         raise ControlMMError(
             f"unknown output format '{Path(args.out).suffix or args.out}'; allowed: .png, .gif, .mp4"
         )
+    check_output_file(args.out, force=args.force)
     motion = load_motion(args.motion)
     plot_or_animate(motion, args.out)
     print(f"wrote {args.out}")

@@ -3,7 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from pathlib import Path
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force, integer, number, positive
+from controlmm.cli.gl import import_mujoco
+from controlmm.errors import ControlMMError
 
 HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
 
@@ -32,13 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("motion", help="human motion (.npz, .npy, .bvh)")
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
-    p.add_argument("--fps", type=float, default=50.0, help="output frame rate in Hz (default 50)")
+    p.add_argument("--fps", type=float, default=50.0, help="output frame rate, 10 to 1000 Hz (default 50)")
     p.add_argument("--out", required=True, help="output prefix: writes OUT.csv, OUT.npz, OUT.json")
     p.add_argument(
-        "--yaw", type=float, default=0.0, help="start heading in degrees about world Z (default 0: +X)"
+        "--yaw", type=number(), default=0.0, help="start heading in degrees about world Z (default 0: +X)"
     )
-    p.add_argument("--x", type=float, default=0.0, help="start position x in metres (default 0)")
-    p.add_argument("--y", type=float, default=0.0, help="start position y in metres (default 0)")
+    p.add_argument("--x", type=number(), default=0.0, help="start position x in metres (default 0)")
+    p.add_argument("--y", type=number(), default=0.0, help="start position y in metres (default 0)")
     p.add_argument(
         "--solver",
         choices=("batched", "mink"),
@@ -46,15 +53,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="batched (all frames at once, default) or mink (per-frame IK; needs mink, daqp)",
     )
     p.add_argument("--render", metavar="VIDEO", help="also write a video (.mp4 or .gif)")
-    p.add_argument("--render-width", type=int, default=480, help="video width in pixels (default 480)")
-    p.add_argument("--render-height", type=int, default=360, help="video height in pixels (default 360)")
-    p.add_argument("--render-fps", type=float, default=25.0, help="video frame rate (default 25)")
+    p.add_argument(
+        "--render-width", type=integer(16, 4096), default=480, help="video width in pixels (default 480)"
+    )
+    p.add_argument(
+        "--render-height", type=integer(16, 4096), default=360, help="video height in pixels (default 360)"
+    )
+    p.add_argument("--render-fps", type=positive, default=25.0, help="video frame rate (default 25)")
     p.add_argument(
         "--render-backend",
         choices=("auto", "mujoco", "stick"),
         default="auto",
         help="auto: MuJoCo, else the stick figure (default); mujoco; stick",
     )
+    add_force(p, "OUT.csv/.npz/.json and the video")
     p.set_defaults(func=run)
 
 
@@ -88,29 +100,26 @@ def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from controlmm.cli.gl import import_mujoco
-    from controlmm.errors import ControlMMError
-
-    gl_note = import_mujoco("egl") if args.render else None
-    from controlmm.frames import HumanToWorld
-    from controlmm.motion.io import load_motion
-    from retarget import retarget_motion, robot_scale
-    from retarget.retarget_motion import check_fps
-
-    check_fps(args.fps)
     out = Path(args.out)
     if out.suffix.lower() in (".csv", ".npz", ".json"):
         out = out.with_suffix("")
-    if not out.parent.exists():
-        raise ControlMMError(f"cannot write '{out}': directory '{out.parent}' does not exist")
     if args.render and Path(args.render).suffix.lower() not in (".mp4", ".gif"):
         raise ControlMMError(
             f"unknown video format '{Path(args.render).suffix or args.render}'; allowed: .mp4, .gif"
         )
-    import math
+    for suffix in (".csv", ".npz", ".json"):
+        check_output_file(out.with_name(out.name + suffix), force=args.force)
+    if args.render:
+        check_output_file(args.render, force=args.force)
+    gl_note = import_mujoco("egl") if args.render else None
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
+    from controlmm.frames import HumanToWorld
+    from controlmm.motion.io import load_motion
+    from retarget import retarget_motion, robot_scale
+    from retarget.render import render_trajectory
+    from retarget.retarget_motion import check_fps
 
+    check_fps(args.fps)
     motion = load_motion(args.motion)
     scale = robot_scale(args.robot)
     transform = HumanToWorld(scale=scale, yaw=math.radians(args.yaw), translation=(args.x, args.y, 0.0))
@@ -124,8 +133,6 @@ def run(args: argparse.Namespace) -> int:
     print(_format_metrics(traj.metrics, traj.solver, traj.scale))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     if args.render:
-        from retarget.render import render_trajectory
-
         backend = args.render_backend
         if gl_note and backend != "stick":
             if backend == "mujoco":

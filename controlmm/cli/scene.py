@@ -3,6 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
+import os
+from pathlib import Path
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force, integer, number
+from controlmm.errors import ControlMMError
 
 HELP = """Scenes are MuJoCo worlds (Z up, metres) with a floor and static or moving obstacles; the
 robot (Unitree G1 by default) is attached by name. SCENE is a packaged scene name (see
@@ -35,12 +42,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     show.add_argument("scene", help="scene name or MJCF file")
     show.add_argument("--out", required=True, help="output .png")
-    show.add_argument("--robot", default="g1", help="robot to attach (g1, h1, t1) or 'none' (default g1)")
     show.add_argument(
-        "--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+        "--robot",
+        default="g1",
+        help="robot to attach, as for retarget and plan (g1, h1 or a mapping .json), or 'none' (default g1)",
     )
-    show.add_argument("--width", type=int, default=800, help="width of each view in pixels (default 800)")
-    show.add_argument("--height", type=int, default=600, help="height of each view in pixels (default 600)")
+    show.add_argument(
+        "--time", type=number(0.0), default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+    )
+    show.add_argument(
+        "--width", type=integer(16, 4096), default=800, help="width of each view in pixels (default 800)"
+    )
+    show.add_argument(
+        "--height", type=integer(16, 4096), default=600, help="height of each view in pixels (default 600)"
+    )
+    add_force(show, "--out")
     show.set_defaults(func=run_show)
 
     sdf = actions.add_parser(
@@ -52,38 +68,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     sdf.add_argument("scene", help="scene name or MJCF file")
     sdf.add_argument("--out", required=True, help="output .png")
     sdf.add_argument(
-        "--height", type=float, default=0.5, help="z of the horizontal slice in metres (default 0.5)"
+        "--height", type=number(), default=0.5, help="z of the horizontal slice in metres (default 0.5)"
     )
-    sdf.add_argument("--y", type=float, default=None, help="y of the vertical slice (default: the start's y)")
     sdf.add_argument(
-        "--time", type=float, default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+        "--y", type=number(), default=None, help="y of the vertical slice (default: the start's y)"
     )
+    sdf.add_argument(
+        "--time", type=number(0.0), default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
+    )
+    add_force(sdf, "--out")
     sdf.set_defaults(func=run_sdf)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
-def _check_png(out: str) -> None:
-    from pathlib import Path
-
-    from controlmm.errors import ControlMMError
-
+def _check_png(out: str, force: bool) -> None:
     if Path(out).suffix.lower() != ".png":
         raise ControlMMError(f"unknown output format '{Path(out).suffix or out}'; allowed: .png")
-
-
-def _finite(name: str, value: float) -> float:
-    import math
-
-    from controlmm.errors import ControlMMError
-
-    if not math.isfinite(value):
-        raise ControlMMError(f"{name} must be a finite number; got {value}")
-    return value
+    check_output_file(out, force=force)
 
 
 def run_list(args: argparse.Namespace) -> int:
-    import json
-
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     from scenes import list_scenes, load_scene
 
     rows = []
@@ -101,24 +106,16 @@ def run_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _robot(value: str) -> str | None:
-    return None if value.strip().lower() in ("none", "") else value
-
-
 def run_show(args: argparse.Namespace) -> int:
-    import os
-
     os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: headless rendering
-    _check_png(args.out)
-    _finite("--time", args.time)
-    from controlmm.errors import ControlMMError
-
-    if not (16 <= args.width <= 4096 and 16 <= args.height <= 4096):
-        raise ControlMMError(f"--width and --height must be 16..4096 pixels; got {args.width}x{args.height}")
+    _check_png(args.out, args.force)
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
+    from retarget import load_mapping
     from scenes import load_scene
     from scenes.render import render_scene
 
-    scene = load_scene(args.scene, robot=_robot(args.robot))
+    robot = None if args.robot.strip().lower() in ("none", "") else load_mapping(args.robot).robot
+    scene = load_scene(args.scene, robot=robot)
     backend = render_scene(scene, args.out, width=args.width, height=args.height, t=args.time)
     if backend != "mujoco":
         print(f"note: {backend.removeprefix('matplotlib (').rstrip(')')}; drew matplotlib views instead")
@@ -127,11 +124,8 @@ def run_show(args: argparse.Namespace) -> int:
 
 
 def run_sdf(args: argparse.Namespace) -> int:
-    _check_png(args.out)
-    _finite("--height", args.height)
-    _finite("--time", args.time)
-    if args.y is not None:
-        _finite("--y", args.y)
+    _check_png(args.out, args.force)
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     from scenes import load_scene
     from scenes.render import plot_sdf_slice
 

@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
+
+from controlmm.atomic import check_output_file, write_text
+from controlmm.cli.args import add_force, add_threads, integer, seed
+from controlmm.errors import ControlMMError
 
 HELP = """Generate one motion from a timeline of body-part tracks: each track gives a body part (legs, torso,
 head, left_arm, right_arm, whole_body), a prompt and a start and end in seconds; tracks may overlap
@@ -38,7 +44,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument("--device", default="cpu", help="cpu, cuda or auto (default cpu)")
     p.add_argument(
-        "--seed", type=int, default=None, help="random seed (default: random, stored in the output)"
+        "--seed",
+        type=seed,
+        default=None,
+        help="random seed, 0 to 2^63 - 1 (default: random, stored in the output)",
     )
     p.add_argument(
         "--preset",
@@ -49,35 +58,39 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--codebook-steps",
-        type=int,
+        type=integer(0),
         default=None,
         metavar="N",
         help="codebook-editing steps per pass (default: the preset's)",
     )
     p.add_argument(
         "--settle-steps",
-        type=int,
+        type=integer(0),
         default=None,
         metavar="N",
         help="steps of each pass's second editing run, per try (default 2x codebook steps)",
     )
     p.add_argument(
         "--blend-frames",
-        type=int,
+        type=integer(0),
         default=10,
         metavar="N",
         help="frames blended at each interior span edge (default 10)",
     )
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(p, None)
+    add_force(p, "--out, --plot and --report files")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
+    # heavy (torch, the models): imported when the command runs, so that --help stays fast
+    import torch
 
-    from controlmm.errors import ControlMMError
-    from controlmm.timeline import Timeline
+    from controlmm.editing import editing_preset
+    from controlmm.generate import load_model
+    from controlmm.motion import save_motion
+    from controlmm.motion.plot import plot_or_animate
+    from controlmm.timeline import Timeline, generate_timeline
 
     out = Path(args.out)
     if out.suffix.lower() != ".npz":
@@ -85,27 +98,10 @@ def run(args: argparse.Namespace) -> int:
     if args.plot and Path(args.plot).suffix.lower() not in (".png", ".gif", ".mp4"):
         raise ControlMMError(f"--plot must end in .png, .gif or .mp4; got '{args.plot}'")
     for path in filter(None, (args.out, args.plot, args.report)):
-        if not Path(path).parent.is_dir():
-            raise ControlMMError(f"cannot write '{path}': directory '{Path(path).parent}' does not exist")
-    if args.codebook_steps is not None and args.codebook_steps < 0:
-        raise ControlMMError(f"--codebook-steps must be >= 0; got {args.codebook_steps}")
-    if args.settle_steps is not None and args.settle_steps < 0:
-        raise ControlMMError(f"--settle-steps must be >= 0; got {args.settle_steps}")
-    if args.blend_frames < 0:
-        raise ControlMMError(f"--blend-frames must be >= 0; got {args.blend_frames}")
+        check_output_file(path, force=args.force)
     timeline = Timeline.load(args.spec)  # validate before loading the model
     if args.threads is not None:
-        if args.threads < 1:
-            raise ControlMMError(f"--threads must be at least 1; got {args.threads}")
-        import torch
-
         torch.set_num_threads(args.threads)
-
-    from controlmm.atomic import write_text
-    from controlmm.editing import editing_preset
-    from controlmm.generate import load_model
-    from controlmm.motion import save_motion
-    from controlmm.timeline import generate_timeline
 
     config = editing_preset(args.preset).with_overrides(codebook_steps=args.codebook_steps)
     model = load_model(args.model, device=args.device)
@@ -141,8 +137,6 @@ def run(args: argparse.Namespace) -> int:
         write_text(args.report, json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.report}")
     if args.plot:
-        from controlmm.motion.plot import plot_or_animate
-
         plot_or_animate(motion, args.plot)
         print(f"wrote {args.plot}")
     return 0

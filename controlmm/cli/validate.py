@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from controlmm.atomic import check_output_file
+from controlmm.cli.args import add_force
+from controlmm.errors import ControlMMError
 
 HELP = """Check an existing robot trajectory in a MuJoCo scene (e.g. one written by another
 retargeter) with the same kinematic and dynamic checks as `controlmm plan`.
@@ -36,21 +41,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, help="report .json to write (a .png plot is written beside it)")
     p.add_argument("--no-plot", action="store_true", help="skip the per-frame plot")
+    add_force(p, "the report and its plot")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from controlmm.errors import ControlMMError
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise ControlMMError(f"--out must be a .json file; got '{args.out}'")
+    check_output_file(out, force=args.force)
+    if not args.no_plot:
+        check_output_file(out.with_suffix(".png"), force=args.force)
+    # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     from retarget import DEFAULT_ROBOT
     from scenes import load_scene
     from sim import check_trajectory, plot_report
     from sim.files import load_qpos
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".json":
-        raise ControlMMError(f"--out must be a .json file; got '{args.out}'")
     qpos, fps, file_robot = load_qpos(args.trajectory, args.fps)
     robot = args.robot or file_robot or DEFAULT_ROBOT
     if args.robot and file_robot and Path(file_robot).name != Path(args.robot).name:

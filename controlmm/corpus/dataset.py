@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from controlmm.atomic import atomic_dir
+from controlmm.atomic import atomic_dir, check_output_dir
 from controlmm.errors import ControlMMError
 from controlmm.motion.normalization import FEATURE_GROUPS
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, MAX_FRAMES, MIN_FRAMES, PARENTS
@@ -224,35 +223,21 @@ def _init_worker() -> None:
     torch.set_num_threads(1)
 
 
-def _check_out(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise ControlMMError(f"--out '{out}' exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / "corpus.json").is_file():
-        raise ControlMMError(
-            f"--out '{out}' is a non-empty directory that is not a corpus; refusing to replace it"
-        )
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise ControlMMError(f"cannot write --out '{out}': directory '{parent}' does not exist")
-    try:  # the only reliable writability test is to write
-        probe = tempfile.mkdtemp(prefix=f".{out.name}.probe.", dir=parent)
-        os.rmdir(probe)
-    except OSError as exc:
-        raise ControlMMError(
-            f"cannot write --out '{out}': directory '{parent}' is not writable ({exc.strerror or exc})"
-        ) from None
+CORPUS_OUTPUT = "corpus"
+"""The output kind of a corpus directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
 
 
 def write_corpus(
-    out: str | Path, config: CorpusConfig, workers: int = 0, progress: bool = True
+    out: str | Path, config: CorpusConfig, workers: int = 0, progress: bool = True, force: bool = False
 ) -> dict[str, Any]:
     """Generate the corpus into ``out`` atomically (the directory appears complete or not at all).
 
     Args:
-        out: target directory (replaced if it already holds a corpus).
+        out: target directory: new, empty or a previous corpus; anything else needs ``force``.
         config: what to generate.
         workers: processes (0: all CPU cores; 1: in this process).
         progress: show a tqdm progress bar.
+        force: replace ``out`` whatever it holds (never a regular file).
 
     Returns:
         The summary also written to ``corpus.json``.
@@ -261,13 +246,13 @@ def write_corpus(
 
     config.validate()
     out = Path(out)
-    _check_out(out)
+    check_output_dir(out, kind=CORPUS_OUTPUT, force=force)
     workers = workers or os.cpu_count() or 1
     if workers < 1:
         raise ControlMMError(f"--workers must be >= 1; got {workers}")
     specs = plan_clips(config)
     start = time.perf_counter()
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, kind=CORPUS_OUTPUT, force=force) as tmp:
         for sub in ("new_joint_vecs", "new_joints", "texts", "meta"):
             (tmp / sub).mkdir()
         jobs = [(spec, str(tmp), config.captions) for spec in specs]

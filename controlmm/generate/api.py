@@ -18,6 +18,7 @@ from controlmm.models.model_dir import MotionModel
 from controlmm.motion.container import Motion
 from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, MAX_FRAMES, MIN_FRAMES
+from controlmm.seeds import check_seed
 from controlmm.text.base import check_texts
 
 
@@ -126,8 +127,7 @@ def generate(
     max_layers = model.config.tokenizer.num_quantizers - 1
     if residual_layers is not None and not 0 <= residual_layers <= max_layers:
         raise ControlMMError(f"residual_layers must be in 0..{max_layers}; got {residual_layers}")
-    if seed is None:
-        seed = secrets.randbits(31)
+    seed = secrets.randbits(31) if seed is None else check_seed(seed)
     device = model.device
     generator = torch.Generator(device=device).manual_seed(int(seed))
     unit = model.config.tokenizer.downsample

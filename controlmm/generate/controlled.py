@@ -59,6 +59,7 @@ from controlmm.models.motion_control_model import control_input, estimate_latent
 from controlmm.motion.container import Motion
 from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, NUM_JOINTS
+from controlmm.seeds import check_seed
 from controlmm.text.base import check_texts
 
 POSITION_DIMS = 67  # feature dims R(.) reads: root velocity/height and the RIC positions
@@ -199,8 +200,7 @@ def generate_controlled(
             pairs.append([])
     if options.iterations < 1:
         raise ControlMMError(f"iterations must be at least 1; got {options.iterations}")
-    if seed is None:
-        seed = secrets.randbits(31)
+    seed = secrets.randbits(31) if seed is None else check_seed(seed)
     generator = torch.Generator(device=model.device).manual_seed(int(seed))
     chunks = _chunks(lengths, batch_size, by_length=bool(terms))
     results: dict[int, tuple] = {}

@@ -37,6 +37,7 @@ from torch import nn
 
 from controlmm.atomic import atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
+from controlmm.files import load_torch
 from controlmm.models.config import ModelConfig
 from controlmm.motion.normalization import Normalizer
 
@@ -208,11 +209,13 @@ def load_part_state(
             f"(train it with: controlmm train {train_command(name)} --out {model_dir})"
         )
     if entry and entry.get("sha256") and sha256_file(path) != entry["sha256"]:
-        raise InputFileError(f"checkpoint '{path}' is corrupt: its checksum differs from model.json")
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - truncated/garbage files raise many exception types
-        raise InputFileError(f"checkpoint '{path}' is corrupt or unreadable ({type(exc).__name__})") from exc
+        raise InputFileError(
+            f"checkpoint '{path}' is corrupt: its checksum differs from model.json "
+            f"(train it again with: controlmm train {train_command(name)} --out {model_dir} --force)"
+        )
+    data = load_torch(
+        path, "checkpoint", hint=f"train it again with: controlmm train {train_command(name)} --force"
+    )
     if not isinstance(data, dict) or data.get("format") != PART_FORMAT or "state_dict" not in data:
         raise InputFileError(f"checkpoint '{path}' is not a controlmm part file")
     return {k: (v.float() if v.is_floating_point() else v) for k, v in data["state_dict"].items()}

@@ -37,8 +37,7 @@ class Motion:
             raise ShapeError(f"joints must have shape (T, {NUM_JOINTS}, 3); got {joints.shape}")
         if joints.shape[0] < 1:
             raise ShapeError("a motion needs at least one frame")
-        if not np.all(np.isfinite(joints)):
-            raise ShapeError("joints contain NaN/inf values")
+        check_finite(joints, "joints")
         self.joints = joints.astype(np.float32, copy=False)
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise ShapeError(f"fps must be a positive number; got {self.fps}")
@@ -49,8 +48,7 @@ class Motion:
                 raise ShapeError(
                     f"features must have shape ({joints.shape[0]}, {FEATURE_DIM}) to match the joints; got {feats.shape}"
                 )
-            if not np.all(np.isfinite(feats)):
-                raise ShapeError("features contain NaN/inf values")
+            check_finite(feats, "features")
             self.features = feats.astype(np.float32, copy=False)
 
     @property
@@ -69,8 +67,11 @@ class Motion:
         feats = np.asarray(features)
         if feats.ndim != 2 or feats.shape[1] != FEATURE_DIM:
             raise ShapeError(f"features must have shape (T, {FEATURE_DIM}); got {feats.shape}")
-        if not np.all(np.isfinite(feats)):
-            raise ShapeError("features contain NaN/inf values")
+        if feats.shape[0] < 2:
+            raise ShapeError(
+                f"features need at least 2 frames (they hold velocities between frames); got {feats.shape[0]}"
+            )
+        check_finite(feats, "features")
         feats = feats.astype(np.float32)
         return cls(joints=features_to_joints_np(feats), fps=float(FPS), features=feats, text=text, **kwargs)
 
@@ -96,6 +97,16 @@ class Motion:
             return self
         out = Motion.from_joints(self.joints, fps=self.fps, text=self.text)
         return replace(out, metadata=dict(self.metadata), extras=dict(self.extras))
+
+
+def check_finite(values: np.ndarray, what: str) -> None:
+    """A one-line ShapeError naming the first frame (axis 0) of ``values`` with NaN/inf."""
+    bad = ~np.isfinite(values.reshape(values.shape[0], -1)).all(axis=1)
+    if bad.any():
+        frames = np.flatnonzero(bad)
+        raise ShapeError(
+            f"{what} contain NaN/inf at {len(frames)} frame(s), the first at frame {int(frames[0])}"
+        )
 
 
 def resample(joints: np.ndarray, src_fps: float, dst_fps: float) -> np.ndarray:

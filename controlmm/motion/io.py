@@ -9,6 +9,7 @@ import numpy as np
 
 from controlmm.atomic import atomic_path
 from controlmm.errors import InputFileError, ShapeError
+from controlmm.files import input_file, load_array
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FEATURE_DIM, FPS, NUM_JOINTS
 
@@ -36,38 +37,41 @@ def load_motion(path: str | Path) -> Motion:
 
     A HumanML3D ``.npy`` is told apart by shape: (T, 263) features or (T, 22, 3) joints.
     """
-    path = Path(path)
-    suffix = _suffix(path, READ_FORMATS)
-    if not path.is_file():
-        raise InputFileError(f"motion file '{path}' does not exist")
+    suffix = _suffix(Path(path), READ_FORMATS)
+    path = input_file(path, "motion file")
+    try:
+        return _load(path, suffix)
+    except ShapeError as exc:
+        raise ShapeError(f"motion file '{path}': {exc}") from None
+
+
+def _load(path: Path, suffix: str) -> Motion:
     if suffix == ".bvh":
         from controlmm.motion.bvh import read_bvh
 
         joints, fps = read_bvh(path)
         return Motion(joints=joints, fps=fps, metadata={"source": str(path)})
-    try:
-        data = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001 - corrupt files are user errors
-        raise InputFileError(
-            f"cannot read '{path}': not a valid {suffix} file ({type(exc).__name__})"
-        ) from exc
+    data = load_array(path, "motion file")
+    if isinstance(data, np.ndarray):
+        if suffix == ".npz":
+            raise InputFileError(f"motion file '{path}' is not a valid NPZ file (it is an NPY array)")
+        return _from_array(data, path)
     if suffix == ".npy":
-        return _from_array(np.asarray(data), path)
-    with data:
-        if "joints" not in data.files:
-            raise InputFileError(
-                f"'{path}' has no 'joints' array; found keys: {', '.join(data.files) or 'none'}"
-            )
-        metadata = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
-        extras = {k: data[k] for k in data.files if k not in _NPZ_KEYS}
-        return Motion(
-            joints=data["joints"],
-            fps=float(data["fps"]) if "fps" in data.files else float(FPS),
-            features=data["features"] if "features" in data.files else None,
-            text=str(data["text"]) if "text" in data.files else "",
-            metadata=metadata,
-            extras=extras,
-        )
+        raise InputFileError(f"motion file '{path}' is not a valid NPY file (it is an NPZ archive)")
+    if "joints" not in data:
+        raise InputFileError(f"'{path}' has no 'joints' array; found keys: {', '.join(data) or 'none'}")
+    try:
+        metadata = json.loads(str(data["metadata"])) if "metadata" in data else {}
+    except json.JSONDecodeError:
+        raise InputFileError(f"motion file '{path}': its 'metadata' is not valid JSON") from None
+    return Motion(
+        joints=data["joints"],
+        fps=float(data["fps"]) if "fps" in data else float(FPS),
+        features=data["features"] if "features" in data else None,
+        text=str(data["text"]) if "text" in data else "",
+        metadata=metadata,
+        extras={k: v for k, v in data.items() if k not in _NPZ_KEYS},
+    )
 
 
 def _from_array(arr: np.ndarray, path: Path) -> Motion:

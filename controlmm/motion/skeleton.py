@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from controlmm.errors import ShapeError
+
 FPS: int = 20
 """HumanML3D frame rate (frames per second)."""
 
@@ -177,3 +179,28 @@ def joint_index(joint: str | int) -> int:
     if name.isdigit():
         return joint_index(int(name))
     raise ControlMMError(f"unknown joint '{joint}'; valid joints: {', '.join(JOINT_NAMES)}")
+
+
+METRE_SCALE_RANGE: tuple[float, float] = (0.3, 3.0)
+"""Sizes (x the reference skeleton) accepted as a person in metres: a child to a giant robot."""
+
+
+def body_size_ratio(joints: np.ndarray) -> float:
+    """Size of a skeleton (T, 22, 3) relative to the reference one: the median over bones of
+    (median length over frames) / (reference bone length). 1.0 for a person in metres,
+    100 for centimetres."""
+    joints = np.asarray(joints, dtype=np.float64)
+    bones = np.linalg.norm(joints[:, 1:] - joints[:, list(PARENTS[1:])], axis=-1)  # (T, 21)
+    return float(np.median(np.median(bones, axis=0) / BONE_LENGTHS[1:]))
+
+
+def check_metre_scale(joints: np.ndarray, what: str = "motion") -> None:
+    """A one-line ShapeError unless ``joints`` (T, 22, 3) look like a person measured in metres."""
+    ratio = body_size_ratio(joints)
+    lo, hi = METRE_SCALE_RANGE
+    if not lo <= ratio <= hi:
+        hint = " (centimetres? divide by 100)" if 30 <= ratio <= 300 else ""
+        raise ShapeError(
+            f"{what}: the skeleton is {ratio:.3g}x the size of a person in metres{hint}; "
+            f"joints must be in metres ({lo:g}x to {hi:g}x the reference skeleton)"
+        )

@@ -9,6 +9,7 @@ from typing import Any
 
 from controlmm.errors import ControlMMError
 from controlmm.pipeline.feedback import FeedbackConfig
+from controlmm.seeds import check_seed
 from sim.config import CheckConfig
 
 DEFAULT_SCENE = "table"
@@ -35,6 +36,7 @@ class PlanConfig:
         fps: robot trajectory rate (Hz).
         safe_distance_m: clearance the obstacle loss keeps from every obstacle (world m).
         render: write ``render.mp4``; render_fps / render_size: its frame rate and (width, height).
+        plots: write ``plots/*.png``.
         timeline: a body-part timeline spec (JSON path) instead of ``text`` (when supported).
         feedback: how failures become loss terms.
         check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
@@ -54,6 +56,7 @@ class PlanConfig:
     render: bool = True
     render_fps: float = 25.0
     render_size: tuple[int, int] = (480, 360)
+    plots: bool = True
     timeline: str | None = None
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
     check: CheckConfig = field(default_factory=CheckConfig)
@@ -65,8 +68,7 @@ class PlanConfig:
             raise ControlMMError(
                 f"seconds must be from 2 to 9.8 (40..196 frames at 20 fps); got {self.seconds}"
             )
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ControlMMError(f"seed must be a whole number >= 0; got {self.seed!r}")
+        check_seed(self.seed)
         if not (math.isfinite(self.fps) and 10 <= self.fps <= 1000):
             raise ControlMMError(f"fps must be from 10 to 1000; got {self.fps}")
         if not (math.isfinite(self.safe_distance_m) and 0 <= self.safe_distance_m <= 0.5):

@@ -13,39 +13,10 @@ the plan's default motion length.
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
+from controlmm.control.reach import reach_warnings, target_name
 from controlmm.control.spec import ControlSpec
 from controlmm.frames import HumanToWorld
-from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, MIN_FRAMES
-
-MAX_SPEED_MPS = 3.0
-"""Fastest pelvis travel assumed reachable (human m/s): a run; the corpus' runs stay below it."""
-
-REACH_M = {
-    "pelvis": 0.0,
-    "left_wrist": 0.85,
-    "right_wrist": 0.85,
-    "left_elbow": 0.6,
-    "right_elbow": 0.6,
-    "head": 0.45,
-    "neck": 0.35,
-}
-"""Horizontal reach of a joint from the pelvis (human m); joints not listed: 0.6 (legs, torso)."""
-
-HEIGHT_M = {
-    "pelvis": (0.25, 1.45),
-    "head": (0.35, 2.1),
-    "neck": (0.3, 1.95),
-    "left_wrist": (0.0, 2.35),
-    "right_wrist": (0.0, 2.35),
-    "left_elbow": (0.05, 2.1),
-    "right_elbow": (0.05, 2.1),
-}
-"""Heights (human m, Y) a joint can have; joints not listed: 0 to 1.9 m."""
-
+from controlmm.motion.skeleton import FPS, MAX_FRAMES, MIN_FRAMES
 
 FRAMES_AFTER_LAST_CONSTRAINT = 10
 """How long a plan's motion runs on after its last constraint when no length is given (0.5 s)."""
@@ -82,10 +53,10 @@ def start_pose_error(scene) -> str | None:
 
 
 def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) -> list[str]:
-    """Warnings for targets that look unreachable, one line each (distances in world metres)."""
-    positions = spec.human_positions(transform)  # (K, 3) human frame
-    warnings: list[str] = []
-    world = transform.to_world(positions.astype(np.float64))
+    """Warnings for targets that look unreachable (:func:`controlmm.control.reach.reach_warnings`)
+    or lie inside an obstacle of ``sdf``, one line each in constraint order (world metres)."""
+    reach = reach_warnings(spec, transform)
+    world = transform.to_world(spec.human_positions(transform))
     inside = None
     if sdf is not None:
         import torch
@@ -95,27 +66,12 @@ def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) ->
                 torch.as_tensor(world, dtype=torch.float64)[None],
                 torch.zeros(1, dtype=torch.float64) if getattr(sdf, "is_moving", False) else None,
             )[0].numpy()
-    for k, (c, p) in enumerate(zip(spec.constraints, positions)):
-        name = JOINT_NAMES[c.joint]
-        where = f"{name} at frame {c.frame} ({', '.join(f'{v:.2f}' for v in world[k])})"
-        t = c.frame / FPS
-        horizontal = math.hypot(float(p[0]), float(p[2]))
-        limit = MAX_SPEED_MPS * t + REACH_M.get(name, 0.6) + 0.1
-        if horizontal > limit:
-            warnings.append(
-                f"{where} is {(horizontal - limit) * transform.scale:.2f} m beyond what the body can "
-                f"reach in {t:.2f} s (at most {MAX_SPEED_MPS:g} m/s); it will likely be missed"
-            )
-        lo, hi = HEIGHT_M.get(name, (0.0, 1.9))
-        if not lo <= p[1] <= hi:
-            off = lo - p[1] if p[1] < lo else p[1] - hi
-            warnings.append(
-                f"{where} is {off * transform.scale:.2f} m {'below' if p[1] < lo else 'above'} the "
-                f"heights a {name} can have ({lo * transform.scale:.2f}..{hi * transform.scale:.2f} m)"
-            )
+    warnings: list[str] = []
+    for k, c in enumerate(spec.constraints):
+        warnings += reach[k]
         if inside is not None and inside[k] < 0:
             warnings.append(
-                f"{where} is {-inside[k]:.2f} m inside an obstacle; the obstacle loss and the target "
-                f"pull against each other"
+                f"{target_name(c.joint, c.frame, world[k])} is {-inside[k]:.2f} m inside an obstacle; "
+                "the obstacle loss and the target pull against each other"
             )
     return warnings

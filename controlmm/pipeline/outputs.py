@@ -4,23 +4,26 @@
 place when every file is written (``controlmm.atomic.atomic_dir``), so an interrupted or failed run
 never leaves a half-written ``out/plan``:
 
-==================  ===========================================================================
-file                content
-==================  ===========================================================================
-motion.npz          the human motion (HumanML3D joints and features, 20 fps, Y up) with the
-                    control targets and errors (``controlmm.motion.load_motion``)
-robot.csv           one row per frame: root xyz, root quaternion xyzw, joint angles (rad)
-robot.npz           qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
-robot.json          the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
-report.json         the chosen round's simulation report (``passed``, penetrations, failures...)
-                    plus ``plan`` (inputs, chosen round) and ``rounds`` (every round's figures)
-render.mp4          the robot in the scene (MuJoCo; a matplotlib stick figure without OpenGL)
-plots/top_view.png  obstacles, paths, control targets and achieved positions from above
-plots/clearance.png per-frame obstacle clearance and floor height of every round
-plots/report.png    the per-frame simulation report of the chosen round
-plots/motion.png    snapshots of the human motion
-plan.json           the settings of the run (to reproduce it)
-==================  ===========================================================================
+======================  =======================================================================
+file                    content
+======================  =======================================================================
+motion.npz              the human motion (HumanML3D joints and features, 20 fps, Y up) with the
+                        control targets and errors (``controlmm.motion.load_motion``)
+robot.csv               one row per frame: root xyz, root quaternion xyzw, joint angles (rad)
+robot.npz               qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
+robot.json              the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
+report.json             the chosen round's simulation report (``passed``, penetrations, failures...)
+                        plus ``plan`` (inputs, chosen round) and ``rounds`` (every round's figures)
+render.mp4              the robot in the scene (MuJoCo; a matplotlib stick figure without OpenGL)
+plots/top_view.png      obstacles, paths, control targets and achieved positions from above
+plots/clearance.png     per-frame obstacle clearance and floor height of every round
+plots/report.png        the per-frame simulation report of the chosen round
+plots/motion.png        snapshots of the human motion
+plan.json               the settings of the run (to reproduce it)
+.controlmm-output.json  the files above: marks a plan output, which the next plan may replace
+======================  =======================================================================
+
+``plots/`` is left out with ``PlanConfig(plots=False)`` and ``render.mp4`` with ``render=False``.
 """
 
 from __future__ import annotations
@@ -31,11 +34,22 @@ from pathlib import Path
 from controlmm.atomic import atomic_dir, write_text
 from controlmm.pipeline.plan import PlanResult
 
+PLAN_OUTPUT = "plan"
+"""The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
+
 
 def write_plan(
-    result: PlanResult, out: str | Path, *, render: bool | None = None, progress: bool = True
+    result: PlanResult,
+    out: str | Path,
+    *,
+    render: bool | None = None,
+    progress: bool = True,
+    force: bool = False,
 ) -> str | None:
     """Write every output of ``result`` into the directory ``out`` (replaced atomically).
+
+    ``out`` may be new, empty or a previous plan output; anything else needs ``force``
+    (:func:`controlmm.atomic.check_output_dir`).
 
     Returns the render backend used (``"mujoco"`` or ``"stick"``), or None without a video.
     """
@@ -48,18 +62,19 @@ def write_plan(
     config = result.config
     render = config.render if render is None else render
     backend = None
-    Path(out).parent.mkdir(parents=True, exist_ok=True)  # only the parent: the directory itself appears whole
-    with atomic_dir(out) as tmp:
-        plots = tmp / "plots"
-        plots.mkdir()
+    with atomic_dir(out, kind=PLAN_OUTPUT, force=force, make_parents=True) as tmp:
         save_motion(result.motion, tmp / "motion.npz")
         result.trajectory.save(tmp / "robot")
         write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
-        plot_top_view(result, plots / "top_view.png")
-        plot_clearance(result, plots / "clearance.png")
-        plot_report(result.report, plots / "report.png", title=f"{result.scene.name}: {result.text[:80]}")
-        plot_motion(result.motion, plots / "motion.png")
+        if config.plots:
+            plots = tmp / "plots"
+            plots.mkdir()
+            plot_top_view(result, plots / "top_view.png")
+            plot_clearance(result, plots / "clearance.png")
+            title = f"{result.scene.name}: {result.text[:80]}"
+            plot_report(result.report, plots / "report.png", title=title)
+            plot_motion(result.motion, plots / "motion.png")
         if render:
             width, height = config.render_size
             backend = render_trajectory(

@@ -1,7 +1,7 @@
 """Pictures of a plan: the path against the obstacles, and the clearance of every round.
 
-* :func:`plot_top_view` - world top view: obstacle footprints (the scene SDF < 0 at any height
-  the body reaches), the robot's pelvis and feet paths, the human hands, the control targets and
+* :func:`plot_top_view` - world top view: obstacle footprints (:func:`scenes.footprint.footprints`
+  at the heights the body reaches), the robot's pelvis and feet paths, the human hands, the control targets and
   where the joints ended up, the start pose.
 * :func:`plot_clearance` - per frame and per round: the robot's smallest distance to an obstacle
   (negative = penetration) and the lowest robot point above the floor, with the tolerances.
@@ -29,7 +29,10 @@ def _pyplot():
 
 def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     """Write the top view PNG of a :class:`~controlmm.pipeline.plan.PlanResult` (atomically)."""
-    from scenes.render import occupancy_grid, scene_bounds
+    from matplotlib.collections import PolyCollection
+
+    from scenes.footprint import footprints
+    from scenes.render import scene_bounds
 
     plt = _pyplot()
     scene, traj, motion = result.scene, result.trajectory, result.motion
@@ -40,17 +43,9 @@ def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     hi[:2] = np.maximum(hi[:2], pos[..., :2].reshape(-1, 2).max(0) + 0.3)
     hi[2] = max(hi[2], float(pos[..., 2].max()) + 0.1)
     fig, ax = plt.subplots(figsize=(9, 6.5))
-    if scene.obstacle_geom_ids:
-        xs, ys, _, values = occupancy_grid(scene, lo, hi, 0.0, res=160)
-        ax.imshow(
-            (values.min(axis=2) < 0).T,
-            origin="lower",
-            extent=(xs[0], xs[-1], ys[0], ys[-1]),
-            cmap="Oranges",
-            vmin=0,
-            vmax=1.5,
-            aspect="equal",
-        )
+    polygons = footprints(scene, 0.0, (0.0, hi[2]))  # obstacles at the heights the body reaches
+    if polygons:
+        ax.add_collection(PolyCollection(polygons, facecolors="tab:orange", edgecolors="none", alpha=0.45))
     if scene.moving_geom_ids:
         ax.text(0.01, 0.01, "moving obstacles drawn at t = 0", transform=ax.transAxes, fontsize=8)
     root = pos[:, 0]  # the floating base (G1, H1: the pelvis)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import torch
 
+from controlmm.text.truncation import warn_truncated
 from controlmm.errors import ControlMMError
 from controlmm.models.config import CLIP_MODEL_ID
 
@@ -102,6 +103,8 @@ class CLIPTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = [clean_text(t) for t in check_texts(texts)]
+        counts = [len(ids) for ids in self.tokenizer(texts)["input_ids"]]
+        warn_truncated(texts, counts, CONTEXT_LENGTH, "the CLIP text encoder")
         enc = self.tokenizer(
             texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True, return_tensors="pt"
         )

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import torch
 
 from controlmm.errors import ControlMMError
+from controlmm.text.truncation import warn_truncated
 
 
 def offline() -> None:
@@ -67,11 +68,20 @@ class MiniLMTextEncoder:
     def model(self):
         return _sentence_transformer(str(self.path), self.device)
 
+    def _warn_truncated(self, texts: list[str], max_tokens: int | None = None) -> None:
+        """Warn about texts longer than MiniLM reads (and than the token-state view keeps)."""
+        counts = [len(ids) for ids in self.model.tokenizer(texts, add_special_tokens=True)["input_ids"]]
+        warn_truncated(texts, counts, self.model.max_seq_length, "the MiniLM text encoder")
+        if max_tokens is not None:
+            limit = min(max_tokens, self.model.max_seq_length)
+            warn_truncated(texts, counts, limit, "the token-state text view")
+
     @torch.no_grad()
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
         from controlmm.text.base import check_texts
 
         texts = check_texts(texts)
+        self._warn_truncated(texts)
         out = self.model.encode(
             texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False, normalize_embeddings=False
         )
@@ -85,6 +95,7 @@ class MiniLMTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = check_texts(texts)
+        self._warn_truncated(texts, max_tokens)
         states = self.model.encode(
             texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False
         )
@@ -97,6 +108,7 @@ class MiniLMTextEncoder:
         from controlmm.text.base import check_texts
 
         texts = check_texts(texts)
+        self._warn_truncated(texts, max_tokens)
         outputs = self.model.encode(texts, batch_size=128, output_value=None, show_progress_bar=False)
         vectors = torch.stack([o["sentence_embedding"] for o in outputs]).float().cpu()
         # Rows past a sentence's attention mask are the batch's padding; token_embeddings drops them.

@@ -148,7 +148,9 @@ def test_control_flags_need_a_spec_and_sane_values(tiny_control_dir, spec_path, 
     ]
     _one_line_error(capsys, base + ["--preset", "fast"], "--preset needs --control SPEC.json")
     _one_line_error(
-        capsys, base + ["--control", str(spec_path), "--tolerance", "0"], "--tolerance must be positive"
+        capsys,
+        base + ["--control", str(spec_path), "--tolerance", "0"],
+        "--tolerance: must be greater than 0",
     )
     _one_line_error(capsys, base + ["--contact-steps", "50"], "--contact-steps needs --control SPEC.json")
     _one_line_error(

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from controlmm.cli.main import main
+from tests.cli_helpers import run_cli
 from controlmm.control.evaluation import build_cases
 from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table, recropped
 from controlmm.eval.evaluator import load_evaluator
@@ -117,7 +117,7 @@ def test_control_table_rows(tiny_control_dir, tiny_data, evaluator):
 
 def test_eval_control_quality_cli(tiny_control_dir, tiny_data, tmp_path, capsys):
     out = tmp_path / "table.json"
-    code = main(
+    code = run_cli(
         [
             "eval",
             "control",
@@ -152,11 +152,12 @@ def test_eval_control_quality_cli(tiny_control_dir, tiny_data, tmp_path, capsys)
     assert len(data[0]["table_row"]["fid"]["values"]) == 2 and len(data[0]["repeats"]) == 2
     assert data[1]["table_row"]["traj"]["mean"] == 0.0
     for argv, needle in (
-        (["--repeats", "0"], "--repeats must be at least 1"),
+        (["--repeats", "0"], "--repeats: must be at least 1"),
         (["--samples", "1"], "--samples 2 or more"),
     ):
         assert (
-            main(["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data)] + argv) == 2
+            run_cli(["eval", "control", "--model", str(tiny_control_dir), "--data", str(tiny_data)] + argv)
+            == 2
         )
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and needle in err, err

@@ -93,3 +93,20 @@ def test_minilm_token_states_pool_to_the_sentence_vector(minilm, tmp_path):
     assert torch.equal(
         embed_captions(minilm, texts, cache_dir=tmp_path, progress=False, tokens=64).vectors, cached.vectors
     )
+
+
+def test_a_prompt_longer_than_minilm_reads_warns_that_it_was_cut():
+    from controlmm.text.minilm import MiniLMTextEncoder
+    from controlmm.text.truncation import TextTruncatedWarning
+
+    encoder = MiniLMTextEncoder()
+    long = "a person walks forward and then turns left " * 40  # about 330 word pieces
+    with pytest.warns(TextTruncatedWarning, match="reads only the first 256"):
+        encoder.encode([long])
+    with pytest.warns(TextTruncatedWarning, match="token-state text view reads only the first 8"):
+        encoder.encode_with_tokens(["a person walks forward, stops, waves with the left hand and sits"], 8)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TextTruncatedWarning)
+        encoder.encode(["a person walks forward"])  # short prompts: no warning

@@ -266,7 +266,9 @@ def test_mismatches_are_one_line_errors(tmp_path):
     torch.save({"something": {}}, res_file)
     _expect_error("has no 'res_transformer' entry", momask=tmp_path, out=tmp_path / "m")
     res_file.write_bytes(b"not a checkpoint")
-    _expect_error("cannot read official checkpoint", momask=tmp_path, out=tmp_path / "m")
+    _expect_error(
+        "is not a valid checkpoint (not a file written by torch.save)", momask=tmp_path, out=tmp_path / "m"
+    )
     torch.save(original, res_file)
     _expect_error("--control", momask=tmp_path, out=tmp_path / "m", control=tmp_path / "nowhere")
     ctrl_tree = write_official_checkpoints(tmp_path / "c", D, control_channels=36)
@@ -285,6 +287,18 @@ def test_mismatches_are_one_line_errors(tmp_path):
     (vq_dir / "meta" / "std.npy").unlink()
     _expect_error("meta/std.npy' is missing", momask=tmp_path, out=tmp_path / "m")
     assert not (tmp_path / "m").exists()  # nothing half-written
+
+
+def test_a_vq_checkpoint_saved_as_net_is_accepted(tmp_path):
+    """Some releases save the RVQ-VAE as {'net': state_dict}; the official loaders accept it too."""
+    tree = write_official_checkpoints(tmp_path, D, control_channels=None)
+    vq_file = tree["t2m"] / "rvq_nq6_dc512_nc512_noshare_qdp0.2" / "model" / "net_best_fid.tar"
+    state = torch.load(vq_file, weights_only=True)["vq_model"]
+    torch.save({"net": state, "ep": 3}, vq_file)
+    out = import_official(tree["t2m"], tmp_path / "model")  # checks every tensor's name and shape
+    tokenizer = torch.load(out / "tokenizer.pt", weights_only=True)["state_dict"]
+    key = "quantizer.layers.0.codebook"
+    torch.testing.assert_close(tokenizer[key].float(), state[key].float())
 
 
 def test_cli_import_then_generate(official, tmp_path, tiny_clip_dir, capsys):

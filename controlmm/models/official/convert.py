@@ -33,8 +33,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from controlmm.atomic import atomic_dir
+from controlmm.atomic import atomic_dir, check_output_dir
 from controlmm.errors import ControlMMError, InputFileError
+from controlmm.files import load_torch
 from controlmm.models.config import (
     CLIP_MODEL_ID,
     ControlConfig,
@@ -56,13 +57,7 @@ CONTROL_CHANNELS = {6: "pelvis", 36: "all"}
 # -- reading ----------------------------------------------------------------------------------------
 def load_official_checkpoint(path: Path, kind: str) -> tuple[State, dict[str, Any]]:
     """The state_dict of an official ``.tar`` (entry per :data:`CHECKPOINT_KEYS`) and its scalar extras."""
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - corrupt, truncated or unsafe pickles raise many types
-        reason = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
-        raise InputFileError(
-            f"cannot read official checkpoint '{path}' ({type(exc).__name__}: {reason})"
-        ) from None
+    data = load_torch(path, "official checkpoint")
     if not isinstance(data, dict):
         raise InputFileError(f"'{path}' is not an official checkpoint (a dict); got {type(data).__name__}")
     key = next((k for k in CHECKPOINT_KEYS[kind] if k in data), None)
@@ -333,10 +328,7 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
             f"{root}, {root / 't2m'}, {root / 'checkpoints' / 't2m'})"
         )
     finest = t2m / "text_mot_match" / "model" / "finest.tar"
-    try:
-        data = torch.load(finest, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001
-        raise InputFileError(f"cannot read '{finest}' ({type(exc).__name__})") from None
+    data = load_torch(finest, "evaluator checkpoint")
     missing = [
         k
         for k in ("movement_encoder", "text_encoder", "motion_encoder")
@@ -412,8 +404,7 @@ def import_official(
     from controlmm.motion.normalization import Normalizer
 
     out = Path(out).expanduser()
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
-        raise ControlMMError(f"'{out}' already exists; pass --force to replace it")
+    check_output_dir(out, kind=None, force=force)
     if clip_precision not in ("float16", "float32"):
         raise ControlMMError(f"--clip-precision must be float16 or float32; got {clip_precision}")
     log = log or (lambda message: None)
@@ -434,7 +425,7 @@ def import_official(
         "residual": ("tokenizer",),
         "control": ("tokenizer", "transformer"),
     }
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, kind=None, force=force) as tmp:
         write_statistics(tmp, normalizer)
         for name in order:
             entry = save_part(tmp, name, modules[name], config.storage_dtype)

@@ -40,12 +40,13 @@ CONTROL_PREFIXES: tuple[str, ...] = (
 """Prefixes of the motion control model's tensors inside ``ct2m_transformer`` (-> ``control.pt``)."""
 
 CHECKPOINT_KEYS: dict[str, tuple[str, ...]] = {
-    "tokenizer": ("vq_model",),
+    "tokenizer": ("vq_model", "net"),
     "transformer": ("t2m_transformer", "trans"),
     "residual": ("res_transformer",),
     "control": ("ct2m_transformer",),
 }
-"""Which entry of the official ``.tar`` dict holds the state_dict, per kind (first found wins)."""
+"""Which entry of the official ``.tar`` dict holds the state_dict, per kind (first found wins).
+A VQ checkpoint saved as ``{'net': state_dict}`` is accepted as the official loaders accept it."""
 
 State = dict[str, torch.Tensor]
 

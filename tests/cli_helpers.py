@@ -1,0 +1,25 @@
+"""Running the ``controlmm`` command line in-process, as the console script does."""
+
+from __future__ import annotations
+
+from controlmm.cli.main import main
+
+
+def run_cli(argv: list[str]) -> int:
+    """The exit status of ``controlmm ARGV``: main's return value, or argparse's exit code for
+    ``--help`` (0) and bad argument values (2, one line on stderr)."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 1
+
+
+def one_line_error(capsys, argv: list[str], *needles: str) -> str:
+    """Assert ``controlmm ARGV`` exits 2 with one stderr line holding every needle; return it."""
+    code = run_cli(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, err
+    return err.strip()
