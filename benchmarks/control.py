@@ -53,8 +53,8 @@ def uncontrolled_skate(model, cases, frames: list[int], seed: int) -> float:
     """Mean foot-skating ratio of the same prompts generated without control by the generator the
     controlled rows extend: the sentence-vector transformer (``token_view=False``; the text-view
     ensemble is a different generator, which ``generate_controlled`` does not use)."""
-    from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate
+    from controlmm.motion.geometry import foot_skating_ratio
 
     values = []
     for i, (case, f) in enumerate(zip(cases, frames)):

@@ -18,7 +18,7 @@ joints of frame t of the distance to the target, metres):
 - **Traj. err**: fraction of cases with any e_t > 0.5 m;
 - **Loc. err**: mean over cases of the fraction of keyframes with e_t > 0.5 m;
 - **Avg. err**: mean over cases of the mean e_t;
-- **foot-skating ratio** (:func:`controlmm.eval.geometry.foot_skating_ratio`) on the generated
+- **foot-skating ratio** (:func:`controlmm.motion.geometry.foot_skating_ratio`) on the generated
   motion's own frames (the official script also counts the padding frames up to 196, §11.12).
 
 Text-motion metrics (FID, R-precision, diversity) plug in through ``text_metrics``: any callable
@@ -239,8 +239,8 @@ def evaluate_control(
     """
     from tqdm import tqdm
 
-    from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate_controlled
+    from controlmm.motion.geometry import foot_skating_ratio
 
     rows: list[dict[str, float]] = []
     generated: list[Motion] = []

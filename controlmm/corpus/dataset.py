@@ -172,7 +172,7 @@ def check_clip(raw: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> st
     """Why a generated clip is unusable, or None. ``raw`` are the generator's joints (metres,
     floor at y = 0), ``joints`` those recovered from the features, ``positions`` the
     canonical positions the features were computed from."""
-    from controlmm.eval.geometry import foot_skating_ratio
+    from controlmm.motion.geometry import foot_skating_ratio
 
     if not np.all(np.isfinite(joints)):
         return "non-finite joints"

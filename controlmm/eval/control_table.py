@@ -124,7 +124,7 @@ def _control_values(result) -> dict[str, float]:
 
 
 def _real_values(cases) -> dict[str, float]:
-    from controlmm.eval.geometry import foot_skating_ratio
+    from controlmm.motion.geometry import foot_skating_ratio
     from controlmm.motion.skeleton import FPS
 
     return {

@@ -1,7 +1,7 @@
 """Text-adherence probes: does a motion do what its caption says?
 
 Each motion family has a probe that checks, with simple geometry in the person's own frame
-(:mod:`controlmm.eval.geometry`), the family's core property and every *claim* a caption
+(:mod:`controlmm.motion.geometry`), the family's core property and every *claim* a caption
 makes (direction, speed, hand, count, turn angle...). A claim comes from the caption's
 metadata (``meta/<id>.json`` of a corpus), so the same probe checks ground truth and
 generated motion:
@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 
 from controlmm.errors import ControlMMError
-from controlmm.eval import geometry as geo
 from controlmm.eval.cases import ProbeCase, ProbeReport, evaluate, ground_truth, list_cases
 from controlmm.eval.measures import Measures
+from controlmm.motion import geometry as geo
 
 __all__ = [
     "PROBES",
