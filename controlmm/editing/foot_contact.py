@@ -15,10 +15,10 @@ from dataclasses import replace
 
 import torch
 
+from controlmm.control.terms import LossTerm
 from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
-from controlmm.editing.terms import LossTerm
 from controlmm.motion.geometry import FOOT_JOINTS, SKATE_HEIGHT, SKATE_SPEED
 from controlmm.motion.skeleton import FPS
 

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from controlmm.editing.terms import LossTerm
+from controlmm.control.terms import LossTerm
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import FPS, JOINT_NAMES, PARENTS, joint_index
 

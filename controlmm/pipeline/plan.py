@@ -28,8 +28,8 @@ from typing import Any
 import torch
 
 from controlmm.control.spec import ControlSpec
+from controlmm.control.terms import LossTerm
 from controlmm.editing.presets import EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion

@@ -16,9 +16,9 @@ import numpy as np
 import torch
 
 from controlmm.control.spec import ControlSpec
+from controlmm.control.terms import LossTerm
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
-from controlmm.editing.terms import LossTerm
 from controlmm.frames import HumanToWorld
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS

@@ -44,9 +44,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from controlmm.control.terms import LossTerm
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.generate.controlled import decode_latent, edit_latent
