@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from controlmm.cli.main import main
-from controlmm.control.evaluation import build_cases
+from controlmm.eval.control import build_cases
 from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table, recropped
 from controlmm.eval.evaluator import load_evaluator
 from controlmm.eval.scoring import MotionSet, score_motions
