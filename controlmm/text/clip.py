@@ -24,7 +24,8 @@ from pathlib import Path
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.models.config import CLIP_MODEL_ID
+from controlmm.text.base import check_texts, offline
+from controlmm.text.config import CLIP_MODEL_ID
 
 CONTEXT_LENGTH = 77
 
@@ -67,8 +68,6 @@ class CLIPTextEncoder:
     def __init__(
         self, weights: str | None = None, device: str | torch.device = "cpu", precision: str = "float32"
     ) -> None:
-        from controlmm.text.minilm import offline
-
         offline()
         source = weights or CLIP_MODEL_ID
         path = Path(source).expanduser()
@@ -77,7 +76,7 @@ class CLIPTextEncoder:
         if not path.exists() and ("/" not in source or source.startswith((".", "/", "~"))):
             raise _missing(f"'{source}' does not exist")
         try:
-            from transformers import AutoTokenizer, CLIPModel
+            from transformers import AutoTokenizer, CLIPModel  # heavy: only when CLIP is used
 
             model = CLIPModel.from_pretrained(str(path) if path.exists() else source, local_files_only=True)
             self.tokenizer = AutoTokenizer.from_pretrained(
@@ -99,8 +98,6 @@ class CLIPTextEncoder:
 
     @torch.no_grad()
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
-        from controlmm.text.base import check_texts
-
         texts = [clean_text(t) for t in check_texts(texts)]
         enc = self.tokenizer(
             texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True, return_tensors="pt"

