@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from controlmm.atomic import atomic_dir
+from controlmm.corpus.processing import process
+from controlmm.corpus.registry import family_names, get_family
 from controlmm.errors import ControlMMError
 from controlmm.motion.normalization import FEATURE_GROUPS
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, MAX_FRAMES, MIN_FRAMES, PARENTS
@@ -60,8 +62,6 @@ class CorpusConfig:
             raise ControlMMError(f"--clips must be an integer >= 1; got {self.clips}")
         if self.captions < 3:
             raise ControlMMError(f"captions per clip must be >= 3; got {self.captions}")
-        from controlmm.corpus.registry import get_family
-
         for name in self.families or ():
             get_family(name)
 
@@ -91,8 +91,6 @@ class ClipResult:
 
 def plan_clips(config: CorpusConfig) -> list[ClipSpec]:
     """Assign families (round-robin over a seeded shuffle) and splits (per family) to clips."""
-    from controlmm.corpus.registry import family_names
-
     names = list(config.families or family_names())
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, 0x5EED]))
     order = [names[i % len(names)] for i in range(config.clips)]
@@ -121,9 +119,6 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     (floor penetration by a non-foot joint, foot skating above 0.1, wrong length, a caption
     that its probe finds untrue); ``meta["seed"][2]`` records the attempt used.
     """
-    from controlmm.corpus.processing import process
-    from controlmm.corpus.registry import get_family
-
     family = get_family(spec.family)
     reasons: list[str] = []
     for attempt in range(MAX_ATTEMPTS):
@@ -309,8 +304,6 @@ def _finish(
         std[sl] = std[sl].mean()
     np.save(root / "Mean.npy", mean.astype(np.float32))
     np.save(root / "Std.npy", np.maximum(std, 1e-8).astype(np.float32))
-    from controlmm.corpus.registry import family_names
-
     families = {name: n for name in family_names() if (n := sum(r.family == name for r in results))}
     summary = {
         "format": "humanml3d",
