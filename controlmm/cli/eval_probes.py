@@ -81,8 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
     from controlmm.atomic import write_text
     from controlmm.errors import ControlMMError
+    from controlmm.eval.cases import evaluate, ground_truth, list_cases
     from controlmm.eval.model_probes import generated_motions, select_cases, tokenized_motions
-    from controlmm.eval.probes import evaluate, ground_truth, list_cases
 
     if (args.tokenizer_only or args.layers is not None) and args.model is None:
         raise ControlMMError("--tokenizer-only and --layers need --model")

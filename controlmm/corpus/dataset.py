@@ -27,9 +27,12 @@ from typing import Any
 import numpy as np
 
 from controlmm.atomic import atomic_dir
+from controlmm.corpus.probes import probe
 from controlmm.corpus.processing import process
 from controlmm.corpus.registry import family_names, get_family
+from controlmm.corpus.text.templates import Caption
 from controlmm.errors import ControlMMError
+from controlmm.motion.geometry import foot_skating_ratio
 from controlmm.motion.normalization import FEATURE_GROUPS
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, MAX_FRAMES, MIN_FRAMES, PARENTS
 
@@ -151,11 +154,9 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     return features, joints, caps, meta
 
 
-def check_captions(family: str, joints: np.ndarray, captions: list) -> str | None:
+def check_captions(family: str, joints: np.ndarray, captions: list[Caption]) -> str | None:
     """A caption the motion does not satisfy (by its probe), or None: a last guard so that no
     untrue caption is ever written."""
-    from controlmm.eval.probes import probe
-
     for cap in captions:
         result = probe(joints, family, cap.claims)
         if not result.passed:
@@ -167,8 +168,6 @@ def check_clip(raw: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> st
     """Why a generated clip is unusable, or None. ``raw`` are the generator's joints (metres,
     floor at y = 0), ``joints`` those recovered from the features, ``positions`` the
     canonical positions the features were computed from."""
-    from controlmm.motion.geometry import foot_skating_ratio
-
     if not np.all(np.isfinite(joints)):
         return "non-finite joints"
     if not MIN_FRAMES <= len(joints) <= MAX_FRAMES:

@@ -45,6 +45,7 @@ import numpy as np
 import torch
 
 from controlmm.control.terms import LossTerm
+from controlmm.corpus.probes import probe
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
 from controlmm.errors import ControlMMError
@@ -320,8 +321,6 @@ def _report(
     config: EditingConfig,
     seconds: float,
 ) -> dict[str, Any]:
-    from controlmm.eval.probes import probe
-
     num_frames = timeline.num_frames
     tracks = []
     for k, track in enumerate(timeline.tracks):
