@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -76,8 +77,6 @@ def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
 
     An existing directory at ``path`` is replaced only once the new one is complete.
     """
-    import shutil
-
     path = Path(path)
     _check_parent(path)
     tmp = Path(

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from controlmm.errors import ControlMMError
+
 # Axis permutation human (x, y, z) -> world (z, x, y).
 HUMAN_TO_WORLD_AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
@@ -53,8 +55,6 @@ class HumanToWorld:
     translation: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0))
 
     def __post_init__(self) -> None:
-        from controlmm.errors import ControlMMError
-
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise ControlMMError(f"scale must be a positive number; got {self.scale}")
         if not math.isfinite(self.yaw) or not all(math.isfinite(v) for v in self.translation):

@@ -17,6 +17,7 @@ the same for any number of worker processes.
 from __future__ import annotations
 
 import json
+import multiprocessing as mp
 import os
 import tempfile
 import time
@@ -25,6 +26,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from controlmm.atomic import atomic_dir
 from controlmm.corpus.probes import probe
@@ -213,8 +216,6 @@ def _work(args: tuple[ClipSpec, str, int]) -> ClipResult:
 
 
 def _init_worker() -> None:
-    import torch
-
     torch.set_num_threads(1)
 
 
@@ -251,8 +252,6 @@ def write_corpus(
     Returns:
         The summary also written to ``corpus.json``.
     """
-    from tqdm import tqdm
-
     config.validate()
     out = Path(out)
     _check_out(out)
@@ -272,8 +271,6 @@ def write_corpus(
                 results.append(_work(job))
                 bar.update()
         else:
-            import multiprocessing as mp
-
             ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
             with ctx.Pool(min(workers, len(jobs)), initializer=_init_worker) as pool:
                 for res in pool.imap(_work, jobs, chunksize=4):

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
 from controlmm.control.spec import ControlSpec
 from controlmm.control.terms import LossTerm
@@ -204,8 +205,6 @@ def generate_controlled(
     generator = torch.Generator(device=model.device).manual_seed(int(seed))
     chunks = _chunks(lengths, batch_size, by_length=bool(terms))
     results: dict[int, tuple] = {}
-    from tqdm import tqdm
-
     bar = tqdm(total=count, desc="generate", unit="motion", disable=not progress, leave=False)
     for chunk in chunks:
         out = _generate_chunk(

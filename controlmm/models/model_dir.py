@@ -35,10 +35,15 @@ import numpy as np
 import torch
 from torch import nn
 
+from controlmm.assets import default_model_dir
 from controlmm.atomic import atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.models.config import ModelConfig
+from controlmm.models.mask_transformer import MaskTransformer
+from controlmm.models.residual_transformer import ResidualTransformer
+from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.normalization import Normalizer
+from controlmm.text import TextEncoder, load_text_encoder
 
 FORMAT = "controlmm-model"
 FORMAT_VERSION = 1
@@ -71,20 +76,14 @@ def register_part(
 
 
 def _build_tokenizer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.rvqvae import RVQVAE
-
     return RVQVAE(cfg.tokenizer)
 
 
 def _build_transformer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.mask_transformer import MaskTransformer
-
     return MaskTransformer(cfg.transformer)
 
 
 def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.mask_transformer import MaskTransformer
-
     if cfg.token_view is None:
         raise ControlMMError(
             "the model configuration has no token_view (the token-state transformer's config)"
@@ -93,8 +92,6 @@ def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
 
 
 def _build_residual(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.residual_transformer import ResidualTransformer
-
     return ResidualTransformer(cfg.residual)
 
 
@@ -246,7 +243,7 @@ class MotionModel:
     directory: Path | None = None
     device: torch.device = field(default_factory=lambda: torch.device("cpu"))
     clip_weights: str | None = None
-    _text_encoder: Any = None
+    _text_encoder: TextEncoder | None = None
 
     @property
     def tokenizer(self):
@@ -278,8 +275,6 @@ class MotionModel:
     def text_encoder(self):
         """The sentence encoder the transformers were trained with (loaded on first use)."""
         if self._text_encoder is None:
-            from controlmm.text import load_text_encoder
-
             self._text_encoder = load_text_encoder(
                 self.config.text_encoder, device=self.device, weights=self.clip_weights
             )
@@ -356,8 +351,6 @@ def load_model(
         clip_weights: for CLIP-conditioned models, where the CLIP weights are (overrides model.json).
     """
     if model_dir is None:
-        from controlmm.assets import default_model_dir
-
         model_dir = default_model_dir()
         if not (Path(model_dir) / "model.json").is_file():
             raise InputFileError(

@@ -16,10 +16,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import torch
 
 from controlmm.control.spec import ControlSpec
 from controlmm.frames import HumanToWorld
+from controlmm.generate.api import frames_for
 from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, MIN_FRAMES
+from sim import CheckConfig, check_pose
 
 MAX_SPEED_MPS = 3.0
 """Fastest pelvis travel assumed reachable (human m/s): a run; the corpus' runs stay below it."""
@@ -59,16 +62,12 @@ def plan_seconds(seconds: float | None, spec: ControlSpec | None) -> float | Non
     """
     if seconds is not None or spec is None or not spec.constraints or spec.last_frame >= MAX_FRAMES:
         return seconds  # (a constraint past the longest motion fails in the generator, with its frame)
-    from controlmm.generate.api import frames_for
-
     end = spec.last_frame + 1  # frames needed to reach the last constraint
     return max(MIN_FRAMES, end, min(frames_for(1)[0], end + FRAMES_AFTER_LAST_CONSTRAINT)) / FPS
 
 
 def start_pose_error(scene) -> str | None:
     """A one-line error when the robot's start pose penetrates an obstacle, else None."""
-    from sim import CheckConfig, check_pose
-
     report = check_pose(scene, scene.robot_start_qpos(), CheckConfig(dynamics=False))
     hits = [f for f in report.failures if f.kind == "obstacle_penetration"]
     if not hits:
@@ -88,8 +87,6 @@ def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) ->
     world = transform.to_world(positions.astype(np.float64))
     inside = None
     if sdf is not None:
-        import torch
-
         with torch.no_grad():
             inside = sdf(
                 torch.as_tensor(world, dtype=torch.float64)[None],

@@ -16,10 +16,11 @@ import numpy as np
 
 from controlmm.atomic import atomic_path
 from controlmm.motion.skeleton import JOINT_NAMES
+from scenes.render import occupancy_grid, scene_bounds
 
 
 def _pyplot():
-    import matplotlib
+    import matplotlib  # only for plots; the Agg backend is chosen before pyplot loads
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -29,8 +30,6 @@ def _pyplot():
 
 def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     """Write the top view PNG of a :class:`~controlmm.pipeline.plan.PlanResult` (atomically)."""
-    from scenes.render import occupancy_grid, scene_bounds
-
     plt = _pyplot()
     scene, traj, motion = result.scene, result.trajectory, result.motion
     names, pos, _ = traj.body_poses()  # (T, B, 3) world

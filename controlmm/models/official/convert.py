@@ -43,8 +43,17 @@ from controlmm.models.config import (
     TransformerConfig,
     preset_config,
 )
+from controlmm.models.model_dir import (
+    PARTS,
+    load_state_strict,
+    new_manifest,
+    save_part,
+    write_manifest,
+    write_statistics,
+)
 from controlmm.models.official.folders import OfficialFolder, find_control, find_momask
 from controlmm.models.official.names import CHECKPOINT_KEYS, State, map_official_state
+from controlmm.motion.normalization import Normalizer
 from controlmm.motion.skeleton import FEATURE_DIM
 from controlmm.text.config import CLIP_MODEL_ID, TextEncoderConfig
 
@@ -226,8 +235,6 @@ def official_model(
 
     Returns (config, {part: module with the official weights}, record for ``model.json``).
     """
-    from controlmm.models.model_dir import PARTS, load_state_strict
-
     notes: list[str] = []
     folders = find_momask(momask)
     states: dict[str, State] = {}
@@ -385,8 +392,6 @@ def _compare_statistics(normalizer, meta: Path) -> str:
     """A note comparing the VQ statistics with the evaluator's (MaskControl denormalises its decoded motion
     with the evaluator loader's mean/std while the data were normalised with the VQ's; the released files
     are expected to agree)."""
-    from controlmm.motion.normalization import Normalizer
-
     other = Normalizer.load(meta / "mean.npy", meta / "std.npy")
     mean_gap = float(np.abs(other.mean - normalizer.mean).max())
     std_gap = float(np.abs(other.std / normalizer.std - 1.0).max())
@@ -407,9 +412,6 @@ def import_official(
     log: Callable[[str], None] | None = None,
 ) -> Path:
     """Convert the official checkpoint folders into the model directory ``out`` (see the module docstring)."""
-    from controlmm.models.model_dir import new_manifest, save_part, write_manifest, write_statistics
-    from controlmm.motion.normalization import Normalizer
-
     out = Path(out).expanduser()
     if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
         raise ControlMMError(f"'{out}' already exists; pass --force to replace it")
