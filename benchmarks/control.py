@@ -5,7 +5,7 @@
     python benchmarks/control.py --table speed --samples 10         # fast / medium / accurate, 196-frame motions
     python benchmarks/control.py --model MODEL_DIR --data DATA_DIR --threads 2 --json out.json
 
-Protocol (``controlmm.control.evaluation``, OmniControl's): targets from held-out clips of the test
+Protocol (``controlmm.eval.control``, OmniControl's): targets from held-out clips of the test
 split, pelvis control, the five densities (1, 2, 5 frames, 25 %, 100 % of the frames) in turn, one
 motion per case, batch 1, after one warm-up generation. The ablation generates each clip at its own
 length; the speed table generates every motion with 196 frames (the clip's targets in its first
@@ -53,8 +53,8 @@ def uncontrolled_skate(model, cases, frames: list[int], seed: int) -> float:
     """Mean foot-skating ratio of the same prompts generated without control by the generator the
     controlled rows extend: the sentence-vector transformer (``token_view=False``; the text-view
     ensemble is a different generator, which ``generate_controlled`` does not use)."""
-    from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate
+    from controlmm.motion.geometry import foot_skating_ratio
 
     values = []
     for i, (case, f) in enumerate(zip(cases, frames)):
@@ -64,7 +64,7 @@ def uncontrolled_skate(model, cases, frames: list[int], seed: int) -> float:
 
 
 def run_rows(model, cases, configs: list[tuple[str, object]], seed: int) -> list[dict]:
-    from controlmm.control.evaluation import evaluate_control
+    from controlmm.eval.control import evaluate_control
 
     out = []
     for label, config in configs:
@@ -160,8 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     from controlmm.cli.eval_control import default_data
-    from controlmm.control.evaluation import build_cases
     from controlmm.editing import PRESETS
+    from controlmm.eval.control import build_cases
     from controlmm.generate import generate_controlled, load_model
 
     model = load_model(args.model)

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from controlmm.corpus import CorpusConfig, write_corpus
-from controlmm.eval.geometry import foot_skating_ratio
-from controlmm.eval.probes import evaluate, ground_truth, list_cases
+from controlmm.eval.cases import evaluate, ground_truth, list_cases
+from controlmm.motion.geometry import foot_skating_ratio
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, PARENTS
 
 LENGTH_BINS = (40, 60, 80, 100, 120, 140, 160, 180, 197)

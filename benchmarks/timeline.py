@@ -5,7 +5,7 @@
 For every spec: wall seconds, the largest drift (cm) of entries held by a later pass from what the
 pass that fixed them produced, the fastest joint at any track boundary (m/s) against the 99th
 percentile of joint speeds in the corpus' test split, and the text-adherence probe of every track
-(``controlmm.eval.probes``) on its span, beside the pass rate of the same prompt generated alone by the
+(``controlmm.corpus.probes``) on its span, beside the pass rate of the same prompt generated alone by the
 model over the span's length (3 seeds: what the model can do without the timeline). Runs
 single-threaded (torch and BLAS) so figures are stable on a shared machine.
 """
@@ -115,7 +115,7 @@ def corpus_speed_percentile(corpus: Path, q: float = 99.0, split: str = "test") 
 
 def _alone(model, track: dict) -> int:
     """How many of 3 seeds of the track's prompt, generated alone over its span, pass its probe."""
-    from controlmm.eval.probes import probe
+    from controlmm.corpus.probes import probe
     from controlmm.generate import generate
     from controlmm.motion.skeleton import MIN_FRAMES
 

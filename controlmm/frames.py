@@ -28,6 +28,7 @@ from controlmm.errors import ControlMMError
 if TYPE_CHECKING:
     import torch
 
+
 # Axis permutation human (x, y, z) -> world (z, x, y).
 HUMAN_TO_WORLD_AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 

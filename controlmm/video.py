@@ -15,7 +15,7 @@ VIDEO_FORMATS = (".mp4", ".gif")
 
 def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> int:
     """Write RGB frames (H, W, 3) uint8 to ``.mp4`` or ``.gif`` atomically; return the count."""
-    import imageio.v2 as imageio
+    import imageio.v2 as imageio  # only when a video is written (it brings its ffmpeg plugin)
 
     path = Path(path)
     suffix = path.suffix.lower()

@@ -1,4 +1,4 @@
-"""Obstacle and floor losses for inference-time editing, as ``controlmm.editing.LossTerm``s.
+"""Obstacle and floor losses for inference-time editing, as ``controlmm.control.LossTerm``s.
 
 Every loss takes generated joints (B, T, 22, 3) in the HUMAN frame (Y up, metres, frames
 0..T-1 at ``fps``), converts them to the world with the given ``HumanToWorld`` (whose scale is
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from controlmm.editing import LossTerm
+from controlmm.control import LossTerm
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, NUM_JOINTS, PARENTS, joint_index

@@ -1,7 +1,7 @@
 import pytest
 import torch
 
-from controlmm.editing import LossTerm, total_loss
+from controlmm.control import LossTerm, total_loss
 from controlmm.errors import ControlMMError
 
 

@@ -7,10 +7,10 @@ import json
 import pytest
 
 from controlmm.cli.main import main
-from tests.cli_helpers import run_cli
 from controlmm.control.spec import ControlSpec
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from scenes import load_scene
+from tests.cli_helpers import run_cli
 
 BLOCKED_START = """<mujoco model="blocked">
   <custom>

@@ -9,8 +9,9 @@ import pytest
 
 from controlmm.corpus import CorpusConfig, family_names, make_clip, write_corpus
 from controlmm.corpus.dataset import ClipSpec
+from controlmm.corpus.probes import PROBES, ProbeCase, check, probe
 from controlmm.errors import ControlMMError
-from controlmm.eval.probes import PROBES, ProbeCase, check, evaluate, ground_truth, list_cases, probe
+from controlmm.eval.cases import evaluate, ground_truth, list_cases
 from controlmm.motion import Motion
 
 

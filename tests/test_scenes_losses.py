@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from controlmm.editing import LossTerm, total_loss
+from controlmm.control import LossTerm, total_loss
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from scenes import body_obstacle_loss, body_points, floor_loss, load_scene, obstacle_loss, scene_loss_terms

@@ -116,8 +116,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def parse_modes(text: str) -> list[str]:
-    from controlmm.control.evaluation import JOINT_MODES
     from controlmm.errors import ControlMMError
+    from controlmm.eval.control import JOINT_MODES
 
     modes = [m.strip() for m in text.split(",") if m.strip()]
     for m in modes:
@@ -129,8 +129,8 @@ def parse_modes(text: str) -> list[str]:
 
 
 def parse_densities(text: str) -> tuple[int, ...]:
-    from controlmm.control.evaluation import DENSITIES
     from controlmm.errors import ControlMMError
+    from controlmm.eval.control import DENSITIES
 
     if text == "all":
         return DENSITIES

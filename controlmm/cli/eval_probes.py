@@ -91,8 +91,8 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from controlmm.errors import ControlMMError
+    from controlmm.eval.cases import evaluate, ground_truth, list_cases
     from controlmm.eval.model_probes import generated_motions, select_cases, tokenized_motions
-    from controlmm.eval.probes import evaluate, ground_truth, list_cases
 
     if args.json:
         check_output_file(args.json, force=args.force)

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from controlmm.control.spec import ControlSpec
-from controlmm.editing.terms import LossTerm
+from controlmm.control.terms import LossTerm
 from controlmm.frames import HumanToWorld
 
 
@@ -31,7 +31,7 @@ def control_loss(joints: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor
 
 
 def control_loss_term(targets: torch.Tensor, mask: torch.Tensor, weight: float = 1.0) -> LossTerm:
-    """Wrap :func:`control_loss` for fixed targets as an editing :class:`LossTerm`."""
+    """Wrap :func:`control_loss` for fixed targets as a :class:`LossTerm` for the editors."""
     return LossTerm("control", lambda joints: control_loss(joints, targets, mask), weight)
 
 

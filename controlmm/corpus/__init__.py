@@ -13,6 +13,7 @@ Public API::
 """
 
 from controlmm.corpus.dataset import CorpusConfig, make_clip, plan_clips, write_corpus
-from controlmm.corpus.registry import Family, family_names, get_family
+from controlmm.corpus.family import Family
+from controlmm.corpus.registry import family_names, get_family
 
 __all__ = ["CorpusConfig", "Family", "family_names", "get_family", "make_clip", "plan_clips", "write_corpus"]

@@ -17,6 +17,7 @@ the same for any number of worker processes.
 from __future__ import annotations
 
 import json
+import multiprocessing as mp
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -24,9 +25,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from controlmm.atomic import atomic_dir, check_output_dir
+from controlmm.corpus.probes import probe
+from controlmm.corpus.processing import process
+from controlmm.corpus.registry import family_names, get_family
+from controlmm.corpus.text.templates import Caption
 from controlmm.errors import ControlMMError
+from controlmm.motion.geometry import foot_skating_ratio
 from controlmm.motion.normalization import FEATURE_GROUPS
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, MAX_FRAMES, MIN_FRAMES, PARENTS
 
@@ -59,8 +67,6 @@ class CorpusConfig:
             raise ControlMMError(f"--clips must be an integer >= 1; got {self.clips}")
         if self.captions < 3:
             raise ControlMMError(f"captions per clip must be >= 3; got {self.captions}")
-        from controlmm.corpus.registry import get_family
-
         for name in self.families or ():
             get_family(name)
 
@@ -90,8 +96,6 @@ class ClipResult:
 
 def plan_clips(config: CorpusConfig) -> list[ClipSpec]:
     """Assign families (round-robin over a seeded shuffle) and splits (per family) to clips."""
-    from controlmm.corpus.registry import family_names
-
     names = list(config.families or family_names())
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, 0x5EED]))
     order = [names[i % len(names)] for i in range(config.clips)]
@@ -120,9 +124,6 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     (floor penetration by a non-foot joint, foot skating above 0.1, wrong length, a caption
     that its probe finds untrue); ``meta["seed"][2]`` records the attempt used.
     """
-    from controlmm.corpus.processing import process
-    from controlmm.corpus.registry import get_family
-
     family = get_family(spec.family)
     reasons: list[str] = []
     for attempt in range(MAX_ATTEMPTS):
@@ -155,11 +156,9 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     return features, joints, caps, meta
 
 
-def check_captions(family: str, joints: np.ndarray, captions: list) -> str | None:
+def check_captions(family: str, joints: np.ndarray, captions: list[Caption]) -> str | None:
     """A caption the motion does not satisfy (by its probe), or None: a last guard so that no
     untrue caption is ever written."""
-    from controlmm.eval.probes import probe
-
     for cap in captions:
         result = probe(joints, family, cap.claims)
         if not result.passed:
@@ -171,8 +170,6 @@ def check_clip(raw: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> st
     """Why a generated clip is unusable, or None. ``raw`` are the generator's joints (metres,
     floor at y = 0), ``joints`` those recovered from the features, ``positions`` the
     canonical positions the features were computed from."""
-    from controlmm.eval.geometry import foot_skating_ratio
-
     if not np.all(np.isfinite(joints)):
         return "non-finite joints"
     if not MIN_FRAMES <= len(joints) <= MAX_FRAMES:
@@ -218,8 +215,6 @@ def _work(args: tuple[ClipSpec, str, int]) -> ClipResult:
 
 
 def _init_worker() -> None:
-    import torch
-
     torch.set_num_threads(1)
 
 
@@ -242,8 +237,6 @@ def write_corpus(
     Returns:
         The summary also written to ``corpus.json``.
     """
-    from tqdm import tqdm
-
     config.validate()
     out = Path(out)
     check_output_dir(out, kind=CORPUS_OUTPUT, force=force)
@@ -263,8 +256,6 @@ def write_corpus(
                 results.append(_work(job))
                 bar.update()
         else:
-            import multiprocessing as mp
-
             ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
             with ctx.Pool(min(workers, len(jobs)), initializer=_init_worker) as pool:
                 for res in pool.imap(_work, jobs, chunksize=4):
@@ -294,8 +285,6 @@ def _finish(
         std[sl] = std[sl].mean()
     np.save(root / "Mean.npy", mean.astype(np.float32))
     np.save(root / "Std.npy", np.maximum(std, 1e-8).astype(np.float32))
-    from controlmm.corpus.registry import family_names
-
     families = {name: n for name in family_names() if (n := sum(r.family == name for r in results))}
     summary = {
         "format": "humanml3d",

@@ -1,73 +1,44 @@
-"""The motion-family registry: every family by name.
+"""The motion-family registry: every family by name, in a fixed order.
 
-A family knows how to draw random parameters, build the motion for them, and describe it
-(caption templates, slot fillers and the claims its words make). Family modules register
-themselves on import (:mod:`controlmm.corpus.families`).
+A family (:class:`~controlmm.corpus.family.Family`) knows how to draw random parameters, build the
+motion for them, and describe it (caption templates, slot fillers and the claims its words make).
+Each family module holds its families in ``FAMILIES``; :data:`GROUPS` lists the modules, and their
+order (then each module's own) is the registry order.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Iterable
+from types import ModuleType
 
-import numpy as np
-
-from controlmm.corpus.text.templates import Caption, Slot, Template, render
+from controlmm.corpus.families import combos, gestures, jumping, lowering, reaching, turning, walking
+from controlmm.corpus.family import Family
 from controlmm.errors import ControlMMError
 
-Params = dict[str, Any]
+GROUPS: tuple[ModuleType, ...] = (walking, turning, jumping, lowering, gestures, reaching, combos)
+"""The family modules in registry order (travelling first, compositions last)."""
 
 
-@dataclass(frozen=True)
-class Family:
-    """A kind of motion.
-
-    Attributes:
-        name: registry name (also the probe's name).
-        group: family module ("walking", "turning", "jumping", "lowering", "gestures", "combos").
-        sample: rng -> JSON-serialisable parameters (speed, direction, hand, count...).
-        build: (params, rng) -> joints (T + 1, 22, 3), metres, Y up; T in 40..196.
-        templates: caption patterns.
-        slots: params -> fillers of the patterns' fields (with claims).
-        core: params -> claims every caption of the family makes.
-    """
-
-    name: str
-    group: str
-    sample: Callable[[np.random.Generator], Params]
-    build: Callable[[Params, np.random.Generator], np.ndarray]
-    templates: tuple[Template, ...]
-    slots: Callable[[Params], dict[str, Slot]]
-    core: Callable[[Params], dict[str, Any]] = lambda p: {}
-
-    def captions(
-        self, params: Params, rng: np.random.Generator, held_out: bool, count: int = 3
-    ) -> list[Caption]:
-        """``count`` different captions of a clip with these parameters."""
-        return render(self.name, self.templates, self.slots(params), rng, held_out, count, self.core(params))
+def _by_name(families: Iterable[Family]) -> dict[str, Family]:
+    out: dict[str, Family] = {}
+    for family in families:
+        if family.name in out:
+            raise ValueError(f"family '{family.name}' is registered twice")
+        out[family.name] = family
+    return out
 
 
-FAMILIES: dict[str, Family] = {}
-
-
-def register(family: Family) -> Family:
-    if family.name in FAMILIES:
-        raise ValueError(f"family '{family.name}' is registered twice")
-    FAMILIES[family.name] = family
-    return family
+FAMILIES: dict[str, Family] = _by_name(f for group in GROUPS for f in group.FAMILIES)
+"""Every family by name, in registry order."""
 
 
 def family_names() -> tuple[str, ...]:
-    """All registered family names, in registration order."""
-    import controlmm.corpus.families  # noqa: F401  (registers the families)
-
+    """All family names, in registry order."""
     return tuple(FAMILIES)
 
 
 def get_family(name: str) -> Family:
     """The family called ``name``; a one-line error lists the valid names otherwise."""
-    names = family_names()
     if name not in FAMILIES:
-        raise ControlMMError(f"unknown motion family '{name}'; valid families: {', '.join(names)}")
+        raise ControlMMError(f"unknown motion family '{name}'; valid families: {', '.join(FAMILIES)}")
     return FAMILIES[name]

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from controlmm.errors import InputFileError
 from controlmm.motion.normalization import Normalizer
@@ -150,8 +151,6 @@ class HumanML3D:
     # -- samples ----------------------------------------------------------------------------------
     def text_samples(self, split: str, progress: bool = False) -> list[MotionSample]:
         """Captioned samples of a split with the official span and length rules (see module doc)."""
-        from tqdm import tqdm
-
         samples: list[MotionSample] = []
         for motion_id in tqdm(
             self.split_ids(split), desc=f"loading {split}", unit="motion", disable=not progress, leave=False
@@ -179,8 +178,6 @@ class HumanML3D:
 
     def motions(self, split: str, min_frames: int, progress: bool = False) -> list[np.ndarray]:
         """Whole motions of a split with at least ``min_frames`` frames (tokenizer training)."""
-        from tqdm import tqdm
-
         out = []
         for motion_id in tqdm(
             self.split_ids(split), desc=f"loading {split}", unit="motion", disable=not progress, leave=False

@@ -1,7 +1,7 @@
-"""Inference-time editing: loss terms on generated joints, logits editing, codebook editing.
+"""Inference-time editing: the objective on generated joints, logits editing, codebook editing.
 
-- :class:`LossTerm` / :func:`total_loss`: the one loss interface (control, obstacles, feedback...);
-- :class:`Objective`: control targets + loss terms + the early-stopping rule;
+- :class:`Objective`: control targets + loss terms (:class:`controlmm.control.LossTerm`) + the
+  early-stopping rule;
 - :func:`logits_editing`, :func:`codebook_editing`: the two editors (reference §5.2-5.4);
 - :class:`EditingConfig`, :data:`PRESETS` (``fast``, ``medium``, ``accurate``), :func:`editing_preset`.
 
@@ -14,17 +14,14 @@ from controlmm.editing.logits_editing import logits_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.optimize import EditOutcome, optimize
 from controlmm.editing.presets import PRESETS, EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm, total_loss
 
 __all__ = [
     "PRESETS",
     "EditOutcome",
     "EditingConfig",
-    "LossTerm",
     "Objective",
     "codebook_editing",
     "editing_preset",
     "logits_editing",
     "optimize",
-    "total_loss",
 ]

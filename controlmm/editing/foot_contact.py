@@ -15,14 +15,14 @@ from dataclasses import replace
 
 import torch
 
+from controlmm.control.terms import LossTerm
 from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
-from controlmm.editing.terms import LossTerm
-from controlmm.eval.geometry import FOOT_JOINTS, SKATE_HEIGHT, SKATE_SPEED
+from controlmm.motion.geometry import FOOT_JOINTS, SKATE_HEIGHT, SKATE_SPEED
 from controlmm.motion.skeleton import FPS
 
-# Contact and sliding follow the foot-skating ratio's rule (controlmm.eval.geometry.foot_skating_ratio):
+# Contact and sliding follow the foot-skating ratio's rule (controlmm.motion.geometry.foot_skating_ratio):
 # a foot (joints 10, 11) below SKATE_HEIGHT (m) at t and t+1 is in contact; above SKATE_SPEED (m/s) it slides.
 
 

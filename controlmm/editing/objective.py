@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from controlmm.editing.terms import LossTerm
+from controlmm.control.loss import control_loss
+from controlmm.control.terms import LossTerm
 
 
 @dataclass
@@ -100,8 +101,6 @@ class Objective:
 
     def term_values(self, joints: torch.Tensor) -> dict[str, torch.Tensor]:
         """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
-        from controlmm.control.loss import control_loss  # (controlmm.control imports this package)
-
         values: dict[str, torch.Tensor] = {}
         if self.has_control:
             value = control_loss(joints, self.targets, self.mask)

@@ -1,4 +1,5 @@
-"""Probe cases (a caption with its claims) from a corpus, probe runs and their report."""
+"""Probe cases (a caption with its claims, :class:`~controlmm.corpus.probes.ProbeCase`) from a corpus,
+probe runs and their report."""
 
 from __future__ import annotations
 
@@ -9,23 +10,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
+from controlmm.corpus.probes import PROBES, ProbeCase, ProbeResult, check
 from controlmm.errors import ControlMMError, InputFileError
-
-
-@dataclass(frozen=True)
-class ProbeCase:
-    """A caption of a clip with what it claims: the input of a probe."""
-
-    clip_id: str
-    caption: str
-    family: str
-    claims: dict[str, Any]
-    frames: int
-    split: str
-    template: str = ""
-    held_out: bool = False
-    params: dict[str, Any] = field(default_factory=dict, compare=False)
+from controlmm.motion import Motion
 
 
 def list_cases(data_dir: str | Path, split: str = "test") -> list[ProbeCase]:
@@ -75,9 +64,9 @@ class ProbeReport:
 
     split: str
     counts: dict[str, list[int]] = field(default_factory=dict)  # family -> [passed, total]
-    failures: list[tuple[ProbeCase, Any]] = field(default_factory=list)  # (case, ProbeResult)
+    failures: list[tuple[ProbeCase, ProbeResult]] = field(default_factory=list)
 
-    def add(self, case: ProbeCase, result) -> None:
+    def add(self, case: ProbeCase, result: ProbeResult) -> None:
         entry = self.counts.setdefault(case.family, [0, 0])
         entry[0] += int(result.passed)
         entry[1] += 1
@@ -99,8 +88,6 @@ class ProbeReport:
     def table(self) -> str:
         """A plain-text table: family, captions, passed, pass rate."""
         lines = [f"{'family':<18} {'captions':>8} {'passed':>7} {'rate':>7}"]
-        from controlmm.eval.probes import PROBES
-
         for family in sorted(self.counts, key=lambda f: list(PROBES).index(f) if f in PROBES else 99):
             p, t = self.counts[family]
             lines.append(f"{family:<18} {t:>8d} {p:>7d} {100.0 * p / t:>6.1f}%")
@@ -138,11 +125,10 @@ def clip_features(data_dir: str | Path, clip_id: str) -> np.ndarray:
         raise InputFileError(f"cannot read {path}: {type(exc).__name__}") from None
 
 
-def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
+def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Motion]:
     """Motion source for :func:`evaluate`: the corpus' own features (``new_joint_vecs``)."""
-    from controlmm.motion import Motion
 
-    def load(case: ProbeCase):
+    def load(case: ProbeCase) -> Motion:
         return Motion.from_features(clip_features(data_dir, case.clip_id))
 
     return load
@@ -150,7 +136,7 @@ def ground_truth(data_dir: str | Path) -> Callable[[ProbeCase], Any]:
 
 def evaluate(
     cases: list[ProbeCase],
-    motion_for: Callable[[ProbeCase], Any],
+    motion_for: Callable[[ProbeCase], Motion | np.ndarray],
     split: str = "test",
     per_clip: bool = False,
     progress: bool = False,
@@ -165,10 +151,6 @@ def evaluate(
         per_clip: call ``motion_for`` once per clip (ground truth) instead of per caption.
         progress: tqdm progress bar.
     """
-    from tqdm import tqdm
-
-    from controlmm.eval.probes import check
-
     report = ProbeReport(split=split)
     last_id, motion = None, None
     for case in tqdm(cases, desc="probes", unit="caption", disable=not progress):

@@ -1,10 +1,11 @@
 """Spatial control with text-motion quality: the paper's Table 1 and Table 3 analogues, over repeats.
 
-Each row of the table is a joint mode (whose cases give the targets, :func:`controlmm.control.evaluation.
-build_cases`) and an editing preset; every repeat r draws fresh cases (seed + r: other clips, captions,
-crops, keyframes) and generates every row on them with seed + r. Per row and repeat:
+Each row of the table is a joint mode (whose cases give the targets,
+:func:`controlmm.eval.control.build_cases`) and an editing preset; every repeat r draws fresh cases
+(seed + r: other clips, captions, crops, keyframes) and generates every row on them with seed + r.
+Per row and repeat:
 
-- the control columns of :func:`~controlmm.control.evaluation.evaluate_control` over all its cases:
+- the control columns of :func:`~controlmm.eval.control.evaluate_control` over all its cases:
   foot-skating ratio, Traj. err, Loc. err, Avg. err (m);
 - the text-motion columns of :func:`controlmm.eval.scoring.score_motions` on the generated motions,
   with the ground truth of the same cases as the FID reference: R-precision top-1/2/3, FID, MM-Dist,
@@ -27,10 +28,15 @@ from typing import Any
 
 import numpy as np
 
+from controlmm.data.humanml3d import HumanML3D
 from controlmm.editing import EditingConfig
 from controlmm.errors import ControlMMError
+from controlmm.eval.control import ControlCase, ControlEvaluation, build_cases, evaluate_control
 from controlmm.eval.evaluator.base import Evaluator
 from controlmm.eval.scoring import SCORE_COLUMNS, MotionSet, Scores, score_motions
+from controlmm.models import MotionModel
+from controlmm.motion.geometry import foot_skating_ratio
+from controlmm.motion.skeleton import FPS, MAX_FRAMES
 
 CONTROL_COLUMNS = ("skate", "traj", "loc", "avg")
 TABLE_COLUMNS = (
@@ -78,7 +84,7 @@ class ControlTable:
     samples: int
     densities: tuple[int, ...]
     rows: dict[str, Scores] = field(default_factory=dict)
-    evaluations: dict[str, list] = field(default_factory=dict)  # row -> ControlEvaluation per repeat
+    evaluations: dict[str, list[ControlEvaluation]] = field(default_factory=dict)  # one per repeat
     settings: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, dict[str, tuple[float, float]]]:
@@ -117,16 +123,13 @@ class ControlTable:
         }
 
 
-def _control_values(result) -> dict[str, float]:
+def _control_values(result: ControlEvaluation) -> dict[str, float]:
     summary = result.by_density()["all"]
     keep = CONTROL_COLUMNS + ("max", "steps", "seconds", "cpu_seconds")
     return {k: float(summary[k]) for k in keep if k in summary}
 
 
-def _real_values(cases) -> dict[str, float]:
-    from controlmm.eval.geometry import foot_skating_ratio
-    from controlmm.motion.skeleton import FPS
-
+def _real_values(cases: Sequence[ControlCase]) -> dict[str, float]:
     return {
         "skate": float(np.mean([foot_skating_ratio(c.targets, FPS) for c in cases])),
         "traj": 0.0,
@@ -135,13 +138,12 @@ def _real_values(cases) -> dict[str, float]:
     }
 
 
-def recropped(data: str | Path, cases, seed: int, split: str = "test") -> list[np.ndarray]:
+def recropped(
+    data: str | Path, cases: Sequence[ControlCase], seed: int, split: str = "test"
+) -> list[np.ndarray]:
     """The ground truth of the same samples with another random crop: per case, the clip (or captioned
     span) it was cut from, m = its length rounded down to a multiple of 4 (at most 196) with one unit
     less with probability 1/3 (the official loader's coin), a random start. Returns (m, 263) arrays."""
-    from controlmm.data.humanml3d import HumanML3D
-    from controlmm.motion.skeleton import MAX_FRAMES
-
     by_id: dict[str, list] = {}
     for sample in HumanML3D(data).text_samples(split):
         by_id.setdefault(sample.motion_id, []).append(sample)
@@ -161,7 +163,7 @@ def recropped(data: str | Path, cases, seed: int, split: str = "test") -> list[n
 
 
 def evaluate_control_table(
-    model,
+    model: MotionModel,
     data: str | Path,
     rows: Sequence[TableRow],
     *,
@@ -183,14 +185,12 @@ def evaluate_control_table(
         rows: the method rows, in table order (e.g. ``TableRow("uncontrolled", "pelvis", UNCONTROLLED)``,
             ``TableRow("pelvis")``, ``TableRow("all joints (avg)", "each")``).
         evaluator: scores the text-motion columns; None = control columns only.
-        densities, samples, seed, batch_size: as :func:`~controlmm.control.evaluation.build_cases` and
-            :func:`~controlmm.control.evaluation.evaluate_control`.
+        densities, samples, seed, batch_size: as :func:`~controlmm.eval.control.build_cases` and
+            :func:`~controlmm.eval.control.evaluate_control`.
         repeats: draws of cases (and generations); the CIs are over these.
         real: include the "Real" row (ground truth, cases of the first row's joint mode; FID against
             :func:`recropped`).
     """
-    from controlmm.control.evaluation import build_cases, evaluate_control
-
     if repeats < 1:
         raise ControlMMError(f"repeats must be at least 1; got {repeats}")
     if not rows:

@@ -1,7 +1,7 @@
 """Probes on a model: generate from each held-out caption and check the claims of its words.
 
 ```python
-from controlmm.eval.probes import evaluate, list_cases
+from controlmm.eval.cases import evaluate, list_cases
 from controlmm.eval.model_probes import generated_motions, select_cases
 from controlmm.generate import load_model
 
@@ -20,9 +20,14 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
+import torch
+from tqdm import tqdm
 
+from controlmm.corpus.probes import PROBES, ProbeCase
 from controlmm.errors import ControlMMError
-from controlmm.eval.cases import ProbeCase
+from controlmm.eval.cases import clip_features
+from controlmm.generate import MotionModel, generate
+from controlmm.motion import Motion
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
 
@@ -36,8 +41,6 @@ def select_cases(
     choice, kept in the original order)."""
     cases = list(cases)
     if families:
-        from controlmm.eval.probes import PROBES
-
         unknown = [f for f in families if f not in PROBES]
         if unknown:
             raise ControlMMError(f"unknown family {', '.join(unknown)}; known: {', '.join(PROBES)}")
@@ -63,7 +66,7 @@ def select_cases(
 
 
 def generated_motions(
-    model,
+    model: MotionModel,
     cases: Sequence[ProbeCase],
     seed: int = 0,
     batch_size: int = 32,
@@ -72,11 +75,7 @@ def generated_motions(
 ) -> Callable[[ProbeCase], object]:
     """Generate one motion per case (text ``case.caption``, ``case.frames`` frames) with a loaded
     :class:`~controlmm.models.MotionModel`; returns the ``motion_for`` function of
-    :func:`controlmm.eval.probes.evaluate`."""
-    from tqdm import tqdm
-
-    from controlmm.generate import generate
-
+    :func:`controlmm.eval.cases.evaluate`."""
     if batch_size < 1:
         raise ControlMMError(f"batch size must be at least 1; got {batch_size}")
     motions: dict[tuple[str, str], object] = {}
@@ -101,16 +100,13 @@ def generated_motions(
     return motion_for
 
 
-def tokenized_motions(model, data_dir: str, layers: int | None = None) -> Callable[[ProbeCase], object]:
+def tokenized_motions(
+    model: MotionModel, data_dir: str, layers: int | None = None
+) -> Callable[[ProbeCase], object]:
     """The ground truth of each case passed through the model's tokenizer (encode, keep the first
     ``layers`` quantizer layers, default all, decode): what the token space can represent at all,
     the ceiling of any generator on top of it. Returns a ``motion_for`` for
-    :func:`controlmm.eval.probes.evaluate`; clips are cropped to a multiple of 4 frames."""
-    import torch
-
-    from controlmm.eval.cases import clip_features
-    from controlmm.motion import Motion
-
+    :func:`controlmm.eval.cases.evaluate`; clips are cropped to a multiple of 4 frames."""
     tokenizer = model.parts.get("tokenizer")
     if tokenizer is None:
         raise ControlMMError("this model directory has no tokenizer")

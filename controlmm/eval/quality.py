@@ -22,12 +22,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from controlmm.data.humanml3d import Caption, HumanML3D
 from controlmm.errors import ControlMMError
 from controlmm.eval import metrics as M
 from controlmm.eval.evaluator.base import Evaluator, MotionLike
 from controlmm.eval.scoring import MotionSet, columns_from_embeddings, quality_columns, score_motions
+from controlmm.generate import MotionModel, generate
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
 COLUMNS = (
@@ -162,12 +164,11 @@ class EvalSet:
 
 
 # -- generation ---------------------------------------------------------------------------------------
-def model_generator(model, batch_size: int = 64, **generate_kwargs: Any) -> GenerateFn:
+def model_generator(model: MotionModel, batch_size: int = 64, **generate_kwargs: Any) -> GenerateFn:
     """A :data:`GenerateFn` for a loaded :class:`~controlmm.models.MotionModel` (base model, no control).
 
     Lengths below the model's 40-frame minimum are generated at 40 frames and cut.
     """
-    from controlmm.generate import generate
 
     def run(samples: list[EvalSample], seed: int) -> list[MotionLike]:
         frames = [s.frames for s in samples]
@@ -267,8 +268,6 @@ def evaluate_quality(
             0 texts: not computed).
         real: include the Real row.
     """
-    from tqdm import tqdm
-
     if repeats < 1:
         raise ControlMMError(f"repeats must be at least 1; got {repeats}")
     generators = generators or {}

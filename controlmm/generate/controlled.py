@@ -24,7 +24,7 @@ Per batch (reference §5):
 5. decoding, recovery of the joints, and the error of every constraint.
 
 Every editor minimises the same :class:`~controlmm.editing.objective.Objective`: the control loss of
-the targets plus any extra :class:`~controlmm.editing.terms.LossTerm` (obstacle SDF losses, floor and
+the targets plus any extra :class:`~controlmm.control.terms.LossTerm` (obstacle SDF losses, floor and
 simulation-feedback losses...) on the joints (B, T, 22, 3) of frames 0..T-1, and stops early once every
 constraint is within the tolerance (1 cm) and every other term is ~0.
 """
@@ -41,14 +41,15 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
 from controlmm.control.spec import ControlSpec
+from controlmm.control.terms import LossTerm
 from controlmm.editing.codebook_editing import codebook_editing
 from controlmm.editing.foot_contact import foot_contact_run
 from controlmm.editing.logits_editing import logits_editing
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.generate.api import frames_for, latent_to_features
@@ -204,8 +205,6 @@ def generate_controlled(
     generator = torch.Generator(device=model.device).manual_seed(int(seed))
     chunks = _chunks(lengths, batch_size, by_length=bool(terms))
     results: dict[int, tuple] = {}
-    from tqdm import tqdm
-
     bar = tqdm(total=count, desc="generate", unit="motion", disable=not progress, leave=False)
     for chunk in chunks:
         out = _generate_chunk(

@@ -13,6 +13,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from controlmm.errors import ControlMMError
+
 
 class InputProcess(nn.Module):
     """Token embeddings (B, N, code_dim) -> (N, B, latent_dim) through ``poseEmbedding``."""
@@ -42,8 +44,6 @@ class PositionalEncoding(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if x.shape[0] > self.pe.shape[0]:
-            from controlmm.errors import ControlMMError
-
             raise ControlMMError(
                 f"sequence of {x.shape[0]} tokens exceeds the model's max_len {self.pe.shape[0]}"
             )

@@ -35,11 +35,16 @@ import numpy as np
 import torch
 from torch import nn
 
+from controlmm.assets import default_model_dir
 from controlmm.atomic import atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.files import load_torch
 from controlmm.models.config import ModelConfig
+from controlmm.models.mask_transformer import MaskTransformer
+from controlmm.models.residual_transformer import ResidualTransformer
+from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.normalization import Normalizer
+from controlmm.text import TextEncoder, load_text_encoder
 
 FORMAT = "controlmm-model"
 FORMAT_VERSION = 1
@@ -72,20 +77,14 @@ def register_part(
 
 
 def _build_tokenizer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.rvqvae import RVQVAE
-
     return RVQVAE(cfg.tokenizer)
 
 
 def _build_transformer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.mask_transformer import MaskTransformer
-
     return MaskTransformer(cfg.transformer)
 
 
 def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.mask_transformer import MaskTransformer
-
     if cfg.token_view is None:
         raise ControlMMError(
             "the model configuration has no token_view (the token-state transformer's config)"
@@ -94,8 +93,6 @@ def _build_token_transformer(cfg: ModelConfig) -> nn.Module:
 
 
 def _build_residual(cfg: ModelConfig) -> nn.Module:
-    from controlmm.models.residual_transformer import ResidualTransformer
-
     return ResidualTransformer(cfg.residual)
 
 
@@ -249,7 +246,7 @@ class MotionModel:
     directory: Path | None = None
     device: torch.device = field(default_factory=lambda: torch.device("cpu"))
     clip_weights: str | None = None
-    _text_encoder: Any = None
+    _text_encoder: TextEncoder | None = None
 
     @property
     def tokenizer(self):
@@ -281,8 +278,6 @@ class MotionModel:
     def text_encoder(self):
         """The sentence encoder the transformers were trained with (loaded on first use)."""
         if self._text_encoder is None:
-            from controlmm.text import load_text_encoder
-
             self._text_encoder = load_text_encoder(
                 self.config.text_encoder, device=self.device, weights=self.clip_weights
             )
@@ -292,6 +287,7 @@ class MotionModel:
         """(B,) texts -> (B, text_dim) condition vectors on the model's device; (B, L, text_dim) token
         states when the model was trained on them (``config.text_encoder.tokens``)."""
         tokens = self.config.text_encoder.tokens
+        self.text_encoder.warn_truncated(texts, tokens or None)
         vectors = (
             self.text_encoder.encode_tokens(texts, tokens) if tokens else self.text_encoder.encode(texts)
         )
@@ -310,6 +306,7 @@ class MotionModel:
         """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer (``config.token_view``)."""
         if self.config.token_view is None:
             raise ControlMMError(f"model '{self.directory or 'this model'}' has no token_view configuration")
+        self.text_encoder.warn_truncated(texts, self.config.token_view.tokens)
         return self.text_encoder.encode_tokens(texts, self.config.token_view.tokens).to(self.device)
 
     def encode_text_views(self, texts: list[str]) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -320,6 +317,7 @@ class MotionModel:
         both = getattr(self.text_encoder, "encode_with_tokens", None)
         if both is None or self.config.text_encoder.tokens:
             return self.encode_text(texts), self.encode_token_states(texts)
+        self.text_encoder.warn_truncated(texts, self.config.token_view.tokens)
         vectors, states = both(texts, self.config.token_view.tokens)
         return self._checked_condition(vectors), states.to(self.device)
 
@@ -359,8 +357,6 @@ def load_model(
         clip_weights: for CLIP-conditioned models, where the CLIP weights are (overrides model.json).
     """
     if model_dir is None:
-        from controlmm.assets import default_model_dir
-
         model_dir = default_model_dir()
         if not (Path(model_dir) / "model.json").is_file():
             raise InputFileError(

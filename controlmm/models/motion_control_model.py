@@ -37,6 +37,7 @@ from torch import nn
 from controlmm.models.config import ModelConfig
 from controlmm.models.layers import apply_layer, run_layers, transformer_trunk
 from controlmm.models.mask_transformer import MaskTransformer
+from controlmm.models.model_dir import register_part
 from controlmm.models.rvqvae import Encoder
 
 
@@ -173,10 +174,4 @@ def _build_control(cfg: ModelConfig) -> nn.Module:
     return MotionControlModel(cfg)
 
 
-def register() -> None:
-    from controlmm.models.model_dir import register_part
-
-    register_part("control", _build_control, requires=("tokenizer", "transformer"))
-
-
-register()
+register_part("control", _build_control, requires=("tokenizer", "transformer"))

@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 
 from controlmm.errors import ShapeError
+from controlmm.motion.extract import check_joints, joints_to_features
+from controlmm.motion.recover import features_to_joints_np
 from controlmm.motion.skeleton import FEATURE_DIM, FPS, NUM_JOINTS
 
 
@@ -62,8 +64,6 @@ class Motion:
     @classmethod
     def from_features(cls, features: np.ndarray, text: str = "", **kwargs: Any) -> Motion:
         """Build from HumanML3D features (T, 263); joints are recovered (20 fps)."""
-        from controlmm.motion.recover import features_to_joints_np
-
         feats = np.asarray(features)
         if feats.ndim != 2 or feats.shape[1] != FEATURE_DIM:
             raise ShapeError(f"features must have shape (T, {FEATURE_DIM}); got {feats.shape}")
@@ -83,8 +83,6 @@ class Motion:
         skeleton and canonicalised (floor, origin, facing +Z). The result has T' - 1 frames
         (the features' length) and joints recovered from those features.
         """
-        from controlmm.motion.extract import check_joints, joints_to_features
-
         arr = check_joints(joints)
         if abs(fps - FPS) > 1e-6:
             arr = resample(arr, fps, FPS)

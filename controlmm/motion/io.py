@@ -10,6 +10,7 @@ import numpy as np
 from controlmm.atomic import atomic_path
 from controlmm.errors import InputFileError, ShapeError
 from controlmm.files import input_file, load_array
+from controlmm.motion.bvh import read_bvh, write_bvh
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FEATURE_DIM, FPS, NUM_JOINTS
 
@@ -47,8 +48,6 @@ def load_motion(path: str | Path) -> Motion:
 
 def _load(path: Path, suffix: str) -> Motion:
     if suffix == ".bvh":
-        from controlmm.motion.bvh import read_bvh
-
         joints, fps = read_bvh(path)
         return Motion(joints=joints, fps=fps, metadata={"source": str(path)})
     data = load_array(path, "motion file")
@@ -97,8 +96,6 @@ def save_motion(motion: Motion, path: str | Path, npy_kind: str = "features") ->
     path = Path(path)
     suffix = _suffix(path, WRITE_FORMATS)
     if suffix == ".bvh":
-        from controlmm.motion.bvh import write_bvh
-
         write_bvh(path, motion.joints, motion.fps)
         return
     if suffix == ".npy":

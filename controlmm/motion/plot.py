@@ -16,13 +16,14 @@ from controlmm.errors import ControlMMError
 from controlmm.frames import human_to_world_axes
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import KINEMATIC_CHAINS
+from controlmm.video import write_video
 
 _CHAIN_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd")
 IMAGE_FORMATS = (".png",)
 
 
 def _figure(size=(10, 5)):
-    import matplotlib
+    import matplotlib  # only for plots; the Agg backend is chosen before pyplot loads
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -96,14 +97,14 @@ def plot_motion(motion: Motion, path: str | Path, snapshots: int = 6) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # only for plots (_figure chose the backend)
 
     plt.close(fig)
 
 
 def render_motion_frames(motion: Motion, size: tuple[int, int] = (640, 480)) -> Iterator[np.ndarray]:
     """Yield RGB frames (H, W, 3) uint8 of a 3-D stick-figure animation with a root trail."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # only for plots
 
     world = human_to_world_axes(motion.joints.astype(np.float64))
     fig = _figure((size[0] / 100, size[1] / 100))
@@ -128,8 +129,6 @@ def render_motion_frames(motion: Motion, size: tuple[int, int] = (640, 480)) -> 
 
 def animate_motion(motion: Motion, path: str | Path, size: tuple[int, int] = (640, 480)) -> int:
     """Write an ``.mp4`` or ``.gif`` stick-figure animation; returns the number of frames."""
-    from controlmm.video import write_video
-
     return write_video(path, render_motion_frames(motion, size), fps=motion.fps)
 
 

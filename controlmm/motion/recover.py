@@ -10,13 +10,12 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from controlmm.errors import ShapeError
 from controlmm.motion.skeleton import FEATURE_DIM, NUM_JOINTS
 
 
 def _check_features(features: torch.Tensor) -> None:
     if features.ndim < 2 or features.shape[-1] != FEATURE_DIM:
-        from controlmm.errors import ShapeError
-
         raise ShapeError(f"features must have shape (..., T, {FEATURE_DIM}); got {tuple(features.shape)}")
 
 

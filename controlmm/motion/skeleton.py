@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controlmm.errors import ShapeError
+from controlmm.errors import ControlMMError, ShapeError
 
 FPS: int = 20
 """HumanML3D frame rate (frames per second)."""
@@ -167,8 +167,6 @@ LEFT_RIGHT_MIRROR: tuple[int, ...] = (
 
 def joint_index(joint: str | int) -> int:
     """Return the index of a joint given by name or index; raise a one-line error otherwise."""
-    from controlmm.errors import ControlMMError
-
     if isinstance(joint, (int, np.integer)) and not isinstance(joint, bool):
         if 0 <= int(joint) < NUM_JOINTS:
             return int(joint)

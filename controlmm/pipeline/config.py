@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from controlmm.editing.presets import editing_preset
 from controlmm.errors import ControlMMError
 from controlmm.pipeline.feedback import FeedbackConfig
 from controlmm.seeds import check_seed
@@ -75,8 +76,6 @@ class PlanConfig:
             raise ControlMMError(f"safe distance must be from 0 to 0.5 m; got {self.safe_distance_m}")
         if self.text is not None and not self.text.strip():
             raise ControlMMError("text is empty; give a prompt such as 'a person walks forward'")
-        from controlmm.editing.presets import editing_preset
-
         editing_preset(self.preset)  # an unknown preset fails here, naming the allowed ones
         if self.text is not None and self.timeline is not None:
             raise ControlMMError("give either a text prompt or a timeline, not both")

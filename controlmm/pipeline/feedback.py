@@ -43,9 +43,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from controlmm.editing.terms import LossTerm
+from controlmm.control.terms import LossTerm
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import FPS, JOINT_NAMES, PARENTS, joint_index
+from scenes.losses import BODY_BONES, body_obstacle_loss
 
 Tensor = torch.Tensor
 
@@ -147,8 +148,6 @@ def feedback_terms(
         joints = body_human_joints(body_joints, body)
         label = f"feedback{round_index + 1}:{kind}:{body or 'robot'}"
         if kind == "obstacle_penetration" and sdf is not None:
-            from scenes.losses import BODY_BONES, body_obstacle_loss
-
             bones = [b for b in BODY_BONES if b.child in joints] or list(BODY_BONES)
             extra = (
                 (history.get(("obstacle", body), 0.0) if history is not None else 0.0)

@@ -13,10 +13,14 @@ the plan's default motion length.
 
 from __future__ import annotations
 
+import torch
+
 from controlmm.control.reach import reach_warnings, target_name
 from controlmm.control.spec import ControlSpec
 from controlmm.frames import HumanToWorld
+from controlmm.generate.api import frames_for
 from controlmm.motion.skeleton import FPS, MAX_FRAMES, MIN_FRAMES
+from sim import CheckConfig, check_pose
 
 FRAMES_AFTER_LAST_CONSTRAINT = 10
 """How long a plan's motion runs on after its last constraint when no length is given (0.5 s)."""
@@ -30,16 +34,12 @@ def plan_seconds(seconds: float | None, spec: ControlSpec | None) -> float | Non
     """
     if seconds is not None or spec is None or not spec.constraints or spec.last_frame >= MAX_FRAMES:
         return seconds  # (a constraint past the longest motion fails in the generator, with its frame)
-    from controlmm.generate.api import frames_for
-
     end = spec.last_frame + 1  # frames needed to reach the last constraint
     return max(MIN_FRAMES, end, min(frames_for(1)[0], end + FRAMES_AFTER_LAST_CONSTRAINT)) / FPS
 
 
 def start_pose_error(scene) -> str | None:
     """A one-line error when the robot's start pose penetrates an obstacle, else None."""
-    from sim import CheckConfig, check_pose
-
     report = check_pose(scene, scene.robot_start_qpos(), CheckConfig(dynamics=False))
     hits = [f for f in report.failures if f.kind == "obstacle_penetration"]
     if not hits:
@@ -59,8 +59,6 @@ def constraint_warnings(spec: ControlSpec, transform: HumanToWorld, sdf=None) ->
     world = transform.to_world(spec.human_positions(transform))
     inside = None
     if sdf is not None:
-        import torch
-
         with torch.no_grad():
             inside = sdf(
                 torch.as_tensor(world, dtype=torch.float64)[None],

@@ -32,7 +32,12 @@ import json
 from pathlib import Path
 
 from controlmm.atomic import atomic_dir, write_text
+from controlmm.motion.io import save_motion
+from controlmm.motion.plot import plot_motion
 from controlmm.pipeline.plan import PlanResult
+from controlmm.pipeline.plots import plot_clearance, plot_top_view
+from retarget.render import render_trajectory
+from sim import plot_report
 
 PLAN_OUTPUT = "plan"
 """The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
@@ -53,12 +58,6 @@ def write_plan(
 
     Returns the render backend used (``"mujoco"`` or ``"stick"``), or None without a video.
     """
-    from controlmm.motion.io import save_motion
-    from controlmm.motion.plot import plot_motion
-    from controlmm.pipeline.plots import plot_clearance, plot_top_view
-    from retarget.render import render_trajectory
-    from sim import plot_report
-
     config = result.config
     render = config.render if render is None else render
     backend = None

@@ -22,21 +22,27 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TextIO
 
 import torch
 
 from controlmm.control.spec import ControlSpec
+from controlmm.control.terms import LossTerm
 from controlmm.editing.presets import EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
+from controlmm.generate import MotionModel, generate_controlled, load_model
 from controlmm.motion.container import Motion
 from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from controlmm.pipeline.refine import edit_motion
+from controlmm.timeline import as_timeline, generate_timeline
+from retarget import RobotTrajectory, load_robot, retarget_motion, robot_scale
+from scenes import Scene, load_scene, scene_loss_terms
+from sim import Report, check_trajectory, make_world
 
 CONSTRAINT_TOLERANCE_M = 0.02
 """A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
@@ -48,8 +54,8 @@ class PlanRound:
 
     index: int
     motion: Motion
-    trajectory: Any  # retarget.RobotTrajectory
-    report: Any  # sim.Report
+    trajectory: RobotTrajectory
+    report: Report
     terms: list[str]  # names of the loss terms this round was generated with
     constraint_errors_m: list[float]
     editing: dict[str, Any]
@@ -93,7 +99,7 @@ class PlanResult:
     """Every round and the chosen one (``best``)."""
 
     config: PlanConfig
-    scene: Any  # scenes.Scene
+    scene: Scene
     text: str
     spec: ControlSpec | None
     transform: HumanToWorld
@@ -115,11 +121,11 @@ class PlanResult:
         return self.final.motion
 
     @property
-    def trajectory(self):
+    def trajectory(self) -> RobotTrajectory:
         return self.final.trajectory
 
     @property
-    def report(self):
+    def report(self) -> Report:
         return self.final.report
 
     def to_dict(self) -> dict[str, Any]:
@@ -148,11 +154,8 @@ class PlanResult:
         return out
 
 
-def resolve_inputs(config: PlanConfig):
+def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, HumanToWorld]:
     """Scene, prompt, control spec and the human -> world placement of a config (or one-line errors)."""
-    from retarget import load_robot, robot_scale
-    from scenes import load_scene
-
     load_robot(config.robot)  # an unknown robot fails here, with the list of packaged ones
     scene = load_scene(config.scene, robot=config.robot)
     transform = scene.human_to_world(robot_scale(config.robot))
@@ -165,8 +168,6 @@ def resolve_inputs(config: PlanConfig):
         spec = ControlSpec.from_dict(scene.suggested_control)
     text = config.text if config.text is not None else scene.suggested_prompt
     if config.timeline is not None:
-        from controlmm.timeline import as_timeline
-
         timeline = as_timeline(config.timeline)  # a bad spec fails here, before any model is loaded
         text = "; ".join(f"{t.part} {t.start:g}-{t.end:g} s: {t.prompt}" for t in timeline.tracks)
     if not text:
@@ -174,7 +175,13 @@ def resolve_inputs(config: PlanConfig):
     return scene, text, spec, transform
 
 
-def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True, log=None) -> PlanResult:
+def plan(
+    config: PlanConfig = PlanConfig(),
+    *,
+    model: MotionModel | None = None,
+    progress: bool = True,
+    log: TextIO | None = None,
+) -> PlanResult:
     """Plan a robot motion in a scene (see the module docstring).
 
     Args:
@@ -183,10 +190,6 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
         progress: progress bars and one line per stage on stderr.
         log: where stage lines go (default stderr); None with ``progress=False`` silences them.
     """
-    from retarget import load_robot, retarget_motion
-    from scenes import scene_loss_terms
-    from sim import check_trajectory, make_world
-
     start = time.perf_counter()
     say = _logger(progress, log)
     scene, text, spec, transform = resolve_inputs(config)
@@ -198,8 +201,6 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
     for w in warnings:
         print(f"controlmm: warning: {w}", file=sys.stderr)
     if model is None:
-        from controlmm.generate import load_model
-
         say("loading the model")
         model = load_model(config.model)
     body_joints = load_robot(config.robot).body_joints
@@ -287,7 +288,7 @@ def plan(config: PlanConfig = PlanConfig(), *, model=None, progress: bool = True
 
 
 def _generate(
-    model,
+    model: MotionModel,
     config: PlanConfig,
     text: str,
     spec: ControlSpec | None,
@@ -299,8 +300,6 @@ def _generate(
 
     Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
     """
-    from controlmm.generate import generate_controlled
-
     out = generate_controlled(
         model,
         text,
@@ -327,11 +326,13 @@ def _generate(
 
 
 def _timeline(
-    model, config: PlanConfig, terms: list[LossTerm], transform: HumanToWorld, editing: EditingConfig
+    model: MotionModel,
+    config: PlanConfig,
+    terms: list[LossTerm],
+    transform: HumanToWorld,
+    editing: EditingConfig,
 ) -> tuple[Motion, list[float], dict[str, Any]]:
     """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
-    from controlmm.timeline import as_timeline, generate_timeline
-
     motion, info = generate_timeline(
         model,
         as_timeline(config.timeline),
@@ -344,7 +345,7 @@ def _timeline(
     return motion, [], {"timeline": summary}
 
 
-def _logger(progress: bool, log):
+def _logger(progress: bool, log: TextIO | None) -> Callable[[str], None]:
     stream = log if log is not None else (sys.stderr if progress else None)
 
     def say(message: str) -> None:

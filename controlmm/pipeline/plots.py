@@ -16,10 +16,12 @@ import numpy as np
 
 from controlmm.atomic import atomic_path
 from controlmm.motion.skeleton import JOINT_NAMES
+from scenes.footprint import footprints
+from scenes.render import scene_bounds
 
 
 def _pyplot():
-    import matplotlib
+    import matplotlib  # only for plots; the Agg backend is chosen before pyplot loads
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -29,12 +31,9 @@ def _pyplot():
 
 def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     """Write the top view PNG of a :class:`~controlmm.pipeline.plan.PlanResult` (atomically)."""
-    from matplotlib.collections import PolyCollection
-
-    from scenes.footprint import footprints
-    from scenes.render import scene_bounds
-
     plt = _pyplot()
+    from matplotlib.collections import PolyCollection  # with pyplot: only for plots
+
     scene, traj, motion = result.scene, result.trajectory, result.motion
     names, pos, _ = traj.body_poses()  # (T, B, 3) world
     world_joints = result.transform.to_world(motion.joints.astype(np.float64))  # (T, 22, 3)

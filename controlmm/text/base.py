@@ -1,14 +1,14 @@
-"""The text-encoder interface and the factory that picks an implementation by name."""
+"""The text-encoder interface, text checks and the offline switch every encoder sets."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.models.config import TEXT_ENCODER_DIMS, TextEncoderConfig
 
 
 @runtime_checkable
@@ -29,6 +29,10 @@ class TextEncoder(Protocol):
         """(B,) sentences -> (B, dim) float32 CPU tensor."""
         ...
 
+    def warn_truncated(self, texts: Sequence[str], max_tokens: int | None = None) -> None:
+        """Warn about texts longer than the encoder reads (or than ``max_tokens`` token states)."""
+        ...
+
 
 def check_texts(texts: Sequence[str]) -> list[str]:
     """The texts as a list of strings; one-line error for an empty or non-string entry."""
@@ -44,25 +48,15 @@ def check_texts(texts: Sequence[str]) -> list[str]:
     return out
 
 
-def load_text_encoder(
-    config: TextEncoderConfig | str = "minilm", device: str | torch.device = "cpu", weights: str | None = None
-) -> TextEncoder:
-    """Build the encoder a model was trained with.
+def offline() -> None:
+    """Forbid Hugging Face downloads in this process and quieten its progress bars."""
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+    try:
+        from transformers.utils import logging as hf_logging  # heavy (about 1 s): only when an encoder loads
 
-    Args:
-        config: a :class:`TextEncoderConfig` or just the encoder name.
-        device: where the encoder runs; vectors are returned on the CPU.
-        weights: CLIP only: overrides ``config.weights`` (a ``save_pretrained`` folder or a model id
-            in the local Hugging Face cache).
-    """
-    if isinstance(config, str):
-        config = TextEncoderConfig(name=config)
-    if config.name not in TEXT_ENCODER_DIMS:
-        raise ControlMMError(f"unknown text encoder '{config.name}'; allowed: {', '.join(TEXT_ENCODER_DIMS)}")
-    if config.name == "minilm":
-        from controlmm.text.minilm import MiniLMTextEncoder
-
-        return MiniLMTextEncoder(device=device)
-    from controlmm.text.clip import CLIPTextEncoder
-
-    return CLIPTextEncoder(weights or config.weights, device=device, precision=config.precision)
+        hf_logging.set_verbosity_error()
+        hf_logging.disable_progress_bar()
+    except Exception:  # noqa: BLE001 - cosmetic only
+        pass

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from tqdm import tqdm
 
 from controlmm.atomic import atomic_path
 from controlmm.text.base import TextEncoder
@@ -63,8 +64,6 @@ def embed_captions(
                     return CaptionEmbeddings(unique, vectors.float())
             except Exception:  # noqa: BLE001 - a bad cache is recomputed
                 pass
-    from tqdm import tqdm
-
     chunks = []
     starts = range(0, len(unique), batch_size)
     for start in tqdm(

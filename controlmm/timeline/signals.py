@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from controlmm.editing.terms import LossTerm
+from controlmm.control.terms import LossTerm
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
 
 LEFT_HIP, RIGHT_HIP, PELVIS = 1, 2, 0

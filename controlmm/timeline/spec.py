@@ -20,7 +20,7 @@ Python form::
 Parts are listed in :mod:`controlmm.timeline.parts` (``legs``, ``torso``, ``head``, ``left_arm``,
 ``right_arm``, ``whole_body``; spaces or hyphens may replace underscores). Tracks may overlap: they are
 applied in the order given, and where two tracks claim the same joint at the same frame the later one
-wins. A track's optional ``probe`` names a text-adherence probe (:mod:`controlmm.eval.probes`) that its
+wins. A track's optional ``probe`` names a text-adherence probe (:mod:`controlmm.corpus.probes`) that its
 span of the result is checked with.
 """
 
@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from controlmm.corpus.probes import PROBES
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.motion.skeleton import FPS, MAX_FRAMES, MIN_FRAMES
 from controlmm.timeline.parts import part_joints, part_name
@@ -192,8 +193,6 @@ class Timeline:
 
 
 def _check_probe(probe: Any, part: str) -> None:
-    from controlmm.eval.probes import PROBES
-
     if not isinstance(probe, dict) or "family" not in probe or set(probe) - {"family", "claims"}:
         raise ControlMMError(
             f'track \'{part}\': probe must be {{"family": NAME, "claims": {{...}}}}; got {probe!r}'

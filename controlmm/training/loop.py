@@ -32,7 +32,7 @@ from torch.utils.data import DataLoader
 from controlmm.data.datasets import StepBatchSampler
 from controlmm.data.humanml3d import HumanML3D
 from controlmm.errors import ControlMMError, InputFileError
-from controlmm.models.config import PRESETS, ModelConfig, StageSchedule, TextEncoderConfig, preset_config
+from controlmm.models.config import PRESETS, ModelConfig, StageSchedule, preset_config
 from controlmm.models.model_dir import (
     load_model,
     new_manifest,
@@ -42,6 +42,7 @@ from controlmm.models.model_dir import (
     write_manifest,
     write_statistics,
 )
+from controlmm.text.config import TextEncoderConfig
 from controlmm.training.checkpoint import (
     load_checkpoint,
     rng_state,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from controlmm.cli.main import main
-from controlmm.control.evaluation import (
+from controlmm.eval.control import (
     CROSS_COMBINATIONS,
     build_cases,
     case_metrics,

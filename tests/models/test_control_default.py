@@ -61,8 +61,8 @@ def test_foot_contact_run_stops_planted_feet_sliding_and_keeps_the_spec():
 
     from controlmm.editing import PRESETS
     from controlmm.editing.foot_contact import foot_contact_term
-    from controlmm.eval.geometry import foot_skating_ratio
     from controlmm.generate import generate, generate_controlled, load_model
+    from controlmm.motion.geometry import foot_skating_ratio
 
     torch.set_num_threads(1)
     model = load_model()

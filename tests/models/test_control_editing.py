@@ -7,11 +7,10 @@ import numpy as np
 import pytest
 import torch
 
-from controlmm.control import ControlSpec, constraint_errors
+from controlmm.control import ControlSpec, LossTerm, constraint_errors
 from controlmm.editing import (
     PRESETS,
     EditingConfig,
-    LossTerm,
     Objective,
     codebook_editing,
     editing_preset,

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from tests.cli_helpers import run_cli
-from controlmm.control.evaluation import build_cases
+from controlmm.eval.control import build_cases
 from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table, recropped
 from controlmm.eval.evaluator import load_evaluator
 from controlmm.eval.scoring import MotionSet, score_motions
 from controlmm.generate import load_model
 from controlmm.motion.skeleton import CONTROL_JOINTS
+from tests.cli_helpers import run_cli
 
 
 @pytest.fixture(scope="module")

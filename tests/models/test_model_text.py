@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.models.config import TextEncoderConfig
 from controlmm.text import embed_captions, load_text_encoder
+from controlmm.text.config import TextEncoderConfig
 
 
 @pytest.fixture(scope="module")
@@ -102,11 +102,12 @@ def test_a_prompt_longer_than_minilm_reads_warns_that_it_was_cut():
     encoder = MiniLMTextEncoder()
     long = "a person walks forward and then turns left " * 40  # about 330 word pieces
     with pytest.warns(TextTruncatedWarning, match="reads only the first 256"):
-        encoder.encode([long])
+        encoder.warn_truncated([long])
     with pytest.warns(TextTruncatedWarning, match="token-state text view reads only the first 8"):
-        encoder.encode_with_tokens(["a person walks forward, stops, waves with the left hand and sits"], 8)
+        encoder.warn_truncated(["a person walks forward, stops, waves with the left hand and sits"], 8)
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", TextTruncatedWarning)
-        encoder.encode(["a person walks forward"])  # short prompts: no warning
+        encoder.warn_truncated(["a person walks forward"], 32)  # short prompts: no warning
+        encoder.encode([long])  # encoding alone (training's captions) never warns

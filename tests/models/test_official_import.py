@@ -346,8 +346,8 @@ def test_cli_import_then_generate(official, tmp_path, tiny_clip_dir, capsys):
 
 def test_clip_float16_as_the_official_code(tiny_clip_dir):
     """Official CLIP: float16 weights, LayerNorms computed in float32, HTML-unescaped text, no normalisation."""
-    from controlmm.models.config import TextEncoderConfig
     from controlmm.text import load_text_encoder
+    from controlmm.text.config import TextEncoderConfig
 
     half = load_text_encoder(TextEncoderConfig(name="clip", precision="float16"), weights=str(tiny_clip_dir))
     full = load_text_encoder(TextEncoderConfig(name="clip", precision="float32"), weights=str(tiny_clip_dir))

@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from controlmm.cli.main import main
-from controlmm.editing import EditingConfig, LossTerm
+from controlmm.control import LossTerm
+from controlmm.editing import EditingConfig
 from controlmm.errors import ControlMMError
 from controlmm.generate import generate, load_model
 from controlmm.motion import load_motion

@@ -20,9 +20,10 @@ from controlmm.generate import (
     masked_decode,
     token_view_logits_fn,
 )
-from controlmm.models.config import ModelConfig, TextEncoderConfig, preset_config
+from controlmm.models.config import ModelConfig, preset_config
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.motion import load_motion
+from controlmm.text.config import TextEncoderConfig
 from controlmm.training import TrainOptions, train
 from controlmm.training.stage import StageContext
 from controlmm.training.transformer import WARM_START_SKIP, TokenTransformerStage, warm_start

@@ -1,12 +1,5 @@
-"""Motion families, one module per group; importing this package registers them all.
+"""Motion families, one module per group, each holding its families in ``FAMILIES``.
 
-The import order below is the registry order (travelling first, compositions last).
+The registry (:mod:`controlmm.corpus.registry`) lists the modules; its order is the registry order
+(travelling first, compositions last).
 """
-
-from controlmm.corpus.families import walking  # noqa: F401,I001
-from controlmm.corpus.families import turning  # noqa: F401
-from controlmm.corpus.families import jumping  # noqa: F401
-from controlmm.corpus.families import lowering  # noqa: F401
-from controlmm.corpus.families import gestures  # noqa: F401
-from controlmm.corpus.families import reaching  # noqa: F401
-from controlmm.corpus.families import combos  # noqa: F401

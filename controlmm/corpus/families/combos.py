@@ -10,11 +10,14 @@ from controlmm.corpus.families.gestures import add_wave
 from controlmm.corpus.families.lowering import apply_squats
 from controlmm.corpus.families.turning import ANGLE_DEG, ANGLE_NOUN, SIGN
 from controlmm.corpus.families.walking import cadence
+from controlmm.corpus.family import Family
 from controlmm.corpus.gait import Gait, RootPath
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import FORWARD, WALK, counted_slot, hand_slot, side_slot, times_slot
 from controlmm.motion.skeleton import FPS
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 
 def _r(x: float) -> float:
@@ -80,7 +83,7 @@ def _walkwave_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="walk_and_wave",
         group="combos",
@@ -154,7 +157,7 @@ def _turnwalk_slots(p):
     }
 
 
-register(
+FAMILIES.append(
     Family(
         name="turn_then_walk",
         group="combos",
@@ -224,7 +227,7 @@ def _walksquat_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="walk_then_squat",
         group="combos",

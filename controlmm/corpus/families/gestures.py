@@ -10,10 +10,13 @@ import numpy as np
 
 from controlmm.corpus.curves import window
 from controlmm.corpus.families.base import Person, finish, frames_for, set_ik, standing_plan, times
-from controlmm.corpus.registry import Family, register
+from controlmm.corpus.family import Family
 from controlmm.corpus.rig import SIDE_SIGN
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import counted_slot, hand_slot, times_slot
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 OTHER = {"left": "right", "right": "left"}
 
@@ -97,7 +100,7 @@ def _wave_builder(side: str):
 
 WAVE_VERB = Slot(("waves", "is waving"), ("flaps",))
 for _side in ("left", "right"):
-    register(
+    FAMILIES.append(
         Family(
             name=f"wave_{_side}",
             group="gestures",
@@ -146,7 +149,7 @@ def _raise_build(p, rng):
 
 
 RAISE = Slot(("raises", "lifts", "puts up"), ("hoists",))
-register(
+FAMILIES.append(
     Family(
         name="raise_arm",
         group="gestures",
@@ -166,7 +169,7 @@ register(
     )
 )
 
-register(
+FAMILIES.append(
     Family(
         name="raise_both_arms",
         group="gestures",
@@ -217,7 +220,7 @@ def _clap_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="clap",
         group="gestures",

@@ -13,11 +13,14 @@ from scipy.interpolate import CubicHermiteSpline
 
 from controlmm.corpus.curves import keyframes
 from controlmm.corpus.families.base import Person, finish, frames_for, standing_plan, times
+from controlmm.corpus.family import Family
 from controlmm.corpus.feet import Stance, foot_track
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.rig import SIDE_SIGN, heading_vectors
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import FORWARD, counted_slot, times_slot
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 G = 9.81
 PREP, PUSH, ABSORB, RECOVER = 0.35, 0.15, 0.25, 0.45
@@ -162,7 +165,7 @@ def _in_place_slots(p):
     }
 
 
-register(
+FAMILIES.append(
     Family(
         name="jump_in_place",
         group="jumping",
@@ -193,7 +196,7 @@ def _forward_slots(p):
     }
 
 
-register(
+FAMILIES.append(
     Family(
         name="jump_forward",
         group="jumping",

@@ -6,11 +6,14 @@ import numpy as np
 
 from controlmm.corpus.curves import keyframes
 from controlmm.corpus.families.base import Person, finish, frames_for, standing_plan, times
+from controlmm.corpus.family import Family
 from controlmm.corpus.feet import Stance, foot_track
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.rig import KNEE_INDEX, SIDE_SIGN, heading_vectors
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import counted_slot, times_slot
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 KNEE_ON_FLOOR = 0.06
 """Height (m) of the knee joint centre when the knee rests on the floor."""
@@ -97,7 +100,7 @@ def apply_squats(plan, p: dict, t: np.ndarray, start: float, person: Person) -> 
             arm.elbow = arm.elbow + 0.6 * frac
 
 
-register(
+FAMILIES.append(
     Family(
         name="squat",
         group="lowering",
@@ -205,7 +208,7 @@ def _kneel_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="kneel",
         group="lowering",

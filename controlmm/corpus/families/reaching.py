@@ -11,11 +11,14 @@ import numpy as np
 from controlmm.corpus.curves import keyframes
 from controlmm.corpus.families.base import Person, finish, frames_for, set_ik, standing_plan, times
 from controlmm.corpus.families.gestures import OTHER, gesture_timing, gesture_window, pole, target
+from controlmm.corpus.family import Family
 from controlmm.corpus.feet import Stance, foot_track
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.rig import SIDE_SIGN
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import counted_slot, hand_slot, times_slot
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 
 def _r(x: float) -> float:
@@ -90,7 +93,7 @@ def _reach_slots(p):
     return {"reach": REACH, "hand": hand}
 
 
-register(
+FAMILIES.append(
     Family(
         name="reach_forward",
         group="reaching",
@@ -110,7 +113,7 @@ register(
     )
 )
 
-register(
+FAMILIES.append(
     Family(
         name="reach_up",
         group="reaching",
@@ -130,7 +133,7 @@ register(
     )
 )
 
-register(
+FAMILIES.append(
     Family(
         name="reach_sideways",
         group="reaching",
@@ -188,7 +191,7 @@ def _punch_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="punch",
         group="reaching",

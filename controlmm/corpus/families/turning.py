@@ -7,11 +7,14 @@ import numpy as np
 from controlmm.corpus.curves import keyframes, ramp, window
 from controlmm.corpus.families.base import Person, Style, finish, frames_for, locomotion_plan, times
 from controlmm.corpus.families.walking import cadence
+from controlmm.corpus.family import Family
 from controlmm.corpus.gait import Gait, RootPath
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import FORWARD, WALK, side_slot
 from controlmm.motion.skeleton import FPS
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 SIGN = {"left": 1.0, "right": -1.0}
 
@@ -104,7 +107,7 @@ def _turn_slots(p, side):
 
 
 for _side in ("left", "right"):
-    register(
+    FAMILIES.append(
         Family(
             name=f"turn_{_side}",
             group="turning",
@@ -195,7 +198,7 @@ ROTATION = {
 TURN_SIDE = {"clockwise": "right", "counterclockwise": "left"}
 
 for _rot in ("clockwise", "counterclockwise"):
-    register(
+    FAMILIES.append(
         Family(
             name="circle_cw" if _rot == "clockwise" else "circle_ccw",
             group="turning",
@@ -267,7 +270,7 @@ def _curve_builder(side: str):
 
 
 for _side in ("left", "right"):
-    register(
+    FAMILIES.append(
         Family(
             name=f"curve_{_side}",
             group="turning",
@@ -341,7 +344,7 @@ def _zigzag_build(p, rng):
     return finish(plan)
 
 
-register(
+FAMILIES.append(
     Family(
         name="zigzag",
         group="turning",

@@ -7,11 +7,14 @@ import numpy as np
 
 from controlmm.corpus.curves import gentle_noise, keyframes, ramp, window
 from controlmm.corpus.families.base import Person, Style, finish, frames_for, locomotion_plan, times
+from controlmm.corpus.family import Family
 from controlmm.corpus.gait import Gait, RootPath
-from controlmm.corpus.registry import Family, register
 from controlmm.corpus.text.templates import Slot, Template
 from controlmm.corpus.text.vocab import BACKWARD, FORWARD, JOG, RUN, WALK, side_slot, speed_slot
 from controlmm.motion.skeleton import FPS
+
+FAMILIES: list[Family] = []
+"""This module's families, in registry order."""
 
 SPEEDS = {"slow": (0.6, 0.9), "normal": (1.1, 1.4), "fast": (1.55, 1.8)}
 
@@ -111,7 +114,7 @@ def _walk_build(p, rng):
     return travel(rng, p, "walk", 0.0, style, duty=0.64 - 0.03 * v)
 
 
-register(
+FAMILIES.append(
     Family(
         name="walk",
         group="walking",
@@ -143,7 +146,7 @@ def _jog_build(p, rng):
     return travel(rng, p, "jog", 0.0, style, duty=0.42, clearance=0.1 * p["speed"], ref_frac=0.4)
 
 
-register(
+FAMILIES.append(
     Family(
         name="jog",
         group="walking",
@@ -171,7 +174,7 @@ def _run_build(p, rng):
     return travel(rng, p, "run", 0.0, style, duty=0.34, clearance=0.1 * p["speed"], ref_frac=0.4)
 
 
-register(
+FAMILIES.append(
     Family(
         name="run",
         group="walking",
@@ -202,7 +205,7 @@ def _back_build(p, rng):
     return travel(rng, p, "walk", np.pi, style, duty=0.65, clearance=0.06, ref_frac=0.5)
 
 
-register(
+FAMILIES.append(
     Family(
         name="walk_backward",
         group="walking",
@@ -255,7 +258,7 @@ def _side_builder(side: str):
 
 
 for _side in ("left", "right"):
-    register(
+    FAMILIES.append(
         Family(
             name=f"sidestep_{_side}",
             group="walking",
@@ -295,7 +298,7 @@ def _crouch_build(p, rng):
     return travel(rng, p, "crouch", 0.0, style, duty=0.68, clearance=0.06, ref_frac=0.45)
 
 
-register(
+FAMILIES.append(
     Family(
         name="crouch_walk",
         group="walking",
@@ -347,7 +350,7 @@ def _stopgo_build(p, rng):
     return travel(rng, p, "walk", 0.0, style, duty=0.62, speed=speed)
 
 
-register(
+FAMILIES.append(
     Family(
         name="stop_and_go",
         group="walking",
@@ -443,7 +446,7 @@ def _dist_slot(p):
     )
 
 
-register(
+FAMILIES.append(
     Family(
         name="walk_to_point",
         group="walking",

@@ -9,17 +9,22 @@ evaluator``) and the official HumanML3D evaluator (:mod:`.official`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
 
+from controlmm.data.humanml3d import Caption
 from controlmm.errors import ShapeError
+from controlmm.motion.container import Motion
+from controlmm.motion.extract import joints_to_features
 from controlmm.motion.normalization import Normalizer
 from controlmm.motion.skeleton import FEATURE_DIM, MAX_FRAMES
 
-MotionLike = Any  # a Motion (features or joints) or a (T, 263) feature array, not normalised
-TextLike = Any  # a caption string, or an object with ``.text`` and ``.tokens`` (HumanML3D "word/POS" tokens)
+MotionLike = Motion | np.ndarray
+"""A Motion (features or joints) or a (T, 263) feature array, not normalised."""
+TextLike = str | Caption
+"""A caption string, or a HumanML3D caption with its ``.text`` and ``.tokens`` ("word/POS" tokens)."""
 
 
 @runtime_checkable
@@ -51,8 +56,6 @@ def motion_features(motion: MotionLike) -> np.ndarray:
     """(T, 263) float32 features of a Motion or an array; joints-only motions are processed first."""
     features = getattr(motion, "features", motion)
     if features is None:  # a Motion without features: HumanML3D processing of its joints (T-1 frames)
-        from controlmm.motion.extract import joints_to_features
-
         features = joints_to_features(motion.joints)[0]
     features = np.asarray(features, dtype=np.float32)
     if features.ndim != 2 or features.shape[1] != FEATURE_DIM:

@@ -26,11 +26,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from controlmm.assets import CHECKPOINT_ROOT
 from controlmm.atomic import write_text
 from controlmm.errors import InputFileError
 from controlmm.eval.evaluator.base import MotionLike, TextLike, caption_text, pad_normalized
 from controlmm.eval.evaluator.modules import EvaluatorConfig, TextMotionEncoder
 from controlmm.eval.evaluator.words import Vocabulary
+from controlmm.models.model_dir import load_part_state, load_state_strict, read_statistics
 from controlmm.motion.normalization import Normalizer
 
 FORMAT = "controlmm-evaluator"
@@ -41,8 +43,6 @@ WEIGHTS = "evaluator"  # part name: evaluator.pt
 
 def default_evaluator_dir() -> Path:
     """The evaluator shipped with the package (trained on the default corpus)."""
-    from controlmm.assets import CHECKPOINT_ROOT
-
     return CHECKPOINT_ROOT / "evaluator"
 
 
@@ -142,8 +142,6 @@ def write_evaluator_manifest(directory: Path, manifest: dict[str, Any]) -> None:
 
 def load_evaluator_dir(directory: str | Path, device: str | torch.device = "cpu") -> TextMotionEvaluator:
     """Load an evaluator directory (checked format, checksum, names and shapes)."""
-    from controlmm.models.model_dir import load_part_state, load_state_strict, read_statistics
-
     directory = Path(directory)
     manifest = read_evaluator_manifest(directory)
     try:

@@ -45,6 +45,7 @@ from torch.nn.utils.rnn import pack_padded_sequence
 from controlmm.errors import InputFileError
 from controlmm.eval.evaluator.base import MotionLike, TextLike, pad_normalized
 from controlmm.eval.evaluator.words import tokenize
+from controlmm.models.model_dir import load_state_strict
 from controlmm.motion.normalization import Normalizer
 
 POS_ENUMERATOR = {
@@ -408,8 +409,6 @@ def official_layout(root: str | Path) -> dict[str, Path]:
 
 def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu") -> OfficialEvaluator:
     """Load the official evaluator from a MoMask-style checkout (see the module docstring)."""
-    from controlmm.models.model_dir import load_state_strict
-
     files = official_layout(root)
     try:
         ckpt = torch.load(files["finest"], map_location="cpu", weights_only=True)

@@ -37,18 +37,26 @@ from controlmm.atomic import atomic_dir, check_output_dir
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.files import load_torch
 from controlmm.models.config import (
-    CLIP_MODEL_ID,
     ControlConfig,
     ModelConfig,
     ResidualConfig,
-    TextEncoderConfig,
     TokenizerConfig,
     TransformerConfig,
     preset_config,
 )
+from controlmm.models.model_dir import (
+    PARTS,
+    load_state_strict,
+    new_manifest,
+    save_part,
+    write_manifest,
+    write_statistics,
+)
 from controlmm.models.official.folders import OfficialFolder, find_control, find_momask
 from controlmm.models.official.names import CHECKPOINT_KEYS, State, map_official_state
+from controlmm.motion.normalization import Normalizer
 from controlmm.motion.skeleton import FEATURE_DIM
+from controlmm.text.config import CLIP_MODEL_ID, TextEncoderConfig
 
 CONTROL_CHANNELS = {6: "pelvis", 36: "all"}
 """Input channels of ``encoder_control`` -> control joint set (MaskControl ``trajectory`` / ``cross``)."""
@@ -222,8 +230,6 @@ def official_model(
 
     Returns (config, {part: module with the official weights}, record for ``model.json``).
     """
-    from controlmm.models.model_dir import PARTS, load_state_strict
-
     notes: list[str] = []
     folders = find_momask(momask)
     states: dict[str, State] = {}
@@ -378,8 +384,6 @@ def _compare_statistics(normalizer, meta: Path) -> str:
     """A note comparing the VQ statistics with the evaluator's (MaskControl denormalises its decoded motion
     with the evaluator loader's mean/std while the data were normalised with the VQ's; the released files
     are expected to agree)."""
-    from controlmm.motion.normalization import Normalizer
-
     other = Normalizer.load(meta / "mean.npy", meta / "std.npy")
     mean_gap = float(np.abs(other.mean - normalizer.mean).max())
     std_gap = float(np.abs(other.std / normalizer.std - 1.0).max())
@@ -400,9 +404,6 @@ def import_official(
     log: Callable[[str], None] | None = None,
 ) -> Path:
     """Convert the official checkpoint folders into the model directory ``out`` (see the module docstring)."""
-    from controlmm.models.model_dir import new_manifest, save_part, write_manifest, write_statistics
-    from controlmm.motion.normalization import Normalizer
-
     out = Path(out).expanduser()
     check_output_dir(out, kind=None, force=force)
     if clip_precision not in ("float16", "float32"):

@@ -18,7 +18,7 @@ joints of frame t of the distance to the target, metres):
 - **Traj. err**: fraction of cases with any e_t > 0.5 m;
 - **Loc. err**: mean over cases of the fraction of keyframes with e_t > 0.5 m;
 - **Avg. err**: mean over cases of the mean e_t;
-- **foot-skating ratio** (:func:`controlmm.eval.geometry.foot_skating_ratio`) on the generated
+- **foot-skating ratio** (:func:`controlmm.motion.geometry.foot_skating_ratio`) on the generated
   motion's own frames (the official script also counts the padding frames up to 196, §11.12).
 
 Text-motion metrics (FID, R-precision, diversity) plug in through ``text_metrics``: any callable
@@ -35,9 +35,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
+from controlmm.data.humanml3d import HumanML3D
+from controlmm.editing import EditingConfig, editing_preset
 from controlmm.errors import ControlMMError
+from controlmm.generate import generate_controlled
+from controlmm.models import MotionModel
 from controlmm.motion.container import Motion
+from controlmm.motion.geometry import foot_skating_ratio
+from controlmm.motion.recover import features_to_joints_np
 from controlmm.motion.skeleton import CONTROL_JOINTS, FPS, JOINT_NAMES, MAX_FRAMES, NUM_JOINTS
 
 DENSITIES: tuple[int, ...] = (1, 2, 5, 49, 196)
@@ -79,9 +86,6 @@ def build_cases(
 
     Clips are drawn without replacement while they last (then again), with a random caption and crop.
     """
-    from controlmm.data.humanml3d import HumanML3D
-    from controlmm.motion.recover import features_to_joints_np
-
     if joints not in JOINT_MODES:
         raise ControlMMError(f"unknown joint mode '{joints}'; allowed: {', '.join(JOINT_MODES)}")
     for d in densities:
@@ -219,9 +223,9 @@ class ControlEvaluation:
 
 
 def evaluate_control(
-    model,
+    model: MotionModel,
     cases: Sequence[ControlCase],
-    preset="accurate",
+    preset: str | EditingConfig = "accurate",
     seed: int = 0,
     batch_size: int = 1,
     text_metrics: TextMetrics | None = None,
@@ -237,11 +241,6 @@ def evaluate_control(
         batch_size: cases generated together (1 gives per-motion timings).
         text_metrics: optional extra columns computed on (generated, texts, ground truth).
     """
-    from tqdm import tqdm
-
-    from controlmm.eval.geometry import foot_skating_ratio
-    from controlmm.generate import generate_controlled
-
     rows: list[dict[str, float]] = []
     generated: list[Motion] = []
     started = time.perf_counter()
@@ -276,8 +275,6 @@ def evaluate_control(
             generated.append(motion)
         bar.update(len(chunk))
     bar.close()
-    from controlmm.editing import editing_preset
-
     result = ControlEvaluation(
         preset=editing_preset(preset).name,
         joints=joints,

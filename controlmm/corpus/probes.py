@@ -1,12 +1,12 @@
 """Text-adherence probes: does a motion do what its caption says?
 
 Each motion family has a probe that checks, with simple geometry in the person's own frame
-(:mod:`controlmm.eval.geometry`), the family's core property and every *claim* a caption
+(:mod:`controlmm.motion.geometry`), the family's core property and every *claim* a caption
 makes (direction, speed, hand, count, turn angle...). A claim comes from the caption's
 metadata (``meta/<id>.json`` of a corpus), so the same probe checks ground truth and
 generated motion:
 
-    cases = list_cases("corpus", split="test")     # (caption, family, claims) per caption
+    cases = list_cases("corpus", split="test")     # ProbeCase per caption (controlmm.eval.cases)
     result = check(cases[0], motion)               # ProbeResult(passed, value, checks)
 
 Thresholds are loose enough that every corpus clip passes and tight enough that a motion
@@ -17,32 +17,36 @@ clockwise, forward vs backward, two vs three jumps) fails.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from controlmm.corpus.measures import Measures
 from controlmm.errors import ControlMMError
-from controlmm.eval import geometry as geo
-from controlmm.eval.cases import ProbeCase, ProbeReport, evaluate, ground_truth, list_cases
-from controlmm.eval.measures import Measures
+from controlmm.motion import geometry as geo
+from controlmm.motion.container import Motion
 
-__all__ = [
-    "PROBES",
-    "Check",
-    "ProbeCase",
-    "ProbeReport",
-    "ProbeResult",
-    "check",
-    "evaluate",
-    "ground_truth",
-    "list_cases",
-    "probe",
-]
+__all__ = ["PROBES", "Check", "ProbeCase", "ProbeResult", "check", "probe"]
 
 HANDS = {"left": (20, 16), "right": (21, 17)}  # wrist, shoulder
 KNEES = {"left": 4, "right": 5}
 HEAD, PELVIS, CHEST = 15, 0, 9
+
+
+@dataclass(frozen=True)
+class ProbeCase:
+    """A caption of a clip with what it claims: the input of a probe."""
+
+    clip_id: str
+    caption: str
+    family: str
+    claims: dict[str, Any]
+    frames: int
+    split: str
+    template: str = ""
+    held_out: bool = False
+    params: dict[str, Any] = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -473,7 +477,7 @@ PROBES: dict[str, Callable[[Measures, dict], list[Check]]] = {
 """The probe of each motion family, by name."""
 
 
-def probe(motion, family: str, claims: dict[str, Any]) -> ProbeResult:
+def probe(motion: Motion | np.ndarray, family: str, claims: dict[str, Any]) -> ProbeResult:
     """Check a motion against a family and the claims of a caption.
 
     Args:
@@ -488,7 +492,7 @@ def probe(motion, family: str, claims: dict[str, Any]) -> ProbeResult:
     return ProbeResult(family, tuple(PROBES[family](Measures(joints, fps), dict(claims))))
 
 
-def check(case: ProbeCase | dict, motion) -> ProbeResult:
+def check(case: ProbeCase | dict[str, Any], motion: Motion | np.ndarray) -> ProbeResult:
     """Probe ``motion`` for a caption case (a :class:`ProbeCase` or a metadata record with a
     ``family`` and, optionally, ``claims``; a record's claims default to its first caption's)."""
     if isinstance(case, ProbeCase):

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import torch
 
+from controlmm.errors import ControlMMError
+
 JointLossFn = Callable[[torch.Tensor], torch.Tensor]
 
 
@@ -37,8 +39,6 @@ class LossTerm:
     def __call__(self, joints: torch.Tensor) -> torch.Tensor:
         value = self.fn(joints)
         if value.shape != joints.shape[:1]:
-            from controlmm.errors import ControlMMError
-
             raise ControlMMError(
                 f"loss term '{self.name}' returned shape {tuple(value.shape)}; expected ({joints.shape[0]},)"
             )

@@ -8,7 +8,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from controlmm.errors import ControlMMError
-from controlmm.eval import geometry as geo
+from controlmm.motion import geometry as geo
 
 PELVIS = 0
 
