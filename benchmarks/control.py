@@ -1,8 +1,8 @@
 """Spatial-control benchmark: the paper's Table 3 (ablation) and Table 5 (speed vs precision) on CPU.
 
-    python benchmarks/control.py                                   # both tables, embedded default model
-    python benchmarks/control.py --table ablation --samples 15      # 8 rows: logits x codebook x control model
-    python benchmarks/control.py --table speed --samples 10         # fast / medium / accurate, 196-frame motions
+    python benchmarks/control.py                               # both tables, embedded default model
+    python benchmarks/control.py --table ablation --samples 15  # 8 rows: logits x codebook x control model
+    python benchmarks/control.py --table speed --samples 10     # fast / medium / accurate, 196 frames
     python benchmarks/control.py --model MODEL_DIR --data DATA_DIR --threads 2 --json out.json
 
 Protocol (``controlmm.eval.control``, OmniControl's): targets from held-out clips of the test
@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 import torch
+from data_dirs import model_data
 
 ROWS = [  # (logits editing, codebook editing, motion control model): the paper's Table 3 order
     (False, False, False),
@@ -57,7 +58,7 @@ def uncontrolled_skate(model, cases, frames: list[int], seed: int) -> float:
     from controlmm.motion.geometry import foot_skating_ratio
 
     values = []
-    for i, (case, f) in enumerate(zip(cases, frames)):
+    for i, (case, f) in enumerate(zip(cases, frames, strict=True)):
         motion = generate(model, case.text, frames=f, seed=seed + i, token_view=False).motion
         values.append(foot_skating_ratio(motion.joints))
     return float(np.mean(values))
@@ -122,7 +123,8 @@ def check_targets(accurate: dict, unedited: list[tuple[str, dict]], skate_base: 
     )
     fast = accurate["seconds"] <= 10.0
     print(
-        f"  accurate {accurate['seconds']:.2f} s per motion wall ({accurate['cpu_seconds']:.2f} s CPU) <= 10 s: "
+        f"  accurate {accurate['seconds']:.2f} s per motion wall ({accurate['cpu_seconds']:.2f} s CPU) "
+        "<= 10 s: "
         f"{'met' if fast else 'MISSED'} (load {accurate['load']})"
     )
     for label, row in unedited:
@@ -145,7 +147,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--table", default="both", choices=("ablation", "speed", "both"))
     parser.add_argument("--model", default=None, help="model directory (default: the embedded default)")
     parser.add_argument(
-        "--data", default=None, help="HumanML3D-format directory (default: the model's training data)"
+        "--data",
+        default=None,
+        help="HumanML3D-format directory (default: the model's recorded training data when it is on this "
+        "machine, else data/corpus-default)",
     )
     parser.add_argument("--samples", type=int, default=15, help="cases per row (default 15: 3 per density)")
     parser.add_argument(
@@ -159,13 +164,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    from controlmm.cli.eval_control import default_data
     from controlmm.editing import PRESETS
     from controlmm.eval.control import build_cases
     from controlmm.generate import generate_controlled, load_model
 
     model = load_model(args.model)
-    data = args.data or default_data(model)
+    data = model_data(model, args.data)
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
         f"{args.threads} threads, load average at start {load_avg()}; model {model.directory}; data {data}"
@@ -199,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
             configs.append((f"{k}|{mark(logits)}|{mark(codebook)}|{mark(control)}", config))
         print(f"ablation ({len(cases)} cases x {len(configs)} rows)")
         rows = run_rows(model, cases, configs, args.seed)
-        ablation = dict(zip(chosen, rows))
+        ablation = dict(zip(chosen, rows, strict=True))
         skate_base = uncontrolled_skate(model, cases, [c.frames for c in cases], args.seed)
         print_table(
             "Table 3 analogue (L = logits editing, E = codebook editing, M = motion control model)",
@@ -232,7 +236,8 @@ def main(argv: list[str] | None = None) -> int:
         accurate = rows[-1]
         print(
             f"\naccurate on 196-frame motions: {accurate['seconds']:.2f} s per motion wall, "
-            f"{accurate['cpu_seconds']:.2f} s CPU: {'met' if accurate['seconds'] <= 10 else 'MISSED'} (<= 10 s)"
+            f"{accurate['cpu_seconds']:.2f} s CPU: "
+            f"{'met' if accurate['seconds'] <= 10 else 'MISSED'} (<= 10 s)"
         )
     print(f"load average at the end {load_avg()}")
     if args.json:

@@ -1,12 +1,13 @@
 """Corpus statistics: one command prints the table recorded in docs/BENCHMARKS.md (## Corpus).
 
     python benchmarks/corpus_stats.py --generate 5000 --seed 0 --workers 2 --png docs/corpus_lengths.png
-    python benchmarks/corpus_stats.py --data /work/data/corpus-default
+    python benchmarks/corpus_stats.py --data data/corpus-default   # an existing corpus (docs/corpus.md)
 
 With ``--generate N`` it times ``controlmm.corpus.write_corpus`` for N clips (into a temporary
 directory unless ``--out`` is given) and then measures the result. Measures, all on the
 written ``new_joints`` (the HumanML3D joints the features describe):
-clips per family, clip lengths, foot-skating ratio (evaluation protocol, reference §8.3),
+clips per family, clip lengths, foot-skating ratio (the ControlMM / OmniControl evaluation's: a foot below
+5 cm in two frames that moves faster than 0.5 m/s, also over 5 frames; ``controlmm.motion.geometry``),
 floor contact and penetration, joint speeds, bone lengths, knee hyper-extension and the
 probe pass rate on the ground truth.
 """
@@ -22,6 +23,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from data_dirs import corpus_dir
 
 from controlmm.corpus import CorpusConfig, write_corpus
 from controlmm.eval.cases import evaluate, ground_truth, list_cases
@@ -118,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("give --data DIR or --generate N")
 
     with tempfile.TemporaryDirectory() as tmp:
-        root = Path(args.data) if args.data else Path(args.out or Path(tmp) / "corpus")
+        root = corpus_dir(args.data) if args.data else Path(args.out or Path(tmp) / "corpus")
         if args.generate:
             t0 = time.perf_counter()
             summary = write_corpus(
@@ -126,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
             )
             gen = time.perf_counter() - t0
             print(
-                f"generation: {args.generate} clips, seed {args.seed}, {summary['workers']} workers: {gen:.1f} s "
+                f"generation: {args.generate} clips, seed {args.seed}, {summary['workers']} workers: "
+                f"{gen:.1f} s "
                 f"({args.generate / gen:.1f} clips/s), {summary['retries']} retried clips"
             )
         m = measure(root)
@@ -143,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     hist, _ = np.histogram(lengths, bins=LENGTH_BINS)
     print(
         "\n| length (frames) | "
-        + " | ".join(f"{a}-{b - 1}" for a, b in zip(LENGTH_BINS[:-1], LENGTH_BINS[1:]))
+        + " | ".join(f"{a}-{b - 1}" for a, b in zip(LENGTH_BINS[:-1], LENGTH_BINS[1:], strict=True))
         + " |"
     )
     print("|---" * (len(hist) + 1) + "|")

@@ -27,9 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from data_dirs import humanml3d_dir, real_clip
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("CONTROLMM_SHARED", ROOT.parent / "shared")) / "data" / "humanml3d"
 PROMPT = "a person walks forward, turns around and walks back"
 
 
@@ -39,8 +38,8 @@ def synthetic_dataset(root: Path, clips: int = 200) -> Path:
     from controlmm.motion.container import resample
     from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR
 
-    feats = np.load(SHARED / "new_joint_vecs" / "012314.npy")
-    joints = np.load(SHARED / "new_joints" / "012314.npy")
+    feats = np.load(real_clip("new_joint_vecs"))
+    joints = np.load(real_clip("new_joints"))
     mirrored = joints.copy()
     mirrored[..., 0] *= -1
     sources = [feats, joints_to_features(mirrored[:, list(LEFT_RIGHT_MIRROR)])[0]]
@@ -64,8 +63,8 @@ def synthetic_dataset(root: Path, clips: int = 200) -> Path:
     (root / "train.txt").write_text("\n".join(ids[n_val:]) + "\n")
     (root / "val.txt").write_text("\n".join(ids[:n_val]) + "\n")
     (root / "test.txt").write_text("\n".join(ids[:n_val]) + "\n")
-    shutil.copy(SHARED / "Mean.npy", root / "Mean.npy")
-    shutil.copy(SHARED / "Std.npy", root / "Std.npy")
+    shutil.copy(humanml3d_dir() / "Mean.npy", root / "Mean.npy")
+    shutil.copy(humanml3d_dir() / "Std.npy", root / "Std.npy")
     return root
 
 
@@ -78,7 +77,7 @@ def random_model(preset: str):
     cfg = preset_config(preset)
     names = ("tokenizer", "transformer", "residual") + (("token_transformer",) if cfg.token_view else ())
     parts = {name: PARTS[name].build(cfg).eval().requires_grad_(False) for name in names}
-    normalizer = Normalizer.load(SHARED / "Mean.npy", SHARED / "Std.npy").with_feat_bias()
+    normalizer = Normalizer.load(humanml3d_dir() / "Mean.npy", humanml3d_dir() / "Std.npy").with_feat_bias()
     return MotionModel(config=cfg, normalizer=normalizer, parts=parts, manifest=new_manifest(cfg, {}))
 
 

@@ -156,7 +156,8 @@ def main() -> None:
             continue
         n = len(rs)
         print(
-            f"| {name} | {n} | {sum(r['before'] for r in rs) / n:.0%} | {sum(r['after'] for r in rs) / n:.0%} | "
+            f"| {name} | {n} | {sum(r['before'] for r in rs) / n:.0%} | "
+            f"{sum(r['after'] for r in rs) / n:.0%} | "
             f"{np.mean([r['rounds'] for r in rs]):.1f} | {max(r['penetration'] for r in rs) * 1000:.1f} | "
             f"{max(r['floor'] for r in rs) * 1000:.1f} | {max(r['constraint'] for r in rs) * 100:.1f} | "
             f"{np.mean([r['seconds'] for r in rs]):.1f} / {max(r['seconds'] for r in rs):.1f} | "
@@ -165,7 +166,8 @@ def main() -> None:
     one = [r for r in rows if r["rounds"] == 1]
     if one:
         print(
-            f"\nruns with exactly one feedback round: {len(one)}, plan time mean {np.mean([r['seconds'] for r in one]):.1f} s, "
+            f"\nruns with exactly one feedback round: {len(one)}, "
+            f"plan time mean {np.mean([r['seconds'] for r in one]):.1f} s, "
             f"max {max(r['seconds'] for r in one):.1f} s"
         )
     gen0 = [r["gen_s"][0] for r in rows]

@@ -31,6 +31,7 @@ from dataclasses import replace
 
 import numpy as np
 import torch
+from data_dirs import model_data
 
 ABLATION = [  # (logits editing, codebook editing, motion control model): the paper's Table 3 order
     (False, False, False),
@@ -120,7 +121,8 @@ def sanity(evaluator, data: str, repeats: int, seed: int) -> dict:
     for name, values in summary.items():
         lines.append("| " + " | ".join([name] + [cell(values, k) for k in QUALITY]) + " |")
     print(
-        f"\nevaluator sanity: {evaluator.name}; test split {len(evalset)} samples, passes of {len(run.samples)} "
+        f"\nevaluator sanity: {evaluator.name}; test split {len(evalset)} samples, "
+        f"passes of {len(run.samples)} "
         f"(groups of 32), {repeats} passes; chance R@1/2/3 = {1 / 32:.3f} / {2 / 32:.3f} / {3 / 32:.3f}"
     )
     print("\n".join(lines), flush=True)
@@ -166,7 +168,8 @@ def run_rows(model, evaluator, data, rows, args, real: bool):
         summary |= table.summary()
         record |= table.to_json()["rows"]
         print(
-            f"  {row.name}: {time.perf_counter() - started:.0f} s wall, {time.process_time() - cpu:.0f} s CPU",
+            f"  {row.name}: {time.perf_counter() - started:.0f} s wall, "
+            f"{time.process_time() - cpu:.0f} s CPU",
             flush=True,
         )
         print(table.table(), flush=True)
@@ -180,7 +183,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--part", default="all", choices=("sanity", "table1", "table3", "all"))
     parser.add_argument("--model", default=None, help="model directory (default: the embedded default)")
     parser.add_argument(
-        "--data", default=None, help="HumanML3D-format directory (default: the model's training data)"
+        "--data",
+        default=None,
+        help="HumanML3D-format directory (default: the model's recorded training data when it is on this "
+        "machine, else data/corpus-default)",
     )
     parser.add_argument("--evaluator", default=None, help="evaluator directory (default: the shipped one)")
     parser.add_argument("--samples", type=int, default=64, help="test cases per repeat (default 64)")
@@ -208,11 +214,10 @@ def main(argv: list[str] | None = None) -> int:
     started, cpu = time.perf_counter(), time.process_time()
     model = data = None
     if args.part != "sanity":
-        from controlmm.cli.eval_control import default_data
         from controlmm.generate import load_model
 
         model = load_model(args.model)
-        data = args.data or default_data(model)
+        data = model_data(model, args.data)
         report |= {
             "model": str(model.directory),
             "data": str(data),
@@ -225,10 +230,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.part in ("sanity", "all"):
         if data is None:
-            from controlmm.cli.eval_control import default_data
             from controlmm.generate import load_model
 
-            data = args.data or default_data(load_model(args.model))
+            data = model_data(load_model(args.model), args.data)
         report["sanity"] = sanity(evaluator, data, args.sanity_repeats, args.seed)
     if args.part in ("table1", "all"):
         rows = [
@@ -247,7 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         mark = lambda flag: "✓" if flag else "×"  # noqa: E731
         labels = {f"#{k}": [str(k)] + [mark(f) for f in ABLATION[k - 1]] for k in chosen}
         print(
-            "\nTable 3 analogue (pelvis control; L = logits editing, E = codebook editing, M = motion control model)"
+            "\nTable 3 analogue (pelvis control; L = logits editing, E = codebook editing, "
+            "M = motion control model)"
         )
         print(markdown(summary, ["#", "L", "E", "M"], labels), flush=True)
         report["table3"] = record

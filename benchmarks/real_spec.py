@@ -13,15 +13,11 @@ without its captions, so the prompt is ``--text``. Prints, per seed, the error o
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-SHARED = Path(os.environ.get("CONTROLMM_SHARED", Path(__file__).resolve().parents[2] / "shared"))
-CLIP = "012314"
+from data_dirs import REAL_CLIP, real_clip
 
 
 def real_spec(joints: np.ndarray) -> dict:
@@ -60,17 +56,17 @@ def main(argv: list[str] | None = None) -> int:
     from controlmm.motion.recover import features_to_joints_np
 
     torch.set_num_threads(args.threads)
-    root = SHARED / "data" / "humanml3d"
-    joints = features_to_joints_np(np.load(root / "new_joint_vecs" / f"{CLIP}.npy"))
+    joints = features_to_joints_np(np.load(real_clip()))
     text = args.text
     spec = ControlSpec.from_dict(real_spec(joints))
     model = load_model(args.model)
     print(
-        f"real spec: clip {CLIP}, {len(joints)} frames, prompt '{text}', preset {args.preset}, "
+        f"real spec: clip {REAL_CLIP}, {len(joints)} frames, prompt '{text}', preset {args.preset}, "
         f"{args.threads} thread(s)"
     )
     print(
-        "| seed | constraints | max err (cm) | mean err (cm) | within 1 cm | logits steps | codebook steps | s |"
+        "| seed | constraints | max err (cm) | mean err (cm) | within 1 cm | logits steps "
+        "| codebook steps | s |"
     )
     print("|---|---|---|---|---|---|---|---|")
     for seed in range(args.seeds):
@@ -82,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
         err = np.asarray(out.errors[0]) * 100
         rec = out.records[0]
         print(
-            f"| {seed} | {len(err)} | {err.max():.2f} | {err.mean():.2f} | {int((err <= 1.0 + 1e-6).sum())} | "
+            f"| {seed} | {len(err)} | {err.max():.2f} | {err.mean():.2f} | "
+            f"{int((err <= 1.0 + 1e-6).sum())} | "
             f"{sum(rec.logits_steps)} | {rec.codebook_steps} | {seconds:.1f} |"
         )
     return 0

@@ -3,9 +3,10 @@
     python benchmarks/retarget.py                      # g1 + h1, real clip + synthetic variants
     python benchmarks/retarget.py --robots g1 --repeats 10 --json out/retarget_bench.json
 
-Motions: the real HumanML3D clip 012314 (``../shared/data/humanml3d``) and variants built
-from it: mirrored (left/right swapped), cropped (frames 40-120), time-reversed, 1.5x faster,
-0.5x slower and with 1 cm Gaussian noise on every joint; plus every ``*.npz``/``*.npy`` motion under ``--corpus`` when given. For each motion
+Motions: the real HumanML3D clip 012314 (``$CONTROLMM_SHARED/data/humanml3d``, default ``../shared``
+beside the repository root) and variants built from it: mirrored (left/right swapped), cropped (frames
+40-120), time-reversed, 1.5x faster, 0.5x slower and with 1 cm Gaussian noise on every joint; plus the
+first 20 ``*.npz``/``*.npy`` motions (sorted by path) under ``--corpus`` when given. For each motion
 and robot: keypoint error after scaling (mm; mean/max per group), joint-limit violations,
 floor penetration (max, mm), stance-foot sliding (mm per stance; mean/max), joint jerk RMS,
 and speed in input frames per second (best of ``--repeats`` wall-clock runs of
@@ -20,31 +21,21 @@ import os
 import platform
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
+from data_dirs import ROOT, real_clip
 
-ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from controlmm.motion import Motion, load_motion, resample  # noqa: E402
 from controlmm.motion.skeleton import LEFT_RIGHT_MIRROR  # noqa: E402
 from retarget import SolverConfig, retarget_motion  # noqa: E402
 
-SHARED = Path(os.environ.get("CONTROLMM_SHARED", ROOT.parent / "shared"))
-CLIP = "012314"
-
-
-def _find_clip() -> Path:
-    for base in (SHARED, Path("/work/shared")):
-        path = base / "data" / "humanml3d" / "new_joint_vecs" / f"{CLIP}.npy"
-        if path.is_file():
-            return path
-    sys.exit(f"the real HumanML3D clip {CLIP} is missing (set CONTROLMM_SHARED)")
-
 
 def motions(corpus: Path | None) -> dict[str, Motion]:
-    real = load_motion(_find_clip())
+    real = load_motion(real_clip())
     j = real.joints
     rng = np.random.default_rng(0)
     mirrored = j[:, list(LEFT_RIGHT_MIRROR)] * np.array([-1.0, 1.0, 1.0], dtype=np.float32)
@@ -96,6 +87,11 @@ def row(name: str, robot: str, solver: str, n: int, wall: float, cpu: float, m: 
     }
 
 
+def _pair(r: dict, group: str) -> str:
+    """``mean/max`` of a keypoint group's error (mm) in a result row."""
+    return f"{r.get(group + '_mean', float('nan')):5.0f}/{r.get(group + '_max', float('nan')):<5.0f}"
+
+
 def print_table(rows: list[dict]) -> None:
     head = (
         f"{'motion':<15} {'robot':<5} {'solver':<7} {'frames':>6} {'fps wall':>9} {'fps cpu':>8} "
@@ -105,10 +101,7 @@ def print_table(rows: list[dict]) -> None:
     print(head)
     print("-" * len(head))
     for r in rows:
-
-        def pair(g):
-            return f"{r.get(g + '_mean', float('nan')):5.0f}/{r.get(g + '_max', float('nan')):<5.0f}"
-
+        pair = partial(_pair, r)
         print(
             f"{r['motion']:<15} {r['robot']:<5} {r['solver']:<7} {r['frames']:>6} {r['fps_wall']:>9.0f} "
             f"{r['fps_cpu']:>8.0f} {pair('feet'):>11} {pair('hands'):>11} {pair('pelvis'):>11} "
@@ -138,7 +131,7 @@ def ablation(motion: Motion, robot: str, repeats: int) -> None:
     base = load_robot(robot).mapping.solver
     for name, change in ABLATION.items():
         cfg = SolverConfig(**{**base, **(change or {})})
-        _, cpu = timed(lambda: retarget_motion(motion, robot, config=cfg, metrics=False), repeats)
+        _, cpu = timed(partial(retarget_motion, motion, robot, config=cfg, metrics=False), repeats)
         traj = retarget_motion(motion, robot, config=cfg)
         m = traj.metrics
         print(
@@ -177,11 +170,11 @@ def main() -> int:
     for name, motion in all_motions.items():
         for robot in args.robots:
             retarget_motion(motion, robot, metrics=False)  # warm caches (model loading)
-            wall, cpu = timed(lambda: retarget_motion(motion, robot, metrics=False), args.repeats)
+            wall, cpu = timed(partial(retarget_motion, motion, robot, metrics=False), args.repeats)
             m = retarget_motion(motion, robot).metrics
             rows.append(row(name, robot, "batched", motion.num_frames, wall, cpu, m))
             if have_mink:
-                wall, cpu = timed(lambda: retarget_motion(motion, robot, solver="mink", metrics=False), 1)
+                wall, cpu = timed(partial(retarget_motion, motion, robot, solver="mink", metrics=False), 1)
                 m = retarget_motion(motion, robot, solver="mink").metrics
                 rows.append(row(name, robot, "mink", motion.num_frames, wall, cpu, m))
     print_table(rows)
@@ -194,7 +187,7 @@ def main() -> int:
         )
         k = [r for r in rows if r["robot"] == robot and r["solver"] == "mink"]
         if k:
-            ratio = np.mean([x["fps_wall"] / y["fps_wall"] for x, y in zip(b, k)])
+            ratio = np.mean([x["fps_wall"] / y["fps_wall"] for x, y in zip(b, k, strict=True)])
             line += (
                 f"; mink {np.mean([r['fps_wall'] for r in k]):.0f} frames/s -> batched is {ratio:.1f}x faster"
             )

@@ -198,7 +198,8 @@ def main() -> None:
     )
     for row in accuracy(args.points):
         print(
-            f"{row[0]:24s} {row[1]:5d}  {row[2]:16s} {row[3]:6d} {row[4]:6d} {row[5]:10.2e} {row[6]:9d} {row[7]:7.2f}"
+            f"{row[0]:24s} {row[1]:5d}  {row[2]:16s} {row[3]:6d} {row[4]:6d} {row[5]:10.2e} "
+            f"{row[6]:9d} {row[7]:7.2f}"
         )
     print("\nmesh far field (mesh_rock, trimesh exact; by true distance from the mesh)")
     print(f"{'dtype':8s} {'band':>10s} {'points':>6s} {'max |err|':>10s} {'median':>10s} {'sign errs':>9s}")

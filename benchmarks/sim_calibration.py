@@ -4,8 +4,9 @@
     python benchmarks/sim_calibration.py --robots g1 --per-family 4 --json out/calib.json
 
 Clean motion should pass: every clip here is a real human clip (HumanML3D 012314) or a
-procedural corpus clip (``controlmm/corpus``, default corpus at ``/work/data/corpus-default``,
-its ``test`` split, the first ``--per-family`` clips of every family in id order). Each is
+procedural corpus clip (``controlmm/corpus``; default ``data/corpus-default``, built by
+``controlmm corpus --out data/corpus-default --clips 6400 --seed 0``, docs/corpus.md), from its
+``test`` split, the first ``--per-family`` clips of every family in id order. Each is
 retargeted with ``retarget_motion(..., fps=50)`` and checked with ``sim.check_trajectory`` in
 the ``empty`` scene with the default ``CheckConfig``. Printed:
 
@@ -32,13 +33,9 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from data_dirs import DEFAULT_CORPUS, REAL_CLIP, ROOT, corpus_dir, humanml3d_dir
 
-ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-SHARED = Path(os.environ.get("CONTROLMM_SHARED", ROOT.parent / "shared"))
-REAL_CLIP = "012314"
-DEFAULT_CORPUS = Path("/work/data/corpus-default")
 
 # per check: (label, unit scale for printing, unit, the clip statistic, the CheckConfig threshold name)
 MEASURES = [
@@ -230,7 +227,8 @@ def print_tables(rows: list[dict], robots: list[str]) -> None:
         rt = sum(r["retarget_cpu_s"] for r in rs)
         ck = sum(r["check_cpu_s"] for r in rs)
         print(
-            f"\n{rb}: passing clips with penetration > 1 cm: {bad_pen}; with joint-limit violations: {bad_lim}. "
+            f"\n{rb}: passing clips with penetration > 1 cm: {bad_pen}; "
+            f"with joint-limit violations: {bad_lim}. "
             f"Retarget {frames_in / rt:,.0f} input frames/s CPU (metrics off); check {frames_out / ck:,.0f} "
             f"frames/s CPU (all checks, 50 fps)."
         )
@@ -238,7 +236,12 @@ def print_tables(rows: list[dict], robots: list[str]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--corpus", type=Path, default=DEFAULT_CORPUS, help="HumanML3D-format corpus directory")
+    ap.add_argument(
+        "--corpus",
+        type=Path,
+        default=DEFAULT_CORPUS,
+        help="HumanML3D-format corpus directory (default: data/corpus-default)",
+    )
     ap.add_argument("--split", default="test")
     ap.add_argument("--per-family", type=int, default=8)
     ap.add_argument("--families", default="", help="comma-separated family names (default: all)")
@@ -249,13 +252,11 @@ def main() -> None:
     robots = [r for r in args.robots.split(",") if r]
     families = [f for f in args.families.split(",") if f] or None
     clips: list[tuple[str, str, Path]] = []
-    real = SHARED / "data" / "humanml3d" / "new_joint_vecs" / f"{REAL_CLIP}.npy"
+    real = humanml3d_dir() / "new_joint_vecs" / f"{REAL_CLIP}.npy"
     if real.is_file() and (families is None or "real" in families):
         clips.append(("real", REAL_CLIP, real))
-    if args.corpus.is_dir():
-        clips += _clip_list(args.corpus, args.split, args.per_family, families)
-    else:
-        print(f"corpus {args.corpus} not found: real clip only", file=sys.stderr)
+    if families != ["real"]:  # --families real runs the real clip alone, without the corpus
+        clips += _clip_list(corpus_dir(args.corpus, "--corpus"), args.split, args.per_family, families)
     jobs = [(fam, cid, str(p), rb) for rb in robots for fam, cid, p in clips]
     print(
         f"# sim calibration: {len(clips)} clips x {len(robots)} robots, {platform.machine()}, "

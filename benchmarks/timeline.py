@@ -1,6 +1,6 @@
 """Benchmark of body-part timeline control on a few specs with a trained model.
 
-    python benchmarks/timeline.py --model MODEL_DIR --corpus CORPUS_DIR [--preset accurate] [--seed 0]
+    python benchmarks/timeline.py --model MODEL_DIR [--corpus CORPUS_DIR] [--preset accurate] [--seed 0]
 
 For every spec: wall seconds, the largest drift (cm) of entries held by a later pass from what the
 pass that fixed them produced, the fastest joint at any track boundary (m/s) against the 99th
@@ -23,6 +23,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from data_dirs import corpus_dir  # noqa: E402
 
 SPECS: dict[str, dict] = {
     "walk+wave": {
@@ -141,7 +142,11 @@ def main() -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--model", required=True, help="trained model directory")
-    parser.add_argument("--corpus", required=True, help="corpus (HumanML3D format) for the speed percentile")
+    parser.add_argument(
+        "--corpus",
+        default=None,
+        help="corpus (HumanML3D format) for the speed percentile (default: data/corpus-default)",
+    )
     parser.add_argument("--preset", default="accurate", choices=("fast", "medium", "accurate"))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--specs", nargs="*", default=list(SPECS), help=f"subset of {', '.join(SPECS)}")
@@ -150,7 +155,8 @@ def main() -> int:
     from controlmm.generate import load_model
     from controlmm.timeline import generate_timeline
 
-    p99 = corpus_speed_percentile(Path(args.corpus))
+    corpus = corpus_dir(args.corpus, "--corpus")
+    p99 = corpus_speed_percentile(corpus)
     model = load_model(args.model)
     model.encode_text(["warm-up"])
     rows = []
@@ -176,7 +182,7 @@ def main() -> int:
         )
     print(
         f"model {args.model}, preset {args.preset}, seed {args.seed}, torch threads 1, "
-        f"corpus joint speed p99 {p99:.2f} m/s ({args.corpus}, test split)"
+        f"corpus joint speed p99 {p99:.2f} m/s ({corpus}, test split)"
     )
     print(
         "| spec | passes | seconds | max drift of fixed parts (cm) | max boundary speed (m/s) | "
