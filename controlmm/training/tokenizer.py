@@ -18,7 +18,8 @@ from torch import nn
 from controlmm.data.datasets import WindowDataset
 from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.recover import features_to_joints
-from controlmm.training.stage import VALIDATION_SEED, Stage
+from controlmm.training.model_stage import ModelStage, StageContext
+from controlmm.training.stage import VALIDATION_SEED
 
 RIC = slice(4, 67)
 
@@ -50,12 +51,12 @@ class TokenizerLoss(nn.Module):
         return loss, {"loss": loss.detach(), "commit": commit.detach(), "perplexity": perplexity.detach()}
 
 
-class TokenizerStage(Stage):
+class TokenizerStage(ModelStage):
     name = "tokenizer"
     requires = ()
     best_metric = "val_mpjpe_mm"
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         super().__init__(ctx)
         window = ctx.config.schedules["tokenizer"].window if "tokenizer" in ctx.config.schedules else 64
         step = ctx.config.tokenizer.downsample
