@@ -22,8 +22,8 @@ loss = alpha CE + (1 - alpha) L1(controlled joints). Validation each epoch: the 
 and the joint error of the argmax tokens at the controlled entries (val_hard_err_cm)."""
 
 EPILOG_CONTROL = """joints: all = pelvis, left/right foot, head, left/right wrist (36 input channels, the
-official all-joint model; any other joint is reached by inference-time editing); pelvis = pelvis only (6).
-Defaults: alpha 0.1 (the paper), estimator gumbel, mode mixed, density mixed, text dropout 0.1."""
+official all-joint model; any other joint is reached by inference-time editing); pelvis = pelvis
+only (6). Defaults: alpha 0.1 (the paper), estimator gumbel, mode mixed, density mixed, text dropout 0.1."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:

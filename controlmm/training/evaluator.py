@@ -75,6 +75,8 @@ class EvaluatorContext:
 
 
 class EvaluatorStage(Stage[EvaluatorContext]):
+    """``controlmm train evaluator``: both encoders of :class:`TextMotionEncoder`, trained together."""
+
     name = WEIGHTS
     manifest = MANIFEST
     best_metric = "val_score"
@@ -109,10 +111,12 @@ class EvaluatorStage(Stage[EvaluatorContext]):
         data = ctx.data
         self.train_samples = data.text_samples("train", progress=ctx.progress)
         self.val_samples = data.text_samples("val", progress=ctx.progress)
-        self.vocabulary = ctx.vocabulary or Vocabulary.build(
-            c for s in self.train_samples for c in s.captions
-        )
-        self.config = ctx.config or replace(EVALUATOR_PRESETS[ctx.preset], vocab_size=len(self.vocabulary))
+        vocabulary, config = ctx.vocabulary, ctx.config
+        if vocabulary is None:
+            vocabulary = Vocabulary.build(c for s in self.train_samples for c in s.captions)
+        if config is None:
+            config = replace(EVALUATOR_PRESETS[ctx.preset], vocab_size=len(vocabulary))
+        self.vocabulary, self.config = vocabulary, config
         texts = sorted({c for s in self.train_samples + self.val_samples for c in s.captions})
         self.caption_index = {c: i for i, c in enumerate(texts)}
         caption_ids, self.caption_lengths = self.vocabulary.encode(texts)

@@ -16,6 +16,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from controlmm.data.datasets import WindowDataset
+from controlmm.data.humanml3d import HumanML3D
+from controlmm.models.model_dir import MotionModel
 from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.recover import features_to_joints
 from controlmm.training.model_stage import ModelStage, StageContext
@@ -116,7 +118,7 @@ class TokenizerStage(ModelStage):
 
 
 @torch.no_grad()
-def reconstruction_metrics(model, data, split: str = "test") -> dict[str, float]:
+def reconstruction_metrics(model: MotionModel, data: HumanML3D, split: str = "test") -> dict[str, float]:
     """Tokenizer reconstruction of whole motions of a split (MoMask's VQ evaluation).
 
     Every motion (40 <= T < 200 frames, cropped to a multiple of 4) is encoded with all RVQ layers and
