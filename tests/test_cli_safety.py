@@ -219,3 +219,18 @@ def test_info_lists_the_robots_plan_accepts(capsys):
     assert run_cli(["info"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("robots"))
     assert line.split(None, 1)[1] == ", ".join(packaged_mappings())
+
+
+def test_a_corrupt_training_checkpoint_says_how_to_start_over(tmp_path):
+    from controlmm.errors import InputFileError
+    from controlmm.training.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+
+    path = tmp_path / "checkpoints" / "tokenizer.pt"
+    save_checkpoint(path, {"step": 3, "model": {"w": torch.ones(2)}, "rng": [rng_state()]})
+    data = load_checkpoint(path)  # tensors and plain containers only: loads without unpickling code
+    expected = np.random.rand()
+    set_rng_state(data["rng"][0])
+    assert np.random.rand() == expected  # the RNG state round-trips
+    path.write_bytes(path.read_bytes()[:100])  # truncated by a full disk or a bad copy
+    with pytest.raises(InputFileError, match=r"not a valid checkpoint .*start this stage over with --force"):
+        load_checkpoint(path)

@@ -10,6 +10,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from pathlib import Path
+from typing import Any
+
+from controlmm.errors import ControlMMError
 
 TRAIN_SUBCOMMANDS: tuple[str, ...] = (
     "tokenizer",
@@ -55,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _no_stage(parser: argparse.ArgumentParser) -> int:
-    from controlmm.models.model_dir import train_command
+    from controlmm.models.model_dir import train_command  # heavy: keeps --help fast
 
     print(
         f"controlmm train: error: choose a stage: {', '.join(map(train_command, TRAIN_SUBCOMMANDS))} "
@@ -125,15 +129,14 @@ def add_common_arguments(p: argparse.ArgumentParser, creates: bool = False) -> N
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def run_stage(name: str, args: argparse.Namespace, stage_options: dict | None = None) -> int:
-    from pathlib import Path
+def run_stage(name: str, args: argparse.Namespace, stage_options: dict[str, Any] | None = None) -> int:
+    """Train stage ``name`` with the parsed command line (options a stage does not offer keep their
+    defaults: the evaluator has no --workers, --precision or --clip-weights)."""
+    from controlmm.training import TrainOptions, train  # heavy: keeps --help fast
 
-    from controlmm.training import TrainOptions, train
-
-    if args.workers < 0:
-        from controlmm.errors import ControlMMError
-
-        raise ControlMMError(f"--workers must be >= 0; got {args.workers}")
+    workers = getattr(args, "workers", 0)
+    if workers < 0:
+        raise ControlMMError(f"--workers must be >= 0; got {workers}")
     options = TrainOptions(
         data=Path(args.data),
         out=Path(args.out),
@@ -147,13 +150,13 @@ def run_stage(name: str, args: argparse.Namespace, stage_options: dict | None = 
         force=args.force,
         seed=args.seed,
         device=args.device,
-        workers=args.workers,
+        workers=workers,
         text_encoder=getattr(args, "text_encoder", None),
-        clip_weights=args.clip_weights,
+        clip_weights=getattr(args, "clip_weights", None),
         text_tokens=getattr(args, "text_tokens", None),
         progress=not args.no_progress,
         command="controlmm " + " ".join(sys.argv[1:]),
-        precision=args.precision,
+        precision=getattr(args, "precision", "fp32"),
         threads=args.threads,
         stage_options=dict(stage_options or {}),
     )

@@ -4,6 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.cli.train import EPILOG, add_common_arguments, run_stage
+
+# The choices of controlmm.training.control (tests check they agree), spelt out here so that building
+# the parser (every `controlmm --help`) does not import torch.
+ESTIMATORS = ("gumbel", "softmax")
+CONTROL_MODES = ("trajectory", "random", "cross", "mixed")
+DENSITIES = ("uniform", "mixed")
+
 DESCRIPTION = """Train ControlMM's motion control model on MODEL_DIR's frozen tokenizer and masked transformer
 (masked consistency training): a trainable copy of the transformer joined to the frozen base by
 zero-initialised linear layers, fed the control signal (relative and absolute target positions of the
@@ -13,15 +21,12 @@ recovers the global joints and adds the error on the controlled joints to the to
 loss = alpha CE + (1 - alpha) L1(controlled joints). Validation each epoch: the loss, token accuracy
 and the joint error of the argmax tokens at the controlled entries (val_hard_err_cm)."""
 
-EPILOG_CONTROL = """joints: all = pelvis, left/right foot, head, left/right wrist (36 input channels, the official
-all-joint model; any other joint is reached by inference-time editing); pelvis = pelvis only (6).
-Defaults: alpha 0.1 (the paper), estimator gumbel, mode mixed, density mixed, text dropout 0.1."""
+EPILOG_CONTROL = """joints: all = pelvis, left/right foot, head, left/right wrist (36 input channels, the
+official all-joint model; any other joint is reached by inference-time editing); pelvis = pelvis
+only (6). Defaults: alpha 0.1 (the paper), estimator gumbel, mode mixed, density mixed, text dropout 0.1."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from controlmm.cli.train import EPILOG, add_common_arguments
-    from controlmm.training.control import CONTROL_MODES, DENSITIES, ESTIMATORS
-
     p = sub.add_parser(
         "control",
         help="train the motion control model (spatial control)",
@@ -64,8 +69,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.train import run_stage
-
     options = {
         "joints": args.joints,
         "alpha": args.alpha,

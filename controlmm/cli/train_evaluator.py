@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import sys
+
+from controlmm.cli.train import run_stage
 
 DESCRIPTION = """Train a text-motion evaluator (a motion encoder and a text encoder into one embedding space,
 contrastive InfoNCE) on the training split of a HumanML3D-format directory, for FID, R-precision,
@@ -15,7 +16,7 @@ R-precision of the ground truth on the val split; the best weights are exported.
 on 2 CPU cores for the default corpus.
 
 examples:
-  controlmm train evaluator --data /work/data/corpus-default --out EVAL_DIR
+  controlmm train evaluator --data CORPUS_DIR --out EVAL_DIR
   controlmm train evaluator --data HumanML3D/ --out EVAL_DIR --epochs 20 --device cuda"""
 
 
@@ -57,27 +58,4 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from controlmm.training.evaluator import EvaluatorTrainOptions, train_evaluator
-
-    train_evaluator(
-        EvaluatorTrainOptions(
-            data=Path(args.data),
-            out=Path(args.out),
-            preset=args.preset,
-            iters=args.iters,
-            epochs=args.epochs,
-            batch_size=args.batch_size,
-            lr=args.lr,
-            checkpoint_every=args.checkpoint_every,
-            resume=args.resume,
-            force=args.force,
-            seed=args.seed,
-            device=args.device,
-            threads=args.threads,
-            progress=not args.no_progress,
-            command="controlmm " + " ".join(sys.argv[1:]),
-        )
-    )
-    return 0
+    return run_stage("evaluator", args)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-DESCRIPTION = """Train the residual transformer that predicts RVQ layers 1..5 from the layers below (shared/tied
-projections, 20% text dropout). Validation each epoch: cross-entropy and accuracy."""
+from controlmm.cli.train import EPILOG, add_common_arguments, run_stage
+
+DESCRIPTION = """Train the residual transformer that predicts RVQ layers 1..5 from the layers below
+(shared/tied projections, 20% text dropout). Validation each epoch: cross-entropy and accuracy."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from controlmm.cli.train import EPILOG, add_common_arguments
-
     p = sub.add_parser(
         "residual", help="train the residual transformer", description=DESCRIPTION, epilog=EPILOG
     )
@@ -19,6 +19,4 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.train import run_stage
-
     return run_stage("residual", args)

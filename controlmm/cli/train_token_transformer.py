@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.cli.train import EPILOG, add_common_arguments, run_stage
+
 DESCRIPTION = """Train the second masked transformer of MODEL_DIR's token_view: the same objective as
 'controlmm train transformer', conditioned on MiniLM's token states (one row per word piece) instead of
 the pooled sentence vector, starting from part of the trained transformer's weights (embeddings, text
@@ -15,8 +17,6 @@ Validation each epoch: masked-token cross-entropy and accuracy."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from controlmm.cli.train import EPILOG, add_common_arguments
-
     p = sub.add_parser(
         "token-transformer",
         help="train the token-state masked transformer (optional)",
@@ -28,6 +28,4 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.train import run_stage
-
     return run_stage("token_transformer", args)

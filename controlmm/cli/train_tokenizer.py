@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from controlmm.cli.train import EPILOG, add_common_arguments, run_stage
+
 DESCRIPTION = """Train the RVQ-VAE motion tokenizer (6 residual codebooks) on random 64-frame windows. Creates
 MODEL_DIR with model.json, mean.npy/std.npy (the data's Mean/Std with MoMask's feat_bias quirk) and
 tokenizer.pt. Validation each epoch: reconstruction loss, MPJPE (mm), code usage."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from controlmm.cli.train import EPILOG, add_common_arguments
-
     p = sub.add_parser(
         "tokenizer",
         help="train the RVQ-VAE tokenizer (creates the model directory)",
@@ -23,6 +23,4 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.train import run_stage
-
     return run_stage("tokenizer", args)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-DESCRIPTION = """Train the text-conditioned masked transformer on the base-layer tokens of MODEL_DIR's tokenizer
-(cosine masking, BERT corruption, 10% text dropout for classifier-free guidance). Validation each
+from controlmm.cli.train import EPILOG, add_common_arguments, run_stage
+
+DESCRIPTION = """Train the text-conditioned masked transformer on the base-layer tokens of MODEL_DIR's
+tokenizer (cosine masking, BERT corruption, 10% text dropout for classifier-free guidance). Validation each
 epoch: masked-token cross-entropy and accuracy."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from controlmm.cli.train import EPILOG, add_common_arguments
-
     p = sub.add_parser(
         "transformer",
         help="train the masked (base-layer) transformer",
@@ -23,6 +23,4 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controlmm.cli.train import run_stage
-
     return run_stage("transformer", args)

@@ -1,22 +1,22 @@
-"""Training of the model parts: one shared loop (:mod:`.loop`), one stage per part.
+"""Training of the model parts and of the evaluator: one shared loop (:mod:`.loop`), one stage per part.
 
-``STAGES`` maps ``controlmm train <name>`` to its :class:`~controlmm.training.stage.Stage`; later stages
-(``control``, ``evaluator``) add themselves here.
+``STAGES`` (:mod:`.registry`) maps ``controlmm train <name>`` to its :class:`~controlmm.training.stage.Stage`.
 """
 
-from controlmm.training.control import ControlStage
-from controlmm.training.loop import TrainOptions, TrainResult, lr_factor, train
-from controlmm.training.residual import ResidualStage
-from controlmm.training.stage import Stage, StageContext
-from controlmm.training.tokenizer import TokenizerStage
-from controlmm.training.transformer import TokenTransformerStage, TransformerStage
+from controlmm.training.loop import TrainResult, train
+from controlmm.training.model_stage import ModelStage, StageContext
+from controlmm.training.options import TrainOptions
+from controlmm.training.registry import STAGES
+from controlmm.training.schedule import lr_factor
+from controlmm.training.stage import Stage
 
-STAGES: dict[str, type[Stage]] = {
-    "tokenizer": TokenizerStage,
-    "transformer": TransformerStage,
-    "token_transformer": TokenTransformerStage,
-    "residual": ResidualStage,
-    "control": ControlStage,
-}
-
-__all__ = ["STAGES", "Stage", "StageContext", "TrainOptions", "TrainResult", "lr_factor", "train"]
+__all__ = [
+    "STAGES",
+    "ModelStage",
+    "Stage",
+    "StageContext",
+    "TrainOptions",
+    "TrainResult",
+    "lr_factor",
+    "train",
+]

@@ -18,18 +18,24 @@ import torch
 
 from controlmm.atomic import atomic_path
 from controlmm.errors import InputFileError
+from controlmm.files import load_torch
 
 
 def rng_state() -> dict[str, Any]:
-    state = {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+    """Every RNG's state as tensors and plain containers (loadable with ``weights_only=True``)."""
+    kind, keys, pos, has_gauss, gauss = np.random.get_state(legacy=True)
+    numpy_state = (kind, torch.from_numpy(keys.astype(np.int64)), int(pos), int(has_gauss), float(gauss))
+    state = {"python": random.getstate(), "numpy": numpy_state, "torch": torch.get_rng_state()}
     if torch.cuda.is_available():
         state["cuda"] = torch.cuda.get_rng_state_all()
     return state
 
 
 def set_rng_state(state: dict[str, Any]) -> None:
-    random.setstate(state["python"])
-    np.random.set_state(state["numpy"])
+    random.setstate(tuple(state["python"]))
+    kind, keys, pos, has_gauss, gauss = state["numpy"]
+    keys = keys.numpy() if isinstance(keys, torch.Tensor) else np.asarray(keys)
+    np.random.set_state((kind, keys.astype(np.uint32), pos, has_gauss, gauss))
     torch.set_rng_state(state["torch"])
     if "cuda" in state and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(state["cuda"])
@@ -47,15 +53,15 @@ def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
         torch.save(payload, tmp)
 
 
+START_OVER = "start this stage over with --force (instead of --resume)"
+"""How to recover from a training checkpoint that cannot be resumed."""
+
+
 def load_checkpoint(path: Path) -> dict[str, Any]:
+    """A training checkpoint (tensors and plain containers only: never arbitrary pickles)."""
     if not path.is_file():
         raise InputFileError(f"nothing to resume: '{path}' does not exist")
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # noqa: BLE001
-        raise InputFileError(
-            f"training checkpoint '{path}' is corrupt or unreadable ({type(exc).__name__})"
-        ) from exc
+    data = load_torch(path, "training checkpoint", hint=START_OVER)
     if not isinstance(data, dict) or "step" not in data or "model" not in data:
-        raise InputFileError(f"'{path}' is not a controlmm training checkpoint")
+        raise InputFileError(f"'{path}' is not a controlmm training checkpoint; {START_OVER}")
     return data

@@ -35,10 +35,13 @@ from torch import nn
 from controlmm.errors import ControlMMError
 from controlmm.models.config import CONTROL_JOINT_SETS, ControlConfig
 from controlmm.models.layers import cosine_schedule, gumbel_noise, lengths_to_mask, zero_samples
-from controlmm.models.mask_transformer import token_loss_and_accuracy
+from controlmm.models.mask_transformer import MaskTransformer, token_loss_and_accuracy
 from controlmm.models.model_dir import read_manifest, write_manifest
 from controlmm.models.motion_control_model import MotionControlModel, control_input, estimate_latent
+from controlmm.models.rvqvae import RVQVAE
+from controlmm.motion.normalization import Normalizer
 from controlmm.motion.recover import features_to_joints
+from controlmm.training.model_stage import StageContext
 from controlmm.training.stage import VALIDATION_SEED
 from controlmm.training.transformer import TextConditionedStage
 
@@ -148,7 +151,12 @@ class ControlLoss(nn.Module):
     """Masked consistency training objective; only ``control``'s parameters are registered/trained."""
 
     def __init__(
-        self, control: MotionControlModel, base, tokenizer, normalizer, settings: ControlTraining
+        self,
+        control: MotionControlModel,
+        base: MaskTransformer,
+        tokenizer: RVQVAE,
+        normalizer: Normalizer,
+        settings: ControlTraining,
     ) -> None:
         super().__init__()
         self.control = control
@@ -235,7 +243,7 @@ def token_probabilities(
 class _Frozen:
     """The frozen parts, held outside the module tree (not trained, not in state dicts, not in DDP)."""
 
-    def __init__(self, base, tokenizer, normalizer) -> None:
+    def __init__(self, base: MaskTransformer, tokenizer: RVQVAE, normalizer: Normalizer) -> None:
         self.base, self.tokenizer, self.normalizer = base, tokenizer, normalizer
 
     def joints(self, latent: torch.Tensor) -> torch.Tensor:
@@ -251,7 +259,7 @@ class ControlStage(TextConditionedStage):
     requires = ("tokenizer", "transformer")
     best_metric = "val_loss"
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         super().__init__(ctx)
         opts = dict(ctx.options)
         joints = opts.pop("joints", None) or ctx.config.control.joints
@@ -264,7 +272,7 @@ class ControlStage(TextConditionedStage):
         self.base_transformer = ctx.base.transformer.eval()
 
     def _set_control_config(self, control: ControlConfig) -> None:
-        """Record the control branch's configuration in model.json (the part is built from it)."""
+        """Use ``control`` for the branch (written to model.json by :meth:`create`)."""
         ctx = self.ctx
         if ctx.resume and control != ctx.config.control:
             raise ControlMMError(
@@ -272,10 +280,13 @@ class ControlStage(TextConditionedStage):
                 f"model; --joints {control.joints} does not match (use --force to start over)"
             )
         ctx.config = replace(ctx.config, control=control)
-        if ctx.is_main:
-            manifest = read_manifest(ctx.model_dir)
-            manifest["config"]["control"] = asdict(control)
-            write_manifest(ctx.model_dir, manifest)
+
+    def create(self) -> None:
+        """Record the control branch's configuration in model.json (the part is built from it)."""
+        super().create()
+        manifest = read_manifest(self.ctx.model_dir)
+        manifest["config"]["control"] = asdict(self.ctx.config.control)
+        write_manifest(self.ctx.model_dir, manifest)
 
     def build_model(self) -> nn.Module:
         return MotionControlModel(self.ctx.config).init_from_base(self.base_transformer)

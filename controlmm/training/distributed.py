@@ -16,6 +16,7 @@ import torch
 import torch.distributed as dist
 
 from controlmm.errors import ControlMMError
+from controlmm.models.model_dir import resolve_device
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,6 @@ class DistContext:
 
 def init_distributed(device: str | None) -> DistContext:
     """Join the ``torchrun`` process group when ``WORLD_SIZE > 1``; pick the device."""
-    from controlmm.models.model_dir import resolve_device
-
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
     local_rank = int(os.environ.get("LOCAL_RANK", str(rank)))

@@ -16,9 +16,12 @@ import torch.nn.functional as F
 from torch import nn
 
 from controlmm.data.datasets import WindowDataset
+from controlmm.data.humanml3d import HumanML3D
+from controlmm.models.model_dir import MotionModel
 from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion.recover import features_to_joints
-from controlmm.training.stage import VALIDATION_SEED, Stage
+from controlmm.training.model_stage import ModelStage, StageContext
+from controlmm.training.stage import VALIDATION_SEED
 
 RIC = slice(4, 67)
 
@@ -50,12 +53,12 @@ class TokenizerLoss(nn.Module):
         return loss, {"loss": loss.detach(), "commit": commit.detach(), "perplexity": perplexity.detach()}
 
 
-class TokenizerStage(Stage):
+class TokenizerStage(ModelStage):
     name = "tokenizer"
     requires = ()
     best_metric = "val_mpjpe_mm"
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         super().__init__(ctx)
         window = ctx.config.schedules["tokenizer"].window if "tokenizer" in ctx.config.schedules else 64
         step = ctx.config.tokenizer.downsample
@@ -115,7 +118,7 @@ class TokenizerStage(Stage):
 
 
 @torch.no_grad()
-def reconstruction_metrics(model, data, split: str = "test") -> dict[str, float]:
+def reconstruction_metrics(model: MotionModel, data: HumanML3D, split: str = "test") -> dict[str, float]:
     """Tokenizer reconstruction of whole motions of a split (MoMask's VQ evaluation).
 
     Every motion (40 <= T < 200 frames, cropped to a multiple of 4) is encoded with all RVQ layers and

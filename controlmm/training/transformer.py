@@ -19,16 +19,17 @@ from controlmm.data.datasets import TextMotionDataset
 from controlmm.errors import ControlMMError
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.text import embed_captions
-from controlmm.training.stage import VALIDATION_SEED, Stage
+from controlmm.training.model_stage import ModelStage, StageContext
+from controlmm.training.stage import VALIDATION_SEED
 
 
-class TextConditionedStage(Stage):
+class TextConditionedStage(ModelStage):
     """Shared by the masked and residual transformer stages: samples, captions, tokens."""
 
-    requires = ("tokenizer",)
+    requires: tuple[str, ...] = ("tokenizer",)
     best_metric = "val_loss"
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         super().__init__(ctx)
         data = ctx.data
         self.train_samples = data.text_samples("train", progress=ctx.progress)
@@ -141,7 +142,7 @@ class TokenTransformerStage(TransformerStage):
     name = "token_transformer"
     requires = ("tokenizer", "transformer")
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         view = ctx.config.token_view
         if view is None:
             raise ControlMMError(

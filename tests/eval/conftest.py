@@ -43,12 +43,12 @@ def small_corpus(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_evaluator_dir(tmp_path_factory, small_corpus) -> Path:
-    from controlmm.training.evaluator import EvaluatorTrainOptions, train_evaluator
+    from controlmm.training import TrainOptions, train
 
     out = tmp_path_factory.mktemp("evaluator") / "tiny"
     with one_thread():
-        train_evaluator(
-            EvaluatorTrainOptions(data=small_corpus, out=out, preset="tiny", progress=False, device="cpu")
+        train(
+            "evaluator", TrainOptions(data=small_corpus, out=out, preset="tiny", progress=False, device="cpu")
         )
     return out
 

@@ -20,7 +20,8 @@ from controlmm.eval.evaluator import (
     tokenize,
 )
 from controlmm.eval.quality import EvalSet
-from controlmm.training.evaluator import EvaluatorTrainOptions, contrastive_loss, train_evaluator
+from controlmm.training import TrainOptions, train
+from controlmm.training.contrastive import contrastive_loss
 
 
 def test_tokenize_and_vocabulary():
@@ -101,7 +102,7 @@ def test_embeddings_lie_on_the_sphere_and_match_the_module(tiny_evaluator_dir, s
 
 def test_resume_continues_exactly(small_corpus, tmp_path):
     def opts(out, iters, resume=False):
-        return EvaluatorTrainOptions(
+        return TrainOptions(
             data=small_corpus,
             out=out,
             preset="tiny",
@@ -112,14 +113,14 @@ def test_resume_continues_exactly(small_corpus, tmp_path):
             checkpoint_every=5,
         )
 
-    train_evaluator(opts(tmp_path / "a", 12))
-    train_evaluator(opts(tmp_path / "b", 6))
-    train_evaluator(opts(tmp_path / "b", 12, resume=True))
+    train("evaluator", opts(tmp_path / "a", 12))
+    train("evaluator", opts(tmp_path / "b", 6))
+    train("evaluator", opts(tmp_path / "b", 12, resume=True))
     a = torch.load(tmp_path / "a" / "checkpoints" / "evaluator.pt", weights_only=False)["model"]
     b = torch.load(tmp_path / "b" / "checkpoints" / "evaluator.pt", weights_only=False)["model"]
     assert all(torch.equal(a[k], b[k]) for k in a)
     with pytest.raises(ControlMMError, match="--resume"):
-        train_evaluator(opts(tmp_path / "a", 12))
+        train("evaluator", opts(tmp_path / "a", 12))
 
 
 def test_loading_errors(tiny_evaluator_dir, tmp_path):
@@ -179,3 +180,32 @@ def test_train_evaluator_cli_errors(capsys, tmp_path, tiny_evaluator_dir, small_
         ["train", "evaluator", "--data", str(small_corpus), "--out", str(tmp_path / "e"), "--resume"],
         "nothing to resume",
     )
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--batch-size", "1"], "batch size must be at least 2 (contrastive pairs); got 1"),
+        (["--batch-size", "1000"], "batch size 1000 is more than the"),
+        (["--iters", "0"], "iters must be at least 1; got 0"),
+        (["--lr", "-1"], "learning rate must be positive; got -1"),
+    ],
+)
+def test_train_evaluator_refuses_options_before_creating_anything(
+    capsys, tmp_path, small_corpus, extra, needle
+):
+    out = tmp_path / "new" / "eval"
+    argv = ["train", "evaluator", "--data", str(small_corpus), "--out", str(out), "--preset", "tiny"]
+    _one_line_error(capsys, argv + ["--no-progress", *extra], needle)
+    assert not (tmp_path / "new").exists()
+
+
+def test_evaluator_keeps_the_highest_score():
+    from controlmm.training.evaluator import EvaluatorStage
+    from controlmm.training.tokenizer import TokenizerStage
+
+    assert EvaluatorStage.is_better({"val_score": 0.5}, {"val_score": 0.4})
+    assert not EvaluatorStage.is_better({"val_score": 0.3}, {"val_score": 0.4})
+    assert TokenizerStage.is_better({"val_mpjpe_mm": 30.0}, {"val_mpjpe_mm": 40.0})
+    assert not TokenizerStage.is_better({"val_mpjpe_mm": 50.0}, {"val_mpjpe_mm": 40.0})
+    assert EvaluatorStage.is_better({"val_score": 0.1}, None)

@@ -110,6 +110,54 @@ def test_generate_bad_input(tiny_model_dir, tmp_path, capsys):
     )
 
 
+def _files(root):
+    """Every file under ``root`` with its bytes."""
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--batch-size", "1000"], "batch size 1000 is more than the 11 usable training items"),
+        (["--batch-size", "0"], "batch size must be at least 1; got 0"),
+        (["--iters", "0"], "iters must be at least 1; got 0"),
+        (["--epochs", "-1"], "--epochs must be positive; got -1"),
+        (["--lr", "0"], "learning rate must be positive; got 0"),
+        (["--checkpoint-every", "0"], "checkpoint interval must be at least 1; got 0"),
+        (["--workers", "-1"], "--workers must be >= 0; got -1"),
+        (["--threads", "0"], "threads must be at least 1; got 0"),
+        (["--preset", "huge"], "unknown preset 'huge'"),
+    ],
+)
+def test_train_refuses_options_before_creating_anything(tiny_data, tmp_path, capsys, extra, needle):
+    out = tmp_path / "new" / "model"
+    argv = ["train", "tokenizer", "--data", str(tiny_data), "--out", str(out), "--preset", "tiny"]
+    _one_line_error(capsys, argv + ["--no-progress", *extra], needle)
+    assert not (tmp_path / "new").exists()
+
+
+def test_train_control_refusal_leaves_the_model_directory_as_it_was(
+    tiny_data, tiny_model_dir, tmp_path, capsys
+):
+    model = tmp_path / "model"
+    shutil.copytree(tiny_model_dir, model, ignore=shutil.ignore_patterns("checkpoints"))
+    before = _files(model)
+    argv = ["train", "control", "--data", str(tiny_data), "--out", str(model), "--no-progress"]
+    # --joints pelvis would be recorded in model.json: refused before that happens
+    _one_line_error(capsys, argv + ["--joints", "pelvis", "--batch-size", "1000"], "batch size 1000")
+    _one_line_error(capsys, argv + ["--alpha", "2"], "alpha must be in [0, 1]; got 2.0")
+    assert _files(model) == before
+
+
+def test_train_control_choices_match_the_stage():
+    from controlmm.cli import train_control
+    from controlmm.training import control
+
+    assert train_control.ESTIMATORS == control.ESTIMATORS
+    assert train_control.CONTROL_MODES == control.CONTROL_MODES
+    assert train_control.DENSITIES == control.DENSITIES
+
+
 def test_train_help_and_bad_input(tiny_data, tmp_path, capsys):
     assert TRAIN_SUBCOMMANDS == (
         "tokenizer",

@@ -265,8 +265,8 @@ def test_validation_draws_do_not_depend_on_the_training_seed(tiny_data, tiny_mod
     # validation losses (and which checkpoint each exports) are comparable.
     from controlmm.data.humanml3d import HumanML3D
     from controlmm.generate import load_model
+    from controlmm.training.model_stage import StageContext
     from controlmm.training.residual import ResidualStage
-    from controlmm.training.stage import StageContext
     from controlmm.training.transformer import TransformerStage
 
     model = load_model(tiny_model_dir)

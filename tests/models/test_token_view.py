@@ -25,7 +25,7 @@ from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.motion import load_motion
 from controlmm.text.config import TextEncoderConfig
 from controlmm.training import TrainOptions, train
-from controlmm.training.stage import StageContext
+from controlmm.training.model_stage import StageContext
 from controlmm.training.transformer import WARM_START_SKIP, TokenTransformerStage, warm_start
 
 
