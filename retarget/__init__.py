@@ -8,7 +8,7 @@ Public API::
 """
 
 from retarget.mapping import Mapping, load_mapping, packaged_mappings
-from retarget.retarget_motion import retarget_motion, robot_scale
+from retarget.retarget_motion import check_fps, retarget_motion, robot_scale
 from retarget.robot_model import RobotModel, load_robot
 from retarget.robots import DEFAULT_ROBOT, available_robots, robot_mjcf, robot_scene
 from retarget.solver import SolverConfig
@@ -21,6 +21,7 @@ __all__ = [
     "RobotTrajectory",
     "SolverConfig",
     "available_robots",
+    "check_fps",
     "load_mapping",
     "load_robot",
     "packaged_mappings",

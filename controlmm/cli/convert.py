@@ -45,18 +45,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # heavy (torch): imported when the command runs, so that --help stays fast
-    from controlmm.motion.io import check_output_format, load_motion, save_motion
+    from controlmm import motion as motions
 
-    check_output_format(Path(args.output))
+    motions.check_output_format(Path(args.output))
     check_output_file(args.output, force=args.force)
-    motion = load_motion(args.input)
+    motion = motions.load_motion(args.input)
     if args.process:
         motion = motion.with_features()
     out = Path(args.output)
     npy_kind = "joints" if args.joints else "features"
     if out.suffix.lower() == ".npy" and npy_kind == "features":
         motion = motion.with_features()
-    save_motion(motion, out, npy_kind=npy_kind)
+    motions.save_motion(motion, out, npy_kind=npy_kind)
     if out.suffix.lower() == ".npy":
         what = f"HumanML3D {npy_kind}"
     elif out.suffix.lower() == ".bvh":

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_file, write_text
 from controlmm.cli.args import add_force, add_threads, integer, positive, seed
+from controlmm.errors import ControlMMError
 
 HELP = """Evaluate spatial control the way OmniControl and ControlMM do: targets taken from held-out motions
 (the test split of --data, default the data the model was trained on), controlled joints at 1, 2 or 5
@@ -34,6 +38,10 @@ examples:
   controlmm eval control --preset accurate --joints pelvis --samples 50
   controlmm eval control --model MODEL_DIR --preset fast --joints cross --density 196 --json out.json
   controlmm eval control --joints pelvis,each --real --uncontrolled --samples 64 --repeats 3 --batch-size 32"""
+
+
+if TYPE_CHECKING:
+    from controlmm.generate import MotionModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -115,40 +123,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def parse_modes(text: str) -> list[str]:
-    from controlmm.errors import ControlMMError
-    from controlmm.eval.control import JOINT_MODES
-
+def parse_modes(text: str, allowed: tuple[str, ...]) -> list[str]:
+    """``--joints``: comma-separated joint modes, each one of ``allowed``."""
     modes = [m.strip() for m in text.split(",") if m.strip()]
     for m in modes:
-        if m not in JOINT_MODES:
-            raise ControlMMError(f"unknown --joints '{m}'; allowed: {', '.join(JOINT_MODES)}")
+        if m not in allowed:
+            raise ControlMMError(f"unknown --joints '{m}'; allowed: {', '.join(allowed)}")
     if not modes:
         raise ControlMMError("--joints is empty")
     return modes
 
 
-def parse_densities(text: str) -> tuple[int, ...]:
-    from controlmm.errors import ControlMMError
-    from controlmm.eval.control import DENSITIES
-
+def parse_densities(text: str, allowed: tuple[int, ...]) -> tuple[int, ...]:
+    """``--density``: ``all`` or comma-separated frame counts, each one of ``allowed``."""
     if text == "all":
-        return DENSITIES
+        return allowed
     try:
         values = tuple(int(x) for x in text.split(","))
     except ValueError:
         values = ()
-    if not values or any(v not in DENSITIES for v in values):
-        raise ControlMMError(f"unknown --density '{text}'; allowed: {', '.join(map(str, DENSITIES))} or all")
+    if not values or any(v not in allowed for v in values):
+        raise ControlMMError(f"unknown --density '{text}'; allowed: {', '.join(map(str, allowed))} or all")
     return values
 
 
-def default_data(model) -> str:
+def default_data(model: MotionModel) -> str:
     """The data directory recorded in the model's training record (control stage first)."""
-    from pathlib import Path
-
-    from controlmm.errors import ControlMMError
-
     training = model.manifest.get("training", {})
     for stage in ("control", "transformer", "tokenizer"):
         data = training.get(stage, {}).get("data")
@@ -161,46 +161,41 @@ def default_data(model) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
+    # heavy (torch, the models): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm.editing import editing_preset
-    from controlmm.errors import ControlMMError
-    from controlmm.generate import load_model
+    from controlmm import editing, generate as generation
+    from controlmm.eval import control, control_table, evaluator
 
-    modes = parse_modes(args.joints)
-    densities = parse_densities(args.density)
+    modes = parse_modes(args.joints, control.JOINT_MODES)
+    densities = parse_densities(args.density, control.DENSITIES)
     if args.samples < 2 and not args.no_quality:
         raise ControlMMError("the quality columns need --samples 2 or more (or pass --no-quality)")
     if args.json:
         check_output_file(args.json, force=args.force)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    model = load_model(args.model)
+    model = generation.load_model(args.model)
     data = args.data or default_data(model)
-    config = editing_preset(args.preset).with_overrides(
+    config = editing.editing_preset(args.preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
         control_model=False if args.no_control_model else None,
         logits_steps=args.logits_steps,
         codebook_steps=args.codebook_steps,
         contact_steps=args.contact_steps,
     )
-    from controlmm.eval.control_table import UNCONTROLLED, TableRow, evaluate_control_table
-
-    evaluator = None
+    judge = None
     if not args.no_quality:
-        from controlmm.eval.evaluator import load_evaluator, model_evaluator
-
         # Default: the evaluator the model directory carries (import-official --evaluator), else the shipped one.
-        evaluator = load_evaluator(args.evaluator or model_evaluator(args.model))
-    rows = [TableRow("uncontrolled", modes[0], UNCONTROLLED)] if args.uncontrolled else []
+        judge = evaluator.load_evaluator(args.evaluator or evaluator.model_evaluator(args.model))
+    TableRow = control_table.TableRow
+    rows = [TableRow("uncontrolled", modes[0], control_table.UNCONTROLLED)] if args.uncontrolled else []
     rows += [TableRow(mode, mode, config) for mode in dict.fromkeys(modes)]
-    table = evaluate_control_table(
+    table = control_table.evaluate_control_table(
         model,
         data,
         rows,
-        evaluator=evaluator,
+        evaluator=judge,
         densities=densities,
         samples=args.samples,
         repeats=args.repeats,
@@ -209,13 +204,13 @@ def run(args: argparse.Namespace) -> int:
         real=args.real,
         progress=not args.quiet,
     )
-    unknown = getattr(evaluator, "unknown_word_share", None)
+    unknown = getattr(judge, "unknown_word_share", None)
     if unknown is not None:
         share = unknown([c.text for c in table.evaluations[rows[0].name][0].cases])
         if share > 0.5:
             print(
                 f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
-                f"({evaluator.name}); train one on this data: controlmm train evaluator --data {data}"
+                f"({judge.name}); train one on this data: controlmm train evaluator --data {data}"
             )
     reports = []
     for mode in dict.fromkeys(modes):
@@ -236,7 +231,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     print(
         f"\n{len(table.rows)} rows, {args.samples} cases x {args.repeats} repeat(s) each, mean ± 95% CI"
-        + (f"; quality by {evaluator.name}" if evaluator is not None else "")
+        + (f"; quality by {judge.name}" if judge is not None else "")
     )
     print(table.table())
     if args.json:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from controlmm.atomic import check_output_file, write_text
 from controlmm.cli.args import add_force, integer, seed
+from controlmm.errors import ControlMMError
 
 HELP = """Check that motions do what their captions say, family by family, with simple geometry
 in the person's frame (e.g. "walks backwards": the pelvis moves against the facing
@@ -88,11 +90,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
-    from controlmm.errors import ControlMMError
-    from controlmm.eval.cases import evaluate, ground_truth, list_cases
-    from controlmm.eval.model_probes import generated_motions, select_cases, tokenized_motions
+    # heavy (torch, the models): imported when the command runs, so that --help stays fast
+    from controlmm import generate as generation
+    from controlmm.eval import cases as probe_cases, model_probes
 
     if args.json:
         check_output_file(args.json, force=args.force)
@@ -100,32 +100,30 @@ def run(args: argparse.Namespace) -> int:
         raise ControlMMError("--tokenizer-only and --layers need --model")
     if args.layers is not None and not args.tokenizer_only:
         raise ControlMMError("--layers goes with --tokenizer-only")
-    cases = list_cases(args.data, args.split)
+    cases = probe_cases.list_cases(args.data, args.split)
     families = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
     if args.families is not None and not families:
         raise ControlMMError("--families is empty; give comma-separated family names")
-    cases = select_cases(cases, families, args.samples, args.seed)
+    cases = model_probes.select_cases(cases, families, args.samples, args.seed)
     if not cases:
         raise ControlMMError(f"the {args.split} split of '{args.data}' has no captions to check")
     if args.model is None:
-        source, what = ground_truth(args.data), "ground truth"
-        report = evaluate(cases, source, split=args.split, per_clip=True, progress=not args.quiet)
+        source, what = probe_cases.ground_truth(args.data), "ground truth"
+        report = probe_cases.evaluate(cases, source, split=args.split, per_clip=True, progress=not args.quiet)
     else:
-        from controlmm.generate import load_model
-
         # generation without control: every listed part but the motion control model
-        model = load_model(
+        model = generation.load_model(
             None if args.model == "default" else args.model, device=args.device, skip=("control",)
         )
         if args.tokenizer_only:
-            source = tokenized_motions(model, args.data, args.layers)
+            source = model_probes.tokenized_motions(model, args.data, args.layers)
             what = f"ground truth through the tokenizer of {model.directory}, {args.layers or 'all'} layer(s)"
         else:
-            source = generated_motions(
+            source = model_probes.generated_motions(
                 model, cases, seed=args.seed, batch_size=args.batch_size, progress=not args.quiet
             )
             what = f"model {model.directory}, seed {args.seed}"
-        report = evaluate(cases, source, split=args.split, progress=not args.quiet)
+        report = probe_cases.evaluate(cases, source, split=args.split, progress=not args.quiet)
     print(f"probes on {args.data} ({args.split} split, {what})")
     print(report.table())
     for case, result in report.failures[: max(args.show_failures, 0)]:

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from pathlib import Path
 
 from controlmm.atomic import check_output_file, write_text
 from controlmm.cli.args import add_force, add_threads, integer, seed
+from controlmm.errors import ControlMMError
 
 HELP = """Evaluate text-to-motion quality as the paper does: R-precision top-1/2/3 (groups of 32), FID,
 MM-Dist, Diversity (300 pairs) and Multimodality, measured by a text-motion evaluator, over REPEATS
@@ -87,14 +90,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
+    # heavy (torch, the models): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm.errors import ControlMMError
-    from controlmm.eval.evaluator import load_evaluator, model_evaluator
-    from controlmm.eval.quality import EvalSet, evaluate_quality, model_generator
+    from controlmm import generate as generation
+    from controlmm.eval import evaluator as evaluators, quality
 
     if args.json:
         check_output_file(args.json, force=args.force)
@@ -102,21 +102,20 @@ def run(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     if args.real_only and args.model:
         raise ControlMMError("--real-only evaluates no model; drop --model or --real-only")
-    if args.evaluator is None and model_evaluator(args.model):  # e.g. the official one, from import-official
-        args.evaluator = model_evaluator(args.model)
+    carried = evaluators.model_evaluator(args.model)
+    if args.evaluator is None and carried:  # e.g. the official one, from import-official
+        args.evaluator = carried
         print(f"evaluator: {args.evaluator} (carried by the model directory)", file=sys.stderr)
-    evaluator = load_evaluator(args.evaluator, device=args.device)
-    evalset = EvalSet.load(args.data, args.split, progress=not args.quiet)
+    evaluator = evaluators.load_evaluator(args.evaluator, device=args.device)
+    evalset = quality.EvalSet.load(args.data, args.split, progress=not args.quiet)
     generators = {}
     if not args.real_only:
-        from controlmm.generate import load_model
-
         for path in args.model or [None]:
-            model = load_model(path, device=args.device)
+            model = generation.load_model(path, device=args.device)
             name = Path(model.directory).name if model.directory else "model"
             while name in generators or name == "Real":
                 name += "'"
-            generators[name] = model_generator(model, batch_size=args.batch_size)
+            generators[name] = quality.model_generator(model, batch_size=args.batch_size)
     unknown = getattr(evaluator, "unknown_word_share", None)
     if unknown is not None:
         share = unknown([c.text for caps in evalset.captions for c in caps])
@@ -125,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
                 f"warning: {100 * share:.0f}% of the caption words are unknown to the evaluator "
                 f"({evaluator.name}); train one on this data: controlmm train evaluator --data {args.data}"
             )
-    report = evaluate_quality(
+    report = quality.evaluate_quality(
         evaluator,
         evalset,
         generators,

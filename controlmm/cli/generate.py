@@ -159,24 +159,19 @@ def run(args: argparse.Namespace) -> int:
     # heavy (torch, the models): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm.control import ControlSpec
-    from controlmm.control.reach import reach_warnings
-    from controlmm.generate import DecodeOptions, generate, load_model
-    from controlmm.motion import save_motion
-    from controlmm.motion.plot import plot_or_animate
-    from controlmm.text.base import check_texts
+    from controlmm import control, generate as generation, motion, text
 
-    texts = check_texts(args.text)
+    texts = text.check_texts(args.text)
     outs = output_paths(args.out, len(texts), (".npz",), args.force)
     plots = output_paths(args.plot, len(texts), (".png", ".gif", ".mp4"), args.force) if args.plot else []
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     spec = None
     if args.control is not None:
-        spec = ControlSpec.load(args.control)
+        spec = control.ControlSpec.load(args.control)
         if not spec.constraints:
             raise ControlMMError(f"control spec '{args.control}' has no constraints")
-        for warning in spec.pinned_frame0_warnings() + sum(reach_warnings(spec), []):
+        for warning in spec.pinned_frame0_warnings() + sum(control.reach_warnings(spec), []):
             print(f"controlmm: warning: {warning}", file=sys.stderr)
     else:
         for flag, value in (
@@ -188,13 +183,13 @@ def run(args: argparse.Namespace) -> int:
         ):
             if value is not None:
                 raise ControlMMError(f"{flag} needs --control SPEC.json")
-    model = load_model(args.model, device=args.device, clip_weights=args.clip_weights)
-    options = DecodeOptions(
+    model = generation.load_model(args.model, device=args.device, clip_weights=args.clip_weights)
+    options = generation.DecodeOptions(
         iterations=args.iterations, cfg_scale=args.cfg_scale, temperature=args.temperature, topk=args.topk
     )
     if spec is not None:
         return _run_controlled(args, model, texts, spec, options, outs, plots)
-    result = generate(
+    result = generation.generate(
         model,
         texts,
         seconds=args.seconds,
@@ -206,14 +201,14 @@ def run(args: argparse.Namespace) -> int:
         residual_layers=args.residual_layers,
         token_view=not args.no_token_view,
     )
-    for i, motion in enumerate(result.motions):
-        save_motion(motion, outs[i])
+    for i, clip in enumerate(result.motions):
+        motion.save_motion(clip, outs[i])
         print(
-            f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): "
-            f"'{motion.text}'"
+            f"wrote {outs[i]} ({clip.num_frames} frames, {clip.seconds:.1f} s, seed {result.seed}): "
+            f"'{clip.text}'"
         )
         if plots:
-            plot_or_animate(motion, plots[i])
+            motion.plot_or_animate(clip, plots[i])
             print(f"wrote {plots[i]}")
     return 0
 
@@ -229,13 +224,10 @@ def _run_controlled(
 ) -> int:
     """``generate --control``: ControlMM generation, per-constraint errors printed and stored."""
     # heavy (torch): imported when the command runs, so that --help stays fast
-    from controlmm.editing import editing_preset
-    from controlmm.generate import generate_controlled
-    from controlmm.motion import save_motion
-    from controlmm.motion.plot import plot_or_animate
+    from controlmm import editing, generate as generation, motion
 
     preset = args.preset or "accurate"
-    config = editing_preset(preset).with_overrides(
+    config = editing.editing_preset(preset).with_overrides(
         tolerance=None if args.tolerance is None else args.tolerance / 100.0,
         logits_steps=args.logits_steps,
         codebook_steps=args.codebook_steps,
@@ -248,7 +240,7 @@ def _run_controlled(
             "using inference-time editing only",
             file=sys.stderr,
         )
-    result = generate_controlled(
+    result = generation.generate_controlled(
         model,
         texts,
         control=spec,
@@ -260,12 +252,12 @@ def _run_controlled(
         residual_cfg_scale=args.residual_cfg_scale,
     )
     tolerance_cm = 100.0 * config.tolerance
-    for i, motion in enumerate(result.motions):
+    for i, clip in enumerate(result.motions):
         record = result.records[i]
-        save_motion(motion, outs[i])
+        motion.save_motion(clip, outs[i])
         errors = 100.0 * result.errors[i]
         print(
-            f"wrote {outs[i]} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {result.seed}): '{motion.text}'"
+            f"wrote {outs[i]} ({clip.num_frames} frames, {clip.seconds:.1f} s, seed {result.seed}): '{clip.text}'"
         )
         steps = (
             f"logits editing {sum(record.logits_steps)} steps" if record.logits_steps else "no logits editing"
@@ -288,6 +280,6 @@ def _run_controlled(
             )
         )
         if plots:
-            plot_or_animate(motion, plots[i])
+            motion.plot_or_animate(clip, plots[i])
             print(f"wrote {plots[i]}")
     return 0

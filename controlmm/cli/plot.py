@@ -30,15 +30,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # heavy (torch, matplotlib): imported when the command runs, so that --help stays fast
-    from controlmm.motion.io import load_motion
-    from controlmm.motion.plot import plot_or_animate
+    from controlmm import motion as motions
 
     if Path(args.out).suffix.lower() not in (".png", ".gif", ".mp4"):
         raise ControlMMError(
             f"unknown output format '{Path(args.out).suffix or args.out}'; allowed: .png, .gif, .mp4"
         )
     check_output_file(args.out, force=args.force)
-    motion = load_motion(args.motion)
-    plot_or_animate(motion, args.out)
+    motions.plot_or_animate(motions.load_motion(args.motion), args.out)
     print(f"wrote {args.out}")
     return 0

@@ -11,6 +11,7 @@ from controlmm.atomic import check_output_file
 from controlmm.cli.args import add_force, integer, number, positive
 from controlmm.cli.gl import import_mujoco
 from controlmm.errors import ControlMMError
+from controlmm.frames import HumanToWorld
 
 HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
 
@@ -113,17 +114,16 @@ def run(args: argparse.Namespace) -> int:
         check_output_file(args.render, force=args.force)
     gl_note = import_mujoco("egl") if args.render else None
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
-    from controlmm.frames import HumanToWorld
-    from controlmm.motion.io import load_motion
-    from retarget import retarget_motion, robot_scale
-    from retarget.render import render_trajectory
-    from retarget.retarget_motion import check_fps
+    import retarget.render
+    from controlmm import motion as motions
 
-    check_fps(args.fps)
-    motion = load_motion(args.motion)
-    scale = robot_scale(args.robot)
+    retarget.check_fps(args.fps)
+    motion = motions.load_motion(args.motion)
+    scale = retarget.robot_scale(args.robot)
     transform = HumanToWorld(scale=scale, yaw=math.radians(args.yaw), translation=(args.x, args.y, 0.0))
-    traj = retarget_motion(motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver)
+    traj = retarget.retarget_motion(
+        motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver
+    )
     traj.source["path"] = str(args.motion)
     paths = traj.save(out)
     print(
@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             backend = "stick"
-        used = render_trajectory(
+        used = retarget.render.render_trajectory(
             traj,
             args.render,
             width=args.render_width,

@@ -110,13 +110,12 @@ def run_show(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: headless rendering
     _check_png(args.out, args.force)
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
+    import scenes.render
     from retarget import load_mapping
-    from scenes import load_scene
-    from scenes.render import render_scene
 
     robot = None if args.robot.strip().lower() in ("none", "") else load_mapping(args.robot).robot
-    scene = load_scene(args.scene, robot=robot)
-    backend = render_scene(scene, args.out, width=args.width, height=args.height, t=args.time)
+    scene = scenes.load_scene(args.scene, robot=robot)
+    backend = scenes.render.render_scene(scene, args.out, width=args.width, height=args.height, t=args.time)
     if backend != "mujoco":
         print(f"note: {backend.removeprefix('matplotlib (').rstrip(')')}; drew matplotlib views instead")
     print(f"wrote {args.out}")
@@ -126,10 +125,9 @@ def run_show(args: argparse.Namespace) -> int:
 def run_sdf(args: argparse.Namespace) -> int:
     _check_png(args.out, args.force)
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
-    from scenes import load_scene
-    from scenes.render import plot_sdf_slice
+    import scenes.render
 
-    scene = load_scene(args.scene, robot=None)
-    plot_sdf_slice(scene, args.out, height=args.height, t=args.time, y=args.y)
+    scene = scenes.load_scene(args.scene, robot=None)
+    scenes.render.plot_sdf_slice(scene, args.out, height=args.height, t=args.time, y=args.y)
     print(f"wrote {args.out}")
     return 0

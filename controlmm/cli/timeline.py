@@ -86,11 +86,7 @@ def run(args: argparse.Namespace) -> int:
     # heavy (torch, the models): imported when the command runs, so that --help stays fast
     import torch
 
-    from controlmm.editing import editing_preset
-    from controlmm.generate import load_model
-    from controlmm.motion import save_motion
-    from controlmm.motion.plot import plot_or_animate
-    from controlmm.timeline import Timeline, generate_timeline
+    from controlmm import editing, generate as generation, motion, timeline as timelines
 
     out = Path(args.out)
     if out.suffix.lower() != ".npz":
@@ -99,13 +95,13 @@ def run(args: argparse.Namespace) -> int:
         raise ControlMMError(f"--plot must end in .png, .gif or .mp4; got '{args.plot}'")
     for path in filter(None, (args.out, args.plot, args.report)):
         check_output_file(path, force=args.force)
-    timeline = Timeline.load(args.spec)  # validate before loading the model
+    timeline = timelines.Timeline.load(args.spec)  # validate before loading the model
     if args.threads is not None:
         torch.set_num_threads(args.threads)
 
-    config = editing_preset(args.preset).with_overrides(codebook_steps=args.codebook_steps)
-    model = load_model(args.model, device=args.device)
-    motion, report = generate_timeline(
+    config = editing.editing_preset(args.preset).with_overrides(codebook_steps=args.codebook_steps)
+    model = generation.load_model(args.model, device=args.device)
+    clip, report = timelines.generate_timeline(
         model,
         timeline,
         seed=args.seed,
@@ -114,9 +110,9 @@ def run(args: argparse.Namespace) -> int:
         settle_steps=args.settle_steps,
         progress=True,
     )
-    save_motion(motion, args.out)
+    motion.save_motion(clip, args.out)
     print(
-        f"wrote {args.out} ({motion.num_frames} frames, {motion.seconds:.1f} s, seed {report['seed']}, "
+        f"wrote {args.out} ({clip.num_frames} frames, {clip.seconds:.1f} s, seed {report['seed']}, "
         f"{report['wall_seconds']:.1f} s)"
     )
     for t in report["tracks"]:
@@ -137,6 +133,6 @@ def run(args: argparse.Namespace) -> int:
         write_text(args.report, json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.report}")
     if args.plot:
-        plot_or_animate(motion, args.plot)
+        motion.plot_or_animate(clip, args.plot)
         print(f"wrote {args.plot}")
     return 0

@@ -53,20 +53,19 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         check_output_file(out.with_suffix(".png"), force=args.force)
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
+    import scenes
+    import sim.files
     from retarget import DEFAULT_ROBOT
-    from scenes import load_scene
-    from sim import check_trajectory, plot_report
-    from sim.files import load_qpos
 
-    qpos, fps, file_robot = load_qpos(args.trajectory, args.fps)
+    qpos, fps, file_robot = sim.files.load_qpos(args.trajectory, args.fps)
     robot = args.robot or file_robot or DEFAULT_ROBOT
     if args.robot and file_robot and Path(file_robot).name != Path(args.robot).name:
         raise ControlMMError(f"--robot {args.robot} does not match the trajectory's robot '{file_robot}'")
-    scene = load_scene(args.scene, robot=robot)
-    report = check_trajectory(scene, qpos, fps)
+    scene = scenes.load_scene(args.scene, robot=robot)
+    report = sim.check_trajectory(scene, qpos, fps)
     report.save(out)
     if not args.no_plot:
-        plot_report(
+        sim.plot_report(
             report, out.with_suffix(".png"), title=f"{Path(args.trajectory).name} in {scene.name} ({robot})"
         )
     print(report.summary())

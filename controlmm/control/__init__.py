@@ -11,6 +11,7 @@ Generation under control is :func:`controlmm.generate.generate_controlled`; the 
 """
 
 from controlmm.control.loss import constraint_errors, control_loss, control_loss_term
+from controlmm.control.reach import reach_warnings
 from controlmm.control.spec import Constraint, ControlSpec
 from controlmm.control.terms import LossTerm, total_loss
 
@@ -21,5 +22,6 @@ __all__ = [
     "constraint_errors",
     "control_loss",
     "control_loss_term",
+    "reach_warnings",
     "total_loss",
 ]
