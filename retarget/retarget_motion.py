@@ -28,7 +28,8 @@ from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
-from retarget.solver import SolverConfig, solve
+from retarget.solver import solve
+from retarget.solver_config import SolverConfig
 from retarget.targets import build_targets
 from retarget.trajectory import RobotTrajectory
 

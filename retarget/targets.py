@@ -523,3 +523,26 @@ def _feet_targets(
         delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
         ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
         ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
+
+
+def take_frames(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
+    """The targets of frames ``idx`` (F,), labelled with frame rate ``fps``."""
+    pick = lambda a: a[idx]  # noqa: E731
+    return Targets(
+        fps=fps,
+        transform=targets.transform,
+        human_world=pick(targets.human_world),
+        kp_pos=pick(targets.kp_pos),
+        kp_weight=pick(targets.kp_weight),
+        seg_parent=targets.seg_parent,
+        seg_child=targets.seg_child,
+        seg_vec=pick(targets.seg_vec),
+        seg_weight=targets.seg_weight,
+        ori_kp=targets.ori_kp,
+        ori_rot=pick(targets.ori_rot),
+        ori_weight=pick(targets.ori_weight),
+        ori_axis_weight=targets.ori_axis_weight,
+        stance={k: pick(v) for k, v in targets.stance.items()},
+        lock={k: pick(v) for k, v in targets.lock.items()},
+        clearance={k: pick(v) for k, v in targets.clearance.items()},
+    )

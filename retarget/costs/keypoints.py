@@ -1,0 +1,45 @@
+"""Keypoint positions: ``sum_k w_k(t) |p_k(t) - target_k(t)|^2`` (metres).
+
+Every mapped keypoint (a point fixed on a robot body) follows its refined human target
+(:func:`retarget.targets.build_targets`); ``w_k(t)`` is the mapping's position weight, raised
+in stance for the foot keypoints (the foot locks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.targets import Targets
+
+
+@dataclass
+class KeypointValue(TermValue):
+    """``res``: (T, K, 3) keypoint position minus target (m)."""
+
+    res: np.ndarray
+
+
+class KeypointCost(CostTerm):
+    """Weighted squared distances of the keypoints to their targets."""
+
+    name = "keypoints"
+
+    def __init__(self, targets: Targets) -> None:
+        self.target = targets.kp_pos  # (T, K, 3)
+        self.weight = targets.kp_weight  # (T, K)
+
+    def evaluate(self, cfg: Configuration) -> KeypointValue:
+        res = cfg.keypoints - self.target
+        return KeypointValue(np.sum(self.weight * np.sum(res**2, axis=-1), axis=1), res)
+
+    def linearise(
+        self, cfg: Configuration, value: KeypointValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
+    ) -> None:
+        jk = cfg.keypoint_jacobian  # (T, K, 3, n)
+        t, k, _, n = jk.shape
+        jt = np.swapaxes(jk.reshape(t, 3 * k, n), 1, 2)
+        h += jt @ (self.weight[:, :, None, None] * jk).reshape(t, 3 * k, n)
+        g += (jt @ (self.weight[..., None] * value.res).reshape(t, 3 * k, 1))[..., 0]
