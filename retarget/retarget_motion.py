@@ -21,11 +21,13 @@ from threadpoolctl import ThreadpoolController
 
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
+from controlmm.motion import load_motion
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS
 from retarget.feet import lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
+from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
 from retarget.solver import solve
@@ -53,8 +55,6 @@ def robot_scale(robot: RobotSpec = "g1") -> float:
 def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray, float, dict[str, Any]]:
     """(joints (T, 22, 3) float64, fps, source info) from a Motion, an array or a file."""
     if isinstance(motion, (str, Path)):
-        from controlmm.motion import load_motion
-
         path = str(motion)
         motion = load_motion(motion)
         info: dict[str, Any] = {"path": path}
@@ -173,8 +173,6 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
     targets = build_targets(rm, joints, src_fps, transform)
     if solver == "mink":
-        from retarget.mink_ik import solve_mink
-
         sol = solve_mink(rm, targets)
     else:
         sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))

@@ -32,7 +32,9 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
+from retarget.robots import robot_mjcf
 from scenes.registry import list_scenes, scene_path
+from scenes.sdf.scene_sdf import SceneSDF
 from scenes.tracks import TRACK_PREFIX, MocapTrack
 
 META = "controlmm."
@@ -76,7 +78,7 @@ class Scene:
     floor_geom_ids: tuple[int, ...]
     robot_geom_ids: tuple[int, ...]
     tracks: dict[str, MocapTrack] = field(default_factory=dict)
-    _sdf: object | None = field(default=None, repr=False)
+    _sdf: SceneSDF | None = field(default=None, repr=False)
 
     @property
     def floor_height(self) -> float:
@@ -125,11 +127,9 @@ class Scene:
         qpos[3:7] = quat
         return qpos
 
-    def sdf(self):
+    def sdf(self) -> SceneSDF:
         """The scene's :class:`scenes.sdf.SceneSDF` (built once, then cached)."""
         if self._sdf is None:
-            from scenes.sdf.scene_sdf import SceneSDF
-
             self._sdf = SceneSDF(self)
         return self._sdf
 
@@ -253,8 +253,6 @@ def _tracks(spec: mujoco.MjSpec, path: Path) -> dict[str, MocapTrack]:
 
 def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
     """Attach the robot's body tree (names unchanged); return the name of its root body."""
-    from retarget.robots import robot_mjcf
-
     robot_spec = mujoco.MjSpec.from_file(str(robot_mjcf(robot)))
     default_opt, scene_opt, robot_opt = mujoco.MjSpec().option, spec.option, robot_spec.option
     for attr in (

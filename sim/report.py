@@ -33,7 +33,11 @@ import numpy as np
 from controlmm.atomic import write_text
 from controlmm.errors import InputFileError
 from sim.config import CheckConfig
+from sim.dynamics import DynamicsResult
 from sim.failures import Failure, sort_failures
+from sim.kinematic import KinematicResult
+from sim.tracking import TrackingResult
+from sim.world import CheckWorld
 
 FORMAT = "controlmm.sim.report/1"
 SUMMARY_FAILURES = 8
@@ -87,9 +91,9 @@ class Report:
     joints: list[str]
     config: CheckConfig
     extra: dict[str, Any] = field(default_factory=dict)
-    kinematic: Any = None
-    dynamics: Any = None
-    tracking: Any = None
+    kinematic: KinematicResult | None = None
+    dynamics: DynamicsResult | None = None
+    tracking: TrackingResult | None = None
 
     # The contract's named statistics, as attributes.
     @property
@@ -213,7 +217,13 @@ class Report:
 
 
 def build_report(
-    world, fps: float, config: CheckConfig, kin, dyn=None, trk=None, extra: dict[str, Any] | None = None
+    world: CheckWorld,
+    fps: float,
+    config: CheckConfig,
+    kin: KinematicResult,
+    dyn: DynamicsResult | None = None,
+    trk: TrackingResult | None = None,
+    extra: dict[str, Any] | None = None,
 ) -> Report:
     """Assemble a :class:`Report` from the kinematic, dynamics and tracking results."""
     T = kin.num_frames

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import mujoco
 import numpy as np
@@ -55,6 +56,20 @@ from scenes.tracks import MocapTrack, quat_to_mat
 
 Tensor = torch.Tensor
 G = mujoco.mjtGeom
+
+
+class ObstacleScene(Protocol):
+    """What :class:`SceneSDF` reads of a scene (:class:`scenes.Scene` has it)."""
+
+    @property
+    def model(self) -> mujoco.MjModel: ...
+
+    @property
+    def obstacle_geom_ids(self) -> tuple[int, ...]: ...
+
+    @property
+    def tracks(self) -> dict[str, MocapTrack]: ...
+
 
 SUPPORTED = ("plane", "sphere", "capsule", "cylinder", "box", "ellipsoid", "mesh", "hfield")
 BOX, CYLINDER, PLANE, ELLIPSOID, MESH = range(5)
@@ -112,7 +127,7 @@ class SceneSDF:
 
     def __init__(
         self,
-        scene,
+        scene: ObstacleScene | mujoco.MjModel,
         geom_ids: Sequence[int] | None = None,
         tracks: Mapping[str, MocapTrack] | None = None,
         convex_hull_meshes: bool = False,
