@@ -18,7 +18,8 @@ import torch
 
 from controlmm.errors import ControlMMError
 from scenes.sdf import kernels, primitives
-from scenes.sdf.mesh import DEFAULT_REACH, MeshSDF, cached_mesh_sdf, heightfield_mesh
+from scenes.sdf.mesh import DEFAULT_REACH, MeshSDF, cached_mesh_sdf
+from scenes.sdf.topology import heightfield_mesh
 from scenes.tracks import MocapTrack
 
 Tensor = torch.Tensor
