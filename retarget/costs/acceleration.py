@@ -10,7 +10,7 @@ from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
 from retarget.costs.temporal import REFERENCE_FPS, coordinate_weights, coupled_pairs, temporal_values
 
 
-class AccelerationCost(CostTerm):
+class AccelerationCost(CostTerm[TermValue]):
     """Weighted squared second differences of the root and joint sequences (per span)."""
 
     name = "acceleration"

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import functools
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -23,9 +24,9 @@ from retarget.kinematics import Poses, so3_log
 from retarget.robot_model import RobotModel
 
 
-def pick(use: np.ndarray, a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    """Frames ``use`` (T,) bool from ``a``, the others from ``b`` (leading axis T; None stays None)."""
-    return None if a is None else np.where(use.reshape(-1, *([1] * (a.ndim - 1))), a, b)
+def pick(use: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Frames ``use`` (T,) bool from ``a``, the others from ``b`` (both with the frames on axis 0)."""
+    return np.where(use.reshape(-1, *([1] * (a.ndim - 1))), a, b)
 
 
 def unwrap_rotations(root_rot: np.ndarray) -> np.ndarray:
@@ -96,8 +97,8 @@ class TermValue:
 
     def select(self, use: np.ndarray, other: TermValue) -> TermValue:
         """Frames ``use`` (T,) bool from this value, the others from ``other``."""
-        return type(self)(
-            **{f.name: pick(use, getattr(self, f.name), getattr(other, f.name)) for f in fields(self)}
+        return replace(
+            self, **{f.name: pick(use, getattr(self, f.name), getattr(other, f.name)) for f in fields(self)}
         )
 
 
@@ -137,7 +138,11 @@ def add_sparse_rows(h: np.ndarray, g: np.ndarray, rows: list[SparseRows]) -> Non
     g += (padt @ rpad[..., None])[..., 0]
 
 
-class CostTerm(ABC):
+V = TypeVar("V", bound=TermValue)
+"""The value type a term evaluates to."""
+
+
+class CostTerm(ABC, Generic[V]):
     """One term of the solver's sum of squares (see the module docstring).
 
     Class attributes:
@@ -152,12 +157,12 @@ class CostTerm(ABC):
     lag: int = 0
 
     @abstractmethod
-    def evaluate(self, cfg: Configuration) -> TermValue:
+    def evaluate(self, cfg: Configuration) -> V:
         """The term's residuals and per-frame cost (T,) at ``cfg``."""
 
     @abstractmethod
     def linearise(
-        self, cfg: Configuration, value: TermValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
+        self, cfg: Configuration, value: V, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
     ) -> None:
         """Add the Gauss-Newton blocks ``J^T J`` to h (T, n, n) and the gradient ``J^T r`` to
         g (T, n) of the cost / 2 at ``cfg``, or append sparse rows to ``rows``."""
@@ -167,7 +172,7 @@ class CostTerm(ABC):
         at lags 0 (T, n), 1 (T - 1, n) and 2 (T - 2, n). Per-frame terms add nothing."""
         return None
 
-    def violation(self, cfg: Configuration, value: TermValue) -> np.ndarray | None:
+    def violation(self, cfg: Configuration, value: V) -> np.ndarray | None:
         """(T,) how far (m) each frame violates the hard constraint the term stands for
         (None: the term is a preference, not a constraint)."""
         return None

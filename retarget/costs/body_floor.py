@@ -24,7 +24,7 @@ class BodyFloorValue(TermValue):
     point: np.ndarray
 
 
-class BodyFloorCost(CostTerm):
+class BodyFloorCost(CostTerm[BodyFloorValue]):
     """The non-foot bodies' lowest points kept ``clearance`` above the floor (stiff)."""
 
     name = "body_floor"

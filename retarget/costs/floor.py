@@ -29,7 +29,7 @@ class FloorValue(TermValue):
     res: np.ndarray
 
 
-class FloorCost(CostTerm):
+class FloorCost(CostTerm[FloorValue]):
     """The feet's collision points kept their clearance above the floor."""
 
     name = "floor"

@@ -22,7 +22,7 @@ class KeypointValue(TermValue):
     res: np.ndarray
 
 
-class KeypointCost(CostTerm):
+class KeypointCost(CostTerm[KeypointValue]):
     """Weighted squared distances of the keypoints to their targets."""
 
     name = "keypoints"

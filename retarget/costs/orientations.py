@@ -24,7 +24,7 @@ class OrientationValue(TermValue):
     res: np.ndarray
 
 
-class OrientationCost(CostTerm):
+class OrientationCost(CostTerm[OrientationValue]):
     """Weighted squared world rotation errors of the oriented keypoints' nodes."""
 
     name = "orientations"

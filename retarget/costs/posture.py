@@ -13,7 +13,7 @@ from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
 from retarget.robot_model import RobotModel
 
 
-class PostureCost(CostTerm):
+class PostureCost(CostTerm[TermValue]):
     """Weighted squared joint deviations from the rest pose (a constant diagonal Hessian)."""
 
     name = "posture"

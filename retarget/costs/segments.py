@@ -22,7 +22,7 @@ class SegmentValue(TermValue):
     res: np.ndarray
 
 
-class SegmentCost(CostTerm):
+class SegmentCost(CostTerm[SegmentValue]):
     """Weighted squared errors of the child - parent keypoint vectors.
 
     With the incidence matrix E (K, S) (+1 at the child, -1 at the parent), the Gauss-Newton

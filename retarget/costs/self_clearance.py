@@ -34,7 +34,7 @@ class SelfClearanceValue(TermValue):
         return SelfClearanceValue(np.where(use, self.cost, other.cost), close)
 
 
-class SelfClearanceCost(CostTerm):
+class SelfClearanceCost(CostTerm[SelfClearanceValue]):
     """Capsule pairs kept their margin apart (stiff)."""
 
     name = "self_clearance"

@@ -9,7 +9,7 @@ from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
 from retarget.costs.temporal import REFERENCE_FPS, coordinate_weights, coupled_pairs, temporal_values
 
 
-class VelocityCost(CostTerm):
+class VelocityCost(CostTerm[TermValue]):
     """Weighted squared first differences of the root and joint sequences (per span)."""
 
     name = "velocity"

@@ -26,8 +26,21 @@ Tensor = torch.Tensor
 G = mujoco.mjtGeom
 
 
+class StartPlace(Protocol):
+    """Where a scene's motion starts (world x, y in metres)."""
+
+    @property
+    def x(self) -> float: ...
+
+    @property
+    def y(self) -> float: ...
+
+
 class ObstacleScene(Protocol):
     """What :class:`SceneSDF` reads of a scene (:class:`scenes.Scene` has it)."""
+
+    @property
+    def start(self) -> StartPlace: ...
 
     @property
     def model(self) -> mujoco.MjModel: ...
