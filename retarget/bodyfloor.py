@@ -2,8 +2,8 @@
 
 Kneeling puts a knee on the floor; a deep squat or a hand on the ground brings shins and
 hands near it. The solver keeps each non-foot body's lowest collision point
-``BODY_CLEARANCE`` above the floor with one residual per body and frame (its lowest point:
-weighing every vertex would weigh a body by its mesh resolution). Per body the candidate
+``SolverConfig.body_clearance`` above the floor with one residual per body and frame (its
+lowest point: weighing every vertex would weigh a body by its mesh resolution). Per body the candidate
 points are the collision points (hull vertices, primitive points with their radii) that are
 extreme in one of ``SUPPORT_DIRECTIONS`` directions, and a body is only evaluated in the
 frames where its bounding sphere reaches down to the floor.

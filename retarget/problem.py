@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.banded import BandedSystem
-from retarget.costs import Configuration, CostTerm, SparseRows, TermValue, add_sparse_rows, default_costs
+from retarget.costs import Configuration, CostTerm, NormalEquations, TermValue, default_costs
 from retarget.reference import reference_root
 from retarget.robot_model import RobotModel
 from retarget.solver_config import SolverConfig
@@ -128,13 +128,10 @@ class Problem:
         """Gauss-Newton blocks H (T, n, n) of the per-frame terms and the gradient g (T, n)
         of all terms (half the cost's gradient) at ``st``; the constant couplings of the
         temporal terms are in :attr:`band`."""
-        h = np.zeros((self.t_len, self.n, self.n))
-        g = np.zeros((self.t_len, self.n))
-        rows: list[SparseRows] = []
+        eq = NormalEquations(self.t_len, self.n)
         for term, value in zip(self.terms, st.values, strict=True):
-            term.linearise(st.cfg, value, h, g, rows)
-        add_sparse_rows(h, g, rows)
-        return h, g
+            term.linearise(st.cfg, value, eq)
+        return eq.finish(st.cfg)
 
     def term_costs(self, st: State) -> dict[str, float]:
         """Total cost of each term at ``st`` (by term name)."""

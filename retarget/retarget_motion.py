@@ -102,8 +102,8 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
     m = robot.model
     geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
     # Every other collision geom whose bounding sphere reaches below the floor in some frame
-    # (a kneeling knee, a hand on the ground): the solver keeps them BODY_CLEARANCE above it
-    # with a stiff but finite weight, and the spline resampling may dip between frames.
+    # (a kneeling knee, a hand on the ground): the solver keeps them SolverConfig.body_clearance
+    # above it with a stiff but finite weight, and the spline resampling may dip between frames.
     others = [
         g
         for g in range(m.ngeom)

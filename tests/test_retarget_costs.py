@@ -27,13 +27,13 @@ from retarget.costs import (
     CostTerm,
     FloorCost,
     KeypointCost,
+    NormalEquations,
     OrientationCost,
     PostureCost,
     SegmentCost,
     SelfClearanceCost,
     TermValue,
     VelocityCost,
-    add_sparse_rows,
 )
 from retarget.kinematics import so3_exp, so3_log
 from retarget.problem import Problem
@@ -80,11 +80,10 @@ def moved(cfg: Configuration, d: np.ndarray) -> Configuration:
 
 def linearised(term: CostTerm, cfg: Configuration) -> tuple[TermValue, np.ndarray, np.ndarray]:
     """The term's value and its own blocks h (T, n, n) and gradient g (T, n) at ``cfg``."""
-    t, n = len(cfg.q), cfg.robot.tree.nv
     value = term.evaluate(cfg)
-    h, g, rows = np.zeros((t, n, n)), np.zeros((t, n)), []
-    term.linearise(cfg, value, h, g, rows)
-    add_sparse_rows(h, g, rows)
+    eq = NormalEquations(len(cfg.q), cfg.robot.tree.nv)
+    term.linearise(cfg, value, eq)
+    h, g = eq.finish(cfg)
     return value, h, g
 
 
@@ -243,9 +242,9 @@ def test_temporal_terms_gradient_and_band(window, exact):
             fd.reshape(-1)[k] = (cost[0] - cost[1]) / (4 * EPS)
             grads = []
             for s in (1, -1):
-                hs, gs = np.zeros((t, n, n)), np.zeros((t, n))
-                term.linearise(with_x(cfg, x0 + s * d.reshape(t, n)), TermValue(np.zeros(t)), hs, gs, [])
-                grads.append(gs.reshape(-1))
+                eq = NormalEquations(t, n)
+                term.linearise(with_x(cfg, x0 + s * d.reshape(t, n)), TermValue(np.zeros(t)), eq)
+                grads.append(eq.g.reshape(-1))
             hess[:, k] = (grads[0] - grads[1]) / (2 * EPS)
         np.testing.assert_allclose(g, fd, atol=1e-6 * np.abs(fd).max(), err_msg=term.name)
         d0, d1, d2 = np.zeros((t, n)), np.zeros((t - 1, n)), np.zeros((t - 2, n))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.costs.acceleration import AccelerationCost
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue, add_sparse_rows
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, SparseRows, TermValue
 from retarget.costs.body_floor import BodyFloorCost
 from retarget.costs.floor import FloorCost
 from retarget.costs.keypoints import KeypointCost
@@ -30,6 +30,7 @@ __all__ = [
     "CostTerm",
     "FloorCost",
     "KeypointCost",
+    "NormalEquations",
     "OrientationCost",
     "PostureCost",
     "SegmentCost",
@@ -37,7 +38,6 @@ __all__ = [
     "SparseRows",
     "TermValue",
     "VelocityCost",
-    "add_sparse_rows",
     "default_costs",
 ]
 

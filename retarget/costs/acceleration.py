@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.costs.temporal import REFERENCE_FPS, coordinate_weights, coupled_pairs, temporal_values
 
 
@@ -35,12 +35,10 @@ class AccelerationCost(CostTerm[TermValue]):
         cost[: len(d2)] = np.sum(self.weight * d2 * d2, axis=1)
         return TermValue(cost)
 
-    def linearise(
-        self, cfg: Configuration, value: TermValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
-        if len(g) > 2:
+    def linearise(self, cfg: Configuration, value: TermValue, eq: NormalEquations) -> None:
+        if len(eq.g) > 2:
             x = temporal_values(cfg, self.ref_x)
-            g += np.diff(np.pad(np.diff(x, n=2, axis=0) * self.weight, ((2, 2), (0, 0))), n=2, axis=0)
+            eq.g += np.diff(np.pad(np.diff(x, n=2, axis=0) * self.weight, ((2, 2), (0, 0))), n=2, axis=0)
 
     def add_band(self, d0: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> None:
         if len(d0) <= 2:

@@ -5,8 +5,9 @@ The solver minimises a sum of squares over all T frames. Each term of the sum is
 :class:`TermValue` with the cost it adds to every frame), adds its Gauss-Newton blocks
 ``J^T J`` and gradient ``J^T r`` to the normal equations, and may say how far each frame
 violates a hard constraint it stands for. Per-frame terms fill the (T, n, n) diagonal blocks
-(or hand over sparse rows, :class:`SparseRows`, when only a few frames are active); terms
-that couple frames (velocity, acceleration) add a constant banded Hessian instead.
+of the :class:`NormalEquations` (or hand over sparse rows, :class:`SparseRows`, when only a few
+frames are active); terms that couple frames (velocity, acceleration) add a constant banded
+Hessian instead.
 n = 6 + nj velocity coordinates per frame: root translation (m), root rotation (rad, world
 frame, applied as ``so3_exp(d) @ R``), joint angles (rad).
 """
@@ -116,26 +117,58 @@ class SparseRows:
     res: np.ndarray
 
 
-def add_sparse_rows(h: np.ndarray, g: np.ndarray, rows: list[SparseRows]) -> None:
-    """Add ``J^T J`` to h (T, n, n) and ``J^T r`` to g (T, n) for the rows of every frame
-    (rows padded per frame into one batched product)."""
-    if not rows:
-        return
-    t, n = g.shape
-    fr = np.concatenate([r.frame for r in rows])
-    jr = np.concatenate([r.jac for r in rows])
-    res = np.concatenate([r.res for r in rows])
-    order = np.argsort(fr, kind="stable")
-    fr, jr, res = fr[order], jr[order], res[order]
-    first = np.searchsorted(fr, fr, side="left")
-    slot = np.arange(len(fr)) - first  # rank of each row within its frame
-    pad = np.zeros((t, int(slot.max()) + 1, n))
-    pad[fr, slot] = jr
-    rpad = np.zeros((t, pad.shape[1]))
-    rpad[fr, slot] = res
-    padt = np.swapaxes(pad, 1, 2)
-    h += padt @ pad
-    g += (padt @ rpad[..., None])[..., 0]
+class NormalEquations:
+    """The Gauss-Newton normal equations of all T frames, as the terms add to them.
+
+    Dense terms add ``J^T J`` to :attr:`h` (T, n, n) and ``J^T r`` to :attr:`g` (T, n) (r the
+    weighted residuals: g is half the cost's gradient); sparse terms append :class:`SparseRows`
+    to :attr:`rows`; terms on keypoint positions, whose Jacobian is the keypoints' Jacobian J_p
+    times a weight pattern, add their weights in keypoint space (:meth:`add_keypoints`), so
+    that ``J_p^T (W (x) I3) J_p`` is formed once for all of them. :meth:`finish` adds the last two.
+    """
+
+    def __init__(self, t_len: int, n: int) -> None:
+        self.h = np.zeros((t_len, n, n))
+        self.g = np.zeros((t_len, n))
+        self.rows: list[SparseRows] = []
+        self.keypoint_weight: np.ndarray | None = None  # (T, K, K) or (K, K)
+        self.keypoint_gradient: np.ndarray | None = None  # (T, K, 3)
+
+    def add_keypoints(self, weight: np.ndarray, gradient: np.ndarray) -> None:
+        """Add a term on keypoint positions: ``weight`` (T, K, K) or (K, K), the matrix W of its
+        cost's second derivative in the keypoint positions (per axis), and ``gradient`` (T, K, 3),
+        W times the residual mapped back to the keypoints."""
+        if self.keypoint_weight is None or self.keypoint_gradient is None:
+            self.keypoint_weight, self.keypoint_gradient = weight, gradient
+        else:
+            self.keypoint_weight = self.keypoint_weight + weight
+            self.keypoint_gradient = self.keypoint_gradient + gradient
+
+    def finish(self, cfg: Configuration) -> tuple[np.ndarray, np.ndarray]:
+        """(h (T, n, n), g (T, n)) with the keypoint terms and the sparse rows added."""
+        h, g = self.h, self.g
+        if self.keypoint_weight is not None and self.keypoint_gradient is not None:
+            jk = cfg.keypoint_jacobian  # (T, K, 3, n)
+            t, k, _, n = jk.shape
+            jt = np.swapaxes(jk.reshape(t, 3 * k, n), 1, 2)
+            h += jt @ (self.keypoint_weight @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
+            g += (jt @ self.keypoint_gradient.reshape(t, 3 * k, 1))[..., 0]
+        if self.rows:  # rows padded per frame into one batched product
+            fr = np.concatenate([r.frame for r in self.rows])
+            jr = np.concatenate([r.jac for r in self.rows])
+            res = np.concatenate([r.res for r in self.rows])
+            order = np.argsort(fr, kind="stable")
+            fr, jr, res = fr[order], jr[order], res[order]
+            first = np.searchsorted(fr, fr, side="left")
+            slot = np.arange(len(fr)) - first  # rank of each row within its frame
+            pad = np.zeros((len(g), int(slot.max()) + 1, g.shape[1]))
+            pad[fr, slot] = jr
+            rpad = np.zeros((len(g), pad.shape[1]))
+            rpad[fr, slot] = res
+            padt = np.swapaxes(pad, 1, 2)
+            h += padt @ pad
+            g += (padt @ rpad[..., None])[..., 0]
+        return h, g
 
 
 V = TypeVar("V", bound=TermValue)
@@ -161,11 +194,9 @@ class CostTerm(ABC, Generic[V]):
         """The term's residuals and per-frame cost (T,) at ``cfg``."""
 
     @abstractmethod
-    def linearise(
-        self, cfg: Configuration, value: V, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
-        """Add the Gauss-Newton blocks ``J^T J`` to h (T, n, n) and the gradient ``J^T r`` to
-        g (T, n) of the cost / 2 at ``cfg``, or append sparse rows to ``rows``."""
+    def linearise(self, cfg: Configuration, value: V, eq: NormalEquations) -> None:
+        """Add the term's Gauss-Newton blocks ``J^T J`` and gradient ``J^T r`` (half its
+        cost's gradient) at ``cfg`` to ``eq``."""
 
     def add_band(self, d0: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> None:
         """Add a constant Hessian that couples frames: its diagonals per velocity coordinate

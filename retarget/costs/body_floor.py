@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.bodyfloor import BodyFloor, lowest_points
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, SparseRows, TermValue
 
 
 @dataclass
@@ -39,9 +39,7 @@ class BodyFloorCost(CostTerm[BodyFloorValue]):
         low = np.minimum(z - self.clearance, 0.0)
         return BodyFloorValue(self.weight * np.sum(low**2, axis=1), low, point)
 
-    def linearise(
-        self, cfg: Configuration, value: BodyFloorValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
+    def linearise(self, cfg: Configuration, value: BodyFloorValue, eq: NormalEquations) -> None:
         fr, b = np.nonzero(value.low < 0)
         if not fr.size:
             return
@@ -50,7 +48,7 @@ class BodyFloorCost(CostTerm[BodyFloorValue]):
             cfg.poses, fr, self.body_floor.node[b], value.point[fr, b], up
         )
         root = np.sqrt(self.weight)
-        rows.append(SparseRows(fr, root * jac, root * value.low[fr, b]))
+        eq.rows.append(SparseRows(fr, root * jac, root * value.low[fr, b]))
 
     def violation(self, cfg: Configuration, value: BodyFloorValue) -> np.ndarray | None:
         """Depth (m) of each frame's lowest body point below the floor."""

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.robot_model import RobotModel
 from retarget.targets import Targets
 
@@ -55,16 +55,14 @@ class FloorCost(CostTerm[FloorValue]):
         res = self.root_weight * np.where(active, low, 0.0)
         return FloorValue(np.sum(res**2, axis=1), pts, active, res)
 
-    def linearise(
-        self, cfg: Configuration, value: FloorValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
+    def linearise(self, cfg: Configuration, value: FloorValue, eq: NormalEquations) -> None:
         if not value.active.any():
             return
         jf = cfg.robot.tree.point_jacobian(cfg.poses, self.nodes, value.points, rows=(2,))[:, :, 0]
         jf *= (self.root_weight * value.active)[..., None]
         jft = np.swapaxes(jf, 1, 2)
-        h += jft @ jf
-        g += (jft @ value.res[..., None])[..., 0]
+        eq.h += jft @ jf
+        eq.g += (jft @ value.res[..., None])[..., 0]
 
     def violation(self, cfg: Configuration, value: FloorValue) -> np.ndarray | None:
         """Depth (m) of a swing foot below half its clearance (None: no foot swings)."""

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.targets import Targets
 
 
@@ -30,16 +30,11 @@ class KeypointCost(CostTerm[KeypointValue]):
     def __init__(self, targets: Targets) -> None:
         self.target = targets.kp_pos  # (T, K, 3)
         self.weight = targets.kp_weight  # (T, K)
+        self.matrix = self.weight[:, :, None] * np.eye(self.weight.shape[1])  # (T, K, K) diag(w_k(t))
 
     def evaluate(self, cfg: Configuration) -> KeypointValue:
         res = cfg.keypoints - self.target
         return KeypointValue(np.sum(self.weight * np.sum(res**2, axis=-1), axis=1), res)
 
-    def linearise(
-        self, cfg: Configuration, value: KeypointValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
-        jk = cfg.keypoint_jacobian  # (T, K, 3, n)
-        t, k, _, n = jk.shape
-        jt = np.swapaxes(jk.reshape(t, 3 * k, n), 1, 2)
-        h += jt @ (self.weight[:, :, None, None] * jk).reshape(t, 3 * k, n)
-        g += (jt @ (self.weight[..., None] * value.res).reshape(t, 3 * k, 1))[..., 0]
+    def linearise(self, cfg: Configuration, value: KeypointValue, eq: NormalEquations) -> None:
+        eq.add_keypoints(self.matrix, self.weight[..., None] * value.res)

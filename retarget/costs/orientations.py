@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.kinematics import so3_log
 from retarget.robot_model import RobotModel
 from retarget.targets import Targets
@@ -41,17 +41,10 @@ class OrientationCost(CostTerm[OrientationValue]):
         res = self.sqrt_weight * err
         return OrientationValue(np.sum(res**2, axis=(1, 2)), res)
 
-    def linearise(
-        self,
-        cfg: Configuration,
-        value: OrientationValue,
-        h: np.ndarray,
-        g: np.ndarray,
-        rows: list[SparseRows],
-    ) -> None:
-        t, n = g.shape
+    def linearise(self, cfg: Configuration, value: OrientationValue, eq: NormalEquations) -> None:
+        t, n = eq.g.shape
         jac = cfg.robot.tree.rotation_jacobian(cfg.poses, self.nodes)  # (T, O, 3, n)
         jr = (self.sqrt_weight[..., None] * jac).reshape(t, -1, n)
         jrt = np.swapaxes(jr, 1, 2)
-        h += jrt @ jr
-        g += (jrt @ value.res.reshape(t, -1, 1))[..., 0]
+        eq.h += jrt @ jr
+        eq.g += (jrt @ value.res.reshape(t, -1, 1))[..., 0]

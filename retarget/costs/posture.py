@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.robot_model import RobotModel
 
 
@@ -25,9 +25,7 @@ class PostureCost(CostTerm[TermValue]):
     def evaluate(self, cfg: Configuration) -> TermValue:
         return TermValue(np.sum(self.weight * (cfg.q - self.rest) ** 2, axis=1))
 
-    def linearise(
-        self, cfg: Configuration, value: TermValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
+    def linearise(self, cfg: Configuration, value: TermValue, eq: NormalEquations) -> None:
         j = 6 + np.arange(len(self.weight))
-        h[:, j, j] += self.weight
-        g[:, 6:] += self.weight * (cfg.q - self.rest)
+        eq.h[:, j, j] += self.weight
+        eq.g[:, 6:] += self.weight * (cfg.q - self.rest)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, TermValue
 from retarget.targets import Targets
 
 
@@ -46,12 +46,5 @@ class SegmentCost(CostTerm[SegmentValue]):
         res = kp[:, self.child] - kp[:, self.parent] - self.target
         return SegmentValue(np.sum(self.weight * np.sum(res**2, axis=-1), axis=1), res)
 
-    def linearise(
-        self, cfg: Configuration, value: SegmentValue, h: np.ndarray, g: np.ndarray, rows: list[SparseRows]
-    ) -> None:
-        jk = cfg.keypoint_jacobian  # (T, K, 3, n)
-        t, k, _, n = jk.shape
-        jt = np.swapaxes(jk.reshape(t, 3 * k, n), 1, 2)
-        h += jt @ (self.matrix @ jk.reshape(t, k, 3 * n)).reshape(t, 3 * k, n)
-        u = self.incidence @ (self.weight[:, None] * value.res)  # (T, K, 3)
-        g += (jt @ u.reshape(t, 3 * k, 1))[..., 0]
+    def linearise(self, cfg: Configuration, value: SegmentValue, eq: NormalEquations) -> None:
+        eq.add_keypoints(self.matrix, self.incidence @ (self.weight[:, None] * value.res))

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from retarget.costs.base import Configuration, CostTerm, SparseRows, TermValue
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, SparseRows, TermValue
 from retarget.selfcollision import ClosePairs, SelfClearance, close_pairs
 
 
@@ -49,14 +49,7 @@ class SelfClearanceCost(CostTerm[SelfClearanceValue]):
         np.add.at(cost, close.frame, self.weight * (close.dist - self.clearance.margin[close.pair]) ** 2)
         return SelfClearanceValue(cost, close)
 
-    def linearise(
-        self,
-        cfg: Configuration,
-        value: SelfClearanceValue,
-        h: np.ndarray,
-        g: np.ndarray,
-        rows: list[SparseRows],
-    ) -> None:
+    def linearise(self, cfg: Configuration, value: SelfClearanceValue, eq: NormalEquations) -> None:
         """d(d)/dx = u . (J(pa) - J(pb)), u the unit vector from the closest point pb to pa."""
         close, sc = value.close, self.clearance
         if not close.frame.size:
@@ -68,7 +61,7 @@ class SelfClearanceCost(CostTerm[SelfClearanceValue]):
         ja = tree.directional_jacobian(cfg.poses, close.frame, sc.node[sc.first[close.pair]], close.pa, u)
         jb = tree.directional_jacobian(cfg.poses, close.frame, sc.node[sc.second[close.pair]], close.pb, u)
         root = np.sqrt(self.weight)
-        rows.append(SparseRows(close.frame, root * (ja - jb), root * (close.dist - sc.margin[close.pair])))
+        eq.rows.append(SparseRows(close.frame, root * (ja - jb), root * (close.dist - sc.margin[close.pair])))
 
     def violation(self, cfg: Configuration, value: SelfClearanceValue) -> np.ndarray | None:
         """Overlap (m) of the deepest capsule pair per frame (0: none overlaps)."""
