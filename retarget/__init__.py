@@ -11,7 +11,7 @@ from retarget.mapping import Mapping, load_mapping, packaged_mappings
 from retarget.retarget_motion import check_fps, retarget_motion, robot_scale
 from retarget.robot_model import RobotModel, load_robot
 from retarget.robots import DEFAULT_ROBOT, available_robots, robot_mjcf, robot_scene
-from retarget.solver import SolverConfig
+from retarget.solver_config import SolverConfig
 from retarget.trajectory import RobotTrajectory
 
 __all__ = [

@@ -2,8 +2,8 @@
 
 Kneeling puts a knee on the floor; a deep squat or a hand on the ground brings shins and
 hands near it. The solver keeps each non-foot body's lowest collision point
-``BODY_CLEARANCE`` above the floor with one residual per body and frame (its lowest point:
-weighing every vertex would weigh a body by its mesh resolution). Per body the candidate
+``SolverConfig.body_clearance`` above the floor with one residual per body and frame (its
+lowest point: weighing every vertex would weigh a body by its mesh resolution). Per body the candidate
 points are the collision points (hull vertices, primitive points with their radii) that are
 extreme in one of ``SUPPORT_DIRECTIONS`` directions, and a body is only evaluated in the
 frames where its bounding sphere reaches down to the floor.
@@ -13,9 +13,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
-from retarget.kinematics import Poses
+from retarget.geoms import FloorPoints, collision_geoms, geom_points
+from retarget.kinematics import KinematicTree, Poses
 
 SUPPORT_DIRECTIONS = 96
 """Directions sampled for a body's support points (its lowest point is found within a few mm)."""
@@ -46,18 +48,18 @@ def fibonacci_sphere(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
-def build_body_floor(robot) -> BodyFloor | None:
-    """The :class:`BodyFloor` of a :class:`~retarget.robot_model.RobotModel` (None: only feet)."""
-    from retarget.robot_model import _geom_points, collision_geoms
-
-    m, tree = robot.model, robot.tree
-    feet = {int(tree.node_body[robot.feet[s].node]) for s in ("left", "right")}
+def build_body_floor(
+    model: mujoco.MjModel, tree: KinematicTree, feet: dict[str, FloorPoints]
+) -> BodyFloor | None:
+    """The :class:`BodyFloor` of a robot's bodies but its ``feet`` (None: the feet are all)."""
+    m = model
+    feet_bodies = {int(tree.node_body[f.node]) for f in feet.values()}
     dirs = fibonacci_sphere(SUPPORT_DIRECTIONS)
     node, pts, rad, centre, bound = [], [], [], [], []
     for b in range(1, m.nbody):
-        if m.body_rootid[b] != tree.root_body or b in feet:
+        if m.body_rootid[b] != tree.root_body or b in feet_bodies:
             continue
-        got = [_geom_points(m, g) for g in collision_geoms(m, b)]
+        got = [geom_points(m, g) for g in collision_geoms(m, b)]
         if not got or sum(len(p) for p, _ in got) == 0:
             continue
         bp = np.concatenate([p for p, _ in got])

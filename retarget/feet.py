@@ -13,9 +13,10 @@ smoothed over time (Gaussian, sigma = 1 frame), so that pinning adds no jerk.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
-from retarget.kinematics import so3_log
+from retarget.geoms import FloorPoints
+from retarget.kinematics import Poses, so3_log
 from retarget.robot_model import RobotModel
 from retarget.targets import Targets
 
@@ -129,8 +130,6 @@ def lift_swing_feet(
     Returns:
         (q, largest rise in m).
     """
-    from scipy.ndimage import maximum_filter1d
-
     tree = robot.tree
     q = q.copy()
     worst = 0.0
@@ -178,7 +177,7 @@ def lift_swing_feet(
     return q, worst
 
 
-def _lowest(poses, f) -> tuple[np.ndarray, np.ndarray]:
+def _lowest(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
     """Height (T,) of a foot's lowest collision point above z = 0 and that point (T, 3)."""
     pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
     low = pts[..., 2] - f.radius

@@ -31,11 +31,13 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.motion.skeleton import JOINT_NAMES
+from retarget.robots import PACKAGED_ROBOTS
+from retarget.solver_config import SolverConfig
 
 MAPPING_FORMAT = "controlmm-retarget-mapping/1"
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
@@ -118,7 +120,7 @@ class Mapping:
         arm_abduction: rad a hanging arm keeps away from the body's side
             (:func:`retarget.targets.abduct_arms`; 0: as the human's).
         body_joints: robot body -> human joints it follows (as written in the file).
-        solver: :class:`retarget.solver.SolverConfig` fields this robot changes (e.g. ``levels``).
+        solver: :class:`retarget.solver_config.SolverConfig` fields this robot changes (e.g. ``levels``).
         source: where the mapping came from (file path or ``packaged:g1``).
         name: short name used in reports (the packaged robot name or the file stem).
     """
@@ -279,10 +281,6 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
 
 def _parse_solver(spec, source: str) -> dict:
     """Validated SolverConfig overrides from the mapping's ``solver`` object."""
-    from dataclasses import fields
-
-    from retarget.solver import SolverConfig
-
     if not isinstance(spec, dict):
         raise ControlMMError(f"{source}: 'solver' must be an object of solver settings")
     allowed = {f.name: f for f in fields(SolverConfig)}
@@ -320,8 +318,6 @@ def load_mapping(name_or_path: str | Path) -> Mapping:
         key = text.lower()
         path = MAPPINGS_DIR / f"{key}.json"
         if not re.fullmatch(r"[a-z0-9_\-]+", key) or not path.is_file():
-            from retarget.robots import PACKAGED_ROBOTS
-
             known = sorted(set(packaged_mappings()))
             hint = ""
             if key in PACKAGED_ROBOTS:

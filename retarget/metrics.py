@@ -24,6 +24,8 @@ import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from retarget.robot_model import RobotModel
+
 KEYPOINT_GROUPS: dict[str, tuple[str, ...]] = {
     "feet": ("left_ankle", "right_ankle", "left_foot", "right_foot"),
     "hands": ("left_wrist", "right_wrist"),
@@ -125,7 +127,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def trajectory_metrics(
-    robot,
+    robot: RobotModel,
     qpos: np.ndarray,
     fps: float,
     human_world: np.ndarray | None = None,

@@ -13,19 +13,22 @@ batched solver have no per-frame equivalent here. Needs the optional packages ``
 from __future__ import annotations
 
 import time
+from types import ModuleType
 
 import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError
+from retarget.reference import initial_guess
 from retarget.robot_model import RobotModel
-from retarget.solver import L_POSTURE, L_ROT, Solution, initial_guess
+from retarget.solver import Solution
+from retarget.solver_config import SolverConfig
 from retarget.targets import Targets
 
 
-def _mink():
+def _mink() -> ModuleType:
     try:
-        import mink  # noqa: F401
+        import mink  # noqa: F401 - optional package (the "bench" extra): imported only when asked for
     except ImportError:
         raise ControlMMError(
             "the mink solver needs the packages 'mink' and 'daqp' (pip install -e \".[bench]\")"
@@ -53,6 +56,7 @@ def solve_mink(
     """Per-frame mink IK on ``targets``; returns a :class:`Solution` like the batched solver."""
     mink = _mink()
     start = time.perf_counter()
+    weights = SolverConfig()  # the batched solver's default orientation and posture scales
     model = _model_with_sites(robot)
     config = mink.Configuration(model)
     tasks, frame_tasks = [], []
@@ -64,7 +68,7 @@ def solve_mink(
         tasks.append(task)
     ori_of = {int(k): i for i, k in enumerate(targets.ori_kp)}
     posture = mink.PostureTask(
-        model, cost=np.concatenate([np.zeros(6), np.sqrt(robot.posture_weights) * L_POSTURE])
+        model, cost=np.concatenate([np.zeros(6), np.sqrt(robot.posture_weights) * weights.l_posture])
     )
     rest = np.concatenate([np.zeros(3), [1.0, 0, 0, 0], robot.rest_q])
     posture.set_target(rest)
@@ -85,7 +89,7 @@ def solve_mink(
             ocost = 0.0
             if o is not None:
                 rot = targets.ori_rot[t, o]
-                ocost = L_ROT * np.sqrt(targets.ori_weight[t, o] * targets.ori_axis_weight[o])
+                ocost = weights.l_rot * np.sqrt(targets.ori_weight[t, o] * targets.ori_axis_weight[o])
             task.set_position_cost(np.sqrt(w))
             task.set_orientation_cost(ocost)
             task.set_target(

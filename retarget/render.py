@@ -18,17 +18,18 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from tqdm import tqdm
 
 from controlmm.errors import ControlMMError
 from controlmm.video import write_video
+from retarget.robots import robot_scene
+from retarget.trajectory import RobotTrajectory
 
 
-def _scene_model(traj) -> mujoco.MjModel:
+def _scene_model(traj: RobotTrajectory) -> mujoco.MjModel:
     """The robot in a scene with a floor and lights (the Menagerie scene for packaged robots)."""
     robot = traj.robot_model()
     if robot.mapping.source.startswith("packaged:"):
-        from retarget.robots import robot_scene
-
         model = mujoco.MjModel.from_xml_path(str(robot_scene(robot.mapping.robot)))
     else:
         spec = mujoco.MjSpec.from_file(str(robot.mjcf))
@@ -48,13 +49,13 @@ def _scene_model(traj) -> mujoco.MjModel:
     return model
 
 
-def _frame_indices(traj, fps: float) -> np.ndarray:
+def _frame_indices(traj: RobotTrajectory, fps: float) -> np.ndarray:
     count = max(1, int(np.floor((traj.num_frames - 1) / traj.fps * fps + 1e-9)) + 1)
     return np.clip(np.rint(np.arange(count) / fps * traj.fps).astype(int), 0, traj.num_frames - 1)
 
 
 def mujoco_frames(
-    traj, width: int = 640, height: int = 480, fps: float = 25.0, scene=None
+    traj: RobotTrajectory, width: int = 640, height: int = 480, fps: float = 25.0, scene=None
 ) -> Iterator[np.ndarray]:
     """RGB frames (H, W, 3) from MuJoCo's offscreen renderer, a camera following the root.
 
@@ -99,9 +100,11 @@ def mujoco_frames(
         renderer.close()
 
 
-def stick_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) -> Iterator[np.ndarray]:
+def stick_frames(
+    traj: RobotTrajectory, width: int = 640, height: int = 480, fps: float = 25.0
+) -> Iterator[np.ndarray]:
     """RGB frames of the robot's bodies as a 3-D stick figure (parent -> child lines)."""
-    import matplotlib
+    import matplotlib  # heavy, and only the stick-figure fallback draws with it
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -141,7 +144,7 @@ def stick_frames(traj, width: int = 640, height: int = 480, fps: float = 25.0) -
 
 
 def render_trajectory(
-    traj,
+    traj: RobotTrajectory,
     path: str | Path,
     width: int = 640,
     height: int = 480,
@@ -197,6 +200,4 @@ def render_trajectory(
 def _progress(frames: Iterator[np.ndarray], total: int, enabled: bool, desc: str) -> Iterator[np.ndarray]:
     if not enabled:
         return frames
-    from tqdm import tqdm
-
     return iter(tqdm(frames, total=total, desc=desc, unit="frame", leave=False))

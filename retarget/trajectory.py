@@ -28,6 +28,8 @@ import numpy as np
 from controlmm.atomic import atomic_open, atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
+from retarget.metrics import replay
+from retarget.robot_model import RobotModel, load_robot
 
 TRAJECTORY_FORMAT = "controlmm-robot-trajectory/1"
 CSV_ROOT_COLUMNS = ("root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw")
@@ -60,17 +62,15 @@ class RobotTrajectory:
     stance: np.ndarray | None = None
     source: dict[str, Any] = field(default_factory=dict)
     solver: dict[str, Any] = field(default_factory=dict)
-    model: Any = field(default=None, repr=False, compare=False)
+    model: RobotModel | None = field(default=None, repr=False, compare=False)
     """The RobotModel used (kept in memory; rebuilt from ``robot`` after loading)."""
 
     @property
     def num_frames(self) -> int:
         return int(self.qpos.shape[0])
 
-    def robot_model(self):
+    def robot_model(self) -> RobotModel:
         """The :class:`retarget.robot_model.RobotModel` of this trajectory."""
-        from retarget.robot_model import load_robot
-
         if self.model is None:
             self.model = load_robot(self.robot)
         return self.model
@@ -91,8 +91,6 @@ class RobotTrajectory:
 
     def body_poses(self) -> tuple[list[str], np.ndarray, np.ndarray]:
         """Body names (without world), world positions (T, B, 3) and quaternions (T, B, 4, wxyz)."""
-        from retarget.metrics import replay
-
         robot = self.robot_model()
         rep = replay(robot.model, self.qpos)
         return robot.body_names, rep.xpos[:, 1:], rep.xquat[:, 1:]

@@ -27,6 +27,8 @@ from controlmm.control import LossTerm
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, NUM_JOINTS, PARENTS, joint_index
+from scenes.scene import Scene
+from scenes.sdf.scene_sdf import SceneSDF
 
 Tensor = torch.Tensor
 
@@ -119,7 +121,7 @@ def _check_distance(name: str, value: float) -> float:
 
 
 def _world_sdf(
-    sdf, transform: HumanToWorld, points: Tensor, frames: Tensor, fps: float, time_offset: float
+    sdf: SceneSDF, transform: HumanToWorld, points: Tensor, frames: Tensor, fps: float, time_offset: float
 ) -> Tensor:
     """SDF (B, F, P) of human-frame points (B, F, P, 3) at the given frames."""
     world = transform.to_world(points)
@@ -128,7 +130,7 @@ def _world_sdf(
 
 
 def obstacle_loss(
-    sdf,
+    sdf: SceneSDF,
     transform: HumanToWorld,
     safe_distance: float = 0.05,
     joints: Sequence[str | int] | None = None,
@@ -163,7 +165,7 @@ def obstacle_loss(
 
 
 def body_obstacle_loss(
-    sdf,
+    sdf: SceneSDF,
     transform: HumanToWorld,
     safe_distance: float = 0.02,
     bones: Sequence[Bone] = BODY_BONES,
@@ -229,7 +231,7 @@ def floor_loss(
 
 
 def scene_loss_terms(
-    scene,
+    scene: Scene,
     transform: HumanToWorld,
     safe_distance: float = 0.02,
     body: bool = True,

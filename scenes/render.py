@@ -70,7 +70,7 @@ def render_scene(
         )
         _matplotlib_views(scene, out, t)
         return f"matplotlib ({reason})"
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -158,7 +158,7 @@ def _robot_points(scene: Scene, t: float) -> np.ndarray:
 
 
 def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> None:
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -218,7 +218,7 @@ def plot_sdf_slice(
 ) -> None:
     """Write a PNG of the scene SDF: a horizontal slice at z = ``height`` and a vertical slice
     at y = ``y`` (default: the start's y), zero level in black, 0.1 m contours."""
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -32,7 +32,9 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
+from retarget.robots import robot_mjcf
 from scenes.registry import list_scenes, scene_path
+from scenes.sdf.scene_sdf import SceneSDF
 from scenes.tracks import TRACK_PREFIX, MocapTrack
 
 META = "controlmm."
@@ -76,7 +78,7 @@ class Scene:
     floor_geom_ids: tuple[int, ...]
     robot_geom_ids: tuple[int, ...]
     tracks: dict[str, MocapTrack] = field(default_factory=dict)
-    _sdf: object | None = field(default=None, repr=False)
+    _sdf: SceneSDF | None = field(default=None, repr=False)
 
     @property
     def floor_height(self) -> float:
@@ -125,11 +127,9 @@ class Scene:
         qpos[3:7] = quat
         return qpos
 
-    def sdf(self):
+    def sdf(self) -> SceneSDF:
         """The scene's :class:`scenes.sdf.SceneSDF` (built once, then cached)."""
         if self._sdf is None:
-            from scenes.sdf.scene_sdf import SceneSDF
-
             self._sdf = SceneSDF(self)
         return self._sdf
 
@@ -256,8 +256,6 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
 
     ``robot`` is a packaged robot name or the path of a robot MJCF (``.xml``).
     """
-    from retarget.robots import robot_mjcf
-
     path = Path(robot) if str(robot).lower().endswith(".xml") else robot_mjcf(robot)
     robot_spec = mujoco.MjSpec.from_file(str(path))
     default_opt, scene_opt, robot_opt = mujoco.MjSpec().option, spec.option, robot_spec.option

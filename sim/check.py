@@ -7,10 +7,11 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from sim.assemble import build_report
 from sim.config import CheckConfig
 from sim.dynamics import dynamics_check
 from sim.kinematic import kinematic_check
-from sim.report import Report, build_report
+from sim.report import Report
 from sim.tracking import tracking_check
 from sim.trajectory import validate_qpos, velocities_and_accelerations
 from sim.world import CheckWorld, SetTime, make_world

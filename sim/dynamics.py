@@ -40,7 +40,7 @@ from scipy.optimize import nnls
 
 from sim.config import CheckConfig
 from sim.failures import Failure, from_mask
-from sim.kinematic import SupportContacts
+from sim.support import SupportContacts
 from sim.world import CheckWorld
 
 RIDGE = 1e-3

@@ -2,32 +2,20 @@
 
 :func:`sim.replay.replay` poses every frame and collects MuJoCo contacts; this module turns
 them, with numpy, into per-frame and per-robot-body measurements and merged failures. Heights
-above the floor come from the geoms' support functions (:func:`sim.geometry.support_heights`).
+above the floor, feet, flights and load-carrying contacts are measured in :mod:`sim.support`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import mujoco
 import numpy as np
 
 from sim.config import CheckConfig
-from sim.failures import Failure, from_events, from_mask, runs
-from sim.geometry import support_heights
+from sim.failures import Failure, from_events, from_mask
 from sim.replay import Contacts, Replay, orient, replay
+from sim.support import SupportContacts, floor_heights, foot_measures, support_contacts, support_measures
 from sim.world import CheckWorld
-
-
-@dataclass
-class SupportContacts:
-    """Contacts able to carry load (robot geom within ``support_height_m`` of floor/obstacle)."""
-
-    frame: np.ndarray
-    pos: np.ndarray
-    normal: np.ndarray
-    body: np.ndarray
-    friction: np.ndarray
 
 
 @dataclass
@@ -98,28 +86,11 @@ class KinematicResult:
 # ------------------------------------------------------------------------------- measures
 
 
-def _contact_friction(m: mujoco.MjModel, g1: np.ndarray, g2: np.ndarray) -> np.ndarray:
-    """MuJoCo's sliding friction of a geom pair: the higher-priority geom's, else the max."""
-    f1, f2 = m.geom_friction[g1, 0], m.geom_friction[g2, 0]
-    p1, p2 = m.geom_priority[g1], m.geom_priority[g2]
-    return np.where(p1 > p2, f1, np.where(p2 > p1, f2, np.maximum(f1, f2)))
-
-
 def _body_max(T: int, nb: int, frames: np.ndarray, body_index: np.ndarray, depth: np.ndarray) -> np.ndarray:
     out = np.zeros((T, nb))
     if frames.size:
         np.maximum.at(out, (frames, body_index), depth)
     return out
-
-
-def _ballistic(com_z: np.ndarray, fps: float, g: float, tol: float) -> bool:
-    """Does a height sequence fit z0 + v0 t - g t^2 / 2 within ``tol`` (RMS)?"""
-    t = np.arange(com_z.size) / fps
-    target = com_z + 0.5 * g * t**2
-    if com_z.size < 3:
-        return True
-    coef = np.polyfit(t, target, 1)
-    return float(np.sqrt(np.mean((np.polyval(coef, t) - target) ** 2))) <= tol
 
 
 @dataclass(frozen=True)
@@ -164,12 +135,12 @@ def kinematic_check(
     sf, body_self, self_failures = _self_measures(world, rep, ix, T, config)
     support_dist = np.full((T, world.robot_geoms.size), np.inf)  # (T, G) distance to floor/obstacles
     np.minimum.at(support_dist, (sc.frame, ix.geom[sc.robot_geom]), sc.dist)
-    heights = _floor_heights(world, rep)
+    heights = floor_heights(world, rep)
     lowest = (
         np.nanmin(heights, axis=1) if heights.size and not np.isnan(heights).all() else np.full(T, np.nan)
     )
-    feet, feet_failures = _foot_measures(world, rep, ix, support_dist, heights, fps, config)
-    support, support_failures = _support_measures(world, rep, support_dist, heights, lowest, fps, config)
+    feet, feet_failures = foot_measures(world, rep, ix.geom, support_dist, heights, fps, config)
+    support, support_failures = support_measures(world, rep, support_dist, heights, lowest, fps, config)
     joints, joint_failures = _joint_measures(world, qpos, half, config)
     nb = world.robot_bodies.size
     return KinematicResult(
@@ -183,7 +154,7 @@ def kinematic_check(
         **feet,
         **support,
         **joints,
-        support=_support_contacts(world, sc, config),
+        support=support_contacts(world, sc, config),
         contacts=Contacts.concat(sc, sf),
         failures=failures + self_failures + feet_failures + support_failures + joint_failures,
     )
@@ -257,85 +228,6 @@ def _self_measures(
     return sf, body_self, failures
 
 
-def _foot_measures(
-    world: CheckWorld,
-    rep: Replay,
-    ix: _Index,
-    support_dist: np.ndarray,
-    heights: np.ndarray,
-    fps: float,
-    config: CheckConfig,
-) -> tuple[dict[str, np.ndarray], list[Failure]]:
-    """Foot heights, stance between consecutive frames and the stance foot's horizontal slide."""
-    T, F = support_dist.shape[0], len(world.feet)
-    height = np.full((T, F), np.nan)
-    stance = np.zeros((T, F), dtype=bool)
-    slide = np.zeros((T, F))
-    failures: list[Failure] = []
-    for f, foot in enumerate(world.feet):
-        cols = ix.geom[foot.geoms]
-        if heights.size and not np.isnan(heights[:, cols]).all():
-            height[:, f] = np.nanmin(heights[:, cols], axis=1)
-        down = support_dist[:, cols] < config.stance_height_m  # (T, g)
-        both = down[1:] & down[:-1]
-        step = np.linalg.norm(rep.geom_xpos[1:, cols, :2] - rep.geom_xpos[:-1, cols, :2], axis=2)
-        step = np.where(both, step, np.inf).min(axis=1)  # the geom that stayed down moved least
-        stance[1:, f] = np.isfinite(step)
-        slide[1:, f] = np.where(stance[1:, f], step, 0.0)
-        fast = stance[:, f] & (slide[:, f] * fps > config.max_foot_slide_speed)
-        failures += from_mask("foot_sliding", fast, slide[:, f], robot_body=foot.name, total=True)
-    return {"foot_height": height, "foot_stance": stance, "foot_slide": slide}, failures
-
-
-def _support_measures(
-    world: CheckWorld,
-    rep: Replay,
-    support_dist: np.ndarray,
-    heights: np.ndarray,
-    lowest: np.ndarray,
-    fps: float,
-    config: CheckConfig,
-) -> tuple[dict[str, np.ndarray], list[Failure]]:
-    """Supported frames, ballistic flights and floating (unsupported, not a flight)."""
-    m = world.model
-    T = support_dist.shape[0]
-    supported = (support_dist < config.support_height_m).any(axis=1)
-    masses = m.body_mass[world.robot_bodies]
-    com = np.einsum("tbk,b->tk", rep.body_xipos, masses) / masses.sum()
-    gap = np.fmin(support_dist.min(axis=1), np.where(np.isnan(lowest), np.inf, lowest))
-    gap = np.where(np.isfinite(gap), gap, np.nan)
-    flight = np.zeros(T, dtype=bool)
-    floating = np.zeros(T, dtype=bool)
-    g = float(np.linalg.norm(m.opt.gravity))
-    edge = int(round(config.flight_edge_s * fps))
-    for a, b in runs(~supported):
-        span = slice(a, b + 1)
-        # The take-off and landing impulses of a kinematic motion are smeared over the frames
-        # around the contact (20 fps source, splines): the centre of mass may still rise just
-        # after the feet left the floor. The ballistic fit skips flight_edge_s at each end.
-        middle = slice(a + edge, b + 1 - edge) if b + 1 - a > 2 * edge + 2 else span
-        if (b - a + 1) / fps <= config.max_flight_s and _ballistic(
-            com[middle, 2], fps, g, config.ballistic_tol_m
-        ):
-            flight[span] = True
-        else:
-            floating[span] = True
-    failures = []
-    low_body = _lowest_body(world, heights)
-    unknown = max(config.support_height_m, config.clearance_sense_m)  # beyond sensing, no plane floor
-    for a, b in runs(floating):
-        values = np.nan_to_num(gap[a : b + 1], nan=unknown)
-        body = low_body[a + int(np.argmax(values))] if low_body else None
-        failures.append(Failure("floating", a, b, body, None, float(values.max())))
-    return {
-        "supported": supported,
-        "support_gap": gap,
-        "flight": flight,
-        "floating": floating,
-        "com": com,
-    }, failures
-
-
 def _joint_measures(
     world: CheckWorld, qpos: np.ndarray, half: np.ndarray, config: CheckConfig
 ) -> tuple[dict[str, np.ndarray], list[Failure]]:
@@ -370,10 +262,6 @@ def _joint_measures(
     }, failures
 
 
-HEIGHT_CUTOFF_M = 0.10
-"""Mesh geoms are evaluated vertex by vertex only when they may come lower than this."""
-
-
 def _joint_speed(half: np.ndarray, dofs: np.ndarray, T: int) -> np.ndarray:
     """(T, J) joint speed at each frame: the larger of the two adjacent half-step speeds.
 
@@ -386,82 +274,3 @@ def _joint_speed(half: np.ndarray, dofs: np.ndarray, T: int) -> np.ndarray:
         speed[:-1] = step
         speed[1:] = np.maximum(speed[1:], step)
     return speed
-
-
-def _floor_heights(world: CheckWorld, rep: Replay) -> np.ndarray:
-    """(T, G) height of each robot geom's lowest point above the floor (min over planes).
-
-    Exact for the feet and primitive geoms up to :data:`HEIGHT_CUTOFF_M`; a mesh geom is
-    evaluated vertex by vertex only in frames where it may be the robot's lowest point (its
-    bounding sphere reaches below both the cutoff and the lowest primitive/foot point),
-    elsewhere its entry is a lower bound that cannot be the minimum. Hull vertices are many
-    (hundreds to thousands per G1 link), so this pruning is most of the cost saved.
-    """
-    T, P = rep.plane_xpos.shape[:2]
-    G = world.robot_geoms.size
-    if P == 0:
-        return np.zeros((T, 0))
-    m = world.model
-    foot_geoms = np.concatenate([f.geoms for f in world.feet]) if world.feet else np.zeros(0, np.int64)
-    feet = np.isin(world.robot_geoms, foot_geoms)
-    first = np.flatnonzero(feet | (m.geom_type[world.robot_geoms] != int(mujoco.mjtGeom.mjGEOM_MESH)))
-    rest = np.setdiff1d(np.arange(G), first)
-    heights = np.full((T, G), np.inf)
-    for p in range(P):
-        normal = rep.plane_xmat[:, p].reshape(T, 3, 3)[:, :, 2]
-        point = rep.plane_xpos[:, p]
-        h = np.empty((T, G))
-        h[:, first] = _plane_heights(world, rep, first, point, normal, HEIGHT_CUTOFF_M)
-        running = np.nanmin(h[:, first], axis=1) if first.size else np.full(T, np.inf)
-        if rest.size:
-            h[:, rest] = _plane_heights(world, rep, rest, point, normal, np.fmin(HEIGHT_CUTOFF_M, running))
-        heights = np.fmin(heights, h)
-    return heights
-
-
-def _plane_heights(
-    world: CheckWorld,
-    rep: Replay,
-    cols: np.ndarray,
-    point: np.ndarray,
-    normal: np.ndarray,
-    cutoff: float | np.ndarray,
-) -> np.ndarray:
-    return support_heights(
-        world.model,
-        world.robot_geoms[cols],
-        rep.geom_xpos[:, cols],
-        rep.geom_xmat[:, cols],
-        point,
-        normal,
-        world.hull_vertices,
-        cutoff=cutoff,
-    )
-
-
-def _lowest_body(world: CheckWorld, heights: np.ndarray) -> list[str]:
-    if heights.size == 0:
-        return []
-    names = [world.body_name(b) for b in world.model.geom_bodyid[world.robot_geoms]]
-    filled = np.where(np.isnan(heights), np.inf, heights)
-    return [names[i] for i in np.argmin(filled, axis=1)]
-
-
-def _support_contacts(world: CheckWorld, sc: Contacts, config: CheckConfig) -> SupportContacts:
-    """Contacts that may carry load: within ``support_height_m`` of the floor or an obstacle.
-
-    A robot geom sunk into the floor still stands on it, but one that has gone into an
-    obstacle further than ``obstacle_penetration_m`` is not leaning on it: that contact is a
-    penetration failure, its normal is arbitrary, and counting it as support would let the
-    obstacle hold the robot up (or twist its wrist) in the dynamics check.
-    """
-    inside = np.isin(sc.other_geom, world.obstacle_geoms) & (sc.dist < -config.obstacle_penetration_m)
-    near = (sc.dist < config.support_height_m) & ~inside
-    c = sc.select(near)
-    if config.friction is not None:
-        mu = np.full(c.frame.size, float(config.friction))
-    else:
-        mu = _contact_friction(world.model, c.robot_geom, c.other_geom)
-    return SupportContacts(
-        c.frame, c.pos, c.normal, world.model.geom_bodyid[c.robot_geom].astype(np.int64), mu
-    )

@@ -32,7 +32,7 @@ def plot_report(
     report: Report, path: str | os.PathLike[str], title: str | None = None, dpi: int = 110
 ) -> None:
     """Write the per-frame plot of ``report`` to ``path`` (PNG, atomically)."""
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a plot is drawn
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt

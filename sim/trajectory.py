@@ -12,13 +12,14 @@ import math
 import mujoco
 import numpy as np
 
-from controlmm.errors import ShapeError
+from controlmm.errors import ControlMMError, ShapeError
+from sim.world import CheckWorld
 
 MIN_FPS = 1.0
 MAX_FPS = 1000.0
 
 
-def _describe_nq(world) -> str:
+def _describe_nq(world: CheckWorld) -> str:
     return (
         f"nq={world.nq} (free joint xyz + quaternion wxyz, then {world.nq - 7} joint positions)"
         if world.nq >= 7
@@ -26,15 +27,13 @@ def _describe_nq(world) -> str:
     )
 
 
-def validate_qpos(world, qpos: object, fps: object) -> tuple[np.ndarray, float]:
+def validate_qpos(world: CheckWorld, qpos: object, fps: object) -> tuple[np.ndarray, float]:
     """Check ``qpos`` and ``fps`` against the model; return float64 qpos with unit quaternions.
 
     Raises:
         ShapeError: wrong shape, NaN/inf, a zero root quaternion (one-line message).
         ControlMMError: fps not a finite number in [1, 1000].
     """
-    from controlmm.errors import ControlMMError
-
     try:
         rate = float(fps)  # type: ignore[arg-type]
     except (TypeError, ValueError):

@@ -18,8 +18,10 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from controlmm.errors import ControlMMError
+from sim.geometry import support_heights
 
 SetTime = Callable[[mujoco.MjData, float], None]
 """``set_time(data, t_seconds)``: writes the mocap obstacles' poses for time ``t`` into ``data``."""
@@ -170,8 +172,6 @@ def _free_joint(model: mujoco.MjModel) -> int:
 
 def _hulls(model: mujoco.MjModel, geoms: np.ndarray) -> dict[int, np.ndarray]:
     """Convex-hull vertices of mesh geoms, in the geom frame (the compiled mesh frame)."""
-    from scipy.spatial import ConvexHull, QhullError
-
     out: dict[int, np.ndarray] = {}
     cache: dict[int, np.ndarray] = {}
     for g in geoms:
@@ -242,8 +242,6 @@ def _lowest_point(
     model: mujoco.MjModel, data: mujoco.MjData, geoms: np.ndarray, hulls: dict[int, np.ndarray]
 ) -> np.ndarray:
     """World height of each geom's lowest point, (G,)."""
-    from sim.geometry import support_heights
-
     return support_heights(
         model,
         geoms,

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError
+from retarget.robots import robot_mjcf
+from sim.geometry import support_heights
+from sim.world import make_world
 
 _TYPES = {
     "box": mujoco.mjtGeom.mjGEOM_BOX,
@@ -41,10 +45,6 @@ class Obstacle:
 
 def robot_world(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bool = True) -> mujoco.MjModel:
     """Compile ``robot`` (a packaged robot name or an MJCF path) with a floor and obstacles."""
-    from pathlib import Path
-
-    from retarget.robots import robot_mjcf
-
     path = Path(robot) if str(robot).endswith(".xml") else robot_mjcf(robot)
     spec = mujoco.MjSpec.from_file(str(path))  # the robot's own spec: options and keyframes kept
     if floor:
@@ -69,8 +69,6 @@ def standing_qpos(model: mujoco.MjModel) -> np.ndarray:
         key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, name)
         if key >= 0:
             return np.array(model.key_qpos[key])
-    from sim.world import make_world
-
     world = make_world(model)
     q = np.array(model.qpos0)
     adr = world.root_qpos_adr
@@ -78,8 +76,6 @@ def standing_qpos(model: mujoco.MjModel) -> np.ndarray:
     data = mujoco.MjData(model)
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
-    from sim.geometry import support_heights
-
     low = support_heights(
         model,
         world.robot_geoms,

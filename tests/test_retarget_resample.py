@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from controlmm.motion import Motion
 from retarget import retarget_motion
 from retarget.resample import continuous_quaternions, output_times, resample_qpos
-from retarget.targets import detect_stance
+from retarget.stance import detect_stance
 
 
 def test_output_times_cover_the_motion():

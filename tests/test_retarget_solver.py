@@ -17,17 +17,11 @@ import pytest
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget.metrics import geom_lowest_z, replay
+from retarget.problem import Problem
 from retarget.robot_model import load_robot
-from retarget.solver import (
-    CONSTRAINT_TOLERANCE,
-    SolverConfig,
-    _Problem,
-    _solve,
-    _take,
-    solve,
-    violation_spans,
-)
-from retarget.targets import build_targets
+from retarget.solver import CONSTRAINT_TOLERANCE, _solve, solve, violation_spans
+from retarget.solver_config import SolverConfig
+from retarget.targets import build_targets, take_frames
 
 
 @pytest.mark.parametrize("patience", [None, 2])
@@ -40,7 +34,7 @@ def test_spans_solved_together_equal_spans_solved_alone(sample_features, patienc
     targets = build_targets(robot, joints, 20.0, HumanToWorld(scale=robot.scale))
     config = SolverConfig(**robot.mapping.solver)
     sol = solve(robot, targets, replace(config, extra_iterations=0, pin_iterations=0))
-    prob = _Problem(robot, targets, config)
+    prob = Problem(robot, targets, config)
     idx, pinned, span = violation_spans(
         prob.frame_violation(prob.evaluate(sol.root_pos, sol.root_rot, sol.q)) > CONSTRAINT_TOLERANCE
     )
@@ -55,7 +49,7 @@ def test_spans_solved_together_equal_spans_solved_alone(sample_features, patienc
         alone.append(
             _solve(
                 robot,
-                _take(targets, r, targets.fps),
+                take_frames(targets, r, targets.fps),
                 config,
                 (sol.root_pos[r], sol.root_rot[r], sol.q[r]),
                 pinned=pinned[span == s],
@@ -66,7 +60,7 @@ def test_spans_solved_together_equal_spans_solved_alone(sample_features, patienc
         )
     together, _ = _solve(
         robot,
-        _take(targets, idx, targets.fps),
+        take_frames(targets, idx, targets.fps),
         config,
         (sol.root_pos[idx], sol.root_rot[idx], sol.q[idx]),
         pinned=pinned,

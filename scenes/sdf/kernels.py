@@ -11,13 +11,17 @@ tests use), rearranged for speed:
 * :func:`round_gradient`: the unit gradient of :func:`scenes.sdf.primitives.sdf_round`, which
   covers all four, at one point per (pose set, point);
 * :func:`stack_frames` / :func:`to_local`: every point into every geom frame in one batched
-  matmul; :class:`WithGradient`: a value with a precomputed gradient, for autograd.
+  matmul; :class:`WithGradient`: a value with a precomputed gradient, for autograd;
+* :func:`check_points` / :func:`check_times`: the inputs, checked and converted.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch.autograd.function import once_differentiable
+
+from controlmm.errors import ShapeError
 
 Tensor = torch.Tensor
 
@@ -111,3 +115,30 @@ class WithGradient(torch.autograd.Function):
     def backward(ctx, grad_out: Tensor):
         (gradient,) = ctx.saved_tensors
         return grad_out[..., None] * gradient, None, None
+
+
+def check_points(points: Tensor | np.ndarray) -> Tensor:
+    """World points (..., N, 3) as a float tensor (one-line errors for a wrong shape, NaN, inf)."""
+    if not isinstance(points, Tensor):
+        points = torch.as_tensor(np.asarray(points, dtype=np.float64))
+    if points.ndim < 2 or points.shape[-1] != 3:
+        raise ShapeError(f"points must have shape (..., N, 3); got {tuple(points.shape)}")
+    if not points.is_floating_point():
+        points = points.to(torch.get_default_dtype())
+    if not bool(torch.isfinite(points.detach().sum())) and not bool(torch.isfinite(points.detach()).all()):
+        raise ShapeError("points hold NaN or inf; the SDF needs finite world coordinates (m)")
+    return points
+
+
+def check_times(t: Tensor | np.ndarray | float, lead: torch.Size, like: Tensor) -> Tensor:
+    """Frame times (s) broadcast to the points' leading shape ``lead``, in ``like``'s dtype and device."""
+    times = torch.as_tensor(t, dtype=like.dtype, device=like.device)
+    if not bool(torch.isfinite(times).all()):
+        raise ShapeError("frame times hold NaN or inf")
+    try:
+        return torch.broadcast_to(times, lead)
+    except RuntimeError:
+        raise ShapeError(
+            f"frame times of shape {tuple(times.shape)} do not broadcast to the points' leading "
+            f"shape {tuple(lead)} (points (..., N, 3), times (...))"
+        ) from None

@@ -35,66 +35,35 @@ How a call runs (vectorised by geom kind; no Python loop over primitive geoms):
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 import torch
 
-from controlmm.errors import ControlMMError, ShapeError
+from controlmm.errors import ControlMMError
 from scenes.sdf import kernels, primitives
-from scenes.sdf.mesh import (
-    DEFAULT_PAD,
-    DEFAULT_PITCH,
-    DEFAULT_REACH,
-    MeshSDF,
-    cached_mesh_sdf,
-    heightfield_mesh,
+from scenes.sdf.kernels import check_points, check_times
+from scenes.sdf.mesh import DEFAULT_PAD, DEFAULT_PITCH, MeshSDF
+from scenes.sdf.obstacles import (
+    BOX,
+    CYLINDER,
+    ELLIPSOID,
+    MESH,
+    PLANE,
+    ObstacleScene,
+    geom_constants,
+    make_geom,
+    model_obstacles,
+    scene_extent,
 )
 from scenes.tracks import MocapTrack, quat_to_mat
 
 Tensor = torch.Tensor
-G = mujoco.mjtGeom
 
-SUPPORTED = ("plane", "sphere", "capsule", "cylinder", "box", "ellipsoid", "mesh", "hfield")
-BOX, CYLINDER, PLANE, ELLIPSOID, MESH = range(5)
-"""Geom kinds, in evaluation order (cheap first, so that the costly ones can be culled). BOX is
-a box grown by a ball: boxes, spheres and capsules."""
-_KIND = {
-    "box": BOX,
-    "sphere": BOX,
-    "capsule": BOX,
-    "cylinder": CYLINDER,
-    "plane": PLANE,
-    "ellipsoid": ELLIPSOID,
-    "mesh": MESH,
-    "hfield": MESH,
-}
+
 _TABLE = 16
 """Columns of the per-geom table: geom-from-world rotation (9), world origin (3), sdf_round's box
 half-extents (3) and disk radius (1)."""
-
-
-def geom_type_name(geom_type: int) -> str:
-    return mujoco.mjtGeom(int(geom_type)).name.removeprefix("mjGEOM_").lower()
-
-
-@dataclass(frozen=True)
-class _Geom:
-    """One obstacle geom, as the SDF sees it."""
-
-    column: int  # position in geom_ids (the per_geom output's last axis)
-    geom_id: int
-    type_name: str
-    size: np.ndarray  # (3,) geom_size
-    rot: np.ndarray  # (3, 3) world-from-geom (static) or body-from-geom (moving)
-    pos: np.ndarray  # (3,)
-    track: int  # index into SceneSDF._tracks, -1 when static
-    mesh: MeshSDF | None = None
-
-    @property
-    def kind(self) -> int:
-        return _KIND[self.type_name]
 
 
 class SceneSDF:
@@ -112,7 +81,7 @@ class SceneSDF:
 
     def __init__(
         self,
-        scene,
+        scene: ObstacleScene | mujoco.MjModel,
         geom_ids: Sequence[int] | None = None,
         tracks: Mapping[str, MocapTrack] | None = None,
         convex_hull_meshes: bool = False,
@@ -121,7 +90,7 @@ class SceneSDF:
     ) -> None:
         if isinstance(scene, mujoco.MjModel):
             model = scene
-            ids = _model_obstacles(model) if geom_ids is None else geom_ids
+            ids = model_obstacles(model) if geom_ids is None else geom_ids
             tracks = dict(tracks or {})
         else:
             model = scene.model
@@ -137,7 +106,7 @@ class SceneSDF:
             data.mocap_pos[mocap], data.mocap_quat[mocap] = track.pose_numpy(float(track.times[0]))
         mujoco.mj_kinematics(model, data)
         start = None if isinstance(scene, mujoco.MjModel) else (scene.start.x, scene.start.y)
-        self._extent = _scene_extent(model, data, self.geom_ids, tracks, start)
+        self._extent = scene_extent(model, data, self.geom_ids, tracks, start)
         track_of_body = {model.body(name).id: name for name in tracks}
         moving = sorted(
             {
@@ -149,7 +118,18 @@ class SceneSDF:
         self._tracks = [tracks[name] for name in moving]  # the tracks that move obstacle geoms
         body_track = {model.body(name).id: k for k, name in enumerate(moving)}
         geoms = [
-            self._make_geom(col, g, data, body_track, mesh_pad, mesh_pitch)
+            make_geom(
+                model,
+                col,
+                g,
+                data,
+                body_track,
+                self._tracks,
+                self._extent,
+                mesh_pad,
+                mesh_pitch,
+                convex_hull_meshes,
+            )
             for col, g in enumerate(self.geom_ids)
         ]
         self._geoms = sorted(geoms, key=lambda geom: geom.kind)  # stable: geom_ids order within a kind
@@ -163,121 +143,12 @@ class SceneSDF:
 
     # -- construction ---------------------------------------------------------------------------
 
-    def _make_geom(
-        self,
-        col: int,
-        g: int,
-        data: mujoco.MjData,
-        body_track: dict[int, int],
-        mesh_pad: float,
-        mesh_pitch: float,
-    ) -> _Geom:
-        m = self.model
-        type_name = geom_type_name(m.geom_type[g])
-        if type_name not in _KIND:
-            name = m.geom(g).name or f"geom{g}"
-            raise ControlMMError(
-                f"geom '{name}' has type '{type_name}', which the SDF does not support "
-                f"(supported: {', '.join(SUPPORTED)})"
-            )
-        body = int(m.geom_bodyid[g])
-        if body in body_track:  # pose relative to the mocap body, composed with the track at call time
-            rot, pos, track = _quat_mat(m.geom_quat[g]), m.geom_pos[g].copy(), body_track[body]
-        else:
-            rot, pos, track = data.geom_xmat[g].reshape(3, 3).copy(), data.geom_xpos[g].copy(), -1
-        mesh = None
-        if _KIND[type_name] == MESH:  # its grids reach every corner of the scene's extent
-            centres = (
-                [data.geom_xpos[g]]
-                if track < 0
-                else [
-                    t_pos + np.linalg.norm(pos) * np.array([sx, sy, sz])
-                    for t_pos in self._tracks[track].pos
-                    for sx in (-1, 1)
-                    for sy in (-1, 1)
-                    for sz in (-1, 1)
-                ]
-            )
-            corners = np.array(
-                [
-                    [x, y, z]
-                    for x in self._extent[:, 0]
-                    for y in self._extent[:, 1]
-                    for z in self._extent[:, 2]
-                ]
-            )
-            reach = max(DEFAULT_REACH, max(float(np.linalg.norm(corners - c, axis=1).max()) for c in centres))
-            mesh = self._mesh(g, mesh_pad, mesh_pitch, reach)
-        return _Geom(col, g, type_name, m.geom_size[g].copy(), rot, pos, track, mesh)
-
-    def _mesh(self, g: int, pad: float, pitch: float, reach: float) -> MeshSDF:
-        m = self.model
-        name = m.geom(g).name or f"geom{g}"
-        if int(m.geom_type[g]) == int(G.mjGEOM_MESH):
-            mid = int(m.geom_dataid[g])
-            v0, nv = m.mesh_vertadr[mid], m.mesh_vertnum[mid]
-            f0, nf = m.mesh_faceadr[mid], m.mesh_facenum[mid]
-            vertices, faces = m.mesh_vert[v0 : v0 + nv], m.mesh_face[f0 : f0 + nf]
-        else:
-            hid = int(m.geom_dataid[g])
-            nrow, ncol = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
-            adr = int(m.hfield_adr[hid])
-            vertices, faces = heightfield_mesh(
-                m.hfield_size[hid], nrow, ncol, m.hfield_data[adr : adr + nrow * ncol]
-            )
-        return cached_mesh_sdf(
-            vertices,
-            faces,
-            convex_hull=self.convex_hull_meshes,
-            pad=pad,
-            pitch=pitch,
-            name=name,
-            reach=round(reach, 1),
-        )
-
     def _tensors(self, like: Tensor) -> dict[str, Tensor]:
         """Stacked geom constants for a dtype and device (built once per pair)."""
         key = (like.dtype, like.device)
-        if key in self._consts:
-            return self._consts[key]
-        to = dict(dtype=like.dtype, device=like.device)
-        geoms = self._geoms
-        box, disk, ball = np.zeros((len(geoms), 3)), np.zeros(len(geoms)), np.zeros(len(geoms))
-        for i, geom in enumerate(geoms[: self._num_round]):
-            box[i], disk[i], ball[i] = primitives.round_params(geom.type_name, geom.size)
-        axes = np.array([geom.size for geom in geoms[self._slices[ELLIPSOID]]]).reshape(-1, 3)
-        spheres = [geom.mesh.bounding_sphere() for geom in geoms[self._slices[MESH]]]
-        moving = [i for i, geom in enumerate(geoms) if geom.track >= 0]
-        c = {
-            "rot": torch.as_tensor(np.array([geom.rot for geom in geoms]).reshape(-1, 3, 3), **to),
-            "pos": torch.as_tensor(np.array([geom.pos for geom in geoms]).reshape(-1, 3), **to),
-            "box": torch.as_tensor(box, **to),
-            "disk": torch.as_tensor(disk, **to),
-            "ball": torch.as_tensor(ball, **to),
-            "axes": torch.as_tensor(axes, **to),
-            "axes_max": torch.as_tensor(axes.max(-1) if len(axes) else np.zeros(0), **to),
-            "mesh_centre": torch.as_tensor(np.array([s[0] for s in spheres]).reshape(-1, 3), **to),
-            "mesh_radius": torch.as_tensor(np.array([s[1] for s in spheres]), **to),
-            "moving": torch.as_tensor(moving, dtype=torch.long, device=like.device),
-            "moving_track": torch.as_tensor(
-                [geoms[i].track for i in moving], dtype=torch.long, device=like.device
-            ),
-            # kind-sorted position of each geom_ids column
-            "order": torch.as_tensor(
-                np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device
-            ),
-        }
-        sb, sc = self._slices[BOX], self._slices[CYLINDER]
-        c["box_half"], c["box_ball"] = c["box"][sb, :, None].contiguous(), c["ball"][sb, None].contiguous()
-        c["cyl_half"], c["cyl_radius"] = c["box"][sc, 2:].contiguous(), c["disk"][sc, None].contiguous()
-        c["closest_column"] = (torch.arange(len(geoms), device=like.device) - self._num_round).clamp_min(0)
-        rot_t = c["rot"].transpose(-1, -2)
-        c["table"] = torch.cat(
-            [rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1
-        ).T.contiguous()
-        c["frames"] = kernels.stack_frames(rot_t[None], c["pos"][None])
-        self._consts[key] = c
-        return c
+        if key not in self._consts:
+            self._consts[key] = geom_constants(self._geoms, self._slices, like)
+        return self._consts[key]
 
     # -- public surface ---------------------------------------------------------------------------
 
@@ -298,9 +169,9 @@ class SceneSDF:
 
     def __call__(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Scene SDF (..., N) of world points (..., N, 3) at frame times ``t`` (see module doc)."""
-        points = _check_points(points)
+        points = check_points(points)
         lead, n = points.shape[:-2], points.shape[-2]
-        times = None if t is None else _check_times(t, lead, points)
+        times = None if t is None else check_times(t, lead, points)
         if not self._geoms:
             return torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
         c = self._tensors(points)
@@ -330,9 +201,9 @@ class SceneSDF:
     def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every
         geom evaluated (no culling) with plain autograd."""
-        points = _check_points(points)
+        points = check_points(points)
         lead, n = points.shape[:-2], points.shape[-2]
-        times = None if t is None else _check_times(t, lead, points)
+        times = None if t is None else check_times(t, lead, points)
         if not self._geoms:
             return points.new_zeros((*lead, n, 0))
         c = self._tensors(points)
@@ -505,99 +376,3 @@ class SceneSDF:
         world = row[:, 0:3] * g[:, 0:1]  # R g = sum_k g_k (row k of R^T)
         world.addcmul_(row[:, 3:6], g[:, 1:2]).addcmul_(row[:, 6:9], g[:, 2:3])
         return world.transpose(1, 2)
-
-
-EXTENT_MARGIN = 1.0
-"""Metres added around the obstacles (and start pose) to get the region where meshes' SDFs are
-accurate (their grids reach it; see :mod:`scenes.sdf.mesh`)."""
-
-
-def _scene_extent(
-    model: mujoco.MjModel,
-    data: mujoco.MjData,
-    geom_ids: Sequence[int],
-    tracks: Mapping[str, MocapTrack],
-    start: tuple[float, float] | None,
-) -> np.ndarray:
-    """(2, 3) world box holding the obstacles (every key pose of moving ones), the start pose
-    (0 to 2 m high) and ``EXTENT_MARGIN`` around them."""
-    points = (
-        [] if start is None else [np.array([start[0], start[1], 0.0]), np.array([start[0], start[1], 2.0])]
-    )
-    for g in geom_ids:
-        if model.geom_type[g] == G.mjGEOM_PLANE:
-            continue
-        rot = data.geom_xmat[g].reshape(3, 3)
-        centre = data.geom_xpos[g] + rot @ model.geom_aabb[g, :3]
-        half = np.abs(rot) @ model.geom_aabb[g, 3:]
-        points += [centre - half, centre + half]
-    for name, track in tracks.items():
-        body = model.body(name).id
-        radius = max(
-            [
-                float(model.geom_rbound[g]) + float(np.linalg.norm(model.geom_pos[g]))
-                for g in geom_ids
-                if model.geom_bodyid[g] == body
-            ]
-            or [0.0]
-        )
-        points += [track.pos.min(0) - radius, track.pos.max(0) + radius]
-    if not points:
-        return np.zeros((2, 3))
-    pts = np.stack(points)
-    return np.stack([pts.min(0) - EXTENT_MARGIN, pts.max(0) + EXTENT_MARGIN])
-
-
-def _quat_mat(quat: np.ndarray) -> np.ndarray:
-    mat = np.empty(9)
-    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=np.float64))
-    return mat.reshape(3, 3)
-
-
-def _check_points(points) -> Tensor:
-    if not isinstance(points, Tensor):
-        points = torch.as_tensor(np.asarray(points, dtype=np.float64))
-    if points.ndim < 2 or points.shape[-1] != 3:
-        raise ShapeError(f"points must have shape (..., N, 3); got {tuple(points.shape)}")
-    if not points.is_floating_point():
-        points = points.to(torch.get_default_dtype())
-    if not bool(torch.isfinite(points.detach().sum())) and not bool(torch.isfinite(points.detach()).all()):
-        raise ShapeError("points hold NaN or inf; the SDF needs finite world coordinates (m)")
-    return points
-
-
-def _check_times(t, lead: torch.Size, like: Tensor) -> Tensor:
-    times = torch.as_tensor(t, dtype=like.dtype, device=like.device)
-    if not bool(torch.isfinite(times).all()):
-        raise ShapeError("frame times hold NaN or inf")
-    try:
-        return torch.broadcast_to(times, lead)
-    except RuntimeError:
-        raise ShapeError(
-            f"frame times of shape {tuple(times.shape)} do not broadcast to the points' leading "
-            f"shape {tuple(lead)} (points (..., N, 3), times (...))"
-        ) from None
-
-
-def _model_obstacles(model: mujoco.MjModel) -> tuple[int, ...]:
-    """Colliding geoms of joint-free bodies, upward planes of static bodies excluded."""
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    has_joint = np.zeros(model.nbody, dtype=bool)
-    for j in range(model.njnt):
-        has_joint[model.jnt_bodyid[j]] = True
-    articulated = {int(model.body_rootid[b]) for b in np.nonzero(has_joint)[0]}
-    ids = []
-    for g in range(model.ngeom):
-        body = int(model.geom_bodyid[g])
-        if int(model.body_rootid[body]) in articulated:
-            continue
-        if (
-            model.geom_type[g] == G.mjGEOM_PLANE
-            and model.body_mocapid[body] < 0
-            and data.geom_xmat[g].reshape(3, 3)[2, 2] > 1 - 1e-9
-        ):
-            continue
-        if model.geom_contype[g] or model.geom_conaffinity[g]:
-            ids.append(g)
-    return tuple(ids)

@@ -1,0 +1,71 @@
+"""The retargeting solver's cost as a list of terms (:class:`~retarget.costs.base.CostTerm`).
+
+The solver (:mod:`retarget.solver`) minimises the sum of the terms :func:`default_costs`
+builds; a new term is one class in this package and one entry in that list. Weights come
+from :class:`~retarget.solver_config.SolverConfig`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from retarget.costs.acceleration import AccelerationCost
+from retarget.costs.base import Configuration, CostTerm, NormalEquations, SparseRows, TermValue
+from retarget.costs.body_floor import BodyFloorCost
+from retarget.costs.floor import FloorCost
+from retarget.costs.keypoints import KeypointCost
+from retarget.costs.orientations import OrientationCost
+from retarget.costs.posture import PostureCost
+from retarget.costs.segments import SegmentCost
+from retarget.costs.self_clearance import SelfClearanceCost
+from retarget.costs.velocity import VelocityCost
+from retarget.robot_model import RobotModel
+from retarget.solver_config import SolverConfig
+from retarget.targets import Targets
+
+__all__ = [
+    "AccelerationCost",
+    "BodyFloorCost",
+    "Configuration",
+    "CostTerm",
+    "FloorCost",
+    "KeypointCost",
+    "NormalEquations",
+    "OrientationCost",
+    "PostureCost",
+    "SegmentCost",
+    "SelfClearanceCost",
+    "SparseRows",
+    "TermValue",
+    "VelocityCost",
+    "default_costs",
+]
+
+
+def default_costs(
+    robot: RobotModel, targets: Targets, config: SolverConfig, ref_x: np.ndarray, span: np.ndarray
+) -> list[CostTerm]:
+    """The solver's terms for ``targets`` (T frames).
+
+    Args:
+        robot, targets, config: the problem and its weights.
+        ref_x: (T, n) reference of the temporal terms (:mod:`retarget.costs.temporal`).
+        span: (T,) int, independent spans of frames (no temporal term couples two spans).
+    """
+    c = config
+    terms: list[CostTerm] = [
+        KeypointCost(targets),
+        SegmentCost(targets),
+        OrientationCost(robot, targets, c.l_rot),
+        FloorCost(robot, targets, c.w_floor),
+        PostureCost(robot, c.l_posture),
+    ]
+    if c.body_floor and robot.body_floor is not None:
+        terms.append(BodyFloorCost(robot.body_floor, c.body_floor_weight, c.body_clearance))
+    if c.self_clearance and robot.self_clearance is not None:
+        terms.append(SelfClearanceCost(robot.self_clearance, c.w_self))
+    terms += [
+        VelocityCost(ref_x, span, targets.fps, c.w_vel_root, c.w_vel_joint),
+        AccelerationCost(ref_x, span, targets.fps, c.w_acc_root, c.w_acc_joint, c.exact_acceleration),
+    ]
+    return terms

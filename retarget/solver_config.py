@@ -1,0 +1,63 @@
+"""Settings of the whole-sequence retargeting solver: schedule, damping and every cost weight.
+
+A mapping file's ``solver`` object overrides any of these fields for its robot
+(:func:`retarget.mapping.parse_mapping`); :func:`retarget.costs.default_costs` reads the
+weights when it builds the cost terms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Solver settings; the weights multiply the per-keypoint weights of the mapping.
+
+    Temporal weights apply to differences at 20 fps and are rescaled for other rates so that
+    the same physical velocity/acceleration costs the same.
+    """
+
+    max_iterations: int = 25
+    """Iterations when ``levels`` is empty (one level, all frames)."""
+    tolerance: float = 0.01
+    """Stop a level when an iteration lowers the cost by less than this fraction."""
+    damping: float = 1e-4
+    """Initial Levenberg-Marquardt damping (per frame)."""
+    w_vel_root: float = 0.5
+    w_vel_joint: float = 0.1
+    w_acc_root: float = 100.0
+    w_acc_joint: float = 5.0
+    exact_acceleration: bool = False
+    """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
+    levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
+    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with
+    max_iterations."""
+    extra_iterations: int = 6
+    """Iterations of the local refinement of frames where the self-clearance or body-floor
+    terms are still violated by more than CONSTRAINT_TOLERANCE (stiff terms converge more
+    slowly); only those frames are solved again."""
+    body_floor: bool = True
+    """Keep every body's collision geometry above the floor, not only the feet (kneeling)."""
+    body_floor_weight: float = 1000.0
+    """Weight of that term at the last (full-rate) level; coarser levels use
+    ``min(w_body_floor_coarse, body_floor_weight)``: stiff, a knee must not sink while the
+    locked feet pull the legs."""
+    self_clearance: bool = True
+    """Keep the arms clear of the trunk, the legs and each other (:mod:`retarget.selfcollision`)."""
+    pin_iterations: int = 1
+    """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
+    # Weights of the per-frame cost terms (appended: positional construction keeps its order).
+    l_rot: float = 0.2
+    """Metres per radian of orientation error (an error of 1 rad costs like 0.2 m)."""
+    l_posture: float = 0.1
+    """Metres per radian of posture error."""
+    w_floor: float = 100.0
+    """Weight of the feet's floor/clearance term (per foot collision point)."""
+    w_self: float = 100.0
+    """Weight of the self-clearance term (per capsule pair, :mod:`retarget.selfcollision`)."""
+    body_clearance: float = 0.002
+    """Metres the collision geometry of the non-foot bodies keeps above the floor (knees, hands)."""
+    w_body_floor_coarse: float = 100.0
+    """Weight of the body-floor term at the coarse levels: a stiff floor from the start would
+    lift a straight-legged initial guess off the ground."""
