@@ -64,6 +64,8 @@ class Scene:
         floor_geom_ids: upward-facing plane geoms of static bodies.
         robot_geom_ids: every geom of the robot (visual and collision).
         tracks: keyframe tracks of mocap bodies, by body name.
+        spec: the ``mujoco.MjSpec`` ``model`` was compiled from (the physics check saves the
+            robot + scene as one MJCF file from it).
     """
 
     name: str
@@ -78,6 +80,7 @@ class Scene:
     floor_geom_ids: tuple[int, ...]
     robot_geom_ids: tuple[int, ...]
     tracks: dict[str, MocapTrack] = field(default_factory=dict)
+    spec: mujoco.MjSpec | None = field(default=None, repr=False, compare=False)
     _sdf: SceneSDF | None = field(default=None, repr=False)
 
     @property
@@ -172,6 +175,7 @@ def load_scene(
         robot_geom_ids=robot_ids,
         floor_geom_ids=floor_ids,
         obstacle_geom_ids=obstacle_ids,
+        spec=spec,
         **meta,
     )
 
@@ -199,7 +203,7 @@ def _spec_from_file(path: Path) -> mujoco.MjSpec:
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
-        raise InputFileError(f"malformed MJCF '{path}': {_one_line(exc)}") from None
+        raise InputFileError(f"malformed MJCF '{path}': {_one_line(str(exc))}") from None
 
 
 def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
@@ -207,7 +211,7 @@ def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
         try:
             return spec.compile()
         except ValueError as exc:
-            raise InputFileError(f"malformed MJCF '{path}': {_one_line(exc)}") from None
+            raise InputFileError(f"malformed MJCF '{path}': {_one_line(str(exc))}") from None
 
 
 def _metadata(spec: mujoco.MjSpec, path: Path) -> dict:

@@ -57,10 +57,11 @@ def load_qpos(path: str | Path, fps: float | None = None) -> tuple[np.ndarray, f
             file_fps = float(np.asarray(data["fps"]).reshape(-1)[0]) if "fps" in data else None
         except (ValueError, TypeError, IndexError) as exc:
             raise InputFileError(f"cannot read '{path}': {exc}") from None
-        rate = fps if fps is not None else file_fps
+        given = fps if fps is not None else file_fps
         robot = str(data["robot"]) if "robot" in data else None
-        if rate is None:
+        if given is None:
             raise InputFileError(f"'{path}' has no 'fps' entry: pass --fps")
+        rate = float(given)
     if qpos.ndim != 2 or len(qpos) < 1:
         raise ShapeError(f"trajectory file '{path}': qpos must be (T, nq) with T >= 1; got {qpos.shape}")
     try:

@@ -1,6 +1,6 @@
 """Minimal worlds for checks without the scene library: a packaged robot on a plane floor.
 
-``robot_world("g1", obstacles=[Obstacle(...)])`` compiles the Menagerie robot (from
+``robot_world("g1", obstacles=[Obstacle(...)])`` (its spec: ``robot_spec``) compiles the Menagerie robot (from
 ``retarget.robots.robot_mjcf``) into a world with a floor plane named ``floor`` and one
 joint-less body per static obstacle (or a mocap body for moving ones), so that the qpos
 layout equals the robot's. The real scene library lives in ``scenes``; this is for
@@ -45,6 +45,12 @@ class Obstacle:
 
 def robot_world(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bool = True) -> mujoco.MjModel:
     """Compile ``robot`` (a packaged robot name or an MJCF path) with a floor and obstacles."""
+    return robot_spec(robot, obstacles, floor).compile()
+
+
+def robot_spec(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bool = True) -> mujoco.MjSpec:
+    """The ``mujoco.MjSpec`` of :func:`robot_world` (``make_world`` keeps it: the physics check
+    saves the model from it)."""
     path = Path(robot) if str(robot).endswith(".xml") else robot_mjcf(robot)
     spec = mujoco.MjSpec.from_file(str(path))  # the robot's own spec: options and keyframes kept
     if floor:
@@ -59,7 +65,7 @@ def robot_world(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bo
         else:
             body = spec.worldbody.add_body(name=f"{ob.name}_body")
             body.add_geom(name=ob.name, type=_TYPES[ob.type], size=size, pos=list(ob.pos), quat=list(ob.quat))
-    return spec.compile()
+    return spec
 
 
 def standing_qpos(model: mujoco.MjModel) -> np.ndarray:
