@@ -12,6 +12,7 @@ from controlmm.errors import ControlMMError
 from controlmm.pipeline.feedback import FeedbackConfig
 from controlmm.seeds import check_seed
 from sim.config import CheckConfig
+from sim.physics import PhysicsConfig
 
 DEFAULT_SCENE = "table"
 """The bundled example: a table to keep clear of and a right-hand target beyond its edge."""
@@ -40,7 +41,9 @@ class PlanConfig:
         plots: write ``plots/*.png``.
         timeline: a body-part timeline spec (JSON path) instead of ``text`` (when supported).
         feedback: how failures become loss terms.
-        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
+        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults);
+            ``CheckConfig(physics=True)`` executes every round in physics as its last check.
+        physics: settings of that physics execution check (``sim.PhysicsConfig``).
     """
 
     scene: str = DEFAULT_SCENE
@@ -61,6 +64,7 @@ class PlanConfig:
     timeline: str | None = None
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
     check: CheckConfig = field(default_factory=CheckConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
 
     def __post_init__(self) -> None:
         if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
@@ -83,6 +87,7 @@ class PlanConfig:
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["check"] = self.check.to_dict()
+        out["physics"] = self.physics.to_dict()
         if isinstance(self.control, (str, Path)):
             out["control"] = str(self.control)
         return out

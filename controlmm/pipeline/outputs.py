@@ -20,6 +20,10 @@ plots/clearance.png     per-frame obstacle clearance and floor height of every r
 plots/report.png        the per-frame simulation report of the chosen round
 plots/motion.png        snapshots of the human motion
 plan.json               the settings of the run (to reproduce it)
+physics.npz             with the physics check (``CheckConfig(physics=True)``): the executed
+                        states at every simulation step and the ctrl of every mj_step
+physics_model.xml       the robot + scene + actuators the physics check simulated (one MJCF file)
+robot_physics.csv       the executed motion at 50 fps (Unitree LAFAN1-G1 / BeyondMimic rows)
 .controlmm-output.json  the files above: marks a plan output, which the next plan may replace
 ======================  =======================================================================
 
@@ -37,7 +41,7 @@ from controlmm.motion.plot import plot_motion
 from controlmm.pipeline.plan import PlanResult
 from controlmm.pipeline.plots import plot_clearance, plot_top_view
 from retarget.render import render_trajectory
-from sim import plot_report
+from sim import plot_report, save_certificate
 
 PLAN_OUTPUT = "plan"
 """The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
@@ -66,6 +70,8 @@ def write_plan(
         result.trajectory.save(tmp / "robot")
         write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
+        if result.report.physics is not None:
+            save_certificate(result.report.physics, tmp)
         if config.plots:
             plots = tmp / "plots"
             plots.mkdir()

@@ -32,6 +32,9 @@ class PhysicsConfig:
             many times the model's; 1 = the model's own).
         threads: threads of the persistent rollout pool.
         seed: noise seed (the run is deterministic for a seed and a thread count).
+        memory_s: time constant (s) with which the warm-started plan returns to the nominal
+            targets: an offset that no later plan confirms fades, so directions the cost hardly
+            sees (an arm's pose) do not drift in a random walk from one plan to the next.
         sigma_foot_m: noise of a foot's position relative to the root, per knot (m).
         sigma_foot_rad: noise of a foot's orientation relative to the root, per knot (rad).
         sigma_joint_rad: noise of the other actuators' targets (waist, arms), per knot (rad).
@@ -54,7 +57,8 @@ class PhysicsConfig:
     Verdict (``sim.physics.verdict``):
 
     Attributes:
-        fall_height_ratio: fallen when the root is below this fraction of its reference height.
+        fall_height_ratio: fallen when the root is below this fraction of its reference height
+            (at most the first frame's reference height).
         max_tilt_error_deg: fallen when the root's up axis is this far from the reference's.
         max_root_error_m: a ``tracking_error`` span where the root is this far from its reference.
         max_body_error_m: a ``tracking_error`` span where a foot or hand (relative to the
@@ -66,24 +70,25 @@ class PhysicsConfig:
     """
 
     samples: int = 32
-    horizon_s: float = 0.3
-    knots: int = 3
+    horizon_s: float = 0.5
+    knots: int = 4
     replan_s: float = 0.04
-    plan_substeps: int = 3
+    plan_substeps: int = 5
     threads: int = 2
     seed: int = 0
+    memory_s: float = 0.4
     sigma_foot_m: float = 0.03
     sigma_foot_rad: float = 0.08
-    sigma_joint_rad: float = 0.05
+    sigma_joint_rad: float = 0.03
     wrist_noise: bool = False
     w_root_height: float = 100.0
     w_root_xy: float = 10.0
     w_root_rot: float = 30.0
-    w_joint: float = 0.3
+    w_joint: float = 5.0
     w_com: float = 100.0
     w_com_vel: float = 3.0
     w_feet: float = 30.0
-    w_effort: float = 0.0
+    w_effort: float = 1.0
     terminal: float = 3.0
     fall_height_ratio: float = 0.6
     max_tilt_error_deg: float = 60.0
@@ -108,9 +113,10 @@ class PhysicsConfig:
                 raise ControlMMError(
                     f"PhysicsConfig.{name} must be at least {low}; got {getattr(self, name)}"
                 )
-        if self.horizon_s <= 0 or self.replan_s <= 0:
+        if self.horizon_s <= 0 or self.replan_s <= 0 or self.memory_s <= 0:
             raise ControlMMError(
-                f"PhysicsConfig.horizon_s and replan_s must be > 0; got {self.horizon_s}, {self.replan_s}"
+                "PhysicsConfig.horizon_s, replan_s and memory_s must be > 0; "
+                f"got {self.horizon_s}, {self.replan_s}, {self.memory_s}"
             )
         if self.replan_s > self.horizon_s:
             raise ControlMMError(

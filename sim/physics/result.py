@@ -18,7 +18,8 @@ simulated                the frame was reached by the simulation
 =======================  ===================================================================
 
 The verdict: a ``tracking_fall`` failure from the first frame where the root is below
-``fall_height_ratio`` x its reference height or its up axis is more than
+``fall_height_ratio`` x its reference height (at most the first frame's: a reference floating
+up does not make a robot that stays on its feet count as fallen) or its up axis is more than
 ``max_tilt_error_deg`` from the reference's (depth: metres the root dropped below its
 reference); ``tracking_error`` failures for spans of at least ``min_error_span_s`` where the root
 is more than ``max_root_error_m`` from its reference or an end effector more than

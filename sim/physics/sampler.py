@@ -81,11 +81,13 @@ class PredictiveSampler:
         self.pool.close()
 
     def _shifted(self, elapsed: int) -> np.ndarray:
-        """The best plan moved ``elapsed`` simulation steps on (held past its last knot)."""
+        """The best plan moved ``elapsed`` simulation steps on (held past its last knot), faded
+        towards zero with the time constant ``memory_s``."""
         if elapsed <= 0:
             return self.best
         t = self.knot_steps + elapsed
-        return np.stack([np.interp(t, self.knot_steps, self.best[:, j]) for j in range(self.z_dim)], axis=1)
+        moved = np.stack([np.interp(t, self.knot_steps, self.best[:, j]) for j in range(self.z_dim)], axis=1)
+        return moved * np.exp(-elapsed * self.ref.dt / self.config.memory_s)
 
     def plan(self, state: np.ndarray, step: int) -> float:
         """Choose the plan from ``state`` (full physics state of the executed data) at ``step``.
@@ -133,5 +135,8 @@ class PredictiveSampler:
     def offset(self, step: int) -> np.ndarray:
         """Target offsets (nu,) of the current plan at simulation ``step``."""
         local = float(step - self.plan_step)
-        z = np.array([np.interp(local, self.knot_steps, self.best[:, j]) for j in range(self.z_dim)])
+        knots = self.knot_steps
+        seg = min(max(int(np.searchsorted(knots, local, side="right")) - 1, 0), knots.size - 2)
+        alpha = min(max((local - knots[seg]) / (knots[seg + 1] - knots[seg]), 0.0), 1.0)
+        z = (1.0 - alpha) * self.best[seg] + alpha * self.best[seg + 1]
         return self.ref.basis_at(np.array([step]))[0] @ z

@@ -80,7 +80,9 @@ def _executed_model(world: CheckWorld) -> tuple[mujoco.MjModel, str | None]:
     return model, xml
 
 
-def _plan_model(world: CheckWorld, xml: str | None, substeps: int, act_kp: float, act_kv: float):
+def _plan_model(
+    world: CheckWorld, xml: str | None, substeps: int, act_kp: float, act_kv: float
+) -> mujoco.MjModel:
     if xml is None:
         raise ControlMMError(
             "the physics check needs the scene's MjSpec (to save the model and build the planning copy): "
@@ -95,7 +97,12 @@ def _plan_model(world: CheckWorld, xml: str | None, substeps: int, act_kp: float
         [f.name for f in world.feet],
     )
     servo_planning(spec, act)
-    return spec.compile()
+    try:
+        return spec.compile()
+    except ValueError as exc:
+        raise ControlMMError(
+            f"MuJoCo cannot compile the planning model: {' '.join(str(exc).split())}"
+        ) from None
 
 
 def _feedforward(
@@ -151,7 +158,10 @@ def track(
         raise ControlMMError("the physics check needs at least 2 frames; got 1")
     check_start(world, q[0], config)
     exec_model, xml = _executed_model(world)
-    plan_model = _plan_model(world, xml, config.plan_substeps, check.tracking_kp, check.tracking_kd)
+    plan_model = world.derived(
+        ("physics_plan", config.plan_substeps, check.tracking_kp, check.tracking_kd),
+        lambda: _plan_model(world, xml, config.plan_substeps, check.tracking_kp, check.tracking_kd),
+    )
     if qvel is None or dynamics is None:
         qvel, dynamics = _feedforward(world, q, rate, check)
     act = actuation(exec_model, check.tracking_kp, check.tracking_kd)
@@ -244,7 +254,7 @@ def _simulate(
         torque[t] = peak / limit
         peak[:] = 0.0
 
-    wall = time.perf_counter()
+    wall, cpu = time.perf_counter(), time.process_time()
     bar = tqdm(total=round(S * dt, 2), unit="s", desc="physics", disable=not progress, leave=False)
     measure(0)
     s = 0
@@ -265,13 +275,9 @@ def _simulate(
         t = int(step_frame[s + 1])
         if t >= 0:
             measure(t)
-            if (
-                fell_at is None
-                and fall_frame(
-                    root_height[t : t + 1], ref.frame_qpos[t : t + 1, adr + 2], tilt[t : t + 1], config
-                )
-                is not None
-            ):
+            reference_height = np.minimum(ref.frame_qpos[t : t + 1, adr + 2], ref.frame_qpos[0, adr + 2])
+            down = fall_frame(root_height[t : t + 1], reference_height, tilt[t : t + 1], config)
+            if fell_at is None and down is not None:
                 fell_at = t
                 stop = min(S, s + 1 + int(round(config.after_fall_s / dt)))
         if (s + 1) % replan == 0:
@@ -279,7 +285,7 @@ def _simulate(
         if s + 1 >= stop:
             break
     bar.close()
-    wall = time.perf_counter() - wall
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     taken = min(stop, S) if S else 0
     if not np.isfinite(qpos[: taken + 1]).all():
         raise ControlMMError("the simulation diverged (non-finite state); the trajectory cannot be executed")
@@ -299,9 +305,9 @@ def _simulate(
         if up_frames.any() and eff_error.size
         else 0.0,
         "max_tilt_error_deg": float(np.nanmax(tilt[up_frames])) if up_frames.any() else 0.0,
-        "max_torque_ratio": float(np.nanmax(torque)) if np.isfinite(torque).any() else 0.0,
-        "mean_torque_ratio": float(np.nanmean(np.nanmax(torque, axis=1)))
-        if np.isfinite(torque).any()
+        "max_torque_ratio": float(torque[simulated].max()) if torque.size and simulated.any() else 0.0,
+        "mean_torque_ratio": float(torque[simulated].max(axis=1).mean())
+        if torque.size and simulated.any()
         else 0.0,
         "foot_contact_frames": [int(n) for n in foot_contact.sum(axis=0)],
         "other_contact_frames": int(other_contact.sum()),
@@ -311,6 +317,9 @@ def _simulate(
         "rollout_steps": sampler.rollouts,
         "wall_s": wall,
         "realtime_factor": sim_seconds / wall if wall > 0 else 0.0,
+        "cpu_s": cpu,
+        "threads": config.threads,
+        "realtime_factor_cpu": sim_seconds * config.threads / cpu if cpu > 0 else 0.0,
         "error_kinds": sorted({f.kind for f in failures}),
     }
     return PhysicsResult(
