@@ -95,6 +95,7 @@ def _physics(q: np.ndarray, threads: int, samples: int | None) -> dict:
         "realtime_factor_cpu": s["realtime_factor_cpu"],
         "wall_s": time.perf_counter() - start,
         "seconds": (q.shape[0] - 1) / FPS,
+        "simulated_s": s["simulated_s"],
     }
 
 
@@ -207,10 +208,10 @@ def speed(corpus: Path, samples: int | None) -> list[dict]:
         {
             "method": "physics check (predictive sampling, 2 threads)",
             "clip": f"walk {cid}",
-            "seconds": min(phys["seconds"], phys["time_up_s"] + 0.5) if phys["fell"] else phys["seconds"],
+            "seconds": phys["simulated_s"],
             "time_up_s": phys["time_up_s"],
             "controller_rt": phys["realtime_factor"],
-            "call_rt": (phys["time_up_s"] if phys["fell"] else phys["seconds"]) / phys["wall_s"],
+            "call_rt": phys["simulated_s"] / phys["wall_s"],
             "cpu_rt": phys["realtime_factor_cpu"],
             "stayed_up": not phys["fell"],
         }

@@ -19,7 +19,16 @@ from sim_motions import hold
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.pipeline.feedback import feedback_terms
-from sim import CheckConfig, Failure, PhysicsConfig, check_trajectory, make_world, replay_certificate, track
+from sim import (
+    CheckConfig,
+    Failure,
+    PhysicsConfig,
+    check_trajectory,
+    load_report,
+    make_world,
+    replay_certificate,
+    track,
+)
 from sim.physics import save_certificate
 from sim.physics.certificate import CSV_FPS
 from sim.world import CheckWorld
@@ -165,3 +174,13 @@ def test_validate_physics_bad_input_exits_2_and_writes_nothing(tmp_path, capsys,
     err = one_line_error(capsys, argv)
     assert {"nan": "NaN", "width": "(T, nq=36", "inside": "starts inside the scene"}[bad] in err
     assert list(out.iterdir()) == []
+
+
+def test_report_carries_the_physics_verdict_and_reloads(tmp_path):
+    report = check_trajectory(g1(), stand(12), FPS, CheckConfig(physics=True), physics=FAST)
+    assert report.physics is not None and report.passed and report.stats["physics"]["passed"]
+    assert "physics: PASSED" in report.summary()
+    report.save(tmp_path / "report.json")
+    loaded = load_report(tmp_path / "report.json")
+    assert loaded.stats["physics"]["fell"] is False and "physics: PASSED" in loaded.summary()
+    assert loaded.frames["physics_root_error_m"].shape == (12,)
