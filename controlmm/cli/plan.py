@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
@@ -125,7 +126,6 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from controlmm.pipeline import DEFAULT_SCENE, PlanConfig, plan, write_plan
-    from sim import CheckConfig
 
     torch.set_num_threads(args.threads)
     config = PlanConfig(
@@ -143,8 +143,8 @@ def run(args: argparse.Namespace) -> int:
         render=not args.no_render,
         plots=not args.no_plots,
         timeline=args.timeline,
-        check=CheckConfig(physics=args.physics),
     )
+    config = replace(config, check=replace(config.check, physics=args.physics))
     progress = not args.no_progress
     result = plan(config, progress=progress)
     backend = write_plan(result, args.out, progress=progress, force=args.force)

@@ -94,7 +94,6 @@ def run(args: argparse.Namespace) -> int:
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     import scenes
     import sim.files
-    import sim.physics
     from retarget import DEFAULT_ROBOT
 
     qpos, fps, file_robot = sim.files.load_qpos(args.trajectory, args.fps)
@@ -116,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     )
     report.save(out)
     if report.physics is not None:
-        sim.physics.save_certificate(report.physics, out.parent)
+        sim.save_certificate(report.physics, out.parent)
     if not args.no_plot:
         sim.plot_report(
             report, out.with_suffix(".png"), title=f"{Path(args.trajectory).name} in {scene.name} ({robot})"
