@@ -114,6 +114,8 @@ def test_bad_input_is_a_one_line_error():
     with pytest.raises(ControlMMError, match="starts inside the scene") as err:
         check_trajectory(g1(), sunk, FPS, CheckConfig(physics=True), physics=FAST)
     assert "\n" not in str(err.value) and re.search(r"by \d+\.\d mm", str(err.value))
+    with pytest.raises(ControlMMError, match="MjSpec"):  # a bare MjModel cannot be saved as one MJCF file
+        track(q, make_world(robot_spec("g1").compile()), FAST, fps=FPS)
     boxed = make_world(robot_spec("g1", [Obstacle("crate", "box", (0.2, 0.2, 0.2), (0.0, 0.0, 0.5))]))
     with pytest.raises(ControlMMError, match="inside crate"):
         track(hold(standing_qpos(boxed.model), 5), boxed, FAST, fps=FPS)
@@ -141,6 +143,7 @@ def _write(path, qpos):
     np.savez(path, qpos=qpos, fps=np.float64(FPS), robot=np.array("g1"))
 
 
+@pytest.mark.slow  # end to end: the scene's model is saved and compiled for this one call
 def test_validate_physics_writes_a_certificate_that_replays(tmp_path, capsys):
     _write(tmp_path / "stand.npz", stand(20))
     out = tmp_path / "out" / "report.json"
