@@ -115,7 +115,15 @@ def check_trajectory(
         phys = timed(
             "physics_s",
             lambda: track(
-                q, world, physics_config, fps=rate, check=config, qvel=qvel, dynamics=dyn, progress=progress
+                q,
+                world,
+                physics_config,
+                fps=rate,
+                check=config,
+                qvel=qvel,
+                dynamics=dyn,
+                flight=kin.flight,
+                progress=progress,
             ),
         )
     extra = {

@@ -14,7 +14,7 @@ from typing import Any
 
 from controlmm.errors import ControlMMError
 
-_INTEGERS = ("samples", "knots", "plan_substeps", "threads", "seed")
+_INTEGERS = ("samples", "flight_samples", "knots", "plan_substeps", "threads", "seed")
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,11 @@ class PhysicsConfig:
 
     Attributes:
         samples: rollouts per planning step (the first one is the previous best plan).
+        flight_samples: rollouts per planning step around the reference's flight phases (jumps,
+            running strides: frames the kinematic check found unsupported and ballistic), from
+            ``flight_margin_s`` before such a phase to ``flight_margin_s`` after it: a take-off and
+            a landing need a broader search than walking does.
+        flight_margin_s: see ``flight_samples``.
         horizon_s: length of each rollout (s).
         knots: spline knots over the horizon (linear interpolation between them).
         replan_s: time between two planning steps (s); the plan is applied in between.
@@ -70,6 +75,8 @@ class PhysicsConfig:
     """
 
     samples: int = 32
+    flight_samples: int = 128
+    flight_margin_s: float = 0.5
     horizon_s: float = 0.5
     knots: int = 4
     replan_s: float = 0.04
@@ -108,7 +115,14 @@ class PhysicsConfig:
                     raise ControlMMError(f"PhysicsConfig.{f.name} must be a whole number; got {value!r}")
             elif not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ControlMMError(f"PhysicsConfig.{f.name} must be a finite number >= 0; got {value!r}")
-        for name, low in (("samples", 2), ("knots", 2), ("plan_substeps", 1), ("threads", 1), ("seed", 0)):
+        for name, low in (
+            ("samples", 2),
+            ("flight_samples", 2),
+            ("knots", 2),
+            ("plan_substeps", 1),
+            ("threads", 1),
+            ("seed", 0),
+        ):
             if getattr(self, name) < low:
                 raise ControlMMError(
                     f"PhysicsConfig.{name} must be at least {low}; got {getattr(self, name)}"

@@ -51,6 +51,7 @@ class Reference:
         effectors: (E,) ids of the end-effector bodies (feet, hands: the leaves of the robot's tree).
         frame_effectors: (T, E, 3) their positions relative to the root, in the root's frame.
         frame_up: (T, 3) the root's up axis (world).
+        flight: (S+1,) steps within ``flight_margin_s`` of a flight phase of the reference.
     """
 
     dt: float
@@ -70,6 +71,7 @@ class Reference:
     effectors: np.ndarray
     frame_effectors: np.ndarray
     frame_up: np.ndarray
+    flight: np.ndarray
 
     def frame_of_step(self, step: np.ndarray | int) -> np.ndarray:
         """Fractional frame index of simulation step(s)."""
@@ -124,6 +126,7 @@ def build_reference(
     joint_torque: np.ndarray,
     timestep: float,
     config: PhysicsConfig,
+    flight: np.ndarray | None = None,
 ) -> Reference:
     """Resample a validated trajectory to simulation steps (see the module docstring).
 
@@ -132,7 +135,8 @@ def build_reference(
         qpos, qvel: (T, nq), (T, nv) the trajectory and its finite-difference velocities.
         fps: trajectory rate; timestep: simulation step (s).
         joint_torque: (T, J) torques the motion needs, in ``world.joints`` order (``sim.dynamics``).
-        config: noise scales of the basis.
+        config: noise scales of the basis, the flight margin.
+        flight: (T,) frames in a flight phase (``KinematicResult.flight``), or None.
     """
     m = world.model
     T = qpos.shape[0]
@@ -189,6 +193,12 @@ def build_reference(
         wrist = "wrist" in act.names[a].lower() or "wrist" in (m.joint(int(act.joint[a])).name or "").lower()
         sigma[nz_legs + k] = 0.0 if wrist and not config.wrist_noise else config.sigma_joint_rad
     com_vel = np.asarray(np.gradient(com, 1.0 / fps, axis=0)) if T > 1 else np.zeros_like(com)
+    near_flight = np.zeros(steps + 1, dtype=bool)
+    if flight is not None and np.any(flight):
+        times_f = np.flatnonzero(flight) / fps
+        margin = config.flight_margin_s
+        near = np.abs(times[:, None] - times_f[None, :]).min(axis=1) <= margin
+        near_flight[:] = near
     root_adr = world.root_qpos_adr
     root_quat = resample(qpos[:, root_adr + 3 : root_adr + 7], fps, times)
     root_quat /= np.linalg.norm(root_quat, axis=1, keepdims=True)
@@ -210,4 +220,5 @@ def build_reference(
         effectors=effectors,
         frame_effectors=eff,
         frame_up=up,
+        flight=near_flight,
     )

@@ -7,8 +7,9 @@ C, with no Python loop per sample or per step) and keeps the cheapest
 coordinates (:mod:`sim.physics.reference`) spread evenly over the horizon and linearly
 interpolated; the targets are the nominal ones (PD + inverse-dynamics feed-forward) plus the
 basis times the interpolated coordinates. Candidate 0 is the previous best plan shifted to the
-current time (warm start); the others add Gaussian noise to it. This is MuJoCo MPC's
-predictive sampling, with the perturbations drawn in foot space rather than joint space.
+current time (warm start); the others add Gaussian noise to it. Around the reference's flight
+phases (``Reference.flight``) a step rolls out ``flight_samples`` plans instead. This is MuJoCo
+MPC's predictive sampling, with the perturbations drawn in foot space rather than joint space.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ class PredictiveSampler:
         self.pool = rollout.Rollout(nthread=config.threads)
         self.datas = [mujoco.MjData(model) for _ in range(config.threads)]
         self.nstate = mujoco.mj_stateSize(model, FULL_STATE)
-        B, H = config.samples, self.horizon
+        B, H = max(config.samples, config.flight_samples), self.horizon
         self.states = np.empty((B, H, self.nstate))
         self.sensordata = np.empty((B, H, model.nsensordata))
         self.sensor0 = plan_sensor_start(model)
@@ -94,7 +95,9 @@ class PredictiveSampler:
 
         Returns the chosen plan's cost.
         """
-        cfg, ref, B, H = self.config, self.ref, self.config.samples, self.horizon
+        cfg, ref, H = self.config, self.ref, self.horizon
+        B = cfg.flight_samples if ref.flight[min(step, ref.steps)] else cfg.samples
+        states, sensordata = self.states[:B], self.sensordata[:B]
         warm = self._shifted(step - self.plan_step)
         knots = warm[None] + self.rng.standard_normal((B, cfg.knots, self.z_dim)) * ref.sigma
         knots[0] = warm
@@ -119,12 +122,12 @@ class PredictiveSampler:
             control_spec=self.control_spec,
             skip_checks=True,
             nstep=H,
-            state=self.states,
-            sensordata=self.sensordata,
+            state=states,
+            sensordata=sensordata,
         )
         self.rollouts += B * H
-        qpos = self.states[:, :, 1 : 1 + self.model.nq]
-        sensors = self.sensordata[:, :, self.sensor0 :]
+        qpos = states[:, :, 1 : 1 + self.model.nq]
+        sensors = sensordata[:, :, self.sensor0 :]
         cost = rollout_cost(qpos, sensors, offsets, ref, after, before, self.root_adr, self.act.qpos_adr, cfg)
         cost = np.where(np.isfinite(cost), cost, np.inf)
         best = int(np.argmin(cost))

@@ -107,11 +107,11 @@ def _plan_model(
 
 def _feedforward(
     world: CheckWorld, q: np.ndarray, fps: float, check: CheckConfig
-) -> tuple[np.ndarray, DynamicsResult]:
+) -> tuple[np.ndarray, DynamicsResult, np.ndarray]:
     qvel, qacc, half = velocities_and_accelerations(world.model, q, fps)
     kin = kinematic_check(world, q, fps, half, check)
     dyn = dynamics_check(world, q, qvel, qacc, kin.support, check, fps, kin.supported)
-    return qvel, dyn
+    return qvel, dyn, kin.flight
 
 
 def track(
@@ -123,6 +123,7 @@ def track(
     check: CheckConfig | None = None,
     qvel: np.ndarray | None = None,
     dynamics: DynamicsResult | None = None,
+    flight: np.ndarray | None = None,
     progress: bool = False,
 ) -> PhysicsResult:
     """Execute ``trajectory`` in ``world`` with the predictive tracking controller.
@@ -136,8 +137,9 @@ def track(
         fps: frame rate (taken from ``trajectory.fps`` when omitted).
         check: thresholds of the inverse-dynamics check that gives the feed-forward torques
             (default ``CheckConfig()``; its ``tracking_kp/kd`` are the PD gains for motors).
-        qvel, dynamics: the trajectory's finite-difference velocities and the inverse-dynamics
-            result when the caller has them (``check_trajectory`` does), else computed here.
+        qvel, dynamics, flight: the trajectory's finite-difference velocities, the
+            inverse-dynamics result and the kinematic check's flight frames when the caller has
+            them (``check_trajectory`` does), else computed here.
         progress: a progress bar on stderr.
 
     Returns:
@@ -162,11 +164,11 @@ def track(
         ("physics_plan", config.plan_substeps, check.tracking_kp, check.tracking_kd),
         lambda: _plan_model(world, xml, config.plan_substeps, check.tracking_kp, check.tracking_kd),
     )
-    if qvel is None or dynamics is None:
-        qvel, dynamics = _feedforward(world, q, rate, check)
+    if qvel is None or dynamics is None or flight is None:
+        qvel, dynamics, flight = _feedforward(world, q, rate, check)
     act = actuation(exec_model, check.tracking_kp, check.tracking_kd)
     dt = float(exec_model.opt.timestep)
-    ref = build_reference(world, act, q, qvel, rate, dynamics.joint_torque, dt, config)
+    ref = build_reference(world, act, q, qvel, rate, dynamics.joint_torque, dt, config, flight)
     mocap = world.mocap_poses(np.arange(ref.steps + 1) * dt)
     sampler = PredictiveSampler(
         plan_model, act, ref, config, config.plan_substeps, world.root_qpos_adr, mocap
