@@ -23,7 +23,7 @@ from controlmm.errors import ControlMMError
 from sim.config import CheckConfig
 from sim.dynamics import DynamicsResult, dynamics_check
 from sim.kinematic import kinematic_check
-from sim.physics.actuation import actuation, servo_planning
+from sim.physics.actuation import Actuation, actuation, servo_planning
 from sim.physics.config import PhysicsConfig
 from sim.physics.model import check_same_layout, compile_xml, executed_xml, planning_spec
 from sim.physics.reference import Reference, build_reference
@@ -183,13 +183,15 @@ def _simulate(
     world: CheckWorld,
     m: mujoco.MjModel,
     xml: str | None,
-    act,
+    act: Actuation,
     ref: Reference,
     sampler: PredictiveSampler,
     mocap: tuple[np.ndarray, np.ndarray] | None,
     config: PhysicsConfig,
     progress: bool,
 ) -> PhysicsResult:
+    """The closed loop: plan every ``replan_s``, apply the targets at every ``mj_step``, measure
+    every frame, stop ``after_fall_s`` after a fall; then the verdict and the statistics."""
     T, fps, dt, S = ref.frame_qpos.shape[0], ref.fps, ref.dt, ref.steps
     d = mujoco.MjData(m)
     d.qpos[:] = ref.frame_qpos[0]
