@@ -226,6 +226,7 @@ def plan(
             motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
         else:
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
+            assert latent is not None  # round 0 set it
             edited = edit_motion(
                 model,
                 latent,
@@ -336,6 +337,7 @@ def _timeline(
     editing: EditingConfig,
 ) -> tuple[Motion, list[float], dict[str, Any]]:
     """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
+    assert config.timeline is not None  # the caller's branch
     motion, info = generate_timeline(
         model,
         as_timeline(config.timeline),
