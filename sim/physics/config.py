@@ -28,7 +28,7 @@ class PhysicsConfig:
         flight_samples: rollouts per planning step around the reference's flight phases (jumps,
             running strides: frames the kinematic check found unsupported and ballistic), from
             ``flight_margin_s`` before such a phase to ``flight_margin_s`` after it: a take-off and
-            a landing need a broader search than walking does.
+            a landing need a broader search than walking does (never fewer than ``samples``).
         flight_margin_s: see ``flight_samples``.
         horizon_s: length of each rollout (s).
         knots: spline knots over the horizon (linear interpolation between them).

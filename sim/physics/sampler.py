@@ -96,7 +96,7 @@ class PredictiveSampler:
         Returns the chosen plan's cost.
         """
         cfg, ref, H = self.config, self.ref, self.horizon
-        B = cfg.flight_samples if ref.flight[min(step, ref.steps)] else cfg.samples
+        B = max(cfg.samples, cfg.flight_samples) if ref.flight[min(step, ref.steps)] else cfg.samples
         states, sensordata = self.states[:B], self.sensordata[:B]
         warm = self._shifted(step - self.plan_step)
         knots = warm[None] + self.rng.standard_normal((B, cfg.knots, self.z_dim)) * ref.sigma
