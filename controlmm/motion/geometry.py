@@ -92,7 +92,7 @@ def segments(mask: np.ndarray, min_len: int = 1) -> list[tuple[int, int]]:
     """Runs of True in a boolean array as (start, end) with end exclusive, at least ``min_len`` long."""
     m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
     edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
     return [r for r in runs if r[1] - r[0] >= min_len]
 
 

@@ -46,6 +46,8 @@ from sim import Report, check_trajectory, make_world
 
 CONSTRAINT_TOLERANCE_M = 0.02
 """A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
+_DEFAULT_CONFIG = PlanConfig()
+"""What :func:`plan` plans when given no config: the defaults of :class:`PlanConfig` (frozen)."""
 
 
 @dataclass
@@ -176,7 +178,7 @@ def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, 
 
 
 def plan(
-    config: PlanConfig = PlanConfig(),
+    config: PlanConfig = _DEFAULT_CONFIG,
     *,
     model: MotionModel | None = None,
     progress: bool = True,

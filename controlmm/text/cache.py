@@ -74,7 +74,7 @@ def embed_captions(
     if tokens:
         length = max((c.shape[1] for c in chunks), default=1)
         vectors = torch.zeros(len(unique), length, encoder.dim)
-        for start, chunk in zip(starts, chunks):
+        for start, chunk in zip(starts, chunks, strict=True):
             vectors[start : start + len(chunk), : chunk.shape[1]] = chunk
         stored = vectors.half()
         vectors = stored.float()  # what a later run reads back from the cache
