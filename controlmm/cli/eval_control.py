@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     unknown = getattr(judge, "unknown_word_share", None)
-    if unknown is not None:
+    if judge is not None and unknown is not None:
         share = unknown([c.text for c in table.evaluations[rows[0].name][0].cases])
         if share > 0.5:
             print(

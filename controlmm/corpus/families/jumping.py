@@ -147,7 +147,9 @@ def build_jumps(p: dict, rng: np.random.Generator) -> np.ndarray:
 
 def _hermite(knots: list[tuple[float, float, float]], t: np.ndarray) -> np.ndarray:
     knots = sorted(knots, key=lambda k: k[0])
-    ts, ys, vs = [], [], []
+    ts: list[float] = []
+    ys: list[float] = []
+    vs: list[float] = []
     for kt, ky, kv in knots:
         if ts and kt <= ts[-1] + 1e-6:
             continue
