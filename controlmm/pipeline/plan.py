@@ -45,7 +45,7 @@ from scenes import Scene, load_scene, scene_loss_terms
 from sim import Report, check_trajectory, make_world
 
 CONSTRAINT_TOLERANCE_M = 0.02
-"""A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
+"""A round meets its constraints when every one is within this (2 cm)."""
 _DEFAULT_CONFIG = PlanConfig()
 """What :func:`plan` plans when given no config: the defaults of :class:`PlanConfig` (frozen)."""
 
