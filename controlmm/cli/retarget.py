@@ -26,7 +26,8 @@ offscreen renderer (MUJOCO_GL=egl unless set: Debian packages libegl1, libegl-me
 libgl1-mesa-dri) and falls back to a matplotlib stick figure when no GL backend loads.
 
 examples:
-  controlmm generate --text "a person walks forward" --out walk.npz && controlmm retarget walk.npz --out out/g1_walk
+  controlmm generate --text "a person walks forward" --out walk.npz \
+      && controlmm retarget walk.npz --out out/g1_walk
   controlmm retarget motion.npz --robot h1 --fps 30 --out out/h1 --render out/h1.mp4
   controlmm retarget motion.npz --robot my_robot_mapping.json --out out/mine"""
 

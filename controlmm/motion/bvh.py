@@ -156,7 +156,10 @@ def read_bvh(path: str | Path) -> tuple[np.ndarray, float]:
 
 
 def _parse_bvh(tokens: list[str]) -> tuple[np.ndarray, float]:
-    names, parents, offsets, channels = [], [], [], []
+    names: list[str | None] = []  # None: an End Site
+    parents: list[int] = []
+    offsets: list[np.ndarray] = []
+    channels: list[list[str]] = []
     stack: list[int] = []
     i = 0
     if tokens[0] != "HIERARCHY":
@@ -202,14 +205,15 @@ def _parse_bvh(tokens: list[str]) -> tuple[np.ndarray, float]:
         raise ValueError(f"expected {n_frames}x{n_ch} motion values, found {values.size}")
     values = values.reshape(n_frames, n_ch)
 
-    glob_rot = [None] * len(names)
-    glob_pos = [None] * len(names)
+    # Every parent comes before its children, so joint j's transforms are the j-th appended.
+    glob_rot: list[np.ndarray] = []
+    glob_pos: list[np.ndarray] = []
     col = 0
     for j in range(len(names)):
         pos = np.tile(offsets[j], (n_frames, 1))
         rot = np.tile(np.eye(3), (n_frames, 1, 1))
         axes = ""
-        angles = []
+        angles: list[np.ndarray] = []
         for ch in channels[j]:
             v = values[:, col]
             col += 1
@@ -223,10 +227,11 @@ def _parse_bvh(tokens: list[str]) -> tuple[np.ndarray, float]:
             rot = Rotation.from_euler(axes, np.stack(angles, -1), degrees=True).as_matrix()
         p = parents[j]
         if p < 0:
-            glob_pos[j], glob_rot[j] = pos, rot
+            glob_pos.append(pos)
+            glob_rot.append(rot)
         else:
-            glob_pos[j] = glob_pos[p] + np.einsum("tij,tj->ti", glob_rot[p], pos)
-            glob_rot[j] = np.einsum("tij,tjk->tik", glob_rot[p], rot)
+            glob_pos.append(glob_pos[p] + np.einsum("tij,tj->ti", glob_rot[p], pos))
+            glob_rot.append(np.einsum("tij,tjk->tik", glob_rot[p], rot))
     index = {n: k for k, n in enumerate(names) if n is not None}
     missing = [n for n in JOINT_NAMES if n not in index]
     if missing:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -101,7 +102,10 @@ def save_motion(motion: Motion, path: str | Path, npy_kind: str = "features") ->
     if suffix == ".npy":
         if npy_kind not in ("features", "joints"):
             raise InputFileError(f"npy_kind must be 'features' or 'joints'; got '{npy_kind}'")
-        arr = motion.with_features().features if npy_kind == "features" else motion.joints
+        if npy_kind == "features":
+            arr = cast(np.ndarray, motion.with_features().features)  # with_features() always sets them
+        else:
+            arr = motion.joints
         with atomic_path(path) as tmp:
             np.save(tmp, arr)
         return
@@ -119,4 +123,5 @@ def save_motion(motion: Motion, path: str | Path, npy_kind: str = "features") ->
         arrays[key] = np.asarray(value)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+            # allow_pickle: numpy's default, named so that no array of ``arrays`` can take the keyword.
+            np.savez_compressed(fh, allow_pickle=True, **arrays)

@@ -45,7 +45,9 @@ from scenes import Scene, load_scene, scene_loss_terms
 from sim import Report, check_trajectory, make_world
 
 CONSTRAINT_TOLERANCE_M = 0.02
-"""A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
+"""A round meets its constraints when every one is within this (2 cm)."""
+_DEFAULT_CONFIG = PlanConfig()
+"""What :func:`plan` plans when given no config: the defaults of :class:`PlanConfig` (frozen)."""
 
 
 @dataclass
@@ -176,7 +178,7 @@ def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, 
 
 
 def plan(
-    config: PlanConfig = PlanConfig(),
+    config: PlanConfig = _DEFAULT_CONFIG,
     *,
     model: MotionModel | None = None,
     progress: bool = True,
@@ -210,19 +212,20 @@ def plan(
     extra: list[LossTerm] = []
     history: dict = {}  # feedback margins per robot body, across rounds
     rounds: list[PlanRound] = []
-    latent = None
+    latent: torch.Tensor | None = None  # the edited decoder latent of the last round (not with a timeline)
     for index in range(config.rounds + 1):
         terms = base_terms + extra
         timer: dict[str, float] = {}
         t0 = time.perf_counter()
         if config.timeline is not None:  # a timeline is regenerated whole, its passes minimising every term
             say(f"round {index}: generating the timeline ({len(terms)} loss terms, preset {editing.name})")
-            motion, errors, record = _timeline(model, config, terms, transform, editing)
+            motion, errors, record = _timeline(model, config.timeline, config.seed, terms, transform, editing)
         elif index == 0:
             say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
             motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
         else:
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
+            assert latent is not None  # round 0 set it (rounds without a timeline)
             edited = edit_motion(
                 model,
                 latent,
@@ -295,7 +298,7 @@ def _generate(
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
-):
+) -> tuple[Motion, list[float], dict[str, Any], torch.Tensor]:
     """Round 0: tokens by masked decoding (control model + logits editing), then codebook editing.
 
     Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
@@ -327,16 +330,18 @@ def _generate(
 
 def _timeline(
     model: MotionModel,
-    config: PlanConfig,
+    timeline: str,
+    seed: int,
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
 ) -> tuple[Motion, list[float], dict[str, Any]]:
-    """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
+    """A body-part timeline (``controlmm.timeline``, a JSON path) generated with the loss terms in
+    every pass."""
     motion, info = generate_timeline(
         model,
-        as_timeline(config.timeline),
-        seed=config.seed,
+        as_timeline(timeline),
+        seed=seed,
         preset=editing,
         terms=terms,
         transform=transform,

@@ -186,7 +186,8 @@ def write_opt(path: Path, options: dict) -> None:
 def write_official_checkpoints(
     root: Path, d: Dims, control_channels: int | None = 36, control_vq_same: bool = True
 ) -> dict:
-    """Write ``root/checkpoints/t2m/...`` as the official download scripts leave it; return the state_dicts."""
+    """Write ``root/checkpoints/t2m/...`` as the official download scripts leave it; return the
+    state_dicts."""
     t2m = root / "checkpoints" / "t2m"
     vq, base, res = official_vq_state(d), official_mask_state(d), official_residual_state(d)
     common = dict(dataset_name="t2m", checkpoints_dir="./checkpoints", gpu_id=0, milestones=[50000])

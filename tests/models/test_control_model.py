@@ -184,7 +184,7 @@ def test_one_training_step_reduces_the_consistency_loss(model, tiny_data):
         # measured with the deterministic expectation (the straight-through forward is piecewise constant)
         probe = ControlLoss(control, model.transformer, model.tokenizer, model.normalizer, settings)
 
-        def consistency():
+        def consistency(probe: ControlLoss = probe) -> float:
             with torch.no_grad():
                 return float(probe(*batch, generator=torch.Generator().manual_seed(3))[1]["ctrl"])
 
