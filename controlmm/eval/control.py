@@ -132,7 +132,8 @@ def _case_joints(mode: str, i: int, rng: np.random.Generator) -> tuple[int, ...]
 
 # -- metrics ----------------------------------------------------------------------------------------
 def keyframe_errors(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """e_t (|F|,): for each frame with a controlled joint, the mean distance (m) over its controlled joints."""
+    """e_t (|F|,): for each frame with a controlled joint, the mean distance (m) over its controlled
+    joints."""
     t = mask.shape[0]
     dist = np.linalg.norm(np.asarray(joints, dtype=np.float64)[:t] - targets, axis=-1)
     frames = np.flatnonzero(mask.any(-1))
@@ -142,7 +143,8 @@ def keyframe_errors(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray) -
 def case_metrics(
     joints: np.ndarray, targets: np.ndarray, mask: np.ndarray, threshold: float = THRESHOLD
 ) -> dict[str, float]:
-    """Traj. fail (0/1), Loc. fail fraction, Avg. err (m) and the worst controlled-joint error (m) of one case."""
+    """Traj. fail (0/1), Loc. fail fraction, Avg. err (m) and the worst controlled-joint error (m) of one
+    case."""
     e = keyframe_errors(joints, targets, mask)
     if len(e) == 0:
         raise ControlMMError("a control case needs at least one controlled entry")
@@ -156,7 +158,8 @@ def case_metrics(
 
 
 def summarize(rows: Sequence[dict[str, float]]) -> dict[str, float]:
-    """Means of per-case metric dicts: traj -> Traj. err, loc -> Loc. err, avg -> Avg. err, ...; max -> max."""
+    """Means of per-case metric dicts: traj -> Traj. err, loc -> Loc. err, avg -> Avg. err, ...;
+    max -> max."""
     if not rows:
         return {}
     out = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "max"}
@@ -183,7 +186,7 @@ class ControlEvaluation:
         """Summary per density and over all cases (``"all"``)."""
         out: dict[str, dict[str, float]] = {}
         for d in sorted({c.density for c in self.cases}):
-            out[str(d)] = summarize([r for r, c in zip(self.rows, self.cases) if c.density == d])
+            out[str(d)] = summarize([r for r, c in zip(self.rows, self.cases, strict=True) if c.density == d])
         out["all"] = summarize(self.rows) | self.extra
         return out
 
@@ -217,7 +220,7 @@ class ControlEvaluation:
                     "joints": [JOINT_NAMES[j] for j in c.joints],
                 }
                 | r
-                for c, r in zip(self.cases, self.rows)
+                for c, r in zip(self.cases, self.rows, strict=True)
             ],
         }
 
@@ -262,7 +265,7 @@ def evaluate_control(
             seed=seed + start,
             batch_size=batch_size,
         )
-        for c, motion, record in zip(chunk, out.motions, out.records):
+        for c, motion, record in zip(chunk, out.motions, out.records, strict=True):
             row = case_metrics(motion.joints, c.targets, c.mask)
             row |= {
                 "skate": foot_skating_ratio(motion.joints, FPS),

@@ -91,7 +91,7 @@ def generated_motions(
             batch_size=batch_size,
             **generate_kwargs,
         )
-        for case, motion in zip(chunk, result.motions):
+        for case, motion in zip(chunk, result.motions, strict=True):
             motions[(case.clip_id, case.caption)] = motion
 
     def motion_for(case: ProbeCase):

@@ -181,7 +181,7 @@ def model_generator(model: MotionModel, batch_size: int = 64, **generate_kwargs:
             batch_size=batch_size,
             **generate_kwargs,
         )
-        return [m.features[:f] for m, f in zip(result.motions, frames)]
+        return [m.features[:f] for m, f in zip(result.motions, frames, strict=True)]
 
     return run
 

@@ -65,7 +65,8 @@ PARTS: dict[str, PartSpec] = {}
 
 
 def train_command(part: str) -> str:
-    """The ``controlmm train`` subcommand that trains ``part`` (``token_transformer`` -> ``token-transformer``)."""
+    """The ``controlmm train`` subcommand that trains ``part`` (``token_transformer`` ->
+    ``token-transformer``)."""
     return part.replace("_", "-")
 
 
@@ -303,7 +304,8 @@ class MotionModel:
         return vectors.to(self.device)
 
     def encode_token_states(self, texts: list[str]) -> torch.Tensor:
-        """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer (``config.token_view``)."""
+        """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer
+        (``config.token_view``)."""
         if self.config.token_view is None:
             raise ControlMMError(f"model '{self.directory or 'this model'}' has no token_view configuration")
         self.text_encoder.warn_truncated(texts, self.config.token_view.tokens)

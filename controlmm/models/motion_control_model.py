@@ -97,7 +97,7 @@ class MotionControlModel(nn.Module):
         residuals = []
         g = h
         attn = base.attention_mask(mask, c.shape[0], h.dtype)  # the base's relative position bias, if any
-        for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear):
+        for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear, strict=True):
             g = apply_layer(layer, g, mask, attn)
             residuals.append(zero(g))
         out = run_layers(base.seqTransEncoder.layers, h, mask, lambda i, x: x + residuals[i], attn)

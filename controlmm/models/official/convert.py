@@ -203,7 +203,8 @@ def control_config(state: State, tokenizer: TokenizerConfig, where: str) -> Cont
 
 
 def paper_differences(config: ModelConfig) -> list[str]:
-    """Architecture fields where ``config`` differs from the ``paper`` preset (empty for the released models)."""
+    """Architecture fields where ``config`` differs from the ``paper`` preset (empty for the released
+    models)."""
     paper = preset_config("paper")
     out = []
     for part in ("tokenizer", "transformer", "residual"):
@@ -414,8 +415,8 @@ def import_official(
     normalizer = Normalizer.load(meta / "mean.npy", meta / "std.npy")
     normalization = {
         "source": str(meta),
-        "description": "the official RVQ-VAE folder's meta/mean.npy and meta/std.npy, unchanged (their std of dims "
-        "0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
+        "description": "the official RVQ-VAE folder's meta/mean.npy and meta/std.npy, unchanged (their std "
+        "of dims 0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
         "feat_bias": config.feat_bias,
         "feat_bias_times": config.feat_bias_times,
     }
