@@ -113,7 +113,7 @@ def build_cases(
         count = density if density <= 5 else int(m * density / MAX_FRAMES)
         frames = rng.choice(m, size=max(1, min(count, m)), replace=False)
         mask = np.zeros((m, NUM_JOINTS), dtype=bool)
-        mask[np.ix_(frames, list(chosen))] = True
+        mask[np.ix_(frames, np.array(chosen, dtype=np.intp))] = True
         cases.append(ControlCase(sample.motion_id, text, m, targets, mask, density, chosen, feats))
     return cases
 

@@ -17,8 +17,9 @@ Every field is a plain value so a config round-trips through ``model.json`` (``a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any, TypeVar
+from typing import Any, TypedDict, TypeVar
 
 from controlmm.errors import ControlMMError
 from controlmm.text.config import CLIP_MODEL_ID, TEXT_ENCODER_DIMS, TextEncoderConfig
@@ -411,9 +412,26 @@ def _paper() -> ModelConfig:
     )
 
 
+class _SharedFields(TypedDict):
+    """The fields a preset gives both transformers (and the token-state member) alike."""
+
+    nb_code: int
+    code_dim: int
+    latent_dim: int
+    ff_size: int
+    num_heads: int
+    dropout: float
+    text_dim: int
+    max_len: int
+
+
+class _SharedFieldsWithDepth(_SharedFields):
+    num_layers: int
+
+
 def _demo() -> ModelConfig:
     tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
-    common = dict(
+    common = _SharedFields(
         nb_code=512,
         code_dim=128,
         latent_dim=256,
@@ -506,7 +524,7 @@ def _demo() -> ModelConfig:
 
 def _tiny() -> ModelConfig:
     tok = TokenizerConfig(width=32, code_dim=16, nb_code=32, num_quantizers=3, resnet_dropout=0.0)
-    common = dict(
+    common = _SharedFieldsWithDepth(
         nb_code=32,
         code_dim=16,
         latent_dim=32,
@@ -541,7 +559,7 @@ def _tiny() -> ModelConfig:
     )
 
 
-PRESETS: dict[str, Any] = {"paper": _paper, "demo": _demo, "tiny": _tiny}
+PRESETS: dict[str, Callable[[], ModelConfig]] = {"paper": _paper, "demo": _demo, "tiny": _tiny}
 """Preset name -> factory of its :class:`ModelConfig`."""
 
 

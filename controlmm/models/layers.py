@@ -30,6 +30,8 @@ class InputProcess(nn.Module):
 class PositionalEncoding(nn.Module):
     """Sinusoidal table ``pe`` (max_len, 1, d) added to (S, B, d) inputs, then dropout."""
 
+    pe: torch.Tensor  # buffer (max_len, 1, d)
+
     def __init__(self, d_model: int, dropout: float, max_len: int) -> None:
         super().__init__()
         self.dropout = nn.Dropout(p=dropout)

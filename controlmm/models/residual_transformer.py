@@ -81,7 +81,10 @@ class ResidualTransformer(nn.Module):
     def history(self, ids: torch.Tensor, q: int) -> torch.Tensor:
         """sum_{j<q} E_j[ids_j]: ids (B, N, >= q) with pads as pad_id -> (B, N, code_dim)."""
         emb = self.token_embed_weight
-        return sum(F.embedding(ids[..., j], emb[j]) for j in range(q))
+        out = torch.zeros(ids.shape[:-1] + (emb.shape[-1],), dtype=emb.dtype, device=emb.device)
+        for j in range(q):
+            out = out + F.embedding(ids[..., j], emb[j])
+        return out
 
     def forward(
         self,

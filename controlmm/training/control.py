@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -172,7 +172,7 @@ class ControlLoss(nn.Module):
         frame_lengths: torch.Tensor,
         generator: torch.Generator | None = None,
         hard_error: bool = False,
-    ):
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Loss and metrics for base ids (B, N), target joints (B, 4N, 22, 3), text (B, text_dim).
 
         Returns (loss, metrics) with ``ce``, ``acc``, ``ctrl`` (L1, m) and, with ``hard_error``,
@@ -269,7 +269,7 @@ class ControlStage(TextConditionedStage):
             )
         self.settings = ControlTraining(**{k: v for k, v in opts.items() if v is not None})
         self._set_control_config(replace(ctx.config.control, joints=joints))
-        self.base_transformer = ctx.base.transformer.eval()
+        self.base_transformer = ctx.trained_parts().transformer.eval()
 
     def _set_control_config(self, control: ControlConfig) -> None:
         """Use ``control`` for the branch (written to model.json by :meth:`create`)."""
@@ -292,7 +292,13 @@ class ControlStage(TextConditionedStage):
         return MotionControlModel(self.ctx.config).init_from_base(self.base_transformer)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return ControlLoss(model, self.base_transformer, self.tokenizer, self.ctx.normalizer, self.settings)
+        return ControlLoss(
+            cast(MotionControlModel, model),
+            self.base_transformer,
+            self.tokenizer,
+            self.ctx.normalizer,
+            self.settings,
+        )
 
     def targets(self, motion: torch.Tensor) -> torch.Tensor:
         """(B, T, 263) normalised motions -> (B, T, 22, 3) global joints (the control targets)."""

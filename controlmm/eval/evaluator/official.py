@@ -414,10 +414,11 @@ def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu"
         ckpt = torch.load(files["finest"], map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001
         raise InputFileError(f"'{files['finest']}' is corrupt or unreadable ({type(exc).__name__})") from None
-    modules = {
-        "movement_encoder": MovementConvEncoder(),
-        "text_encoder": TextEncoderBiGRUCo(),
-        "motion_encoder": MotionEncoderBiGRUCo(),
+    movement, text, motion = MovementConvEncoder(), TextEncoderBiGRUCo(), MotionEncoderBiGRUCo()
+    modules: dict[str, nn.Module] = {
+        "movement_encoder": movement,
+        "text_encoder": text,
+        "motion_encoder": motion,
     }
     for key, module in modules.items():
         if not isinstance(ckpt, dict) or key not in ckpt:
@@ -429,9 +430,9 @@ def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu"
     normalizer = Normalizer.load(files["mean"], files["std"])
     words = WordVectorizer(files["glove"])
     return OfficialEvaluator(
-        modules["movement_encoder"],
-        modules["text_encoder"],
-        modules["motion_encoder"],
+        movement,
+        text,
+        motion,
         words,
         normalizer,
         Path(root),

@@ -28,7 +28,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import torch
@@ -140,17 +140,27 @@ def tokenizer_config(state: State, folder: OfficialFolder, notes: list[str]) -> 
     )
 
 
-def _trunk_sizes(state: State, where: str) -> dict[str, int]:
+class _TrunkSizes(TypedDict):
+    """Sizes of a transformer trunk read from its state_dict (shared by both transformer configs)."""
+
+    num_layers: int
+    ff_size: int
+    latent_dim: int
+    text_dim: int
+    max_len: int
+
+
+def _trunk_sizes(state: State, where: str) -> _TrunkSizes:
     layers = _indices(state, r"seqTransEncoder\.layers\.(\d+)\.linear1\.weight")
     if not layers:
         raise InputFileError(f"{where}: no seqTransEncoder layers")
-    return {
-        "num_layers": len(layers),
-        "ff_size": int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
-        "latent_dim": int(_need(state, "cond_emb.weight", where).shape[0]),
-        "text_dim": int(state["cond_emb.weight"].shape[1]),
-        "max_len": int(_need(state, "position_enc.pe", where).shape[0]),
-    }
+    return _TrunkSizes(
+        num_layers=len(layers),
+        ff_size=int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
+        latent_dim=int(_need(state, "cond_emb.weight", where).shape[0]),
+        text_dim=int(state["cond_emb.weight"].shape[1]),
+        max_len=int(_need(state, "position_enc.pe", where).shape[0]),
+    )
 
 
 def transformer_config(state: State, folder: OfficialFolder, notes: list[str]) -> TransformerConfig:
