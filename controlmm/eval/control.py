@@ -1,4 +1,5 @@
-"""The spatial-control evaluation protocol of OmniControl/ControlMM (reference §8).
+"""The spatial-control evaluation protocol of OmniControl/ControlMM (the official MaskControl evaluation,
+https://github.com/exitudio/MaskControl).
 
 Cases come from held-out motions (the test split of a HumanML3D-format directory): per case a clip
 and one of its captions, the length rounded down to a multiple of 4 (at most 196 frames) with a
@@ -19,7 +20,7 @@ joints of frame t of the distance to the target, metres):
 - **Loc. err**: mean over cases of the fraction of keyframes with e_t > 0.5 m;
 - **Avg. err**: mean over cases of the mean e_t;
 - **foot-skating ratio** (:func:`controlmm.motion.geometry.foot_skating_ratio`) on the generated
-  motion's own frames (the official script also counts the padding frames up to 196, §11.12).
+  motion's own frames (the official script also counts the padding frames up to 196).
 
 Text-motion metrics (FID, R-precision, diversity) plug in through ``text_metrics``: any callable
 ``(generated motions, texts, ground-truth motions) -> {column: value}``.

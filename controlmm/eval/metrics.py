@@ -1,4 +1,4 @@
-"""Text-motion quality metrics on evaluator embeddings (reference §8.4; Guo et al. 2022).
+"""Text-motion quality metrics on evaluator embeddings (Guo et al. 2022, as MoMask and MaskControl).
 
 Pure NumPy/SciPy functions of embedding arrays; the evaluator that produces the embeddings and
 the evaluation passes that feed them live in :mod:`controlmm.eval.quality`.

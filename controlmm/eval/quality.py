@@ -1,6 +1,7 @@
 """Quality evaluation of text-to-motion: evaluation passes, the paper's columns, repeats, the table.
 
-Protocol (reference §8; MoMask/MaskControl evaluation scripts):
+Protocol (the evaluation scripts of MoMask, https://github.com/EricGuo5513/momask-codes, and MaskControl,
+https://github.com/exitudio/MaskControl):
 
 - an **evaluation pass** over a split (:class:`EvalSet.draw`): the captioned samples in a random
   order, a final incomplete group of 32 dropped; per sample a random caption, the length m rounded

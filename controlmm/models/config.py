@@ -67,7 +67,7 @@ class TransformerConfig:
     ``pooled_row`` (not in MoMask; models on MiniLM token states only): besides one row per token
     state, one condition row for the states' pooled sentence vector (MiniLM's own pooling) through its
     own LayerNorm and Linear. The two views of a caption fail on different held-out wordings
-    (docs/BENCHMARKS.md, "Sentence vector and token states").
+    (docs/benchmarks-history.md, "Sentence vector and token states").
 
     ``relative_positions`` (not in MoMask): K > 0 adds a learned per-head attention bias for the offset
     between two motion tokens, clipped at K tokens (:mod:`controlmm.models.relative_position`); 0 = off.
@@ -126,7 +126,8 @@ class ResidualConfig:
 
 
 CONTROL_JOINT_SETS: dict[str, tuple[int, ...]] = {"pelvis": (0,), "all": (0, 10, 11, 15, 20, 21)}
-"""Joints the motion control model sees (reference §4.2): pelvis only, or pelvis, feet, head, wrists."""
+"""Joints the motion control model sees, as in the released MaskControl models: pelvis only, or pelvis,
+feet, head, wrists."""
 
 
 @dataclass(frozen=True)
@@ -160,8 +161,8 @@ class TokenViewConfig:
     reads) and the token states (what this transformer reads, at most ``tokens`` per caption). The two
     fail on different held-out wordings, so text-only decoding (``generate``) averages their
     classifier-free-guided log-probabilities at every iteration:
-    ``(1 - weight) * log p_sentence + weight * log p_tokens`` (docs/BENCHMARKS.md, "Sentence vector and
-    token states"). The part (``token_transformer.pt``, ``controlmm train token-transformer``) is
+    ``(1 - weight) * log p_sentence + weight * log p_tokens`` (docs/benchmarks-history.md, "Sentence
+    vector and token states"). The part (``token_transformer.pt``, ``controlmm train token-transformer``) is
     optional: without it decoding uses ``transformer`` alone. The motion control model extends
     ``transformer`` only, so ``generate_controlled`` (whatever its settings) does not use it.
     """
@@ -445,7 +446,7 @@ def _demo() -> ModelConfig:
     # at a time): tokenizer 6.9 it/s (8.6 min), transformer 3.2 it/s (34.5 min), residual 3.6 it/s
     # (19.0 min), token-state transformer 2.6 it/s (20.1 min), control 1.8 it/s (14.5 min): 97 min in
     # all (docs/model-card.md). Both masked transformers use a relative position bias of 16 tokens
-    # (docs/BENCHMARKS.md, "Relative positions"); the residual transformer does not.
+    # (docs/benchmarks-history.md, "Relative positions"); the residual transformer does not.
     schedules = {
         "tokenizer": StageSchedule(
             iters=3500,

@@ -1,7 +1,7 @@
 """The official HumanML3D evaluator (Guo et al. 2022), for users who have its files on disk.
 
 Nothing is downloaded. The modules below are written for this project but are structurally
-identical to the official ones (reference §8.4: same layers, same parameter names and shapes), so
+identical to the official ones (same layers, same parameter names and shapes), so
 the released ``finest.tar`` loads with ``strict=True``:
 
 - ``MovementConvEncoder(259, 512, 512)``: ``main.0`` Conv1d(259->512, k4, s2, p1), ``main.1`` Dropout 0.2,
