@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -254,17 +254,17 @@ class MotionModel:
         return self.require("tokenizer")
 
     @property
-    def transformer(self):
-        return self.require("transformer")
+    def transformer(self) -> MaskTransformer:
+        return cast(MaskTransformer, self.require("transformer"))  # built by _build_transformer
 
     @property
-    def residual(self):
-        return self.parts.get("residual")
+    def residual(self) -> ResidualTransformer | None:
+        return cast(ResidualTransformer | None, self.parts.get("residual"))  # built by _build_residual
 
     @property
-    def token_transformer(self):
+    def token_transformer(self) -> MaskTransformer | None:
         """The token-state masked transformer of ``config.token_view``, or None (not trained)."""
-        return self.parts.get("token_transformer")
+        return cast(MaskTransformer | None, self.parts.get("token_transformer"))
 
     def require(self, name: str) -> nn.Module:
         if name not in self.parts:

@@ -29,6 +29,7 @@ from torch import nn
 from controlmm.models.config import ResidualConfig
 from controlmm.models.layers import (
     InputProcess,
+    LayerHook,
     OutputProcess,
     PositionalEncoding,
     drop_condition,
@@ -93,7 +94,7 @@ class ResidualTransformer(nn.Module):
         cond: torch.Tensor,
         padding_mask: torch.Tensor,
         force_mask: bool = False,
-        hook=None,
+        hook: LayerHook | None = None,
     ) -> torch.Tensor:
         """Logits (B, N, K+1) of layer q.
 

@@ -36,6 +36,7 @@ import pickle
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -247,13 +248,13 @@ class _PlainUnpickler(pickle.Unpickler):
 
     ALLOWED = {("numpy", "dtype"), ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar")}
 
-    def find_class(self, module: str, name: str):
+    def find_class(self, module: str, name: str) -> Any:  # a class or function, as pickle's
         if (module, name) in self.ALLOWED:
             return super().find_class(module, name)
         raise pickle.UnpicklingError(f"refusing to load {module}.{name}")
 
 
-def _read_pickle(path: Path):
+def _read_pickle(path: Path) -> Any:  # whatever the file holds (the callers check what they use)
     try:
         with open(path, "rb") as fh:
             return _PlainUnpickler(fh).load()

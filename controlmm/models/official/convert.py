@@ -391,7 +391,7 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
     }
 
 
-def _compare_statistics(normalizer, meta: Path) -> str:
+def _compare_statistics(normalizer: Normalizer, meta: Path) -> str:
     """A note comparing the VQ statistics with the evaluator's (MaskControl denormalises its decoded motion
     with the evaluator loader's mean/std while the data were normalised with the VQ's; the released files
     are expected to agree)."""
