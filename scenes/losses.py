@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 import torch
@@ -123,7 +122,7 @@ def _check_distance(name: str, value: float) -> float:
 
 def _to_world(transform: HumanToWorld, points: Tensor) -> Tensor:
     """Human-frame points (..., 3) -> world points (..., 3), a tensor as the input is."""
-    return cast(Tensor, transform.to_world(points))  # to_world keeps the array type (annotated as a union)
+    return transform.to_world(points)
 
 
 def _world_sdf(
