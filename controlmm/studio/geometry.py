@@ -89,8 +89,9 @@ def plane(hx: float, hy: float) -> GeomMesh:
     return verts, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)
 
 
-def _lathe(profile: np.ndarray) -> GeomMesh:
-    """Revolve a (K, 2) profile of (radius, z) points about the z axis (closed by its end rings)."""
+def _lathe(profile: np.ndarray, poles: tuple[float, float] | None = None) -> GeomMesh:
+    """Revolve a (K, 2) profile of (radius, z) points about the z axis, closed at both ends by a fan
+    to a point on the axis: at the end rings' heights (flat caps), or at ``poles`` (bottom, top z)."""
     angles = np.linspace(0.0, 2 * math.pi, _SEGMENTS, endpoint=False)
     ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (S, 2)
     verts = np.concatenate(
@@ -103,7 +104,8 @@ def _lathe(profile: np.ndarray) -> GeomMesh:
             c, d = a + _SEGMENTS, b + _SEGMENTS
             tris += [(a, b, d), (a, d, c)]
     last = (len(profile) - 1) * _SEGMENTS
-    caps = np.array([[0.0, 0.0, profile[0, 1]], [0.0, 0.0, profile[-1, 1]]])
+    low, high = poles if poles is not None else (profile[0, 1], profile[-1, 1])
+    caps = np.array([[0.0, 0.0, low], [0.0, 0.0, high]])
     first_cap, last_cap = len(verts), len(verts) + 1
     for s in range(_SEGMENTS):
         tris.append((first_cap, (s + 1) % _SEGMENTS, s))
@@ -114,7 +116,7 @@ def _lathe(profile: np.ndarray) -> GeomMesh:
 def ellipsoid(radii: np.ndarray) -> GeomMesh:
     """An ellipsoid with semi-axes ``radii`` (3,)."""
     polar = np.linspace(math.pi, 0.0, _RINGS + 1)[1:-1]  # bottom to top, poles left to the caps
-    verts, tris = _lathe(np.column_stack([np.sin(polar), np.cos(polar)]))
+    verts, tris = _lathe(np.column_stack([np.sin(polar), np.cos(polar)]), poles=(-1.0, 1.0))
     return (verts * radii.astype(np.float32)), tris
 
 
@@ -126,9 +128,7 @@ def capsule(radius: float, half_length: float) -> GeomMesh:
     profile = np.concatenate(
         [np.column_stack([r[low], z[low] - half_length]), np.column_stack([r[high], z[high] + half_length])]
     )
-    verts, tris = _lathe(profile)
-    verts[-2, 2], verts[-1, 2] = -half_length - radius, half_length + radius  # the poles
-    return verts, tris
+    return _lathe(profile, poles=(-half_length - radius, half_length + radius))
 
 
 def cylinder(radius: float, half_length: float) -> GeomMesh:

@@ -39,6 +39,7 @@ from controlmm.studio.view import dir_view, is_plan_dir, plan_files, plan_view, 
 from scenes import Scene, load_scene
 
 STATUSES = ("queued", "running", "done", "failed")
+WARM_UP_TEXT = "a person walks forward"
 _ROUND = re.compile(r"^round (\d+):")
 
 
@@ -240,7 +241,9 @@ class PlanService:
         if self.threads is not None:
             torch.set_num_threads(self.threads)  # per thread: the worker's own OpenMP setting
         try:
-            self._model = load_model(self.model_dir)
+            model = load_model(self.model_dir)
+            model.encode_text([WARM_UP_TEXT])  # the text encoder loads on first use: load it now, once
+            self._model = model
             self.model_state = "ready"
         except Exception as exc:  # noqa: BLE001 - reported on every request, the server keeps running
             self.model_state, self.model_error = "failed", _one_line(exc)

@@ -41,10 +41,11 @@ FIELDS: dict[str, tuple[str, bool]] = {
     "timeline": ("a timeline object or a timeline .json path", True),
 }
 """Request fields: (what the value must be, whether null is allowed). Unset fields take the
-``PlanConfig`` defaults, except ``render`` (False: the viewer shows the motion in 3-D; ask for
-``render.mp4`` with ``"render": true``)."""
+``PlanConfig`` defaults, except :data:`SERVICE_DEFAULTS`."""
 
-SERVICE_DEFAULTS: dict[str, Any] = {"render": False}
+SERVICE_DEFAULTS: dict[str, Any] = {"render": False, "plots": False}
+"""The service writes no video and no PNG plots unless asked (``"render": true``, ``"plots": true``):
+the page draws the same in 3-D, and they would double a plan's time."""
 
 
 class RequestError(ControlMMError):

@@ -20,7 +20,7 @@ from sim import check_trajectory, make_world
 
 from .conftest import subprocess_env
 
-PLAN = {"scene": "table", "rounds": 1, "preset": "fast", "seed": 3, "plots": False}
+PLAN = {"scene": "table", "rounds": 1, "preset": "fast", "seed": 3}
 """A short plan: the bundled table scene and its hand target, fast editing, one feedback round."""
 
 

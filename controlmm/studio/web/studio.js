@@ -4,7 +4,8 @@
 const $ = (id) => document.getElementById(id);
 const MODE = document.body.dataset.mode;
 const FIELD_INPUTS = { scene: ["scene", "scene-path"], robot: ["robot"], text: ["text"], seconds: ["seconds"],
-  seed: ["seed"], rounds: ["rounds"], preset: ["preset"], control: ["targets"], render: ["render"] };
+  seed: ["seed"], rounds: ["rounds"], preset: ["preset"], control: ["targets"], render: ["render"],
+  plots: ["plots"] };
 const state = { info: null, scene: null, geometries: {}, edits: [], active: -1, job: null, view: null,
   playing: false, textTouched: false, plans: [] };
 const viewer = new window.StudioViewer($("view"), $("labels"));
@@ -49,6 +50,7 @@ async function init() {
   $("seed").value = info.defaults.seed;
   $("rounds").value = info.defaults.rounds;
   $("render").checked = !!info.defaults.render;
+  $("plots").checked = !!info.defaults.plots;
   bindControls();
   await refreshPlans();
   if (MODE === "studio") {
@@ -185,7 +187,8 @@ function controlSpec() {
 
 // ------------------------------------------------------------------------------ planning
 function planRequest() {
-  const body = { scene: sceneRef(), robot: $("robot").value, preset: $("preset").value, render: $("render").checked };
+  const body = { scene: sceneRef(), robot: $("robot").value, preset: $("preset").value, render: $("render").checked,
+    plots: $("plots").checked };
   const text = $("text").value.trim();
   if (text) body.text = text;
   for (const k of ["seed", "rounds"]) body[k] = $(k).value === "" ? NaN : Number($(k).value);
