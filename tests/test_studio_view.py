@@ -10,7 +10,8 @@ import pytest
 from cli_helpers import one_line_error
 
 from controlmm.studio.geometry import box, capsule, cylinder, ellipsoid
-from controlmm.studio.view import body_poses_and_contacts, moving_bodies, scene_geometry
+from controlmm.studio.run import plan_dirs
+from controlmm.studio.view import PLAN_FILES, body_poses_and_contacts, moving_bodies, scene_geometry
 from scenes import load_scene
 
 
@@ -83,3 +84,13 @@ def test_view_and_studio_refuse_bad_input_with_one_line(capsys, tmp_path):
     one_line_error(capsys, ["view", str(tmp_path / "missing")], "is not a directory")
     one_line_error(capsys, ["studio", "--model", str(tmp_path / "missing")], "does not exist")
     one_line_error(capsys, ["studio", "--port", "70000"], "--port", "70000")
+
+
+def test_view_finds_one_plan_or_a_folder_of_plans(tmp_path):
+    for name in ("seed0", "seed1"):
+        for f in PLAN_FILES:
+            (tmp_path / "batch" / name).mkdir(parents=True, exist_ok=True)
+            (tmp_path / "batch" / name / f).write_text("{}")
+    (tmp_path / "batch" / "notes").mkdir()
+    assert [p.name for p in plan_dirs(tmp_path / "batch")] == ["seed0", "seed1"]
+    assert plan_dirs(tmp_path / "batch" / "seed1") == [tmp_path / "batch" / "seed1"]

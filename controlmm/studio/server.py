@@ -38,7 +38,7 @@ from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES
 from controlmm.pipeline import DEFAULT_SCENE, PlanConfig
 from controlmm.studio.jobs import PlanService
 from controlmm.studio.schema import FIELDS, SERVICE_DEFAULTS, RequestError, parse_plan_request, parse_spec
-from retarget import available_robots, robot_scale
+from retarget import available_robots, load_robot, robot_scale
 from scenes import list_scenes, load_scene
 
 WEB = resources.files("controlmm.studio") / "web"
@@ -95,10 +95,13 @@ async def info(request: web.Request) -> web.Response:
 
 def _scene_doc(service: PlanService, scene_ref: str, robot: str) -> dict[str, Any]:
     try:
+        load_robot(robot)
+    except ControlMMError as exc:
+        raise RequestError("robot", str(exc)) from None
+    try:
         scene, gid = service.preview(scene_ref, robot)
     except ControlMMError as exc:
-        field = "robot" if "robot" in str(exc).split(";")[0] else "scene"
-        raise RequestError(field, str(exc)) from None
+        raise RequestError("scene", str(exc)) from None
     targets: list[dict[str, Any]] = []
     if scene.suggested_control:
         transform = scene.human_to_world(robot_scale(robot))
@@ -135,6 +138,10 @@ async def scene(request: web.Request) -> web.Response:
 def _spec_targets(body: dict[str, Any]) -> dict[str, Any]:
     spec = parse_spec(body.get("control"))
     robot = str(body.get("robot") or "g1")
+    try:
+        load_robot(robot)
+    except ControlMMError as exc:
+        raise RequestError("robot", str(exc)) from None
     try:
         scene = load_scene(str(body.get("scene") or DEFAULT_SCENE), robot=robot)
     except ControlMMError as exc:
@@ -281,7 +288,7 @@ def serve(
     (``port=0`` picks a free one)."""
 
     async def main() -> None:
-        runner = web.AppRunner(make_app(service, mode), access_log=None)
+        runner = web.AppRunner(make_app(service, mode), access_log=None, shutdown_timeout=2.0)
         await runner.setup()
         site = web.TCPSite(runner, host, port)
         try:

@@ -14,7 +14,7 @@ import pytest
 from browser import element_pixels, headless_chromium
 from studio_helpers import call, running_server, wait_for
 
-from retarget import RobotTrajectory
+from retarget import RobotTrajectory, robot_scale
 from scenes import load_scene
 from sim import check_trajectory, make_world
 
@@ -273,6 +273,30 @@ def test_the_page_shows_bad_input_next_to_the_field(studio, browser, tmp_path):
     assert "invalid" in browser.find_element(By.ID, "seed").get_attribute("class")
     seed.clear()
     seed.send_keys("0")
+    # a spec file in human coordinates: its targets come back in world coordinates, one row each
+    spec = tmp_path / "spec.json"
+    spec.write_text(
+        json.dumps(
+            {
+                "coords": "human",
+                "constraints": [
+                    {"joint": "pelvis", "frame": 40, "position": [0.0, 0.9, 1.0]},
+                    {"joint": "left_wrist", "frame": 70, "position": [0.3, 1.2, 1.5]},
+                ],
+            }
+        )
+    )
+    browser.find_element(By.ID, "spec-file").send_keys(str(spec))
+    _wait_js(browser, "return document.querySelectorAll('#targets tbody tr').length === 2", 30)
+    edits = browser.execute_script("return window.studio.state.edits")
+    table = load_scene("table", robot="g1")
+    world = table.human_to_world(robot_scale("g1")).to_world(np.array([[0.0, 0.9, 1.0], [0.3, 1.2, 1.5]]))
+    assert [e["joint"] for e in edits] == ["pelvis", "left_wrist"]
+    assert np.array([e["position"] for e in edits]) == pytest.approx(world, abs=1e-3)
+    spec.write_text(json.dumps({"constraints": [{"joint": "tail", "frame": 5, "position": [0, 1, 0]}]}))
+    browser.find_element(By.ID, "spec-file").send_keys(str(spec))
+    message = _wait_js(browser, "return document.getElementById('error-control').textContent", 30)
+    assert "tail" in message
     frame = browser.find_element(By.CSS_SELECTOR, "#targets tbody tr input[data-k=frame]")
     frame.clear()
     frame.send_keys("900")
