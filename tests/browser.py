@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
+from PIL import Image
 
 CHROMIUM_FLAGS = (
     "--headless",
@@ -82,8 +83,6 @@ def headless_chromium() -> Iterator:
 
 def element_pixels(browser, element_id: str) -> np.ndarray:
     """(H, W, 3) uint8 pixels of a page element, from a real screenshot."""
-    from PIL import Image
-
     png = browser.get_screenshot_as_png()
     image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     rect = browser.execute_script(
