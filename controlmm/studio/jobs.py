@@ -71,7 +71,6 @@ class PlanJob:
     out_dir: Path | None = None
     files: list[str] = field(default_factory=list)
     view: bytes | None = None
-    scene: Scene | None = None
 
     def to_dict(self, report: bool = True) -> dict[str, Any]:
         """The job as ``GET /api/plans/{id}`` answers it."""
@@ -153,7 +152,7 @@ class PlanService:
             raise ControlMMError("this server only views finished plans (controlmm view); plan with studio")
         if self.model_state == "failed":
             raise ControlMMError(f"the model did not load: {self.model_error}")
-        job = PlanJob(id=uuid.uuid4().hex[:12], config=request.config, scene=request.scene)
+        job = PlanJob(id=uuid.uuid4().hex[:12], config=request.config)
         with self._lock:
             self._jobs[job.id] = job
         self._queue.put(job)

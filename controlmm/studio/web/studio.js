@@ -7,7 +7,7 @@ const FIELD_INPUTS = { scene: ["scene", "scene-path"], robot: ["robot"], text: [
   seed: ["seed"], rounds: ["rounds"], preset: ["preset"], control: ["targets"], render: ["render"],
   plots: ["plots"] };
 const state = { info: null, scene: null, geometries: {}, edits: [], active: -1, job: null, view: null,
-  playing: false, textTouched: false, plans: [] };
+  playing: false, textTouched: false, plans: [], loading: null };
 const viewer = new window.StudioViewer($("view"), $("labels"));
 window.studio = { state, viewer };  // for people poking at the page from the console (and the tests)
 if (!viewer.ok) $("nogl").hidden = false;
@@ -77,7 +77,13 @@ async function watchModel() {
 
 function sceneRef() { return $("scene-path").value.trim() || $("scene").value; }
 
-async function loadScene(replaceTargets) {
+// A plan sent while a scene loads waits for it (its targets replace the last scene's first).
+function loadScene(replaceTargets) {
+  state.loading = fetchScene(replaceTargets);
+  return state.loading;
+}
+
+async function fetchScene(replaceTargets) {
   clearErrors();
   const q = new URLSearchParams({ scene: sceneRef(), robot: $("robot").value });
   const res = await api("GET", "/api/scene?" + q);
@@ -198,6 +204,7 @@ function planRequest() {
 }
 
 async function startPlan() {
+  if (state.loading) await state.loading;
   clearErrors();
   const body = planRequest();
   for (const k of ["seed", "rounds", "seconds"]) {
