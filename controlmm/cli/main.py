@@ -18,6 +18,8 @@ from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
     "plan",
+    "studio",
+    "view",
     "generate",
     "timeline",
     "train",
