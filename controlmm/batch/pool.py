@@ -1,0 +1,167 @@
+"""The local backend: a pool of worker processes on this machine, each kept warm between jobs.
+
+Every worker is a fresh Python process (``spawn``) that imports torch and MuJoCo and loads the
+models once (:func:`controlmm.batch.worker.setup`), then runs the jobs it is sent one at a
+time over a pipe. A worker whose job runs too long is killed and replaced; one that dies
+(a crash, the out-of-memory killer) is replaced and its job reported. Workers ignore Ctrl-C:
+the driver stops them, and a worker whose driver is gone exits when its pipe closes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import signal
+import sys
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
+from typing import Any
+
+from controlmm.batch.backend import START_FAILURES, Done, load_worker
+from controlmm.errors import ControlMMError
+
+STOP_WAIT_S = 3.0
+"""How long a stopping worker may take to clean up before it is killed."""
+
+
+def _serve(conn: Connection, threads: int, models: list[str | None]) -> None:
+    """A worker process: set up, say ready, then run payloads until the pipe closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides when to stop
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # clean up temporary folders, then exit
+    os.environ["OMP_NUM_THREADS"] = str(threads)
+    worker = load_worker()
+    conn.send(("ready", worker.setup(threads, models)))
+    while True:
+        try:
+            payload = conn.recv()
+        except (EOFError, OSError):
+            return
+        if payload is None:
+            return
+        result = worker.run_job(payload)
+        try:
+            conn.send(("done", result))
+        except OSError:  # the driver is gone
+            return
+
+
+def exit_reason(code: int | None) -> str:
+    """A worker's exit code in words."""
+    if code is not None and code < 0:
+        with contextlib.suppress(ValueError):
+            return f"killed by {signal.Signals(-code).name}"
+    return f"exit code {code}"
+
+
+@dataclass
+class _Slot:
+    process: BaseProcess
+    conn: Connection
+    state: str = "starting"  # starting, idle, busy
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+class LocalPool:
+    """``workers`` processes with ``threads`` torch threads each, ``models`` loaded at start."""
+
+    name = "local"
+
+    def __init__(self, workers: int, *, threads: int = 1, models: list[str | None] | None = None) -> None:
+        if workers < 1:
+            raise ControlMMError(f"workers must be at least 1; got {workers}")
+        self.workers = workers
+        self.threads = threads
+        self.models = list(models or [])
+        self._ctx = mp.get_context("spawn")
+        self._slots: list[_Slot] = []
+        self._failures = 0
+
+    def _spawn(self) -> _Slot:
+        parent, child = self._ctx.Pipe()
+        process = self._ctx.Process(
+            target=_serve, args=(child, self.threads, self.models), daemon=True, name="controlmm-batch-worker"
+        )
+        process.start()
+        child.close()
+        return _Slot(process, parent)
+
+    def start(self) -> None:
+        self._slots = [self._spawn() for _ in range(self.workers)]
+
+    def idle(self) -> list[int]:
+        return [i for i, s in enumerate(self._slots) if s.state == "idle"]
+
+    def worker(self, slot: int) -> dict[str, Any]:
+        return dict(self._slots[slot].info)
+
+    def submit(self, slot: int, payload: dict[str, Any]) -> None:
+        s = self._slots[slot]
+        s.state = "busy"
+        with contextlib.suppress(OSError):  # a worker that just died is reported by wait()
+            s.conn.send(payload)
+
+    def wait(self, timeout: float) -> list[Done]:
+        owners: dict[Any, int] = {}
+        for i, s in enumerate(self._slots):
+            owners[s.conn] = i
+            owners[s.process.sentinel] = i
+        done: list[Done] = []
+        dead: set[int] = set()
+        for obj in wait(list(owners), timeout):
+            i = owners[obj]
+            s = self._slots[i]
+            if obj is not s.conn:
+                dead.add(i)
+                continue
+            try:
+                kind, value = s.conn.recv()
+            except (EOFError, OSError):
+                dead.add(i)
+                continue
+            if kind == "ready":
+                s.state, s.info, self._failures = "idle", value, 0
+            else:
+                s.state = "idle"
+                done.append(Done(i, value))
+        for i in sorted(dead):
+            s = self._slots[i]
+            with contextlib.suppress(EOFError, OSError):  # a result sent just before the worker died
+                while s.state == "busy" and s.conn.poll():
+                    kind, value = s.conn.recv()
+                    if kind == "done":
+                        s.state = "idle"
+                        done.append(Done(i, value))
+            s.process.join(STOP_WAIT_S)
+            if s.process.is_alive():
+                s.process.kill()
+                s.process.join()
+            reason = exit_reason(s.process.exitcode)
+            if s.state == "busy":
+                done.append(Done(i, None, f"the worker process died ({reason})"))
+            elif s.state == "starting":
+                self._failures += 1
+                if self._failures >= START_FAILURES:
+                    raise ControlMMError(f"batch worker processes die before they start ({reason})")
+            s.conn.close()
+            self._slots[i] = self._spawn()
+        return done
+
+    def kill(self, slot: int) -> None:
+        s = self._slots[slot]
+        s.process.kill()
+        s.process.join()
+        s.conn.close()
+        self._slots[slot] = self._spawn()
+
+    def close(self) -> None:
+        for s in self._slots:  # an idle worker holds nothing: killed; a busy one cleans its temporary folder
+            (s.process.kill if s.state == "idle" else s.process.terminate)()
+        for s in self._slots:
+            s.process.join(STOP_WAIT_S)
+            if s.process.is_alive():
+                s.process.kill()
+                s.process.join()
+            s.conn.close()
+        self._slots = []
