@@ -17,6 +17,7 @@ import sys
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
+from types import FrameType
 from typing import Any
 
 from controlmm.batch.backend import START_FAILURES, Done, load_worker
@@ -25,26 +26,36 @@ from controlmm.errors import ControlMMError
 STOP_WAIT_S = 3.0
 """How long a stopping worker may take to clean up before it is killed."""
 
+KILL_WAIT_S = 1.0
+"""How long a timed-out job's worker may take to unwind before it is killed."""
+
 
 def _serve(conn: Connection, threads: int, models: list[str | None]) -> None:
-    """A worker process: set up, say ready, then run payloads until the pipe closes."""
+    """A worker process: set up, say ready, then run payloads until told to stop or the pipe closes.
+
+    SIGTERM stops it: a job in progress unwinds (its temporary folder is removed), then the
+    process ends at once (``os._exit``: tearing down torch and the models would take seconds).
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides when to stop
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # clean up temporary folders, then exit
+    signal.signal(signal.SIGTERM, _exit_on_term)
     os.environ["OMP_NUM_THREADS"] = str(threads)
-    worker = load_worker()
-    conn.send(("ready", worker.setup(threads, models)))
-    while True:
-        try:
+    try:
+        worker = load_worker()
+        conn.send(("ready", worker.setup(threads, models)))
+        while True:
             payload = conn.recv()
-        except (EOFError, OSError):
-            return
-        if payload is None:
-            return
-        result = worker.run_job(payload)
-        try:
-            conn.send(("done", result))
-        except OSError:  # the driver is gone
-            return
+            if payload is None:
+                break
+            conn.send(("done", worker.run_job(payload)))
+    except (EOFError, OSError, SystemExit):  # the driver is gone, or SIGTERM
+        pass
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+def _exit_on_term(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(0)
 
 
 def exit_reason(code: int | None) -> str:
@@ -150,14 +161,17 @@ class LocalPool:
 
     def kill(self, slot: int) -> None:
         s = self._slots[slot]
-        s.process.kill()
-        s.process.join()
+        s.process.terminate()  # the job unwinds and its temporary folder goes, unless it is stuck in C
+        s.process.join(KILL_WAIT_S)
+        if s.process.is_alive():
+            s.process.kill()
+            s.process.join()
         s.conn.close()
         self._slots[slot] = self._spawn()
 
     def close(self) -> None:
-        for s in self._slots:  # an idle worker holds nothing: killed; a busy one cleans its temporary folder
-            (s.process.kill if s.state == "idle" else s.process.terminate)()
+        for s in self._slots:  # SIGTERM: the worker exits at once, cleaning up its temporary files
+            s.process.terminate()
         for s in self._slots:
             s.process.join(STOP_WAIT_S)
             if s.process.is_alive():

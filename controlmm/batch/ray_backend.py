@@ -85,8 +85,8 @@ class RayBackend:
     def __init__(
         self, address: str, workers: int | None, *, threads: int = 1, models: list[str | None] | None = None
     ) -> None:
-        if address != "auto":
-            parse_address(address)
+        if address != "auto" and not ray.is_initialized():
+            check_reachable(address)  # before any output is written
         self.address = address
         self.workers = workers
         self.threads = threads
@@ -103,7 +103,6 @@ class RayBackend:
                 cpus = self.workers or os.cpu_count() or 1
                 ray.init(address="local", num_cpus=cpus, include_dashboard=False, **options)
             else:
-                check_reachable(self.address)
                 try:
                     ray.init(address=self.address, **options)
                 except (ConnectionError, RuntimeError, ValueError) as exc:

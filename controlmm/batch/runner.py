@@ -29,7 +29,7 @@ from typing import Any
 from tqdm import tqdm
 
 from controlmm import __version__
-from controlmm.atomic import open_growing_dir, write_text
+from controlmm.atomic import check_output_dir, open_growing_dir, write_text
 from controlmm.batch.backend import Backend
 from controlmm.batch.jobs import Job
 from controlmm.batch.payload import payload
@@ -137,24 +137,26 @@ def run_batch(
     if len({job.id for job in jobs}) != len(jobs):
         raise ControlMMError("job ids must be unique (controlmm.batch.duplicate_ids marks repeats)")
     start = time.perf_counter()
-    out = open_growing_dir(out, kind=BATCH_OUTPUT, force=config.force, make_parents=True)
+    out = check_output_dir(out, kind=BATCH_OUTPUT, force=config.force, make_parents=True)
     store = BatchStore(out)
     result = BatchResult(out, jobs, {})
     todo: list[Job] = []
     for job in jobs:
-        record = store.load(job)
+        record = None if config.force else store.load(job)  # force: start over
         if record is not None and not (config.retry_errors and record.get("status") in RETRY_STATUSES):
             result.records[job.id] = record
-        elif job.error:  # a malformed entry: recorded, never run
+        elif not job.error:
+            todo.append(job)
+    result.skipped = len(result.records)
+    backend = make_backend(config, todo) if todo else None  # Ray missing or unreachable: fails here
+    open_growing_dir(out, kind=BATCH_OUTPUT, force=config.force, make_parents=True)
+    for job in jobs:
+        if job.error and job.id not in result.records:  # a malformed entry: recorded, never run
             result.records[job.id] = store.write(job, {"status": "error", "error": job.error, "seconds": 0.0})
             result.ran += 1
-        else:
-            todo.append(job)
-    result.skipped = len(result.records) - result.ran
     bar = _Progress(config.progress, jobs, result.records)
     try:
-        if todo:
-            backend = make_backend(config, todo)
+        if backend is not None:
             result.backend = backend.name
             _write_run(out, config, backend, jobs)
             try:

@@ -16,6 +16,7 @@ import os
 import socket
 import sys
 import tempfile
+import threading
 import time
 import traceback
 import warnings
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from tqdm import tqdm
 
 from controlmm.atomic import OUTPUT_MARKER
 from controlmm.batch.tasks import TASKS, Warm
@@ -45,6 +47,9 @@ def setup(threads: int = 1, models: list[str | None] | None = None) -> dict[str,
     ``{"worker": "host:pid", "pid": pid}``.
     """
     torch.set_num_threads(threads)
+    # tqdm's default lock is a multiprocessing semaphore, which a stopped worker would leave behind:
+    # a worker writes one bar at most, so a thread lock does
+    tqdm.set_lock(threading.RLock())
     for model in models or []:
         with contextlib.suppress(Exception):
             _WARM.model(model)

@@ -28,6 +28,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "retarget",
     "scene",
     "validate",
+    "batch",
     "eval",
     "info",
 )
