@@ -29,7 +29,7 @@ import hashlib
 import json
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -200,7 +200,7 @@ def parse_job(entry: object, *, base: Path, source: str) -> list[Job]:
     family = entry.get("family", "")
     if not isinstance(family, str):
         raise ControlMMError(f"{source}: 'family' must be a string; got {family!r}")
-    given_id = check_job_id(entry["id"]) if "id" in entry else None
+    given_id = _located(source, lambda: check_job_id(entry["id"])) if "id" in entry else None
     if kind == "variations":
         return scene_variations(args, base=base, source=source, id=given_id, family=family)
     job = Job(given_id or "", kind, args, str(base), source, family)
@@ -229,22 +229,23 @@ def _check_paths(job: Job) -> None:
     for key, label in what.items():
         path = job.path(key)
         if path is not None:
-            _exists(job.source, lambda p=path, label=label: input_file(p, label))
+            _located(job.source, lambda p=path, label=label: input_file(p, label))
     control = job.path("control")
     if control is not None:
-        _exists(job.source, lambda: input_file(control, "control spec"))
+        _located(job.source, lambda: input_file(control, "control spec"))
     model = job.path("model")
     if model is not None:
-        _exists(job.source, lambda: input_dir(model, "model directory"))
+        _located(job.source, lambda: input_dir(model, "model directory"))
     for key in ("scene", "robot"):
         path = job.path(key)
         if path is not None:
-            _exists(job.source, lambda p=path, key=key: input_file(p, f"{key} file"))
+            _located(job.source, lambda p=path, key=key: input_file(p, f"{key} file"))
 
 
-def _exists(source: str, check: Any) -> None:
+def _located(source: str, check: Callable[[], Any]) -> Any:
+    """``check()``'s value; its ControlMMError with ``source`` in front."""
     try:
-        check()
+        return check()
     except ControlMMError as exc:
         raise ControlMMError(f"{source}: {exc}") from None
 

@@ -123,6 +123,7 @@ def run_plan(args: dict[str, Any], out: Path, warm: Warm) -> dict[str, Any]:
     return {
         **report_figures(result.report),
         **figures,
+        "input": result.text,
         "constraint_errors_m": [round(e, 5) for e in errors],
         "max_constraint_error_m": round(max(errors), 5) if errors else None,
         "chosen_round": result.best,
