@@ -101,7 +101,8 @@ class Job:
         args: the arguments as written (JSON types; paths as given, relative to ``base``).
         base: folder that relative paths in ``args`` are relative to.
         source: where the job came from (``jobs.jsonl:3``, a motion file).
-        family: the summary's group (given, the motion's folder or corpus family, or the scene).
+        family: the summary's group (given in the JSONL; for a folder, the motion's folder or its
+            corpus family).
         error: why the entry is malformed (the job is recorded as an error, never run).
     """
 
@@ -147,7 +148,10 @@ class Job:
     def input(self) -> str:
         """The motion, trajectory or prompt the job starts from."""
         if self.kind == "plan":
-            return str(self.args.get("text") or self.args.get("timeline") or "(the scene's prompt)")
+            timeline = self.args.get("timeline")
+            if timeline is not None:
+                return f"timeline {timeline}" if isinstance(timeline, str) else "(a timeline)"
+            return str(self.args.get("text") or "(the scene's prompt)")
         return str(self.args.get(_INPUT_FILES.get(self.kind, ""), ""))
 
 
@@ -200,7 +204,10 @@ def parse_job(entry: object, *, base: Path, source: str) -> list[Job]:
     family = entry.get("family", "")
     if not isinstance(family, str):
         raise ControlMMError(f"{source}: 'family' must be a string; got {family!r}")
-    given_id = _located(source, lambda: check_job_id(entry["id"])) if "id" in entry else None
+    try:
+        given_id = check_job_id(entry["id"]) if "id" in entry else None
+    except ControlMMError as exc:
+        raise ControlMMError(f"{source}: {exc}") from None
     if kind == "variations":
         return scene_variations(args, base=base, source=source, id=given_id, family=family)
     job = Job(given_id or "", kind, args, str(base), source, family)
@@ -223,31 +230,26 @@ def _check_type(source: str, key: str, value: object, types: tuple[type, ...]) -
         raise ControlMMError(f"{source}: '{key}' must be {_TYPE_NAMES[types]}; got {json.dumps(value)}")
 
 
+_PATH_CHECKS: dict[str, tuple[str, Callable[[Path, str], Path]]] = {
+    "motion": ("motion file", input_file),
+    "trajectory": ("trajectory file", input_file),
+    "timeline": ("timeline file", input_file),
+    "control": ("control spec", input_file),
+    "model": ("model directory", input_dir),
+    "scene": ("scene file", input_file),
+    "robot": ("robot file", input_file),
+}
+
+
 def _check_paths(job: Job) -> None:
     """Input files must exist now (a job is never started on a missing file)."""
-    what = {"motion": "motion file", "trajectory": "trajectory file", "timeline": "timeline file"}
-    for key, label in what.items():
+    for key, (label, check) in _PATH_CHECKS.items():
         path = job.path(key)
         if path is not None:
-            _located(job.source, lambda p=path, label=label: input_file(p, label))
-    control = job.path("control")
-    if control is not None:
-        _located(job.source, lambda: input_file(control, "control spec"))
-    model = job.path("model")
-    if model is not None:
-        _located(job.source, lambda: input_dir(model, "model directory"))
-    for key in ("scene", "robot"):
-        path = job.path(key)
-        if path is not None:
-            _located(job.source, lambda p=path, key=key: input_file(p, f"{key} file"))
-
-
-def _located(source: str, check: Callable[[], Any]) -> Any:
-    """``check()``'s value; its ControlMMError with ``source`` in front."""
-    try:
-        return check()
-    except ControlMMError as exc:
-        raise ControlMMError(f"{source}: {exc}") from None
+            try:
+                check(path, label)
+            except ControlMMError as exc:
+                raise ControlMMError(f"{job.source}: {exc}") from None
 
 
 def _with_id(job: Job, given: str | None) -> Job:

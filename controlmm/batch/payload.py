@@ -9,6 +9,7 @@ timeline) are made absolute and must be readable where the workers run.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from typing import Any
 
 from controlmm.batch.jobs import Job
@@ -19,6 +20,16 @@ INPUT_FILES = {"retarget": ("motion", "motion file"), "validate": ("trajectory",
 """The argument of each kind that names the file the job starts from (sent as bytes), and its label."""
 
 PATHS = ("scene", "robot", "model", "timeline")
+
+
+def plan_models(jobs: Sequence[Job]) -> list[str | None]:
+    """The model directories the plan jobs use (None: the embedded default), as workers receive them."""
+    models = set()
+    for job in jobs:
+        if job.kind == "plan":
+            path = job.path("model")
+            models.add(str(path.resolve()) if path is not None else None)
+    return sorted(models, key=str)
 
 
 def payload(job: Job) -> dict[str, Any]:

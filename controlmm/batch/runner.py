@@ -32,7 +32,7 @@ from controlmm import __version__
 from controlmm.atomic import check_output_dir, open_growing_dir, write_text
 from controlmm.batch.backend import Backend
 from controlmm.batch.jobs import Job
-from controlmm.batch.payload import payload
+from controlmm.batch.payload import payload, plan_models
 from controlmm.batch.pool import LocalPool
 from controlmm.batch.store import BATCH_OUTPUT, RETRY_STATUSES, BatchStore
 from controlmm.batch.summary import write_summary
@@ -108,9 +108,7 @@ def cpu_count() -> int:
 
 def make_backend(config: BatchConfig, jobs: Sequence[Job]) -> Backend:
     """The backend of ``config`` for ``jobs`` (plan models loaded by every worker at start)."""
-    models = sorted(
-        {str(job.path("model")) if job.path("model") else None for job in jobs if job.kind == "plan"}, key=str
-    )
+    models = plan_models(jobs)
     if config.ray is None:
         workers = config.workers or max(1, min(cpu_count(), len(jobs)))
         return LocalPool(workers, threads=config.threads, models=models)
