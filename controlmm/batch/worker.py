@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from controlmm.atomic import OUTPUT_MARKER
@@ -47,6 +48,8 @@ def setup(threads: int = 1, models: list[str | None] | None = None) -> dict[str,
     ``{"worker": "host:pid", "pid": pid}``.
     """
     torch.set_num_threads(threads)
+    # numpy's BLAS (OpenBLAS starts one spinning thread per core) too: workers share the cores
+    threadpool_limits(limits=threads)
     # tqdm's default lock is a multiprocessing semaphore, which a stopped worker would leave behind:
     # a worker writes one bar at most, so a thread lock does
     tqdm.set_lock(threading.RLock())
@@ -63,7 +66,7 @@ def run_job(payload: dict[str, Any]) -> dict[str, Any]:
     (:func:`controlmm.batch.payload.payload`). The record's ``status`` is ``passed``, ``failed``
     (a check failed), ``done`` (nothing to check) or ``error`` (with ``error``, one line).
     """
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     record: dict[str, Any] = {"worker": worker_name()}
     files: dict[str, bytes] = {}
     log = io.StringIO()
@@ -93,6 +96,7 @@ def run_job(payload: dict[str, Any]) -> dict[str, Any]:
     if lines:
         record["log"] = lines[-MAX_LOG_LINES:]
     record["seconds"] = round(time.perf_counter() - start, 3)
+    record["cpu_seconds"] = round(time.process_time() - cpu, 3)
     sys.stdout.flush()
     return {"record": record, "files": files}
 
