@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from controlmm.batch import load_jobs, read_jsonl, scene_variations, write_summary
-from controlmm.batch.jobs import Job, folder_jobs
+from controlmm.batch.jobs import Job
+from controlmm.batch.sources import folder_jobs
 from controlmm.batch.variations import jitter_scene
 from controlmm.errors import ControlMMError
 from scenes import load_scene

@@ -1,7 +1,7 @@
-"""Batch jobs: what to run, read from a JSONL file or a folder of motions.
+"""Batch jobs: one ``plan``, ``retarget`` or ``validate`` run each, with stable ids.
 
-A job is one ``plan``, ``retarget`` or ``validate`` run. In a JSONL file each line is one JSON
-object, ``{"kind": ..., <arguments>}``, with the arguments of the command of that name::
+A job is written as a JSON object, ``{"kind": ..., <arguments>}``, with the arguments of the
+command of that name (:data:`FIELDS` lists them with their JSON types)::
 
     {"kind": "plan", "scene": "pillars", "seed": 3, "rounds": 1, "preset": "fast"}
     {"kind": "retarget", "motion": "walk.npz", "robot": "h1", "scene": "table"}
@@ -10,17 +10,10 @@ object, ``{"kind": ..., <arguments>}``, with the arguments of the command of tha
 
 ``variations`` is a generator: ``count`` plan jobs in copies of ``scene`` whose static obstacles
 are moved by up to ``jitter_m`` metres in x and y (seeded by ``variation_seed`` and the copy's
-index); it takes every ``plan`` argument too. Every line may name its ``id`` (letters, digits,
-``.``, ``_``, ``-``) and its ``family`` (a group of the summary); relative paths are relative to
-the JSONL file's folder. Blank lines and lines starting with ``#`` are skipped. A line that cannot
-be read becomes a job with an ``error`` naming its line number (recorded as failed, never run).
-
-A folder of motions (``.npz``, ``.npy``, ``.bvh``, ``.csv``, searched recursively; for a
-HumanML3D-format folder ``new_joint_vecs/*.npy`` only, families from ``meta/<id>.json``) gives one
-``retarget`` job per motion and robot (retarget, then validate in ``scene``).
-
-Job ids are stable: the given ``id``, else the kind, a readable name and a hash of the arguments,
-so a rerun of the same file finds the jobs it already ran.
+index); it takes every ``plan`` argument too. Any job may name its ``id`` (letters, digits,
+``.``, ``_``, ``-``) and its ``family`` (a group of the summary). Job ids are stable: the given
+``id``, else the kind, a readable name and a hash of the arguments, so a rerun finds the jobs it
+already ran. Where jobs come from (JSONL files, folders of motions): :mod:`.sources`.
 """
 
 from __future__ import annotations
@@ -29,7 +22,7 @@ import hashlib
 import json
 import math
 import re
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,9 +36,6 @@ KINDS = ("plan", "retarget", "validate")
 
 GENERATORS = ("variations",)
 """JSONL kinds that stand for several jobs."""
-
-MOTION_SUFFIXES = (".npz", ".npy", ".bvh", ".csv")
-"""Files of a folder of motions (a ``.csv``: 22 x 3 joint columns, or a robot trajectory)."""
 
 MAX_VARIATIONS = 10_000
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
@@ -137,12 +127,12 @@ class Job:
         """The scene named by the job (the plan default ``table``, ``empty`` for the others)."""
         variation = self.args.get("variation")
         if isinstance(variation, dict):  # a jittered copy: grouped with its scene
-            return _stem(variation["scene"])
-        return _stem(self.args.get("scene") or ("table" if self.kind == "plan" else "empty"))
+            return short_name(variation["scene"])
+        return short_name(self.args.get("scene") or ("table" if self.kind == "plan" else "empty"))
 
     @property
     def robot(self) -> str:
-        return _stem(self.args.get("robot") or "g1")
+        return short_name(self.args.get("robot") or "g1")
 
     @property
     def input(self) -> str:
@@ -155,7 +145,12 @@ class Job:
         return str(self.args.get(_INPUT_FILES.get(self.kind, ""), ""))
 
 
-def _stem(name: str) -> str:
+def file_safe(name: str) -> str:
+    """``name`` with every run of characters other than letters, digits, ``.``, ``_``, ``-`` as ``_``."""
+    return _UNSAFE.sub("_", name)
+
+
+def short_name(name: str) -> str:
     """A scene or robot as the summary shows it: the name, or a file's stem."""
     text = str(name)
     return Path(text).stem if text.lower().endswith((".xml", ".json")) else text
@@ -164,7 +159,7 @@ def _stem(name: str) -> str:
 def job_id(kind: str, name: str, args: dict[str, Any]) -> str:
     """A stable id: ``kind-name-<8 hex of the arguments>`` (name made file-name safe)."""
     digest = hashlib.sha1(json.dumps([kind, args], sort_keys=True).encode()).hexdigest()[:8]
-    slug = _UNSAFE.sub("_", name).strip("._-")[:60]
+    slug = file_safe(name).strip("._-")[:60]
     return f"{kind}-{slug}-{digest}" if slug else f"{kind}-{digest}"
 
 
@@ -289,148 +284,11 @@ def scene_variations(
     if not 0 <= seed <= SEED_MAX:
         raise ControlMMError(f"{source}: 'variation_seed' must be from 0 to 2^63 - 1; got {seed}")
     scene = str(plan_args.get("scene", "table"))
-    prefix = id or job_id("variations", _stem(scene), args)
+    prefix = id or job_id("variations", short_name(scene), args)
     jobs = []
     for k in range(count):
         variation = {"scene": scene, "index": k, "jitter_m": jitter, "seed": seed}
         job = Job(f"{prefix}-v{k}", "plan", {**plan_args, "variation": variation}, str(base), source, family)
         _check_paths(job)
         jobs.append(job)
-    return jobs
-
-
-def read_jsonl(path: str | Path) -> list[Job]:
-    """Every job of a JSONL file; a line that cannot be read gives a job with ``error`` set."""
-    path = input_file(path, "jobs file")
-    base = path.resolve().parent
-    jobs: list[Job] = []
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError as exc:
-        raise ControlMMError(f"jobs file '{path}' is not UTF-8 text ({exc.reason})") from None
-    for number, line in enumerate(lines, start=1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        source = f"{path.name}:{number}"
-        try:
-            try:
-                entry = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise ControlMMError(f"{source}: not valid JSON ({exc.msg} at column {exc.colno})") from None
-            jobs.extend(parse_job(entry, base=base, source=source))
-        except ControlMMError as exc:
-            jobs.append(Job(f"line-{number}", "invalid", {"line": number}, str(base), source, error=str(exc)))
-    return jobs
-
-
-def motion_files(folder: str | Path) -> tuple[Path, list[Path], dict[str, str]]:
-    """``(folder, motion files sorted, family by file)`` of a folder of motions.
-
-    A HumanML3D-format folder (``new_joint_vecs/``) gives ``new_joint_vecs/*.npy`` with the
-    ``family`` of ``meta/<id>.json`` where present; any other folder every motion file below it
-    (hidden entries skipped), its family the file's folder.
-    """
-    root = input_dir(folder, "motion folder").resolve()
-    families: dict[str, str] = {}
-    if (root / "new_joint_vecs").is_dir():
-        files = sorted((root / "new_joint_vecs").glob("*.npy"))
-        for f in files:
-            meta = root / "meta" / f"{f.stem}.json"
-            if meta.is_file():
-                try:
-                    families[str(f)] = str(json.loads(meta.read_text(encoding="utf-8")).get("family", ""))
-                except (OSError, ValueError, AttributeError):
-                    pass
-        return root, files, families
-    files = sorted(
-        p
-        for p in root.rglob("*")
-        if p.suffix.lower() in MOTION_SUFFIXES
-        and p.is_file()
-        and not any(part.startswith(".") for part in p.relative_to(root).parts)
-    )
-    for f in files:
-        parent = f.parent.relative_to(root).as_posix()
-        families[str(f)] = "" if parent == "." else parent
-    return root, files, families
-
-
-def folder_jobs(
-    folder: str | Path,
-    robots: Sequence[str] = ("g1",),
-    *,
-    scene: str = "empty",
-    fps: float = 50.0,
-    csv_fps: float = 30.0,
-) -> list[Job]:
-    """One ``retarget`` job (retarget, then validate in ``scene``) per motion file and robot.
-
-    Ids are ``<path below the folder>.<robot>`` (``/`` -> ``__``), e.g. ``walks__012314.npy.g1``.
-    """
-    root, files, families = motion_files(folder)
-    if not files:
-        raise ControlMMError(f"motion folder '{folder}' holds no motion files ({', '.join(MOTION_SUFFIXES)})")
-    jobs = []
-    for f in files:
-        rel = f.relative_to(root).as_posix()
-        for robot in robots:
-            args: dict[str, Any] = {"motion": rel, "robot": robot, "fps": fps, "scene": scene}
-            if f.suffix.lower() == ".csv":
-                args["csv_fps"] = csv_fps
-            name = _UNSAFE.sub("_", rel.replace("/", "__"))
-            jid = f"{name}.{_UNSAFE.sub('_', _stem(robot))}"[-100:].lstrip("._-")
-            jobs.append(Job(jid, "retarget", args, str(root), rel, families.get(str(f), "")))
-    return jobs
-
-
-def duplicate_ids(jobs: Iterable[Job]) -> list[Job]:
-    """``jobs`` with a later job whose id is taken turned into an error entry (never run)."""
-    seen: dict[str, str] = {}
-    out = []
-    for job in jobs:
-        if job.id in seen:
-            error = f"{job.source}: job id '{job.id}' is already used by {seen[job.id]}"
-            job = Job(f"{job.id}-dup-{_digest(job.source)}", "invalid", {}, job.base, job.source, error=error)
-        seen.setdefault(job.id, job.source)
-        out.append(job)
-    return out
-
-
-def _digest(text: str) -> str:
-    return hashlib.sha1(text.encode()).hexdigest()[:6]
-
-
-def load_jobs(
-    source: str | Path,
-    robots: Sequence[str] | None = None,
-    *,
-    scene: str | None = None,
-    fps: float | None = None,
-    csv_fps: float = 30.0,
-    strict: bool = False,
-) -> list[Job]:
-    """The jobs of a JSONL file or a folder of motions (see the module docstring).
-
-    ``robots``, ``scene`` and ``fps`` apply to a folder (defaults ``g1``, ``empty``, 50 Hz); a
-    JSONL file's jobs carry their own. With ``strict`` the first malformed entry raises its
-    one-line ControlMMError instead of becoming an error job.
-    """
-    path = Path(source).expanduser()
-    if path.is_dir():
-        jobs = folder_jobs(path, robots or ("g1",), scene=scene or "empty", fps=fps or 50.0, csv_fps=csv_fps)
-    else:
-        for name, value in (("--robot", robots), ("--scene", scene), ("--fps", fps)):
-            if value:
-                raise ControlMMError(
-                    f"{name} applies to a folder of motions; a JSONL job names its own ('{name[2:]}')"
-                )
-        jobs = read_jsonl(path)
-    jobs = duplicate_ids(jobs)
-    if strict:
-        for job in jobs:
-            if job.error:
-                raise ControlMMError(job.error)
-    if not jobs:
-        raise ControlMMError(f"'{source}' holds no jobs")
     return jobs
