@@ -104,7 +104,7 @@ def main() -> None:
             tries = [measure(jobs, Path(tmp) / f"out{i}-{k}", config) for k in range(args.repeat)]
             rows.append((name, max(tries, key=lambda r: r["jobs_per_min"])))
     print(f"\n{args.jobs} retarget + validate jobs (G1, empty scene), {args.frames} frames at 20 fps each\n")
-    head = "backend | workers | jobs passed | start-up s | run s | jobs/min | job s | job CPU s | overhead ms/job"
+    head = "backend | workers | passed | start-up s | run s | jobs/min | job s | job CPU s | overhead ms/job"
     print(f"| {head} |")
     print("|---" * len(head.split("|")) + "|")
     for name, r in rows:
