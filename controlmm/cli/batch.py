@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-from pathlib import Path
 from types import FrameType
 
 from controlmm.atomic import check_output_dir
 from controlmm.cli.args import add_force, integer, positive, threads
-from controlmm.errors import ControlMMError
 
 HELP = """Run many jobs: plans, retargets and validations, on a local process pool or on Ray.
 
@@ -118,8 +116,6 @@ def _stop(signum: int, frame: FrameType | None) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, kind="batch", force=args.force, make_parents=True)  # before any work
-    if not Path(args.jobs).exists():
-        raise ControlMMError(f"jobs '{args.jobs}' does not exist; give a JSONL file or a folder of motions")
     # heavy (the runner and tqdm; workers import torch and MuJoCo): imported when the command runs, so
     # that --help stays fast
     from controlmm.batch import BatchConfig, load_jobs, run_batch
