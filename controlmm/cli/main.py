@@ -30,6 +30,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "retarget",
     "scene",
     "validate",
+    "batch",
     "eval",
     "info",
 )
