@@ -20,8 +20,10 @@ smpl      pelvis, left_hip, ..., right_wrist (this project, the SMPL body models
 
 Names are compared exactly first, then ignoring case and any namespace prefix (``mixamorig:``,
 ``mixamorig1:``, ``Character1_``-style prefixes are not stripped: only ``xxx:`` and ``mixamorig_``).
-The SMPL collar joint sits halfway along the clavicle, so the BVH families take it as the midpoint
-of ``LeftShoulder`` (the clavicle's root) and ``LeftArm`` (the shoulder joint).
+Where a family has fewer spine joints than SMPL's three, the middle one is the midpoint of its
+neighbours. CMU's ``LeftShoulder`` starts at the chest's centre line, so its SMPL collar is the
+midpoint of ``LeftShoulder`` and ``LeftArm`` (the clavicle's middle); LAFAN1's and Mixamo's
+``LeftShoulder`` is the collar itself.
 
 Any other skeleton needs a mapping file (JSON, :func:`load_skeleton_map`)::
 
@@ -82,7 +84,7 @@ _HIPS_STYLE_LIMBS: dict[str, str | Sources] = {
     "{side}_ankle": "{S}Foot",
     "neck": "Neck",
     "head": "Head",
-    "{side}_collar": {"{S}Shoulder": 0.5, "{S}Arm": 0.5},
+    "{side}_collar": "{S}Shoulder",
     "{side}_shoulder": "{S}Arm",
     "{side}_elbow": "{S}ForeArm",
     "{side}_wrist": "{S}Hand",
@@ -93,6 +95,7 @@ _TWO_SPINES: dict[str, str | Sources] = {
     "spine2": {"Spine": 0.5, "Spine1": 0.5},
     "spine3": "Spine1",
 }
+_CMU_COLLARS: dict[str, str | Sources] = {"{side}_collar": {"{S}Shoulder": 0.5, "{S}Arm": 0.5}}
 
 
 def _table(*parts: dict[str, str | Sources], toe: str) -> dict[str, str | Sources]:
@@ -138,7 +141,7 @@ FAMILIES: tuple[Family, ...] = (
     Family("smpl", dict(PHC_NAMES), markers=("l_hip", "l_thorax")),
     Family(
         "cmu",
-        _table(_HIPS_STYLE_LIMBS, _TWO_SPINES, toe="{S}ToeBase"),
+        _table(_HIPS_STYLE_LIMBS, _TWO_SPINES, _CMU_COLLARS, toe="{S}ToeBase"),
         markers=("lhipjoint", "lowerback", "neck1"),
         needs_marker=True,
     ),
@@ -248,14 +251,22 @@ def closest_family(names: Sequence[str]) -> tuple[str, list[str]]:
 
 
 def unmapped_error(what: str, names: Sequence[str]) -> InputFileError:
-    """The one-line error for a skeleton no family maps: the missing joints and the mapping file to write."""
+    """The one-line error for a skeleton no family maps: its joints, the missing ones of the closest
+    family, and the mapping file to write."""
     family, missing = closest_family(names)
-    shown = ", ".join(missing[:12]) + (f" and {len(missing) - 12} more" if len(missing) > 12 else "")
+    table = next(f.table for f in FAMILIES if f.name == family)
+    needed = {n for v in _as_sources(table).values() for n in v}
+    own = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+    if len(missing) < len(needed):
+        shown = ", ".join(missing[:12]) + (f" and {len(missing) - 12} more" if len(missing) > 12 else "")
+        why = f"the closest naming, {family}, lacks {shown}"
+    else:
+        why = f"they follow no known naming ({', '.join(dict.fromkeys(f.name for f in FAMILIES))})"
     return InputFileError(
-        f"{what}: cannot map its {len(names)} joints to the 22 SMPL joints (closest naming: {family}, "
-        f'which lacks {shown}); write a mapping file {{"joints": {{"pelvis": "<your root joint>", '
-        f'"left_hip": ..., ...}}}} naming one of your joints for each of the 22 SMPL joints '
-        f"({', '.join(JOINT_NAMES)}) and pass it with --skeleton-map FILE (see {MAPPING_DOC})"
+        f"{what}: cannot map its {len(names)} joints ({own}) to the 22 SMPL joints: {why}; write a "
+        f'mapping file {{"joints": {{"pelvis": "<your root joint>", "left_hip": ..., ...}}}} naming one of '
+        f"your joints for each of the 22 SMPL joints ({', '.join(JOINT_NAMES)}) and pass it with "
+        f"--skeleton-map FILE (see {MAPPING_DOC})"
     )
 
 
