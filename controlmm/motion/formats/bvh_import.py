@@ -154,7 +154,7 @@ def bvh_to_smpl22(
     error that lists the missing joints and the mapping file to write.
     """
     if mapping is None:
-        mapping = detect_family(anim.names)
+        mapping = detect_family(anim.names, anim.positions)
         if mapping is None:
             raise unmapped_error(what, anim.names)
     else:

@@ -95,7 +95,7 @@ def import_positions(array: PositionArray, path: Path, options: ImportOptions, f
             )
         joints, skeleton = mapping.apply(names, array.positions), mapping.name
     elif array.names is not None:
-        family = detect_family(array.names)
+        family = detect_family(array.names, array.positions)
         if family is None:
             raise unmapped_error(what, array.names)
         joints, skeleton = family.apply(array.names, array.positions), family.name

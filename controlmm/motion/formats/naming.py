@@ -21,9 +21,10 @@ smpl      pelvis, left_hip, ..., right_wrist (this project, the SMPL body models
 Names are compared exactly first, then ignoring case and any namespace prefix (``mixamorig:``,
 ``mixamorig1:``, ``Character1_``-style prefixes are not stripped: only ``xxx:`` and ``mixamorig_``).
 Where a family has fewer spine joints than SMPL's three, the middle one is the midpoint of its
-neighbours. CMU's ``LeftShoulder`` starts at the chest's centre line, so its SMPL collar is the
-midpoint of ``LeftShoulder`` and ``LeftArm`` (the clavicle's middle); LAFAN1's and Mixamo's
-``LeftShoulder`` is the collar itself.
+neighbours. The BVH families' ``LeftShoulder`` is the SMPL collar, unless the file puts it on the
+chest's centre line (as CMU conversions may: left and right shoulder joints closer than a quarter of
+the shoulder width), where the collar is taken halfway to ``LeftArm`` (the clavicle's middle) so that
+the two collars stay apart.
 
 Any other skeleton needs a mapping file (JSON, :func:`load_skeleton_map`)::
 
@@ -95,7 +96,9 @@ _TWO_SPINES: dict[str, str | Sources] = {
     "spine2": {"Spine": 0.5, "Spine1": 0.5},
     "spine3": "Spine1",
 }
-_CMU_COLLARS: dict[str, str | Sources] = {"{side}_collar": {"{S}Shoulder": 0.5, "{S}Arm": 0.5}}
+_MID_CLAVICLES: dict[str, str | Sources] = _sided(
+    "Left", "Right", {"{side}_collar": {"{S}Shoulder": 0.5, "{S}Arm": 0.5}}
+)
 
 
 def _table(*parts: dict[str, str | Sources], toe: str) -> dict[str, str | Sources]:
@@ -141,7 +144,7 @@ FAMILIES: tuple[Family, ...] = (
     Family("smpl", dict(PHC_NAMES), markers=("l_hip", "l_thorax")),
     Family(
         "cmu",
-        _table(_HIPS_STYLE_LIMBS, _TWO_SPINES, _CMU_COLLARS, toe="{S}ToeBase"),
+        _table(_HIPS_STYLE_LIMBS, _TWO_SPINES, toe="{S}ToeBase"),
         markers=("lhipjoint", "lowerback", "neck1"),
         needs_marker=True,
     ),
@@ -218,8 +221,11 @@ def _as_sources(table: Mapping[str, str | Sources]) -> dict[str, Sources]:
     return {j: ({v: 1.0} if isinstance(v, str) else dict(v)) for j, v in table.items()}
 
 
-def detect_family(names: Sequence[str]) -> SkeletonMap | None:
-    """The naming family of a skeleton whose joints are ``names``, or None when none maps fully."""
+def detect_family(names: Sequence[str], positions: np.ndarray | None = None) -> SkeletonMap | None:
+    """The naming family of a skeleton whose joints are ``names``, or None when none maps fully.
+
+    With ``positions`` (T, J, 3), shoulder joints on the chest's centre line move the collars to the
+    clavicles' middle (module docstring)."""
     normalised = {normalise_name(n) for n in names}
     lowered = [n.strip().lower() for n in names]
     best: tuple[int, int, Family] | None = None
@@ -237,7 +243,26 @@ def detect_family(names: Sequence[str]) -> SkeletonMap | None:
             best = key
     if best is None:
         return None
-    return SkeletonMap(best[2].name, _as_sources(best[2].table))
+    table = dict(best[2].table)
+    if positions is not None and _central_shoulders(names, positions, table):
+        table.update(_MID_CLAVICLES)
+    return SkeletonMap(best[2].name, _as_sources(table))
+
+
+def _central_shoulders(names: Sequence[str], positions: np.ndarray, table: dict[str, str | Sources]) -> bool:
+    """Whether the joints a table takes as the collars lie on the centre line (closer together than a
+    quarter of the shoulder width)."""
+    index = _NameIndex(names)
+    picks = [table[k] for k in ("left_collar", "right_collar", "left_shoulder", "right_shoulder")]
+    if not all(isinstance(p, str) for p in picks) or "Shoulder" not in str(picks[0]):
+        return False
+    found = [index.find(str(p)) for p in picks]
+    if any(k is None for k in found):
+        return False
+    lc, rc, ls, rs = (positions[:, k] for k in found)
+    collars = float(np.median(np.linalg.norm(lc - rc, axis=-1)))
+    shoulders = float(np.median(np.linalg.norm(ls - rs, axis=-1)))
+    return collars < 0.25 * shoulders
 
 
 def closest_family(names: Sequence[str]) -> tuple[str, list[str]]:
