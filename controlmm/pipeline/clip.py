@@ -13,9 +13,13 @@ The edit is applied to the clip as a change: the motion of a latent z is
 so an unedited clip is reproduced exactly, whatever the tokenizer's own reconstruction error
 (``tokens_only`` in the report: the demo model's tokenizer, trained on the procedural corpus, is
 several centimetres off on real mocap), and the decoder supplies a smooth, body-coordinated basis
-of changes. One more loss term keeps the motion on the clip:
+of changes. One more loss term keeps the motion on the clip (``d`` the joints' displacement from the
+clip, ``p`` the pelvis's horizontal part of it):
 
-    closeness(joints) = mean over frames and joints of max(|joints - clip| - tolerance, 0)^2    (m^2)
+    closeness = mean over frames and joints of max(|d - p| - tol, 0)^2
+                + 0.1 * mean over frames of max(|p| - tol, 0)^2                               (m^2)
+
+so the pose counts fully and the path a tenth: going around an obstacle with the clip's poses is cheap.
 
 It is quadratic while the obstacle, floor and feedback losses are linear in the penetration
 depth, so near a constraint the constraint wins and the closeness term only decides everything
@@ -49,17 +53,21 @@ from controlmm.motion.skeleton import FPS, JOINT_NAMES, MIN_FRAMES
 from controlmm.pipeline.refine import EditedMotion, control_targets
 
 MAX_CLIP_SECONDS = 30.0
-"""Longest clip a plan edits (600 frames at 20 fps); choose a window of a longer one."""
+"""Longest clip a plan edits (600 frames at 20 fps): a longer clip is cut (with a warning) unless a
+window is chosen."""
 CLOSENESS_TOLERANCE_M = 0.01
 """Joint distance to the clip that costs nothing (the closeness term's dead zone)."""
+PATH_WEIGHT = 0.1
+"""Weight of the pelvis's horizontal path against the pose in the closeness term."""
 
 
 def load_clip(
     path: str, options: dict[str, Any], start_s: float = 0.0, seconds: float | None = None
 ) -> Motion:
     """The clip as a HumanML3D Motion with features (20 fps, starting at the origin facing +Z),
-    cut to ``[start_s, start_s + seconds)``; one-line errors for a window outside the clip or a clip
-    too short or too long to edit."""
+    cut to ``[start_s, start_s + seconds)`` (at most :data:`MAX_CLIP_SECONDS`: a longer rest of the
+    clip is cut there, and ``metadata["window_note"]`` says so); one-line errors for a window outside
+    the clip or one too short to edit."""
     motion = load_motion(path, **options).with_features()
     frames = motion.num_frames
     first = int(round(start_s * FPS))
@@ -73,20 +81,22 @@ def load_clip(
             f"the clip '{path}' from {start_s:g} s holds {count / FPS:.2f} s; a plan needs at least "
             f"{MIN_FRAMES / FPS:g} s ({MIN_FRAMES} frames at {FPS} fps)"
         )
+    note = None
     if count > MAX_CLIP_SECONDS * FPS:
-        raise ControlMMError(
-            f"the clip '{path}' is {count / FPS:.1f} s long; a plan edits at most {MAX_CLIP_SECONDS:g} s: "
-            "choose a window with --motion-start S --seconds S"
+        note = (
+            f"the clip '{path}' runs {count / FPS:.1f} s from {start_s:g} s; a plan edits at most "
+            f"{MAX_CLIP_SECONDS:g} s, so {start_s:g}-{start_s + MAX_CLIP_SECONDS:g} s is edited "
+            "(choose another window with --motion-start S --seconds S)"
         )
+        count = int(MAX_CLIP_SECONDS * FPS)
     if first == 0 and count == frames:
         return motion
     assert motion.features is not None  # with_features() above
+    metadata = {**motion.metadata, "window_s": [first / FPS, (first + count) / FPS]}
+    if note:
+        metadata["window_note"] = note
     # Recovered from the window's features, so that the window starts at the origin like the model's output.
-    return Motion.from_features(
-        motion.features[first : first + count],
-        text=motion.text,
-        metadata={**motion.metadata, "window_s": [first / FPS, (first + count) / FPS]},
-    )
+    return Motion.from_features(motion.features[first : first + count], text=motion.text, metadata=metadata)
 
 
 def encode_clip(model: MotionModel, motion: Motion) -> tuple[torch.Tensor, torch.Tensor]:
@@ -196,15 +206,27 @@ class ClipEditor:
 
 
 def closeness_term(
-    reference: np.ndarray, weight: float = 1.0, tolerance: float = CLOSENESS_TOLERANCE_M
+    reference: np.ndarray,
+    weight: float = 1.0,
+    tolerance: float = CLOSENESS_TOLERANCE_M,
+    path_weight: float = PATH_WEIGHT,
 ) -> LossTerm:
-    """The loss term that keeps joints (B, T, 22, 3) near ``reference`` (T, 22, 3) (module docstring)."""
+    """The loss term that keeps joints (B, T, 22, 3) near ``reference`` (T, 22, 3) (module docstring).
+
+    The pose (every joint relative to the pelvis's horizontal position) counts fully and the
+    horizontal path of the pelvis ``path_weight`` times, so a detour around an obstacle that keeps the
+    clip's poses costs little while a changed pose costs a lot."""
     ref = torch.as_tensor(np.asarray(reference), dtype=torch.float32)
+
+    def excess(delta: torch.Tensor) -> torch.Tensor:
+        return torch.relu((delta.square().sum(-1) + 1e-12).sqrt() - tolerance).square()
 
     def fn(joints: torch.Tensor) -> torch.Tensor:
         r = ref.to(device=joints.device, dtype=joints.dtype)[: joints.shape[1]]
-        dist = ((joints[:, : len(r)] - r).square().sum(-1) + 1e-12).sqrt()
-        return torch.relu(dist - tolerance).square().flatten(1).mean(-1)
+        delta = joints[:, : len(r)] - r  # (B, T, 22, 3)
+        path = delta[:, :, :1] * delta.new_tensor([1.0, 0.0, 1.0])  # the pelvis's horizontal shift
+        pose = excess(delta - path).flatten(1).mean(-1)
+        return pose + path_weight * excess(path[:, :, 0]).mean(-1)
 
     return LossTerm("closeness:clip", fn, weight=weight)
 

@@ -234,6 +234,8 @@ def plan(
         raise ControlMMError(error)
     sdf = scene.sdf() if scene.obstacle_geom_ids else None
     warnings = constraint_warnings(spec, transform, sdf) if spec else []
+    if clip is not None and clip.metadata.get("window_note"):
+        warnings.insert(0, str(clip.metadata["window_note"]))
     for w in warnings:
         print(f"controlmm: warning: {w}", file=sys.stderr)
     if model is None:
