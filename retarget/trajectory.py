@@ -137,8 +137,8 @@ class RobotTrajectory:
             rows = np.concatenate([self.qpos[:, 0:3], self.qpos[:, [4, 5, 6, 3]], self.qpos[:, 7:]], axis=1)
             with atomic_open(paths["csv"], "w", encoding="ascii", newline="") as fh:
                 np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
-        arrays = {
-            "fps": np.float64(self.fps),
+        arrays: dict[str, np.ndarray] = {
+            "fps": np.asarray(self.fps, dtype=np.float64),  # a 0-d array, as np.savez stores a scalar
             "qpos": self.qpos,
             "qvel": self.qvel(),
             "joint_names": np.array(self.joint_names),

@@ -130,8 +130,7 @@ def run(args: argparse.Namespace) -> int:
         )
     gl_note = import_mujoco("egl") if args.render else None  # the GL backend is chosen before MuJoCo loads
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
-    import retarget.exports
-    import retarget.render
+    import retarget.render  # (the package imports retarget.exports too)
     from controlmm import motion as motions
 
     formats = retarget.exports.parse_formats(args.format)
