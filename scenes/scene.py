@@ -25,6 +25,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import TracebackType
 from typing import NamedTuple
 
 import mujoco
@@ -196,7 +197,7 @@ def _resolve(name_or_path: str | Path) -> Path:
 
 
 def _one_line(message: str) -> str:
-    return "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
+    return "; ".join(part.strip() for part in message.splitlines() if part.strip())
 
 
 def _spec_from_file(path: Path) -> mujoco.MjSpec:
@@ -288,7 +289,7 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
 class _quiet_mujoco:
     """Silence MuJoCo's attach warnings (empty prefix on purpose: the robot keeps its names)."""
 
-    def __enter__(self):
+    def __enter__(self) -> _quiet_mujoco:
         self._old = mujoco.get_mju_user_warning()
         self._messages: list[str] = []
         mujoco.set_mju_user_warning(self._messages.append)
@@ -298,10 +299,14 @@ class _quiet_mujoco:
         warnings.filterwarnings("ignore", message=".*Attach conflict.*")
         return self
 
-    def __exit__(self, *exc):
-        self._catch.__exit__(*exc)
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self._catch.__exit__(exc_type, exc, traceback)
         mujoco.set_mju_user_warning(self._old)
-        return False
 
 
 def _classify_geoms(model: mujoco.MjModel, robot_root: str | None) -> tuple[tuple[int, ...], ...]:
