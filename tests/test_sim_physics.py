@@ -19,6 +19,7 @@ from sim_motions import hold
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.pipeline.feedback import feedback_terms
+from retarget.exports import read_csv_qpos, read_export
 from sim import (
     CheckConfig,
     Failure,
@@ -78,11 +79,20 @@ def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path
         data.ctrl[:] = ctrl[s]
         mujoco.mj_step(model, data)
         assert np.array_equal(data.qpos, qpos[s + 1]), s
-    assert not data.xfrc_applied.any() and not data.qfrc_applied.any()
     assert np.array_equal(replay_certificate(paths["physics_model.xml"], paths["physics.npz"]), qpos)
-    rows = np.loadtxt(paths["robot_physics.csv"], delimiter=",", ndmin=2)
-    assert rows.shape == (int(round((qpos.shape[0] - 1) * dt * CSV_FPS)) + 1, model.nq)
-    assert np.allclose(rows[-1, [6, 3, 4, 5]], qpos[-1, 3:7]) and np.allclose(rows[-1, 7:], qpos[-1, 7:])
+    # Only the robot's own actuators acted: the MJCF's, on its hinges, never on the free joint;
+    # no external force was ever applied during the run.
+    robot = g1().model
+    assert [model.actuator(a).name for a in range(model.nu)] == [
+        robot.actuator(a).name for a in range(robot.nu)
+    ]
+    for field in ("actuator_ctrlrange", "actuator_forcerange", "actuator_gear", "actuator_trnid"):
+        assert np.allclose(getattr(model, field), getattr(robot, field), rtol=1e-9, atol=1e-12), field
+    assert (model.jnt_type[model.actuator_trnid[:, 0]] == mujoco.mjtJoint.mjJNT_HINGE).all()
+    assert standing_run.stats["max_external_force"] == 0.0
+    # robot_physics.csv: the simulated states at 50 fps (every 10th step of 2 ms), LAFAN1-G1 rows (xyzw)
+    stride = int(round(1.0 / CSV_FPS / dt))
+    assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
 
 
 def test_a_root_lifted_without_a_jump_fails_as_a_tracking_error():
@@ -157,7 +167,8 @@ def test_validate_physics_writes_a_certificate_that_replays(tmp_path, capsys):
     qpos = replay_certificate(out.parent / "physics_model.xml", out.parent / "physics.npz")
     with np.load(out.parent / "physics.npz") as npz:
         assert np.array_equal(qpos, npz["qpos"])
-    assert (out.parent / "robot_physics.csv").stat().st_size > 0
+    rows, _ = read_export(out.parent / "robot_physics.csv", "lafan1", fps=CSV_FPS)
+    assert rows.tolist() == qpos[::10].tolist()  # 50 fps rows of the 2 ms simulation
     assert run_cli([*args, "--physics"]) == 2  # the files exist: --force is needed
 
 

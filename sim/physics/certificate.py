@@ -11,7 +11,8 @@ Three files (written atomically, each on its own):
   also ``mocap_pos`` (S, nmocap, 3) and ``mocap_quat`` (S, nmocap, 4, wxyz) set before each step.
 * ``robot_physics.csv``: the simulated motion at 50 fps in the Unitree LAFAN1-G1 / BeyondMimic
   row layout (no header; root x, y, z, root quaternion qx, qy, qz, qw, then the joint
-  positions in MJCF order), 17 significant digits.
+  positions in MJCF order), 17 significant digits: written by
+  :func:`retarget.exports.write_lafan1_csv`, read back by :func:`retarget.exports.read_export`.
 
 Replay (:func:`replay_certificate`)::
 
@@ -31,8 +32,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from controlmm.atomic import atomic_open, atomic_path, write_text
+from controlmm.atomic import atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
+from retarget.exports import write_lafan1_csv
 from sim.physics.result import PhysicsResult
 
 MODEL_FILE = "physics_model.xml"
@@ -50,24 +52,26 @@ def certificate_paths(directory: str | Path) -> dict[str, Path]:
 
 
 def resample_states(qpos: np.ndarray, timestep: float, fps: float, root_adr: int = 0) -> np.ndarray:
-    """``qpos`` at every simulation step -> rows at ``fps`` (linear; root quaternion normalised)."""
+    """``qpos`` at every simulation step -> rows at ``fps``: the simulated states themselves when
+    ``1 / fps`` is a whole number of steps (0.02 s = 10 steps of 0.002 s), else linear between the
+    two nearest steps (root quaternion normalised)."""
     duration = (qpos.shape[0] - 1) * timestep
     times = np.arange(int(np.floor(duration * fps + 1e-9)) + 1) / fps
     x = np.minimum(times / timestep, qpos.shape[0] - 1)
-    i0 = np.floor(x + 1e-9).astype(np.int64)
+    whole = np.round(x)
+    x = np.where(np.abs(x - whole) < 1e-6, whole, x)  # on a step: that step's state, bit for bit
+    i0 = np.floor(x).astype(np.int64)
     i1 = np.minimum(i0 + 1, qpos.shape[0] - 1)
-    a = np.clip(x - i0, 0.0, 1.0)[:, None]
-    out = (1.0 - a) * qpos[i0] + a * qpos[i1]
-    quat = out[:, root_adr + 3 : root_adr + 7]
-    out[:, root_adr + 3 : root_adr + 7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    a = x - i0
+    out = qpos[i0].copy()
+    between = a > 0
+    if between.any():
+        w = a[between, None]
+        mixed = (1.0 - w) * qpos[i0[between]] + w * qpos[i1[between]]
+        quat = mixed[:, root_adr + 3 : root_adr + 7]
+        mixed[:, root_adr + 3 : root_adr + 7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+        out[between] = mixed
     return out
-
-
-def csv_rows(qpos: np.ndarray, root_adr: int = 0) -> np.ndarray:
-    """Rows ``[root xyz, root quaternion xyzw, joints]`` from qpos (wxyz) with the root first."""
-    if root_adr != 0:
-        raise ControlMMError("the LAFAN1/BeyondMimic CSV layout needs the free joint first in qpos")
-    return np.concatenate([qpos[:, 0:3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:]], axis=1)
 
 
 def save_certificate(result: PhysicsResult, directory: str | Path) -> dict[str, Path]:
@@ -77,6 +81,8 @@ def save_certificate(result: PhysicsResult, directory: str | Path) -> dict[str, 
             "this physics run has no saved model (its world had no MjSpec); build the world from a "
             "scenes.Scene, an MjSpec or sim.worlds.robot_spec(...)"
         )
+    if result.root_qpos_adr != 0:
+        raise ControlMMError("the LAFAN1/BeyondMimic CSV layout needs the robot's free joint first in qpos")
     paths = certificate_paths(directory)
     frame_steps = np.round(np.arange(result.num_frames) / result.fps / result.timestep).astype(np.int64)
     frame_steps[frame_steps > result.steps] = -1
@@ -97,10 +103,7 @@ def save_certificate(result: PhysicsResult, directory: str | Path) -> dict[str, 
     write_text(paths[MODEL_FILE], result.model_xml)
     with atomic_path(paths[STATES_FILE]) as tmp:
         np.savez_compressed(tmp, **arrays)
-    adr = result.root_qpos_adr
-    rows = csv_rows(resample_states(result.qpos, result.timestep, CSV_FPS, adr), adr)
-    with atomic_open(paths[CSV_FILE], "w", encoding="ascii", newline="") as fh:
-        np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
+    write_lafan1_csv(resample_states(result.qpos, result.timestep, CSV_FPS), paths[CSV_FILE])
     return paths
 
 

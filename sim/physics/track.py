@@ -222,6 +222,7 @@ def _simulate(
     torque = np.full((T, len(J.names)), np.nan)
     simulated = np.zeros(T, dtype=bool)
     peak = np.zeros(len(J.names))
+    external = 0.0  # largest |xfrc_applied| or |qfrc_applied| seen: nothing but the actuators may act
     root, adr = world.root_body, world.root_qpos_adr
     replan = max(1, int(round(config.replan_s / dt)))
     stop = S
@@ -231,6 +232,8 @@ def _simulate(
     mocap_quat = np.zeros((S, m.nmocap, 4)) if mocap is not None else None
 
     def measure(t: int) -> None:
+        nonlocal external
+        external = max(external, float(np.abs(d.xfrc_applied).max()), float(np.abs(d.qfrc_applied).max()))
         mujoco.mj_kinematics(m, d)  # positions of the current state (the step's own are one behind)
         simulated[t] = True
         p_ref = ref.frame_qpos[t, adr : adr + 3]
@@ -313,6 +316,7 @@ def _simulate(
         "mean_torque_ratio": float(torque[simulated].max(axis=1).mean())
         if torque.size and simulated.any()
         else 0.0,
+        "max_external_force": external,
         "foot_contact_frames": [int(n) for n in foot_contact.sum(axis=0)],
         "other_contact_frames": int(other_contact.sum()),
         "simulated_s": sim_seconds,
