@@ -209,7 +209,7 @@ class RobotModel:
                     f"which is not in {self.mjcf.name}"
                 )
         own: dict[int, list[str]] = {}
-        for kp, node in zip(self.keypoint_names, self.nodes):
+        for kp, node in zip(self.keypoint_names, self.nodes, strict=True):
             own.setdefault(int(self.tree.node_body[node]), []).append(kp)
         children: dict[int, list[int]] = {}
         for b in range(1, m.nbody):
