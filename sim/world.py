@@ -6,7 +6,8 @@ obstacles, which robot bodies are feet, the joint limits and the moving obstacle
 itself when the sets are not given) or from anything shaped like ``scenes.Scene``
 (``.model``, ``.robot_geom_ids``, ``.floor_geom_ids``, ``.obstacle_geom_ids``, ``.set_time``).
 
-Automatic classification (robotics reference §4.2/§4.4): robot geoms are the collision geoms
+Automatic classification (MuJoCo's collision filtering: contype/conaffinity and the
+body tree, MuJoCo documentation, Computation > Collision detection): robot geoms are the collision geoms
 whose body's root is the free-joint body; floor geoms are the other plane geoms; obstacles
 are every other collision geom (static bodies and mocap bodies alike).
 """
