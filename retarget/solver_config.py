@@ -61,3 +61,7 @@ class SolverConfig:
     w_body_floor_coarse: float = 100.0
     """Weight of the body-floor term at the coarse levels: a stiff floor from the start would
     lift a straight-legged initial guess off the ground."""
+    human_limb_share: float = 1.0
+    """How far (0-1) the knee, ankle, toe, elbow and wrist targets move from the robot-proportioned
+    limbs (the robot's bone lengths along the human's bones, from the robot's own hips and
+    shoulders) to the scaled human's joint positions (:func:`retarget.targets.fit_limbs_to_human`)."""

@@ -8,6 +8,10 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    rigid trunk links (pelvis -> hips/spine1, spine3 -> neck/collars/shoulders/head) rotate
    the robot offset with the human pelvis or torso frame; limb bones keep the human bone
    direction with the robot's length. The refined targets have the robot's proportions.
+   Then the limb targets (knees, ankles, toes, elbows, wrists) move by
+   ``SolverConfig.human_limb_share`` toward the scaled human's own joint positions
+   (:func:`fit_limbs_to_human`): a robot whose hips are wider than the scaled human's
+   brings its knees and feet in under the human's instead of standing on its own hip width.
 3. **Orientations** from bone directions: pelvis frame (hip axis + hips -> pelvis), torso
    frame (collar axis + spine3 -> neck), foot frames (ankle -> toe heading and pitch). The
    trunk's heading counts fully, its tilt at ``TRUNK_TILT``.
@@ -30,6 +34,7 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget.foot_targets import STANCE_CLEARANCE, feet_targets
 from retarget.robot_model import RobotModel
+from retarget.solver_config import SolverConfig
 from retarget.stance import RAMP_SECONDS, detect_contacts, detect_stance, lock_ramp, slowness
 
 FRAME_CHILDREN = {
@@ -40,6 +45,11 @@ FRAME_CHILDREN = {
 
 SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
+LIMB_JOINTS = ("left_knee", "right_knee", "left_ankle", "right_ankle", "left_elbow", "right_elbow")
+LIMB_JOINTS += ("left_wrist", "right_wrist")
+"""Keypoints that :func:`fit_limbs_to_human` moves toward the scaled human's joints."""
+TOE_ANKLE = {"left_foot": "left_ankle", "right_foot": "right_ankle"}
+"""Toe keypoints move with their ankle (the robot's foot stays rigid)."""
 TRUNK_TILT = 0.3
 """Weight factor of the pelvis/torso tilt (roll, pitch) against their heading: the human's
 neutral trunk tilt is not well defined from joints, the heading is."""
@@ -121,8 +131,9 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
     side, the arm's frontal-plane angle (shoulder -> wrist target in the torso frame,
     lateral against downward) is raised to ``minimum`` by rotating the elbow and wrist
     targets about the torso's forward axis through the shoulder; the correction is weighted
-    by how much the arm points down (none for an arm held forward, sideways or up), so it is
-    continuous in time. The solver's self-clearance term handles the rest (squats, crossing).
+    by how much the arm points down and lies in the frontal plane (none for an arm held
+    forward, sideways or up), and is at most ``minimum``, so it is continuous in time. The
+    solver's self-clearance term handles the rest (squats, crossing).
     """
     x_axis = torso[..., :, 0]  # (T, 3) torso forward
     for sign, side in ((1.0, "left"), (-1.0, "right")):
@@ -135,8 +146,12 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
         down = np.maximum(-local[:, 2], 0.0)
         lateral = sign * local[:, 1]
         angle = np.arctan2(lateral, np.maximum(down, 1e-9))
-        share = down / np.maximum(np.linalg.norm(local, axis=1), 1e-9)
-        delta = np.maximum(minimum - angle, 0.0) * share * sign  # rotation about torso x
+        length = np.maximum(np.linalg.norm(local, axis=1), 1e-9)
+        # Only an arm hanging beside the body passes through the hips: the correction fades
+        # with how far the arm points forward or back, and is at most ``minimum`` (an arm
+        # reaching across the front is not swung out).
+        share = down / length * (1.0 - np.abs(local[:, 0]) / length)
+        delta = np.clip(minimum - angle, 0.0, minimum) * share * sign  # rotation about torso x
         if not np.any(delta):
             continue
         c, s_ = np.cos(delta)[:, None], np.sin(delta)[:, None]
@@ -148,8 +163,40 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
             kp_pos[:, k] = kp_pos[:, ks] + along + perp * c + np.cross(x_axis, perp) * s_
 
 
-def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: HumanToWorld) -> Targets:
-    """Targets for ``joints`` (T, 22, 3) human frame (metres, Y up) at ``fps``."""
+def fit_limbs_to_human(robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, share: float) -> None:
+    """Move the limb targets ``share`` (0-1) of the way to the scaled human's joints (in place).
+
+    ``kp_pos`` (T, K, 3): the refined targets (robot proportions); ``world`` (T, 22, 3): the
+    scaled human in the world. Knees, ankles, elbows and wrists move toward the human's own
+    joint positions, each toe by its ankle's shift (the robot's foot stays rigid); the trunk
+    (pelvis, hips, spine, shoulders, head) keeps the robot's proportions. With ``share`` 1 the
+    robot's feet and hands go where the human's are, which is what a position fit to the
+    human measures; the solver's self-clearance term keeps the legs and arms apart.
+    """
+    if share <= 0:
+        return
+    shift = {}
+    for name in LIMB_JOINTS:
+        if robot.has_keypoint(name):
+            k = robot.keypoint_index(name)
+            shift[name] = share * (world[:, robot.joints[k]] - kp_pos[:, k])
+    for name, delta in shift.items():
+        kp_pos[:, robot.keypoint_index(name)] += delta
+    for toe, ankle in TOE_ANKLE.items():
+        if robot.has_keypoint(toe) and ankle in shift:
+            kp_pos[:, robot.keypoint_index(toe)] += shift[ankle]
+
+
+def build_targets(
+    robot: RobotModel,
+    joints: np.ndarray,
+    fps: float,
+    transform: HumanToWorld,
+    config: SolverConfig | None = None,
+) -> Targets:
+    """Targets for ``joints`` (T, 22, 3) human frame (metres, Y up) at ``fps``; ``config``
+    (default: the robot's :class:`SolverConfig`) gives ``human_limb_share``."""
+    config = config if config is not None else SolverConfig(**robot.mapping.solver)
     joints = np.asarray(joints, dtype=np.float64)
     world = np.asarray(transform.to_world(joints), dtype=np.float64)
     t_len, k_len = len(world), len(robot.joints)
@@ -181,6 +228,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
             seg_parent.append(a)
             seg_child.append(k)
             seg_weight.append(mapping.keypoints[k].segment_weight)
+    fit_limbs_to_human(robot, kp_pos, world, config.human_limb_share)
     if mapping.arm_abduction > 0:
         abduct_arms(robot, kp_pos, frames["spine3"], mapping.arm_abduction)
     kp_weight = np.tile([kp.position_weight for kp in mapping.keypoints], (t_len, 1)).astype(float)
