@@ -45,10 +45,10 @@ def rot_y(angle: np.ndarray) -> np.ndarray:
 
 def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     """Heel and toe pivots (3,) of a foot in its node frame: the centres of its rearmost and
-    foremost sole points (the collision points within 3 mm of the sole, rest pose, world +X
+    foremost sole points (the collision points within 3 mm of the sole, the foot flat, world +X
     forward). A foot rolling about a pivot keeps that point's height and place."""
     f = robot.feet[side]
-    rot = robot.rest.rot[0, f.node]
+    rot = robot.foot_flat_rot[side]
     world = f.points @ rot.T
     low = world[:, 2] - f.radius
     sole = low <= low.min() + 0.003
@@ -89,13 +89,13 @@ def feet_targets(
         for k in range(len(robot.joints))
         if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
     ]
-    rest_rot = robot.rest.rot[0, foot_node]
-    rest_pos = robot.rest.pos[0, foot_node]
+    rest_rot = robot.foot_flat_rot[side]  # the foot flat on the floor, facing +X
+    flat_height = robot.foot_flat_height[side]  # its node's height then
     heading, elevation = foot_heading_pitch(world, side)
     ref = flat_stance if flat_stance.any() else contact
     flat = np.median(elevation[ref]) if ref.any() else np.median(elevation)
     # Swing: shift the foot keypoints vertically so the human stance height is the robot's.
-    ankle_rest_h = robot.rest_keypoints[ka, 2] - robot.floor_z
+    ankle_rest_h = flat_height + float((rest_rot @ robot.offsets[ka])[2])
     ref_h = kp_pos[ref, ka, 2] if ref.any() else np.sort(kp_pos[:, ka, 2])[: max(1, len(kp_pos) // 20)]
     lift = ankle_rest_h - float(np.median(ref_h))
     for k in same_node:
@@ -125,7 +125,7 @@ def feet_targets(
             frames[:, None] - ends[None, :], 0
         )
         owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
-        height = rest_pos[2] - robot.floor_z + STANCE_CLEARANCE
+        height = flat_height + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
             sel = (owner == i) & (alpha_xy > 0)
             pick = np.arange(s, e)

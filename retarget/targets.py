@@ -242,8 +242,10 @@ def build_targets(
         node_rest = robot.rest.rot[0, robot.nodes[k]]
         if kp.joint in frames:
             rot = frames[kp.joint] @ node_rest
-        else:  # feet: heading and pitch relative to the stance pitch (filled in below)
-            rot = np.tile(node_rest, (t_len, 1, 1))
+        else:  # feet: heading and pitch relative to the stance pitch (filled in below), flat foot
+            side = kp.joint.split("_")[0]
+            on_foot = robot.nodes[k] == robot.feet[side].node
+            rot = np.tile(robot.foot_flat_rot[side] if on_foot else node_rest, (t_len, 1, 1))
         ori_kp.append(k)
         ori_axes.append((TRUNK_TILT, TRUNK_TILT, 1.0) if kp.joint in frames else (1.0, 1.0, 1.0))
         ori_rot.append(rot)
