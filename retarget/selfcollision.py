@@ -14,8 +14,8 @@ robot's collision geoms (:class:`SelfClearance`):
   and ankle bodies: out of reach but for touching the toes); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
-* the left leg's geoms (above the foot) are paired with the right leg's (crossing steps,
-  hips turned out), with the same margins.
+* the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
+  hips turned out, feet placed close together), with the same margins.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -183,13 +183,16 @@ def build_self_clearance(
         for b in range(1, m.nbody):  # the wrist body's descendants (hands)
             if wrist in ancestors(b):
                 arm[b] = side_i
-    # Legs: the bodies from below the trunk down to each foot (the feet themselves are left
-    # to the foot locks: a stance foot is placed where the human's was).
+    # Legs: the bodies from below the trunk down to each foot and the foot's own (toes):
+    # the feet follow the human's, which may stand closer together than the robot's allow.
     leg: dict[int, int] = {}
     for side_i, side in enumerate(("left", "right")):
         ankle = int(tree.node_body[feet[side].node])
-        for b in ancestors(ankle)[1:]:
+        for b in ancestors(ankle):
             leg[b] = side_i
+        for b in range(1, m.nbody):
+            if ankle in ancestors(b):
+                leg[b] = side_i
     shared = set(ancestors(int(tree.node_body[feet["left"].node]))) & set(
         ancestors(int(tree.node_body[feet["right"].node]))
     )

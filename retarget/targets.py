@@ -9,7 +9,7 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    the robot offset with the human pelvis or torso frame; limb bones keep the human bone
    direction with the robot's length. The refined targets have the robot's proportions.
    Then the limb targets (knees, ankles, toes, elbows, wrists) move by
-   ``SolverConfig.human_limb_share`` toward the scaled human's own joint positions
+   ``SolverConfig.human_leg_share`` / ``human_arm_share`` toward the scaled human's own joint positions
    (:func:`fit_limbs_to_human`): a robot whose hips are wider than the scaled human's
    brings its knees and feet in under the human's instead of standing on its own hip width.
 3. **Orientations** from bone directions: pelvis frame (hip axis + hips -> pelvis), torso
@@ -45,8 +45,8 @@ FRAME_CHILDREN = {
 
 SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
-LIMB_JOINTS = ("left_knee", "right_knee", "left_ankle", "right_ankle", "left_elbow", "right_elbow")
-LIMB_JOINTS += ("left_wrist", "right_wrist")
+LEG_JOINTS = ("left_knee", "right_knee", "left_ankle", "right_ankle")
+ARM_JOINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
 """Keypoints that :func:`fit_limbs_to_human` moves toward the scaled human's joints."""
 TOE_ANKLE = {"left_foot": "left_ankle", "right_foot": "right_ankle"}
 """Toe keypoints move with their ankle (the robot's foot stays rigid)."""
@@ -163,23 +163,25 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
             kp_pos[:, k] = kp_pos[:, ks] + along + perp * c + np.cross(x_axis, perp) * s_
 
 
-def fit_limbs_to_human(robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, share: float) -> None:
-    """Move the limb targets ``share`` (0-1) of the way to the scaled human's joints (in place).
+def fit_limbs_to_human(
+    robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, leg_share: float, arm_share: float
+) -> None:
+    """Move the limb targets toward the scaled human's joints (in place): the legs' by
+    ``leg_share``, the arms' by ``arm_share`` (0: as refined, 1: at the human's joints).
 
     ``kp_pos`` (T, K, 3): the refined targets (robot proportions); ``world`` (T, 22, 3): the
     scaled human in the world. Knees, ankles, elbows and wrists move toward the human's own
     joint positions, each toe by its ankle's shift (the robot's foot stays rigid); the trunk
-    (pelvis, hips, spine, shoulders, head) keeps the robot's proportions. With ``share`` 1 the
+    (pelvis, hips, spine, shoulders, head) keeps the robot's proportions. With shares of 1 the
     robot's feet and hands go where the human's are, which is what a position fit to the
     human measures; the solver's self-clearance term keeps the legs and arms apart.
     """
-    if share <= 0:
-        return
     shift = {}
-    for name in LIMB_JOINTS:
-        if robot.has_keypoint(name):
-            k = robot.keypoint_index(name)
-            shift[name] = share * (world[:, robot.joints[k]] - kp_pos[:, k])
+    for names, share in ((LEG_JOINTS, leg_share), (ARM_JOINTS, arm_share)):
+        for name in names:
+            if share > 0 and robot.has_keypoint(name):
+                k = robot.keypoint_index(name)
+                shift[name] = share * (world[:, robot.joints[k]] - kp_pos[:, k])
     for name, delta in shift.items():
         kp_pos[:, robot.keypoint_index(name)] += delta
     for toe, ankle in TOE_ANKLE.items():
@@ -195,7 +197,7 @@ def build_targets(
     config: SolverConfig | None = None,
 ) -> Targets:
     """Targets for ``joints`` (T, 22, 3) human frame (metres, Y up) at ``fps``; ``config``
-    (default: the robot's :class:`SolverConfig`) gives ``human_limb_share``."""
+    (default: the robot's :class:`SolverConfig`) gives ``human_leg_share`` and ``human_arm_share``."""
     config = config if config is not None else SolverConfig(**robot.mapping.solver)
     joints = np.asarray(joints, dtype=np.float64)
     world = np.asarray(transform.to_world(joints), dtype=np.float64)
@@ -228,7 +230,7 @@ def build_targets(
             seg_parent.append(a)
             seg_child.append(k)
             seg_weight.append(mapping.keypoints[k].segment_weight)
-    fit_limbs_to_human(robot, kp_pos, world, config.human_limb_share)
+    fit_limbs_to_human(robot, kp_pos, world, config.human_leg_share, config.human_arm_share)
     if mapping.arm_abduction > 0:
         abduct_arms(robot, kp_pos, frames["spine3"], mapping.arm_abduction)
     kp_weight = np.tile([kp.position_weight for kp in mapping.keypoints], (t_len, 1)).astype(float)
