@@ -171,3 +171,14 @@ def mapping_file_text(mapping: dict, out: str | Path) -> str:
 
 def _json(value: object) -> str:
     return json.dumps(value)
+
+
+def describe_mapping(mapping: dict) -> str:
+    """A few lines saying which robot point each human joint follows (for review)."""
+    lines = [f"{Path(mapping['robot']).name}: scale {mapping.get('scale', 'auto')}"]
+    width = max(len(j) for j in mapping["keypoints"])
+    for joint, spec in mapping["keypoints"].items():
+        where = spec.get("body") or spec.get("site")
+        offset = ", ".join(f"{v:+.3f}" for v in spec.get("offset", (0.0, 0.0, 0.0)))
+        lines.append(f"  {joint:<{width}}  {where}  offset ({offset}) m")
+    return "\n".join(lines)

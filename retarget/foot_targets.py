@@ -21,6 +21,10 @@ PITCH_SMOOTH_SECONDS = 0.05
 """Gaussian sigma (s) of a contact foot's pitch (flat, heel strike, toe-off) over time."""
 LOCK_GAIN = 30.0
 """Weight multiplier of the foot targets during stance (locked feet)."""
+FOOT_GAP = 0.02
+"""Metres kept between the two feet's soles sideways where they are side by side."""
+OVERLAP_RAMP = 0.05
+"""Lengthwise distance (m) between the footprints over which the sideways gap fades out."""
 
 
 def foot_heading_pitch(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
@@ -58,6 +62,115 @@ def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     return f.points[back].mean(axis=0), f.points[front].mean(axis=0)
 
 
+def footprint(robot: RobotModel, side: str) -> np.ndarray:
+    """(x_min, x_max, y_min, y_max) of a flat foot's collision geometry around its ankle keypoint (m;
+    x forward, y left)."""
+    f = robot.feet[side]
+    rot = robot.foot_flat_rot[side]
+    rel = (f.points - robot.offsets[robot.keypoint_index(f"{side}_ankle")]) @ rot.T
+    r = f.radius
+    return np.array(
+        [(rel[:, 0] - r).min(), (rel[:, 0] + r).max(), (rel[:, 1] - r).min(), (rel[:, 1] + r).max()]
+    )
+
+
+def _heading_axes(pelvis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, y, heading): the horizontal forward and left axes (T, 3) of the pelvis frames
+    (T, 3, 3) and their heading (T,) about +Z."""
+    x = pelvis[:, :, 0].copy()
+    x[:, 2] = 0.0
+    x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-9)
+    y = np.stack([-x[:, 1], x[:, 0], np.zeros(len(x))], axis=1)
+    return x, y, np.arctan2(x[:, 1], x[:, 0])
+
+
+def feet_shortfall(
+    robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """How much (m, (T,)) the left ankle target must move further left of the right one, along
+    the pelvis heading's left axis (T, 3), for the robot's feet not to overlap.
+
+    Each foot's footprint (:func:`footprint`) is turned by the human foot's heading (``world``:
+    the scaled human (T, 22, 3)); where the two overlap lengthwise the left one must lie
+    FOOT_GAP left of the right one, the need fading out over OVERLAP_RAMP of lengthwise gap.
+    """
+    kl, kr = robot.keypoint_index("left_ankle"), robot.keypoint_index("right_ankle")
+    x, y, pelvis_heading = _heading_axes(pelvis)
+    extent = {}
+    for side in ("left", "right"):
+        box = footprint(robot, side)
+        corners = np.array([[box[i], box[j]] for i in (0, 1) for j in (2, 3)])  # (4, 2)
+        turn = foot_heading_pitch(world, side)[0] - pelvis_heading  # (T,)
+        c, s_ = np.cos(turn)[:, None], np.sin(turn)[:, None]
+        cx = c * corners[:, 0] - s_ * corners[:, 1]  # (T, 4) in the pelvis heading frame
+        cy = s_ * corners[:, 0] + c * corners[:, 1]
+        extent[side] = (cx.min(axis=1), cx.max(axis=1), cy.min(axis=1), cy.max(axis=1))
+    fl, fr = extent["left"], extent["right"]
+    d = kp_pos[:, kl] - kp_pos[:, kr]
+    dx, dy = np.sum(d * x, axis=1), np.sum(d * y, axis=1)
+    overlap = np.minimum(dx + fl[1], fr[1]) - np.maximum(dx + fl[0], fr[0])  # > 0: side by side
+    share = np.clip(1.0 + overlap / OVERLAP_RAMP, 0.0, 1.0)
+    need = (fr[3] - fl[2] + FOOT_GAP) * share
+    return np.maximum(need - dy, 0.0), y
+
+
+def _move_foot(robot: RobotModel, kp_pos: np.ndarray, side: str, delta: np.ndarray) -> None:
+    for joint in (f"{side}_ankle", f"{side}_foot"):
+        if robot.has_keypoint(joint):
+            kp_pos[:, robot.keypoint_index(joint)] += delta
+
+
+def space_feet(robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray) -> None:
+    """Push the feet targets apart sideways where the robot's feet would overlap (in place).
+
+    The limb targets follow the scaled human's feet (:func:`retarget.targets.fit_limbs_to_human`),
+    and a robot's feet may be wider or longer than the scaled human's. Per frame, each side
+    moves half the :func:`feet_shortfall` along the pelvis heading's left axis, its toe with it.
+    """
+    if not all(robot.has_keypoint(n) for n in ("left_ankle", "right_ankle")):
+        return
+    short, y = feet_shortfall(robot, kp_pos, world, pelvis)
+    for side, sign in (("left", 0.5), ("right", -0.5)):
+        _move_foot(robot, kp_pos, side, sign * short[:, None] * y)
+
+
+def separate_locks(
+    robot: RobotModel,
+    kp_pos: np.ndarray,
+    world: np.ndarray,
+    pelvis: np.ndarray,
+    runs: dict[str, np.ndarray],
+    alpha_xy: dict[str, np.ndarray],
+    passes: int = 2,
+) -> None:
+    """Move whole foot locks apart where the two locked feet would overlap (in place).
+
+    A lock is one place per contact run, the mean of the run's targets, so two locks may
+    overlap although every frame's targets were spaced (:func:`space_feet`). Each run of
+    each foot (``runs[side]``: (T,) run index per frame, -1 outside) moves by one constant
+    vector, half the largest :func:`feet_shortfall` over its frames along their mean left
+    axis, weighted by the run's horizontal lock weight ``alpha_xy[side]`` (T,): the locked
+    foot stays still.
+    """
+    if not all(robot.has_keypoint(n) for n in ("left_ankle", "right_ankle")):
+        return
+    for _ in range(passes):
+        short, y = feet_shortfall(robot, kp_pos, world, pelvis)
+        if not np.any(short > 1e-6):
+            return
+        for side, sign in (("left", 0.5), ("right", -0.5)):
+            owner = runs[side]
+            for run in np.unique(owner[owner >= 0]):
+                frames = owner == run
+                need = frames & (short > 1e-6)
+                if not need.any():
+                    continue
+                axis = y[need].mean(axis=0)
+                axis /= max(float(np.linalg.norm(axis)), 1e-9)
+                shift = sign * float(short[need].max()) * axis
+                _move_foot(robot, kp_pos, side, np.where(frames, alpha_xy[side], 0.0)[:, None] * shift)
+
+
 def feet_targets(
     robot: RobotModel,
     side: str,
@@ -74,13 +187,14 @@ def feet_targets(
     ori_kp: list[int],
     ori_rot: np.ndarray,
     ori_w: np.ndarray,
-) -> None:
+) -> np.ndarray:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
     Each contact run gets one place and heading. Within it the foot is flat while the human
     foot is flat, and otherwise pitches with the human foot about its heel pivot (toe up: a
     heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
     (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
+    Returns (T,) the contact run each frame's lock belongs to (-1 where the foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     foot_node = robot.nodes[ka]
@@ -105,6 +219,7 @@ def feet_targets(
     lock_rot = swing_rot.copy()
     lock_node = kp_pos[:, ka] - np.einsum("tij,j->ti", swing_rot, robot.offsets[ka])
     runs = true_runs(contact)
+    owner_out = np.full(len(world), -1)
     if runs:
         # In contact: flat when both heel and toe are down, else rolling on the pivot that
         # the human's pitch puts on the floor (never rolling onto the lifted end).
@@ -128,6 +243,7 @@ def feet_targets(
         height = flat_height + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
             sel = (owner == i) & (alpha_xy > 0)
+            owner_out[sel] = i
             pick = np.arange(s, e)
             if flat_stance[s:e].any():
                 pick = pick[flat_stance[s:e]]
@@ -152,3 +268,4 @@ def feet_targets(
         delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
         ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
         ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
+    return owner_out

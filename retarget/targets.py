@@ -11,7 +11,9 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    Then the limb targets (knees, ankles, toes, elbows, wrists) move by
    ``SolverConfig.human_leg_share`` / ``human_arm_share`` toward the scaled human's own joint positions
    (:func:`fit_limbs_to_human`): a robot whose hips are wider than the scaled human's
-   brings its knees and feet in under the human's instead of standing on its own hip width.
+   brings its knees and feet in under the human's instead of standing on its own hip width,
+   its feet kept far enough apart sideways not to overlap (:func:`retarget.foot_targets.space_feet`,
+   and whole foot locks moved apart by :func:`retarget.foot_targets.separate_locks`).
 3. **Orientations** from bone directions: pelvis frame (hip axis + hips -> pelvis), torso
    frame (collar axis + spine3 -> neck), foot frames (ankle -> toe heading and pitch). The
    trunk's heading counts fully, its tilt at ``TRUNK_TILT``.
@@ -32,7 +34,7 @@ import numpy as np
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.foot_targets import STANCE_CLEARANCE, feet_targets
+from retarget.foot_targets import STANCE_CLEARANCE, feet_targets, separate_locks, space_feet
 from retarget.robot_model import RobotModel
 from retarget.solver_config import SolverConfig
 from retarget.stance import RAMP_SECONDS, detect_contacts, detect_stance, lock_ramp, slowness
@@ -231,6 +233,7 @@ def build_targets(
             seg_child.append(k)
             seg_weight.append(mapping.keypoints[k].segment_weight)
     fit_limbs_to_human(robot, kp_pos, world, config.human_leg_share, config.human_arm_share)
+    space_feet(robot, kp_pos, world, frames["pelvis"])
     if mapping.arm_abduction > 0:
         abduct_arms(robot, kp_pos, frames["spine3"], mapping.arm_abduction)
     kp_weight = np.tile([kp.position_weight for kp in mapping.keypoints], (t_len, 1)).astype(float)
@@ -255,7 +258,7 @@ def build_targets(
     ori_rot_a = np.stack(ori_rot, axis=1) if ori_rot else np.zeros((t_len, 0, 3, 3))
     ori_w_a = np.stack(ori_w, axis=1) if ori_w else np.zeros((t_len, 0))
 
-    stance, lock, clearance = {}, {}, {}
+    stance, lock, clearance, runs, lock_xy = {}, {}, {}, {}, {}
     for side in ("left", "right"):
         flat = detect_stance(joints, fps, side)
         contact, heel, toe = detect_contacts(joints, fps, side, flat)
@@ -269,7 +272,8 @@ def build_targets(
         # Horizontally the foot holds its contact place a little longer (RAMP_SECONDS more):
         # it lands and takes off vertically instead of sliding in or out.
         alpha_xy = lock_ramp(contact, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
-        feet_targets(
+        lock_xy[side] = alpha_xy
+        runs[side] = feet_targets(
             robot,
             side,
             world,
@@ -286,6 +290,7 @@ def build_targets(
             ori_rot_a,
             ori_w_a,
         )
+    separate_locks(robot, kp_pos, world, frames["pelvis"], runs, lock_xy)
 
     return Targets(
         fps=float(fps),

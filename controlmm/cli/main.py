@@ -26,6 +26,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "convert",
     "plot",
     "retarget",
+    "robots",
     "scene",
     "validate",
     "eval",
