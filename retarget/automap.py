@@ -37,6 +37,10 @@ UNOBSERVED_POSTURE = 0.5
 """Posture weight of the joints the human does not observe (wrists, hands, neck)."""
 FIVE_JOINT_LEVELS = [[3, 5], [1, 4]]
 """Solver schedule of robots with fewer than six joints in a leg (they converge more slowly)."""
+SMALL_SCALE = 0.4
+SMALL_W_SELF = 300.0
+"""Self-clearance weight of robots smaller than SMALL_SCALE times the human: the clearance
+margins (and the checks' tolerances) are absolute, large against a small robot's links."""
 
 
 def _point(anatomy: Anatomy, body: int, world: np.ndarray) -> dict:
@@ -116,6 +120,9 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
         if ow > 0:
             spec["orientation_weight"] = ow
     short_legs = any(len(leg.joints) < 6 for leg in a.legs.values())
+    solver: dict = {"levels": FIVE_JOINT_LEVELS} if short_legs else {}
+    if scale < SMALL_SCALE:
+        solver["w_self"] = SMALL_W_SELF
     out: dict = {
         "format": MAPPING_FORMAT,
         "description": (
@@ -129,8 +136,8 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
     }
     if a.arms:
         out["arm_abduction"] = 0.2
-    if short_legs:
-        out["solver"] = {"levels": FIVE_JOINT_LEVELS}
+    if solver:
+        out["solver"] = solver
     return out
 
 

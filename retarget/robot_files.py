@@ -29,20 +29,27 @@ COLLISION_GROUP = 3
 """Geom group of collision geoms in MuJoCo Menagerie models (visual geoms: groups 1-2)."""
 
 
-def robot_mjcf_path(robot: str | Path) -> Path:
-    """The MJCF file of a robot argument: packaged name, MJCF path or mapping ``.json``."""
+def _resolve(robot: str | Path) -> tuple[Path, str | None]:
+    """(MJCF path, packaged robot name or None) of a robot argument."""
     text = str(robot).strip()
     if text.lower().endswith(".xml"):
         path = Path(text).expanduser()
         if not path.is_file():
             raise InputFileError(f"robot MJCF '{text}' does not exist")
-        return path.resolve()
+        return path.resolve(), None
     if text.lower().endswith(".json"):
         mapping = load_mapping(text)
-        return Path(mapping.robot) if mapping.robot.lower().endswith(".xml") else robot_mjcf(mapping.robot)
+        if mapping.robot.lower().endswith(".xml"):
+            return Path(mapping.robot), None
+        return robot_mjcf(mapping.robot), mapping.robot.lower()
     if not is_packaged(text):
         load_mapping(text)  # raises the one-line "unknown robot" error with the known names
-    return robot_mjcf(text)
+    return robot_mjcf(text), text.lower()
+
+
+def robot_mjcf_path(robot: str | Path) -> Path:
+    """The MJCF file of a robot argument: packaged name, MJCF path or mapping ``.json``."""
+    return _resolve(robot)[0]
 
 
 def _one_line(exc: Exception) -> str:
@@ -72,13 +79,12 @@ def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
     Raises:
         ControlMMError: unknown robot, missing file, an MJCF that does not parse or compile.
     """
-    path = robot_mjcf_path(robot)
+    path, packaged = _resolve(robot)
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
-    scene = robot_scene(str(robot)) if is_packaged(str(robot)) else None
-    declare_collisions(spec, scene)
+    declare_collisions(spec, robot_scene(packaged) if packaged else None)
     return spec
 
 

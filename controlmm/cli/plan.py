@@ -7,7 +7,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
-from controlmm.cli.args import add_force, add_threads
+from controlmm.cli.args import add_force, add_robot, add_threads
 from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
@@ -69,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="TIMELINE.json",
         help="body-part timeline spec instead of --text (see docs/timeline.md)",
     )
-    p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
+    add_robot(p)
     p.add_argument(
         "--seconds",
         type=float,
