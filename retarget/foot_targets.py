@@ -87,12 +87,13 @@ def _heading_axes(pelvis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 def feet_shortfall(
     robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """How much (m, (T,)) the left ankle target must move further left of the right one, along
-    the pelvis heading's left axis (T, 3), for the robot's feet not to overlap.
+    """How far (m, (T,), signed) the left ankle target must move relative to the right one along
+    the pelvis heading's left axis (T, 3) for the robot's feet not to overlap.
 
     Each foot's footprint (:func:`footprint`) is turned by the human foot's heading (``world``:
     the scaled human (T, 22, 3)); where the two overlap lengthwise the left one must lie
-    FOOT_GAP left of the right one, the need fading out over OVERLAP_RAMP of lengthwise gap.
+    FOOT_GAP left of the right one (or, feet crossed, right of it: whichever is nearer), the
+    need fading out over OVERLAP_RAMP of lengthwise gap.
     """
     kl, kr = robot.keypoint_index("left_ankle"), robot.keypoint_index("right_ankle")
     x, y, pelvis_heading = _heading_axes(pelvis)
@@ -110,8 +111,13 @@ def feet_shortfall(
     dx, dy = np.sum(d * x, axis=1), np.sum(d * y, axis=1)
     overlap = np.minimum(dx + fl[1], fr[1]) - np.maximum(dx + fl[0], fr[0])  # > 0: side by side
     share = np.clip(1.0 + overlap / OVERLAP_RAMP, 0.0, 1.0)
-    need = (fr[3] - fl[2] + FOOT_GAP) * share
-    return np.maximum(need - dy, 0.0), y
+    # Apart: the left foot left of the right one (dy >= beside) or, crossed, right of it
+    # (dy <= -crossed); short of both, the nearer of the two.
+    beside = (fr[3] - fl[2] + FOOT_GAP) * share
+    crossed = (fl[3] - fr[2] + FOOT_GAP) * share
+    left = np.maximum(beside - dy, 0.0)
+    right = np.maximum(dy + crossed, 0.0)
+    return np.where(left <= right, left, -right), y
 
 
 def _move_foot(robot: RobotModel, kp_pos: np.ndarray, side: str, delta: np.ndarray) -> None:
@@ -156,18 +162,19 @@ def separate_locks(
         return
     for _ in range(passes):
         short, y = feet_shortfall(robot, kp_pos, world, pelvis)
-        if not np.any(short > 1e-6):
+        if not np.any(np.abs(short) > 1e-6):
             return
         for side, sign in (("left", 0.5), ("right", -0.5)):
             owner = runs[side]
             for run in np.unique(owner[owner >= 0]):
                 frames = owner == run
-                need = frames & (short > 1e-6)
+                need = frames & (np.abs(short) > 1e-6)
                 if not need.any():
                     continue
                 axis = y[need].mean(axis=0)
                 axis /= max(float(np.linalg.norm(axis)), 1e-9)
-                shift = sign * float(short[need].max()) * axis
+                worst = short[need][np.argmax(np.abs(short[need]))]
+                shift = sign * float(worst) * axis
                 _move_foot(robot, kp_pos, side, np.where(frames, alpha_xy[side], 0.0)[:, None] * shift)
 
 

@@ -15,7 +15,8 @@ robot's collision geoms (:class:`SelfClearance`):
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
-  hips turned out, feet placed close together), with the same margins.
+  hips turned out, feet placed close together), and in each leg the links above the knee
+  with the links below the knee's own (a deep crouch), with the same margins.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -234,6 +235,20 @@ def build_self_clearance(
             if leg.get(bj) == 1:
                 first.append(i)
                 second.append(j)
+    # Within a leg: the thigh against the foot and the links between the knee and the foot (a
+    # deep crouch folds a short leg's foot onto its hip).
+    for side in ("left", "right"):
+        if f"{side}_knee" not in keypoint_nodes:
+            continue
+        knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
+        upper = {b for b in ancestors(knee)[1:] if b in leg}
+        lower = {b for b in leg if knee in ancestors(b) and b != knee}
+        for i, bi in enumerate(body_of):
+            if bi in upper:
+                for j, bj in enumerate(body_of):
+                    if bj in lower:
+                        first.append(i)
+                        second.append(j)
     if not first:
         return None
     sc = SelfClearance(
