@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError
-from retarget.geoms import geom_points
+from retarget.geoms import aabb_corners, geom_points
 from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND
 from retarget.robot_files import free_root
 
@@ -93,7 +93,8 @@ class Anatomy:
         legs, arms: ``{"left": Limb, "right": Limb}`` (arms empty for a legs-only robot).
         xpos: (nbody, 3), xmat: (nbody, 3, 3) rest body poses (root at its qpos0 position,
             identity rotation).
-        floor_z: the lowest collision point (m); top_z: the highest point of any geom (m).
+        floor_z: the lowest collision point (m); top_z: the highest point of any geom's
+            bounding box (m).
     """
 
     model: mujoco.MjModel
@@ -293,10 +294,10 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
             low[g] = (float((pts[:, 2] - rad).min()), float(data.geom_xpos[g][1] - data.xpos[root][1]))
     tops = []
     for g in range(model.ngeom):
-        if model.body_rootid[model.geom_bodyid[g]] == root:
-            pts, rad = _geom_world_points(model, data, g)
-            if len(pts):
-                tops.append(float((pts[:, 2] + rad).max()))
+        body = int(model.geom_bodyid[g])
+        if model.body_rootid[body] == root:
+            corners = data.xpos[body] + aabb_corners(model, g) @ data.xmat[body].reshape(3, 3).T
+            tops.append(float(corners[:, 2].max()))
     floor_z = min(v[0] for v in low.values())
     top_z = max(tops) if tops else floor_z
     height = max(top_z - floor_z, 1e-3)

@@ -13,7 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from retarget.geoms import geom_points
+from retarget.geoms import aabb_corners
 from retarget.mapping import packaged_mappings
 from retarget.robot_model import RobotModel, load_robot
 from retarget.robots import PACKAGED_ROBOTS, available_robots
@@ -37,7 +37,7 @@ class RobotInfo:
 
 
 def standing_height(robot: RobotModel) -> float:
-    """Highest point (m) of the robot's geoms above its soles in the rest pose."""
+    """Highest point (m) of the robot's geoms (their bounding boxes) above its soles in the rest pose."""
     m = robot.model
     data = mujoco.MjData(m)
     data.qpos[:] = m.qpos0
@@ -50,10 +50,8 @@ def standing_height(robot: RobotModel) -> float:
         body = int(m.geom_bodyid[g])
         if m.body_rootid[body] != m.body_rootid[root]:
             continue
-        pts, rad = geom_points(m, g)
-        if len(pts):
-            world = data.xpos[body] + pts @ data.xmat[body].reshape(3, 3).T
-            top = max(top, float((world[:, 2] + rad).max()))
+        world = data.xpos[body] + aabb_corners(m, g) @ data.xmat[body].reshape(3, 3).T
+        top = max(top, float(world[:, 2].max()))
     return top - robot.floor_z
 
 

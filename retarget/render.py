@@ -134,7 +134,7 @@ def stick_frames(
             p = pos[t]
             for b, par in enumerate(parents):
                 if par >= 0:
-                    ax.plot(*zip(p[par], p[b]), color="#1f77b4", lw=2)
+                    ax.plot(*zip(p[par], p[b], strict=True), color="#1f77b4", lw=2)
             ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=6, color="#d62728")
             ax.set_title(f"{robot.name}  t = {t / traj.fps:.2f} s (stick figure)")
             fig.canvas.draw()
