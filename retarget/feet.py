@@ -7,8 +7,9 @@ reaches its locked target: Gauss-Newton on the foot's position (and orientation,
 m/rad, for legs with six or more joints; a five-joint leg such as H1's keeps the solver's
 foot orientation), all frames at once; a step that does not lower a frame's error is
 undone, and a frame whose correction would turn a joint by more than PIN_MAX_CHANGE keeps
-the solver's pose (the lock is out of the leg's reach there). The correction is then faded out around each stance with the lock weight and
-smoothed over time (Gaussian, sigma = 1 frame), so that pinning adds no jerk.
+the solver's pose (the lock is out of the leg's reach there). The correction is then faded
+out around each stance with the lock weight and smoothed over time (Gaussian, sigma = 1
+frame), so that pinning adds no jerk.
 """
 
 from __future__ import annotations

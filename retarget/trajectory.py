@@ -134,7 +134,7 @@ class RobotTrajectory:
         rows = np.concatenate([self.qpos[:, 0:3], self.qpos[:, [4, 5, 6, 3]], self.qpos[:, 7:]], axis=1)
         with atomic_open(paths["csv"], "w", encoding="ascii", newline="") as fh:
             np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
-        arrays = {
+        arrays: dict[str, Any] = {  # numpy arrays (Any: savez's keywords include allow_pickle)
             "fps": np.float64(self.fps),
             "qpos": self.qpos,
             "qvel": self.qvel(),

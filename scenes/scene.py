@@ -193,7 +193,7 @@ def _resolve(name_or_path: str | Path) -> Path:
     )
 
 
-def _one_line(message: str) -> str:
+def _one_line(message: object) -> str:
     return "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
 
 

@@ -13,7 +13,7 @@ import pytest
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
-from retarget import load_mapping, load_robot, retarget_motion, robot_mjcf, robot_scale
+from retarget import load_robot, retarget_motion, robot_mjcf, robot_scale
 from retarget.robot_model import HUMAN_HIP_HEIGHT
 
 T1_MAPPING = {
