@@ -18,8 +18,8 @@ simulation check of ``controlmm validate`` on the ``empty`` scene):
   collision geom below the floor (mm); self: frames with a self-collision deeper than 5 mm;
 * stance: mean horizontal speed of the foot bodies while the human's foot is in contact
   (cm/s); jerk: joint jerk RMS (rad/s^3);
-* frames/s: input frames per second of wall time (ours: best of ``--repeats`` runs once
-  loaded; holosoma: one run of its script, loading included).
+* frames/s: output frames (30 fps) per second of wall time (ours: best of ``--repeats`` runs
+  once loaded; holosoma: one run of its script, loading included).
 
 Peers run in their own virtual environments, never imported here:
 holosoma-retargeting 0.1.0 (PyPI) needs mujoco <= 3.11, so ``--holosoma-python`` names the
@@ -48,7 +48,7 @@ from data_dirs import ROOT, real_clip
 sys.path.insert(0, str(ROOT))
 
 from controlmm.frames import HumanToWorld  # noqa: E402
-from controlmm.motion import load_motion  # noqa: E402
+from controlmm.motion import Motion, load_motion  # noqa: E402
 from retarget import load_robot, retarget_motion  # noqa: E402
 from retarget.compare import joint_jerk_rms, resample_human, similarity_fit, stance_foot_speed  # noqa: E402
 from retarget.metrics import geom_lowest_z, replay  # noqa: E402
@@ -69,8 +69,8 @@ GMR_RECORDED = {
 }
 
 
-def human_motions(corpus: Path | None, clips: int) -> dict[str, tuple[np.ndarray, float]]:
-    """name -> (HumanML3D joints (T, 22, 3), fps), resampled to FPS."""
+def human_motions(corpus: Path | None, clips: int) -> dict[str, tuple[Motion, np.ndarray]]:
+    """name -> (the motion as loaded, its HumanML3D joints (T, 22, 3) resampled to FPS)."""
     out = {}
     sources = [("real 012314", real_clip())]
     if corpus is not None:
@@ -80,7 +80,7 @@ def human_motions(corpus: Path | None, clips: int) -> dict[str, tuple[np.ndarray
     for name, path in sources:
         m = load_motion(path)
         frames = int(np.floor((m.num_frames - 1) / m.fps * FPS)) + 1
-        out[name] = (resample_human(m.joints, m.fps, frames, FPS), FPS)
+        out[name] = (m, resample_human(m.joints, m.fps, frames, FPS))
     return out
 
 
@@ -119,25 +119,19 @@ def measure(robot_name: str, qpos: np.ndarray, human: np.ndarray, seconds: float
     }
 
 
-def ours(robot: str, human: np.ndarray, repeats: int) -> tuple[np.ndarray, float]:
-    """Our qpos at FPS and the best wall time of ``repeats`` runs (the robot loaded once before)."""
-    retarget_motion(human[:10], robot, fps=FPS, metrics=False)  # load the robot
-    best, traj = float("inf"), None
+def ours(robot: str, motion: Motion, repeats: int) -> tuple[np.ndarray, float]:
+    """Our qpos at FPS for a motion (at its own rate) and the best wall time of ``repeats``
+    runs (the robot loaded once before)."""
+    retarget_motion(Motion(joints=motion.joints[:10], fps=motion.fps), robot, fps=FPS, metrics=False)  # load
+    best, qpos = float("inf"), np.zeros(0)
     for _ in range(repeats):
         start = time.perf_counter()
-        traj = retarget_motion(human, robot, fps=FPS, metrics=False)
+        qpos = retarget_motion(motion, robot, fps=FPS, metrics=False).qpos
         best = min(best, time.perf_counter() - start)
-    assert traj is not None
-    return traj.qpos, best
+    return qpos, best
 
 
-def _motion(joints: np.ndarray) -> object:
-    from controlmm.motion import Motion
-
-    return Motion(joints=joints.astype(np.float32), fps=FPS)
-
-
-def holosoma(python: Path, motions: dict[str, tuple[np.ndarray, float]]) -> tuple[dict, dict, str]:
+def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tuple[dict, dict, str]:
     """Run holosoma on ``motions`` and export its demo clips; (qpos and seconds per motion, demo
     motions (SMPL-22, Y up) with holosoma's own qpos and seconds, a note)."""
     driver = ROOT / "benchmarks" / "peers" / "holosoma_driver.py"
@@ -145,7 +139,7 @@ def holosoma(python: Path, motions: dict[str, tuple[np.ndarray, float]]) -> tupl
         tmp_dir = Path(tmp)
         arrays: dict[str, np.ndarray] = {}
         keys = {}
-        for i, (name, (joints, _)) in enumerate(motions.items()):
+        for i, (name, (_, joints)) in enumerate(motions.items()):
             key = f"m{i}"
             keys[key] = name
             # Z up as (x, y, z) -> (z, x, y); the first frame away from the origin (holosoma's
@@ -263,8 +257,8 @@ def main() -> int:
     )
     for robot in robots:
         per[f"ours/{robot}"] = {}
-        for name, (joints, _) in motions.items():
-            qpos, seconds = ours(robot, joints, args.repeats)
+        for name, (motion, joints) in motions.items():
+            qpos, seconds = ours(robot, motion, args.repeats)
             per[f"ours/{robot}"][name] = measure(robot, qpos, joints, seconds, len(joints))
         results = list(per[f"ours/{robot}"].values())
         rows.append(summarise("controlmm", robot, "real + corpus", results))
@@ -284,7 +278,7 @@ def main() -> int:
             notes["holosoma"] = note
             if results:
                 per["holosoma/g1"] = {
-                    k: measure("g1", q, motions[k][0], s, len(motions[k][0])) for k, (q, s) in results.items()
+                    k: measure("g1", q, motions[k][1], s, len(motions[k][1])) for k, (q, s) in results.items()
                 }
                 for group, subset in (("real 012314", real), ("corpus", corpus)):
                     if subset:
@@ -293,7 +287,9 @@ def main() -> int:
                         )
                 per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
                 for name, (joints, q_peer, s_peer) in demo.items():
-                    qpos, seconds = ours("g1", joints, args.repeats)
+                    qpos, seconds = ours(
+                        "g1", Motion(joints=joints.astype(np.float32), fps=FPS), args.repeats
+                    )
                     per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
                     per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))
                 if demo:
