@@ -120,11 +120,16 @@ def _check_distance(name: str, value: float) -> float:
     return float(value)
 
 
+def _to_world(transform: HumanToWorld, points: Tensor) -> Tensor:
+    """Human-frame points (..., 3) -> world points (..., 3), a tensor as the input is."""
+    return transform.to_world(points)
+
+
 def _world_sdf(
     sdf: SceneSDF, transform: HumanToWorld, points: Tensor, frames: Tensor, fps: float, time_offset: float
 ) -> Tensor:
     """SDF (B, F, P) of human-frame points (B, F, P, 3) at the given frames."""
-    world = transform.to_world(points)
+    world = _to_world(transform, points)
     times = frames.to(points.dtype) / fps + time_offset
     return sdf(world, times if getattr(sdf, "is_moving", True) else None)
 
@@ -224,7 +229,7 @@ def floor_loss(
         f = _frames(frames, motion.shape[1], motion.device)
         if len(f) == 0:
             return motion.new_zeros(motion.shape[0])
-        z = transform.to_world(motion[:, f][:, :, ids])[..., 2]
+        z = _to_world(transform, motion[:, f][:, :, ids])[..., 2]
         return torch.relu(floor - z).mean(dim=(1, 2))
 
     return LossTerm(name, fn, weight)

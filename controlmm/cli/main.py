@@ -18,6 +18,8 @@ from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
     "plan",
+    "studio",
+    "view",
     "generate",
     "timeline",
     "train",
@@ -29,6 +31,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "robots",
     "scene",
     "validate",
+    "batch",
     "eval",
     "info",
 )

@@ -11,7 +11,7 @@ from controlmm.frames import HumanToWorld
 
 
 def control_loss(joints: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Squared error on controlled joints, normalised per sample (reference §5.2).
+    """Squared error on controlled joints, normalised per sample (ControlMM's inference loss, L_ctrl).
 
     Args:
         joints: (B, T, 22, 3) generated joints, human frame.

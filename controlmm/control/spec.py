@@ -122,9 +122,10 @@ class ControlSpec:
 
     def human_positions(self, transform: HumanToWorld | None = None) -> np.ndarray:
         """Constraint positions in the human frame, (K, 3) float64."""
-        pos = np.array([c.position for c in self.constraints], dtype=np.float64).reshape(-1, 3)
+        pos: np.ndarray = np.array([c.position for c in self.constraints], dtype=np.float64).reshape(-1, 3)
         if self.coords == "world":
-            pos = (transform or HumanToWorld()).to_human(pos)
+            # to_human maps an ndarray to an ndarray; asarray states it (no copy).
+            pos = np.asarray((transform or HumanToWorld()).to_human(pos))
         return pos
 
     def dense(self, num_frames: int, transform: HumanToWorld | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -132,7 +133,7 @@ class ControlSpec:
         self.check_length(num_frames)
         targets = np.zeros((num_frames, NUM_JOINTS, 3), dtype=np.float32)
         mask = np.zeros((num_frames, NUM_JOINTS), dtype=bool)
-        for c, p in zip(self.constraints, self.human_positions(transform)):
+        for c, p in zip(self.constraints, self.human_positions(transform), strict=True):
             targets[c.frame, c.joint] = p
             mask[c.frame, c.joint] = True
         return targets, mask
@@ -140,7 +141,7 @@ class ControlSpec:
     def pinned_frame0_warnings(self, transform: HumanToWorld | None = None, tol: float = 0.01) -> list[str]:
         """Warnings for pelvis targets at frame 0 away from the origin (unreachable by design)."""
         warnings = []
-        for c, p in zip(self.constraints, self.human_positions(transform)):
+        for c, p in zip(self.constraints, self.human_positions(transform), strict=True):
             if c.joint == 0 and c.frame == 0:
                 off = float(np.hypot(p[0], p[2]))
                 if off > tol:
@@ -200,11 +201,15 @@ def _parse_item(item: Any, k: int) -> list[Constraint]:
             raise ControlMMError(f"{where}: positions must be a list of [x, y, z]") from exc
         if arr.shape != (end - start + 1, 3):
             raise ControlMMError(
-                f"{where}: positions must have shape ({end - start + 1}, 3) for frames {start}..{end}; got {arr.shape}"
+                f"{where}: positions must have shape ({end - start + 1}, 3) for frames {start}..{end}; "
+                f"got {arr.shape}"
             )
         if not np.all(np.isfinite(arr)):
             raise ControlMMError(f"{where}: positions contain NaN/inf")
-        return [Constraint(joint, f, tuple(map(float, p))) for f, p in zip(range(start, end + 1), arr)]
+        return [
+            Constraint(joint, f, (float(p[0]), float(p[1]), float(p[2])))
+            for f, p in zip(range(start, end + 1), arr, strict=True)
+        ]
     extra = set(item) - {"joint", "frame", "position"}
     if extra:
         raise ControlMMError(

@@ -2,7 +2,7 @@
 
 - :class:`Objective`: control targets + loss terms (:class:`controlmm.control.LossTerm`) + the
   early-stopping rule;
-- :func:`logits_editing`, :func:`codebook_editing`: the two editors (reference §5.2-5.4);
+- :func:`logits_editing`, :func:`codebook_editing`: the two editors (ControlMM paper §3.3; docs/control.md);
 - :class:`EditingConfig`, :data:`PRESETS` (``fast``, ``medium``, ``accurate``), :func:`editing_preset`.
 
 Controlled generation itself (decoding with the control model and both editors) is

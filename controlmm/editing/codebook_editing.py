@@ -3,8 +3,9 @@
 After the base and residual layers are decoded, the latent e = sum_q C_q[id_q] (B, N, code_dim), the
 sum of the RVQ layers' code vectors at every token position, becomes a free per-sample tensor and is
 optimised (at most ``codebook_steps`` AdamW steps, lr 0.06, betas (0.5, 0.9)) against the objective on
-R(denorm(decoder(e))). The shared codebooks themselves never change (reference §11.2). The latent with
-the lowest loss is kept; a sample stops as soon as it meets the stopping rule.
+R(denorm(decoder(e))). The shared codebooks themselves never change: despite its name, the official code
+edits this per-sample latent, not the codebook entries. The latent with the lowest loss is kept; a
+sample stops as soon as it meets the stopping rule.
 """
 
 from __future__ import annotations

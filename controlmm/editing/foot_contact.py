@@ -1,11 +1,11 @@
 """The foot-contact run: a second codebook-editing run that takes the skating out of an edited motion.
 
 Editing moves a motion onto its targets by changing the decoder latent, and the feet that were planted
-start to slide (docs/BENCHMARKS.md, "Control": foot skating 0.05 -> 0.12 with the accurate preset on the
-default model). Putting a contact term into the editors' objective from the start fights the targets;
-instead, once codebook editing has met them, this run edits the latent again with the same objective
-plus :func:`foot_contact_term`, and a sample keeps the result only where it still meets the whole
-objective (every constraint within the tolerance, every other term met).
+start to slide (docs/benchmarks-history.md, "Control", "The fourth update's default": foot skating 0.05 ->
+0.12 with the accurate preset on that default model). Putting a contact term into the editors' objective
+from the start fights the targets; instead, once codebook editing has met them, this run edits the
+latent again with the same objective plus :func:`foot_contact_term`, and a sample keeps the result only
+where it still meets the whole objective (every constraint within the tolerance, every other term met).
 """
 
 from __future__ import annotations

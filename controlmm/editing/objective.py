@@ -7,7 +7,7 @@ An :class:`Objective` is the spatial-control targets (optional) plus any other :
     done(joints)  = every constraint within ``tolerance`` (m)  and  every other term <= ``loss_tolerance``
 
 ``L_ctrl`` is ControlMM's inference loss (squared error over the controlled (t, j, xyz) entries divided
-by their number, per sample; reference §5.2); H (:meth:`Objective.control_hinge`) pulls on the
+by their number, per sample, as in the official code); H (:meth:`Objective.control_hinge`) pulls on the
 constraints still over half the tolerance (codebook editing uses it, weight 10). Stopping looks at the
 worst constraint, not the mean, so an early-stopped motion meets *every* constraint to the tolerance
 (``stop_on="max"``); logits editing, which only steers the sampling of the tokens, stops on the mean
@@ -64,25 +64,29 @@ class Objective:
         """Whether there is anything to optimise at all."""
         return self.has_control or bool(self.terms)
 
-    def controlled(self) -> torch.Tensor | None:
-        """(B,) bool: samples with at least one constraint."""
-        return None if self.mask is None else self.mask.flatten(1).any(-1)
+    def _control(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(targets (B, T, 22, 3), mask (B, T, 22)); an error if the objective has none."""
+        if self.targets is None or self.mask is None:
+            raise ValueError("this objective has no control targets")
+        return self.targets, self.mask
 
     def max_error(self, joints: torch.Tensor) -> torch.Tensor:
         """Worst constraint error per sample (B,) in metres (0 without constraints)."""
         if self.mask is None:
             return joints.new_zeros(joints.shape[0])
+        targets, mask = self._control()
         t = joints.shape[1]
-        err = (joints.detach() - self.targets[:, :t]).norm(dim=-1)
-        return torch.where(self.mask[:, :t], err, torch.zeros_like(err)).flatten(1).amax(-1)
+        err = (joints.detach() - targets[:, :t]).norm(dim=-1)
+        return torch.where(mask[:, :t], err, torch.zeros_like(err)).flatten(1).amax(-1)
 
     def mean_error(self, joints: torch.Tensor) -> torch.Tensor:
         """Mean constraint error per sample (B,) in metres (0 without constraints)."""
         if self.mask is None:
             return joints.new_zeros(joints.shape[0])
+        targets, mask = self._control()
         t = joints.shape[1]
-        err = (joints.detach() - self.targets[:, :t]).norm(dim=-1)
-        mask = self.mask[:, :t]
+        err = (joints.detach() - targets[:, :t]).norm(dim=-1)
+        mask = mask[:, :t]
         total = torch.where(mask, err, torch.zeros_like(err)).flatten(1).sum(-1)
         return total / mask.flatten(1).sum(-1).clamp(min=1)
 
@@ -92,9 +96,10 @@ class Objective:
         Zero once every constraint is within half the tolerance; it pulls on the few constraints that
         lag behind, which the mean squared error barely feels once most constraints are met.
         """
+        targets, mask = self._control()
         t = joints.shape[1]
-        mask = self.mask[:, :t]
-        err = ((joints - self.targets[:, :t].to(joints)).square().sum(-1) + 1e-12).sqrt()
+        mask = mask[:, :t]
+        err = ((joints - targets[:, :t].to(joints)).square().sum(-1) + 1e-12).sqrt()
         excess = torch.relu(err - 0.5 * self.tolerance).square()
         total = torch.where(mask, excess, torch.zeros_like(excess)).flatten(1).sum(-1)
         return total / mask.flatten(1).sum(-1).clamp(min=1)
@@ -103,7 +108,8 @@ class Objective:
         """Weighted per-sample value (B,) of every term, the control loss first (as ``control``)."""
         values: dict[str, torch.Tensor] = {}
         if self.has_control:
-            value = control_loss(joints, self.targets, self.mask)
+            targets, mask = self._control()
+            value = control_loss(joints, targets, mask)
             if self.hinge_weight > 0:
                 value = value + self.hinge_weight * self.control_hinge(joints)
             values["control"] = self.control_weight * value

@@ -92,6 +92,18 @@ def optimize(
     return EditOutcome(param=kept, steps=used, done=done, loss=kept_loss, max_error=kept_err)
 
 
+@dataclass
+class _LbfgsState:
+    """What the L-BFGS closure updates at every evaluation (per sample, like :class:`EditOutcome`)."""
+
+    kept: torch.Tensor  # (B, ...) the best evaluated state
+    kept_loss: torch.Tensor  # (B,) its loss
+    kept_err: torch.Tensor  # (B,) its worst constraint error (m)
+    done: torch.Tensor  # (B,) bool, met the stopping rule
+    used: torch.Tensor  # (B,) long, evaluations counted as steps
+    count: int = 0  # evaluations so far, the starting point included
+
+
 def optimize_lbfgs(
     param: torch.Tensor,
     forward: Callable[[torch.Tensor], torch.Tensor],
@@ -100,7 +112,8 @@ def optimize_lbfgs(
     config: EditingConfig,
     chunk: int = 10,
 ) -> EditOutcome:
-    """Minimise ``objective(forward(param))`` with L-BFGS (strong Wolfe line search) for at most ``evaluations``.
+    """Minimise ``objective(forward(param))`` with L-BFGS (strong Wolfe line search), at most
+    ``evaluations`` evaluations.
 
     The control loss is a smooth least-squares problem whose pelvis part is badly conditioned (the root
     trajectory integrates velocities and headings over the whole clip); a quasi-Newton method meets
@@ -117,14 +130,25 @@ def optimize_lbfgs(
     x = param.detach().clone().requires_grad_(True)
     active = torch.ones(b, dtype=torch.bool, device=device)  # still optimised (restarts drop the done ones)
     scale = torch.ones(b, device=device)  # 1 / initial loss: L-BFGS's first step is sized by the gradient
-    state = {
-        "kept": x.detach().clone(),
-        "kept_loss": torch.full((b,), float("inf"), device=device),
-        "kept_err": torch.zeros(b, device=device),
-        "done": torch.zeros(b, dtype=torch.bool, device=device),
-        "used": torch.zeros(b, dtype=torch.long, device=device),
-        "count": 0,
-    }
+    state = _LbfgsState(
+        kept=x.detach().clone(),
+        kept_loss=torch.full((b,), float("inf"), device=device),
+        kept_err=torch.zeros(b, device=device),
+        done=torch.zeros(b, dtype=torch.bool, device=device),
+        used=torch.zeros(b, dtype=torch.long, device=device),
+    )
+
+    def new_optimizer() -> torch.optim.LBFGS:
+        return torch.optim.LBFGS(
+            [x],
+            lr=1.0,
+            max_iter=chunk,
+            max_eval=chunk * 2,
+            history_size=50,
+            tolerance_grad=0.0,
+            tolerance_change=0.0,
+            line_search_fn="strong_wolfe",
+        )
 
     def closure() -> torch.Tensor:
         optimizer.zero_grad(set_to_none=True)
@@ -132,54 +156,46 @@ def optimize_lbfgs(
         value = loss.detach()
         finished = finished if config.early_stop else torch.zeros_like(finished)
         ok = torch.isfinite(value)
-        moving = active & ~state["done"]
-        if state["count"] == 0:
+        moving = active & ~state.done
+        if state.count == 0:
             scale.copy_(1.0 / value.clamp(min=1e-12).nan_to_num(1.0))
         else:  # the first evaluation is the starting point, not a step
-            state["used"] = state["used"] + moving.long()
-        take = moving & ok & (finished | (value < state["kept_loss"]))
-        state["kept"] = torch.where(take.view(view), x.detach(), state["kept"])
-        state["kept_loss"] = torch.where(take, value, state["kept_loss"])
-        state["kept_err"] = torch.where(take, max_err, state["kept_err"])
-        state["done"] = state["done"] | (moving & finished & ok)
-        state["count"] += 1
+            state.used = state.used + moving.long()
+        take = moving & ok & (finished | (value < state.kept_loss))
+        state.kept = torch.where(take.view(view), x.detach(), state.kept)
+        state.kept_loss = torch.where(take, value, state.kept_loss)
+        state.kept_err = torch.where(take, max_err, state.kept_err)
+        state.done = state.done | (moving & finished & ok)
+        state.count += 1
         # samples done in this chunk stop moving; once all are, the zero gradient ends the L-BFGS step
-        total = torch.where(active & ~state["done"] & ok, loss * scale, torch.zeros_like(loss)).sum()
+        total = torch.where(active & ~state.done & ok, loss * scale, torch.zeros_like(loss)).sum()
         if total.requires_grad:
             total.backward()
         return total.detach()
 
-    optimizer = None
+    # Nothing is done yet, so the first pass of the loop keeps this optimiser and x.
+    optimizer = new_optimizer()
     while True:
-        if optimizer is None or bool((active & state["done"]).any()):
-            active = active & ~state["done"]
-            optimizer = torch.optim.LBFGS(
-                [x],
-                lr=1.0,
-                max_iter=chunk,
-                max_eval=chunk * 2,
-                history_size=50,
-                tolerance_grad=0.0,
-                tolerance_change=0.0,
-                line_search_fn="strong_wolfe",
-            )
+        if bool((active & state.done).any()):
+            active = active & ~state.done
+            optimizer = new_optimizer()
             with torch.no_grad():
-                x.copy_(torch.where(active.view(view), x, state["kept"]))
-        if state["count"] == 0:
+                x.copy_(torch.where(active.view(view), x, state.kept))
+        if state.count == 0:
             with torch.enable_grad():
                 closure()
-            active = active & ~state["done"]
-        if state["count"] > evaluations or not bool(active.any()):
+            active = active & ~state.done
+        if state.count > evaluations or not bool(active.any()):
             break
-        before = state["count"]
-        optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state["count"]))
+        before = state.count
+        optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state.count))
         optimizer.step(closure)
-        if state["count"] == before:  # converged to machine precision
+        if state.count == before:  # converged to machine precision
             break
     return EditOutcome(
-        param=state["kept"],
-        steps=state["used"],
-        done=state["done"],
-        loss=state["kept_loss"],
-        max_error=state["kept_err"],
+        param=state.kept,
+        steps=state.used,
+        done=state.done,
+        loss=state.kept_loss,
+        max_error=state.kept_err,
     )

@@ -1,6 +1,6 @@
-"""Editing settings and the named presets of the paper (reference §5.5, Paper A.3/A.4, Table 5).
+"""Editing settings and the named presets of the paper (ControlMM, arXiv:2410.10780: A.3/A.4, Table 5).
 
-| preset | motion control model | logits editing (steps per decoding iteration) | codebook editing (steps at the end) |
+| preset | motion control model | logits editing (per decoding iteration) | codebook editing (at the end) |
 |---|---|---|---|
 | ``fast`` | on | 0 | 100 |
 | ``medium`` | on | 0 | 600 |
@@ -15,6 +15,7 @@ weight decay 1e-6; Gumbel-softmax temperature 1.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 from controlmm.errors import ControlMMError
 
@@ -63,7 +64,7 @@ class EditingConfig:
         if self.loss_tolerance < 0:
             raise ControlMMError(f"loss_tolerance must be >= 0; got {self.loss_tolerance}")
 
-    def with_overrides(self, **changes) -> EditingConfig:
+    def with_overrides(self, **changes: Any) -> EditingConfig:
         """A copy with the non-None ``changes`` applied."""
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 
@@ -80,7 +81,8 @@ PRESETS: dict[str, EditingConfig] = {
 
 
 def editing_preset(preset: str | EditingConfig) -> EditingConfig:
-    """The :class:`EditingConfig` of a preset name (``fast``, ``medium``, ``accurate``) or the config itself."""
+    """The :class:`EditingConfig` of a preset name (``fast``, ``medium``, ``accurate``) or the config
+    itself."""
     if isinstance(preset, EditingConfig):
         return preset
     if preset not in PRESETS:

@@ -40,7 +40,7 @@ def frames_for(
         frames = [int(round(float(s) * FPS)) for s in secs]
         unit = "s"
     else:
-        frames = [frames] * count if isinstance(frames, numbers.Integral) else list(frames)
+        frames = [frames] * count if isinstance(frames, (int, numbers.Integral)) else list(frames)
         unit = "frames"
     if len(frames) != count:
         raise ControlMMError(f"{len(frames)} lengths given for {count} prompts")
@@ -94,7 +94,7 @@ def generate(
     seconds: float | Sequence[float] | None = None,
     frames: int | Sequence[int] | None = None,
     seed: int | None = None,
-    options: DecodeOptions = DecodeOptions(),
+    options: DecodeOptions | None = None,
     use_residual: bool = True,
     residual_cfg_scale: float = 5.0,
     residual_temperature: float = 1.0,
@@ -110,7 +110,8 @@ def generate(
         text: a prompt or a list of prompts.
         seconds / frames: length per prompt (scalar or list); default 6 s; 40..196 frames.
         seed: makes the result reproducible (None: a random seed, recorded in the metadata).
-        options: base-layer decoding (iterations 10, CFG 4, temperature 1, top-k 0.9).
+        options: base-layer decoding (default ``DecodeOptions()``: iterations 10, CFG 4, temperature 1,
+            top-k 0.9).
         use_residual: add the residual layers when the model has a residual transformer.
         residual_layers: how many residual layers to predict (default all, Q - 1).
         batch_size: prompts decoded together.
@@ -118,6 +119,7 @@ def generate(
             log-probabilities with the sentence-vector transformer's (:mod:`controlmm.generate.token_view`);
             False: the sentence-vector transformer alone.
     """
+    options = DecodeOptions() if options is None else options
     texts = check_texts(text)
     if not texts:
         raise ControlMMError("no text given")
@@ -160,7 +162,7 @@ def generate(
         latent = model.tokenizer.ids_to_latent(ids)
         features = latent_to_features(model, latent)
         joints = features_to_joints(features)
-        for i, (prompt, f) in enumerate(zip(chunk_texts, chunk_frames)):
+        for i, (prompt, f) in enumerate(zip(chunk_texts, chunk_frames, strict=True)):
             meta = {
                 "seed": int(seed),
                 "index": start + i,
@@ -200,7 +202,7 @@ def generate(
     )
 
 
-def _cat_padded(chunks: list[torch.Tensor], value) -> torch.Tensor:
+def _cat_padded(chunks: list[torch.Tensor], value: float) -> torch.Tensor:
     """Concatenate along the batch, padding the token axis (dim 1) to the longest chunk."""
     n = max(c.shape[1] for c in chunks)
     padded = []

@@ -12,7 +12,7 @@ out.errors[0]                                          # (K,) metres, one per co
 out.records[0].codebook_steps                          # editing steps used
 ```
 
-Per batch (reference §5):
+Per batch (ControlMM paper §3.3 and A.2-A.4; docs/control.md):
 
 1. iterative masked decoding of the base layer (10 iterations, CFG 4). With the motion control model,
    each iteration's logits come from the base transformer steered by the control branch, whose input is
@@ -53,10 +53,10 @@ from controlmm.editing.presets import EditingConfig, editing_preset
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.generate.api import frames_for, latent_to_features
-from controlmm.generate.masked_decoding import DecodeOptions, DecodeState, masked_decode
+from controlmm.generate.masked_decoding import DecodeOptions, DecodeState, LogitsFn, masked_decode
 from controlmm.generate.residual_decoding import residual_decode
 from controlmm.models.model_dir import MotionModel
-from controlmm.models.motion_control_model import control_input, estimate_latent
+from controlmm.models.motion_control_model import MotionControlModel, control_input, estimate_latent
 from controlmm.motion.container import Motion
 from controlmm.motion.recover import features_to_joints
 from controlmm.motion.skeleton import FPS, JOINT_NAMES, MAX_FRAMES, NUM_JOINTS
@@ -139,7 +139,7 @@ def generate_controlled(
     frames: int | Sequence[int] | None = None,
     seed: int | None = None,
     transform: HumanToWorld | None = None,
-    options: DecodeOptions = DecodeOptions(),
+    options: DecodeOptions | None = None,
     residual_cfg_scale: float = 5.0,
     batch_size: int = 16,
     progress: bool = False,
@@ -162,7 +162,7 @@ def generate_controlled(
             with a spec 6 s, or longer to cover the last constrained frame (up to 196).
         seed: reproducibility (None: random, recorded).
         transform: placement of the human in the world, for ``coords: world`` specs.
-        options: base-layer sampling (MoMask defaults).
+        options: base-layer sampling (default ``DecodeOptions()``: the MoMask defaults).
         batch_size: prompts decoded together.
 
     Returns:
@@ -171,6 +171,7 @@ def generate_controlled(
     texts = check_texts(text)
     if not texts:
         raise ControlMMError("no text given")
+    options = DecodeOptions() if options is None else options
     config = editing_preset(preset)
     preset_name = config.name
     count = len(texts)
@@ -185,11 +186,12 @@ def generate_controlled(
     full_t = np.zeros((count, MAX_FRAMES, NUM_JOINTS, 3), dtype=np.float32)
     full_m = np.zeros((count, MAX_FRAMES, NUM_JOINTS), dtype=bool)
     for i, f in enumerate(lengths):
-        if specs is not None and specs[i] is not None:
-            t, m = specs[i].dense(f, transform)
+        spec = specs[i] if specs is not None else None
+        if spec is not None:
+            t, m = spec.dense(f, transform)
             full_t[i, :f], full_m[i, :f] = t, m
-            pairs.append([(c.joint, c.frame) for c in specs[i].constraints])
-        elif dense_t is not None:
+            pairs.append([(c.joint, c.frame) for c in spec.constraints])
+        elif dense_t is not None and dense_m is not None:
             if dense_m[i, f:].any():
                 frame = int(np.argwhere(dense_m[i, f:])[0][0]) + f
                 raise ControlMMError(
@@ -204,10 +206,10 @@ def generate_controlled(
     seed = secrets.randbits(31) if seed is None else check_seed(seed)
     generator = torch.Generator(device=model.device).manual_seed(int(seed))
     chunks = _chunks(lengths, batch_size, by_length=bool(terms))
-    results: dict[int, tuple] = {}
+    results: dict[int, tuple[np.ndarray, np.ndarray, EditingRecord, torch.Tensor]] = {}
     bar = tqdm(total=count, desc="generate", unit="motion", disable=not progress, leave=False)
     for chunk in chunks:
-        out = _generate_chunk(
+        chunk_joints, chunk_features, chunk_records, chunk_tokens = _generate_chunk(
             model,
             [texts[i] for i in chunk],
             [lengths[i] for i in chunk],
@@ -221,7 +223,7 @@ def generate_controlled(
             generator,
         )
         for k, i in enumerate(chunk):
-            results[i] = tuple(x[k] for x in out)
+            results[i] = (chunk_joints[k], chunk_features[k], chunk_records[k], chunk_tokens[k])
         bar.update(len(chunk))
     bar.close()
     motions, errors, records, ids = [], [], [], []
@@ -286,7 +288,10 @@ def _generate_chunk(
     options: DecodeOptions,
     residual_cfg_scale: float,
     generator: torch.Generator,
-):
+) -> tuple[list[np.ndarray], list[np.ndarray], list[EditingRecord], list[torch.Tensor]]:
+    """Decode, edit and evaluate one batch: per motion its joints (T_span, 22, 3) and features
+    (T_span, 263) over the frames the decoder produces, its :class:`EditingRecord` and its token ids
+    (N_i, q)."""
     started, cpu_started = time.perf_counter(), time.process_time()
     device = model.device
     unit = model.config.tokenizer.downsample
@@ -307,18 +312,27 @@ def _generate_chunk(
     tokenizer, transformer = model.tokenizer, model.transformer
     codebook = tokenizer.codebooks[0]
     control = model.parts.get("control") if config.control_model else None
-    use_control = control is not None and bool(mask.any())
+    if control is not None and not isinstance(control, MotionControlModel):
+        raise ControlMMError(
+            f"the model's control part is a {type(control).__name__}, not a MotionControlModel"
+        )
     b = len(texts)
     logit_steps: list[torch.Tensor] = []
 
     def decode(latent: torch.Tensor) -> torch.Tensor:
         return latent_to_positions(model, latent)[:, :t_max]
 
-    def control_logits(ids: torch.Tensor, state: DecodeState) -> torch.Tensor:
-        known = ~state.is_mask & ~state.padding_mask
-        current = latent_to_positions(model, estimate_latent(ids, codebook, known))
-        ctrl_in = control_input(targets, mask, current, control.joint_ids)
-        return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
+    control_logits: LogitsFn | None = None
+    if control is not None and bool(mask.any()):
+
+        def steered_logits(ids: torch.Tensor, state: DecodeState) -> torch.Tensor:
+            known = ~state.is_mask & ~state.padding_mask
+            current = latent_to_positions(model, estimate_latent(ids, codebook, known))
+            ctrl_in = control_input(targets, mask, current, control.joint_ids)
+            return control.cfg_logits(transformer, ids, cond, state.padding_mask, ctrl_in, options.cfg_scale)
+
+        control_logits = steered_logits
+    use_control = control_logits is not None
 
     logits_objective = replace(
         objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean", hinge_weight=0.0
@@ -341,7 +355,7 @@ def _generate_chunk(
         token_lengths,
         options,
         generator,
-        logits_fn=control_logits if use_control else None,
+        logits_fn=control_logits,
         logits_hook=edit_logits if editing and config.logits_steps > 0 else None,
     )
     ids = base.ids[..., None]
@@ -433,7 +447,8 @@ def latent_to_positions(model: MotionModel, latent: torch.Tensor) -> torch.Tenso
 
 
 def decode_latent(model: MotionModel, latent: torch.Tensor, frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """(joints (T, 22, 3), features (T, 263)) numpy of the first ``frames`` frames of a latent (1, N, code_dim)."""
+    """(joints (T, 22, 3), features (T, 263)) numpy of the first ``frames`` frames of a latent
+    (1, N, code_dim)."""
     with torch.no_grad():
         features = latent_to_features(model, latent)[:, :frames]
         joints = features_to_joints(features)
@@ -473,7 +488,9 @@ def edit_latent(
 
 
 # -- inputs -----------------------------------------------------------------------------------------
-def _specs(control, count: int) -> list[ControlSpec | None] | None:
+def _specs(
+    control: ControlSpec | Sequence[ControlSpec | None] | None, count: int
+) -> list[ControlSpec | None] | None:
     if control is None:
         return None
     if isinstance(control, ControlSpec):
@@ -487,7 +504,9 @@ def _specs(control, count: int) -> list[ControlSpec | None] | None:
     return specs
 
 
-def _dense_targets(targets, mask, count: int) -> tuple[np.ndarray | None, np.ndarray | None, int]:
+def _dense_targets(
+    targets: np.ndarray | torch.Tensor | None, mask: np.ndarray | torch.Tensor | None, count: int
+) -> tuple[np.ndarray | None, np.ndarray | None, int]:
     """Targets and mask padded to 196 frames, and the frame count they were given with."""
     if targets is None and mask is None:
         return None, None, 0
@@ -517,7 +536,13 @@ def _dense_targets(targets, mask, count: int) -> tuple[np.ndarray | None, np.nda
     return padded_t, padded_m, int(t.shape[1])
 
 
-def _lengths(count: int, seconds, frames, specs, dense_m) -> list[int]:
+def _lengths(
+    count: int,
+    seconds: float | Sequence[float] | None,
+    frames: int | Sequence[int] | None,
+    specs: list[ControlSpec | None] | None,
+    dense_m: np.ndarray | None,
+) -> list[int]:
     """Lengths from seconds/frames, or the default 6 s stretched to cover the last constrained frame."""
     if seconds is not None or frames is not None:
         return frames_for(count, seconds, frames)
@@ -528,7 +553,7 @@ def _lengths(count: int, seconds, frames, specs, dense_m) -> list[int]:
     elif dense_m is not None:
         last = [int(np.flatnonzero(m.any(-1)).max()) if m.any() else -1 for m in dense_m]
     out = []
-    for d, lf in zip(default, last):
+    for d, lf in zip(default, last, strict=True):
         if lf >= MAX_FRAMES:
             raise ControlMMError(
                 f"a constraint at frame {lf} is beyond the longest motion (frames 0..{MAX_FRAMES - 1})"
@@ -562,7 +587,7 @@ def _control_metadata(
         "editing": record.to_json(),
         "constraints": [
             {"joint": JOINT_NAMES[j], "frame": f, "error_cm": round(100 * float(e), 4)}
-            for (j, f), e in zip(pairs, errors)
+            for (j, f), e in zip(pairs, errors, strict=True)
         ],
     }
     if spec is not None:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import torch
 
 from controlmm.models.layers import gumbel_noise, lengths_to_mask, top_k_filter
+from controlmm.models.mask_transformer import MaskTransformer
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ LogitsHook = Callable[[torch.Tensor, DecodeState], torch.Tensor]
 
 @torch.no_grad()
 def masked_decode(
-    transformer,
+    transformer: MaskTransformer,
     cond: torch.Tensor,
     token_lengths: torch.Tensor,
     options: DecodeOptions = DecodeOptions(),
@@ -120,5 +121,7 @@ def masked_decode(
         ids = torch.where(is_mask, pred, ids)
         probs = torch.softmax(logits, dim=-1)
         scores = probs.gather(-1, pred[..., None]).squeeze(-1).masked_fill(~is_mask, 1e5)
+    if logits is None:  # mask_counts gives at least one iteration
+        raise RuntimeError("masked decoding ran no iteration")
     ids = torch.where(padding, -1, ids)
     return BaseDecoding(ids=ids, logits=logits, token_lengths=token_lengths)

@@ -14,11 +14,12 @@ import torch
 
 from controlmm.generate.masked_decoding import sample_ids
 from controlmm.models.layers import lengths_to_mask, top_k_filter
+from controlmm.models.residual_transformer import ResidualTransformer
 
 
 @torch.no_grad()
 def residual_decode(
-    residual,
+    residual: ResidualTransformer,
     base_ids: torch.Tensor,
     cond: torch.Tensor,
     token_lengths: torch.Tensor,

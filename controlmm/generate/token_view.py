@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import torch
 
+from controlmm.errors import ControlMMError
 from controlmm.generate.masked_decoding import DecodeState, LogitsFn
 from controlmm.models.model_dir import MotionModel
 
@@ -31,9 +32,12 @@ def token_view_logits_fn(
     member = model.token_transformer
     if member is None:
         return None
+    view = model.config.token_view
+    if view is None:
+        raise ControlMMError("the model has a token-state transformer but its model.json has no token_view")
     if states is None:
         states = model.encode_token_states(list(texts))  # (B, L, 384)
-    weight = model.config.token_view.weight
+    weight = view.weight
     sentence = model.transformer
 
     def logits_fn(ids: torch.Tensor, state: DecodeState) -> torch.Tensor:

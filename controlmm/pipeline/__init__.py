@@ -1,4 +1,5 @@
-"""The plan pipeline: text + constraints + scene -> ControlMM -> retarget -> MuJoCo check -> feedback -> export.
+"""The plan pipeline: text + constraints + scene -> ControlMM -> retarget -> MuJoCo check -> feedback
+-> export.
 
 ```python
 from controlmm.pipeline import PlanConfig, plan, write_plan

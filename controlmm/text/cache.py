@@ -11,7 +11,8 @@ import torch
 from tqdm import tqdm
 
 from controlmm.atomic import atomic_path
-from controlmm.text.base import TextEncoder
+from controlmm.errors import ControlMMError
+from controlmm.text.base import TextEncoder, TokenTextEncoder
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,11 @@ def embed_captions(
     the longest (``encoder.encode_tokens``); stored as float16 on disk (they are large), float32 here.
     """
     unique = tuple(dict.fromkeys(captions))
+    token_encoder = None
+    if tokens:
+        if not isinstance(encoder, TokenTextEncoder):
+            raise ControlMMError(f"text encoder '{encoder.name}' gives no token states (tokens={tokens})")
+        token_encoder = encoder
     path = None
     if cache_dir is not None:
         kind = f"{encoder.name}-tok{tokens}" if tokens else encoder.name
@@ -70,11 +76,13 @@ def embed_captions(
         starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress, leave=False
     ):
         texts = list(unique[start : start + batch_size])
-        chunks.append(encoder.encode_tokens(texts, tokens) if tokens else encoder.encode(texts))
+        chunks.append(
+            token_encoder.encode_tokens(texts, tokens) if token_encoder is not None else encoder.encode(texts)
+        )
     if tokens:
         length = max((c.shape[1] for c in chunks), default=1)
         vectors = torch.zeros(len(unique), length, encoder.dim)
-        for start, chunk in zip(starts, chunks):
+        for start, chunk in zip(starts, chunks, strict=True):
             vectors[start : start + len(chunk), : chunk.shape[1]] = chunk
         stored = vectors.half()
         vectors = stored.float()  # what a later run reads back from the cache

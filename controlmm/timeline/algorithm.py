@@ -53,6 +53,7 @@ from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.generate.api import generate
 from controlmm.generate.controlled import decode_latent, edit_latent
+from controlmm.models.model_dir import MotionModel
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, MIN_FRAMES, NUM_JOINTS
 from controlmm.timeline.parts import ATTACHMENT, moves_root
@@ -85,7 +86,7 @@ def as_timeline(timeline: Timeline | dict | str | Path) -> Timeline:
 
 
 def generate_timeline(
-    model,
+    model: MotionModel,
     timeline: Timeline | dict | str | Path,
     *,
     seed: int | None = None,
@@ -215,7 +216,7 @@ def generate_timeline(
         # the held entries, the blend and the caller's terms get the last word (the prompt target is soft);
         # the part may not leave where the first run took it by more than the prompt target's margins
         hard = replace(objective, terms=tuple(t for t in objective.terms if t.name != "timeline:prompt"))
-        keeps = [()]
+        keeps: list[tuple[LossTerm, ...]] = [()]
         if prompt is not None:
             moved_to, _ = decode_latent(model, latent, num_frames)
             targets = reference_targets(moved_to, prompt)
@@ -233,7 +234,7 @@ def generate_timeline(
         steps = first_record["steps"]
         for keep in keeps:  # looser and looser, until the held entries are met
             latent, record = edit_latent(
-                model, latent, num_frames, replace(hard, terms=hard.terms + keep), settle
+                model, latent, num_frames, replace(hard, terms=tuple(hard.terms) + keep), settle
             )
             steps += record["steps"]
             if record["converged"]:
@@ -280,9 +281,12 @@ def generate_timeline(
 
 
 # -- the pieces of a pass ---------------------------------------------------------------------------
-def _generate_latent(model, prompt: str, frames: int, seed: int) -> torch.Tensor:
+def _generate_latent(model: MotionModel, prompt: str, frames: int, seed: int) -> torch.Tensor:
     """Decoder latent (1, N, code_dim) of the prompt generated alone (MoMask: base + residual layers)."""
-    return generate(model, prompt, frames=frames, seed=seed).latent.detach()
+    latent = generate(model, prompt, frames=frames, seed=seed).latent
+    if latent is None:  # generate always fills it
+        raise RuntimeError("generate returned no decoder latent")
+    return latent.detach()
 
 
 def _pass_record(

@@ -120,11 +120,15 @@ def build_signal(
         others = [j for j in range(NUM_JOINTS) if j not in joints]
         for t in range(s, e):
             for j in others:
-                frames.append(t), js.append(j), anchors.append(t)
+                frames.append(t)
+                js.append(j)
+                anchors.append(t)
         if e < num_frames:
             for t in range(e, num_frames):
                 for j in range(NUM_JOINTS):
-                    frames.append(t), js.append(j), anchors.append(e)
+                    frames.append(t)
+                    js.append(j)
+                    anchors.append(e)
         hold = Entries(
             np.array(frames, dtype=np.int64),
             np.array(js, dtype=np.int64),
@@ -141,7 +145,9 @@ def build_signal(
             if not interior:
                 continue
             for j in joints:
-                frames.append(t), js.append(j), anchors.append(edge_anchor)
+                frames.append(t)
+                js.append(j)
+                anchors.append(edge_anchor)
                 margins.append(tolerance + blend_rate * d)
     blend = Entries(
         np.array(frames, dtype=np.int64),
@@ -205,7 +211,8 @@ def hinge_term(
 
 
 def reference_targets(reference: np.ndarray, entries: Entries, shift: int = 0) -> np.ndarray:
-    """(E, 3) local positions of the entries in ``reference`` (T', 22, 3), frames and anchors moved by -shift."""
+    """(E, 3) local positions of the entries in ``reference`` (T', 22, 3), frames and anchors moved by
+    -shift."""
     with torch.no_grad():
         return local_positions(
             torch.as_tensor(np.asarray(reference, dtype=np.float32)), entries.shifted(shift)
@@ -252,7 +259,9 @@ def prompt_entries(
         if e < num_frames:
             relax = max(relax, blend_frames - (e - 1 - t))
         for j in joints:
-            frames.append(t), js.append(j), anchors.append(s if root_moves else t)
+            frames.append(t)
+            js.append(j)
+            anchors.append(s if root_moves else t)
             margins.append(margin + blend_rate * max(relax, 0))
     return Entries(
         np.array(frames, dtype=np.int64),

@@ -30,7 +30,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from controlmm.corpus.probes import PROBES
 from controlmm.errors import ControlMMError, InputFileError
@@ -120,19 +120,19 @@ class Timeline:
                 f"timeline length {seconds:g} s is out of range; allowed "
                 f"{MIN_SECONDS:g}..{MAX_SECONDS:g} s (tracks end by then)"
             )
-        object.__setattr__(self, "seconds", float(seconds))
+        length = float(seconds)
+        object.__setattr__(self, "seconds", length)
         for k, t in enumerate(tracks):
-            if t.end > self.seconds + 1e-9:
+            if t.end > length + 1e-9:
                 raise ControlMMError(
-                    f"track {k} ('{t.part}') ends at {t.end:g} s, after the timeline's end "
-                    f"({self.seconds:g} s)"
+                    f"track {k} ('{t.part}') ends at {t.end:g} s, after the timeline's end ({length:g} s)"
                 )
         if self.base is not None and (not isinstance(self.base, str) or not self.base.strip()):
             raise ControlMMError(f"base must be a non-empty prompt; got {self.base!r}")
 
     @property
     def num_frames(self) -> int:
-        return int(round(self.seconds * FPS))
+        return int(round(cast(float, self.seconds) * FPS))  # __post_init__ sets seconds
 
     @property
     def base_prompt(self) -> str:

@@ -141,10 +141,6 @@ class MeshSDF:
         self.is_hull = False
         self._cache: dict[tuple[torch.dtype, torch.device], dict[str, Tensor]] = {}
 
-    @property
-    def num_triangles(self) -> int:
-        return len(self.faces)
-
     def bounds(self) -> np.ndarray:
         """(2, 3) min and max corner of the mesh (local frame)."""
         return np.stack([self.vertices.min(0), self.vertices.max(0)])
@@ -153,18 +149,18 @@ class MeshSDF:
         key = (like.dtype, like.device)
         if key not in self._cache:
             g = self.grid
-            to = dict(dtype=like.dtype, device=like.device)
+            dtype, device = like.dtype, like.device
             self._cache[key] = {
-                "tri": torch.as_tensor(self.triangles, **to),
-                "data": triangle_data(torch.as_tensor(self.triangles, **to)),
-                "normals": torch.as_tensor(self.normals, **to),
-                "centre": torch.as_tensor(g.centre, **to),
-                "half": torch.as_tensor(g.half, **to),
-                "shape": torch.as_tensor(g.shape, device=like.device),
-                "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=like.device).reshape(-1),
-                "ring": torch.as_tensor(self.ring.T.copy(), device=like.device),  # (K, F)
+                "tri": torch.as_tensor(self.triangles, dtype=dtype, device=device),
+                "data": triangle_data(torch.as_tensor(self.triangles, dtype=dtype, device=device)),
+                "normals": torch.as_tensor(self.normals, dtype=dtype, device=device),
+                "centre": torch.as_tensor(g.centre, dtype=dtype, device=device),
+                "half": torch.as_tensor(g.half, dtype=dtype, device=device),
+                "shape": torch.as_tensor(g.shape, device=device),
+                "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=device).reshape(-1),
+                "ring": torch.as_tensor(self.ring.T.copy(), device=device),  # (K, F)
                 "corners": torch.tensor(
-                    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], device=like.device
+                    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], device=device
                 ),
             }
         return self._cache[key]
@@ -267,7 +263,8 @@ def _build_grid(
     half = (hi - lo) / 2 + pad
     levels = 1 + max(0, math.ceil(math.log2(float(np.max(((hi - lo) / 2 + reach) / half)))))
     pitch = max(pitch, float(np.cbrt(levels * np.prod(2 * half) / MAX_NODES)))
-    shape = tuple(int(v) for v in np.ceil(2 * half / pitch).astype(int) + 1)
+    nx, ny, nz = (int(v) for v in np.ceil(2 * half / pitch).astype(int) + 1)
+    shape = (nx, ny, nz)
     half = (np.asarray(shape) - 1) * pitch / 2  # >= the asked half extents, so levels still reach
 
     base_spacing = max(pitch / 2, math.sqrt(2 * float(mesh.area) / MAX_SAMPLES))
