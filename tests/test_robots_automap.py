@@ -18,6 +18,8 @@ import pytest
 from controlmm.corpus.dataset import ClipSpec, make_clip
 from controlmm.errors import ControlMMError
 from controlmm.motion import Motion
+from controlmm.pipeline import PlanConfig
+from controlmm.pipeline.plan import resolve_inputs
 from retarget import (
     infer_mapping,
     load_robot,
@@ -65,6 +67,72 @@ def _renamed_g1(tmp_path: Path) -> Path:
     path = tmp_path / "renamed.xml"
     path.write_text(spec.to_xml())
     return path
+
+
+def _outside_humanoid(tmp_path: Path) -> Path:
+    """A humanoid from outside the package's naming and DoF: the G1 with its six wrist joints
+    removed (23 DoF) and every body and joint renamed to numbered links, no actuators."""
+    src = robot_mjcf("g1")
+    spec = mujoco.MjSpec.from_file(str(src))
+    spec.meshdir = str(src.parent / "assets")
+    for kind in (spec.actuators, spec.sensors, spec.keys, [j for j in spec.joints if "wrist" in j.name]):
+        for element in list(kind):
+            spec.delete(element)
+    for i, body in enumerate(spec.bodies):
+        if body.name and body.name != "world":
+            body.name = f"link{i:02d}"
+    for i, joint in enumerate(spec.joints):
+        joint.name = f"q{i:02d}" if joint.name else joint.name
+    path = tmp_path / "outside.xml"
+    path.write_text(spec.to_xml())
+    return path
+
+
+def _independent_check(path: Path, qpos: np.ndarray) -> tuple[int, float, int]:
+    """(frames past a joint limit, deepest floor penetration m, frames with a robot-robot
+    contact deeper than 5 mm), measured with MuJoCo alone on the robot MJCF plus a floor."""
+    spec = mujoco.MjSpec.from_file(str(path))
+    floor = spec.worldbody.add_geom()
+    floor.type, floor.size, floor.name = mujoco.mjtGeom.mjGEOM_PLANE, [0, 0, 1], "check_floor"
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    floor_id = model.geom("check_floor").id
+    hinge = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+    q = qpos[:, model.jnt_qposadr[hinge]]
+    lo, hi = model.jnt_range[hinge].T
+    limits = int(np.any((q < lo - 1e-6) | (q > hi + 1e-6), axis=1).sum())
+    floor_depth, self_frames = 0.0, 0
+    for frame in qpos:
+        data.qpos[:] = frame
+        mujoco.mj_forward(model, data)
+        contacts = data.contact[: data.ncon]
+        on_floor = [c.dist for c in contacts if floor_id in (c.geom1, c.geom2)]
+        floor_depth = max([floor_depth, *(-d for d in on_floor)])
+        self_frames += any(floor_id not in (c.geom1, c.geom2) and c.dist < -0.005 for c in contacts)
+    return limits, floor_depth, self_frames
+
+
+def test_outside_humanoid_by_path_through_the_cli(tmp_path, motion):
+    """Issue 35's check: a humanoid MJCF of other naming and DoF, given by path, retargets the
+    real clip; MuJoCo alone finds no limit, floor or self-collision fault, the similarity-aligned
+    fit is close to the packaged G1's, and ``controlmm validate`` passes it."""
+    path = _outside_humanoid(tmp_path)
+    src = tmp_path / "clip.npy"
+    np.save(src, motion.joints)
+    prefix = tmp_path / "out"
+    done = cli("retarget", src, "--robot", path, "--fps", 30, "--out", prefix)
+    assert done.returncode == 0, done.stderr
+    with np.load(f"{prefix}.npz") as data:
+        qpos = data["qpos"]
+    assert qpos.shape == (len(np.arange(0, (motion.num_frames - 1) / motion.fps + 1e-9, 1 / 30)), 30)
+    limits, floor_depth, self_frames = _independent_check(path, qpos)
+    assert (limits, self_frames) == (0, 0) and floor_depth <= 0.005, (limits, floor_depth, self_frames)
+    fit = similarity_fit(load_robot(path), qpos, 30, motion.joints, motion.fps).mean
+    assert fit <= 0.05, fit
+    report = tmp_path / "report.json"
+    checked = cli("validate", f"{prefix}.npz", "--robot", path, "--out", report, "--no-plot")
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    assert json.loads(report.read_text())["passed"] is True
 
 
 def test_inferred_mapping_reads_geometry_not_names(tmp_path):
@@ -217,6 +285,8 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
             load_robot(robot)
     for argv, needle in (
         (("retarget", src, "--robot", no_free, "--out", tmp_path / "r"), "no free joint"),
+        (("retarget", src, "--robot", broken, "--out", tmp_path / "r"), "does not load"),
+        (("retarget", src, "--robot", bad_mapping, "--out", tmp_path / "r"), "body 'Knee_Left'"),
         (("robots", "map", ball, "--out", tmp_path / "m.json"), "no two legs"),
     ):
         done = cli(*argv)
@@ -229,9 +299,6 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
 
 def test_any_robot_spec_plans_validates_and_shows(tmp_path, motion):
     """A mapping .json or an MJCF path works wherever a robot is taken (plan's inputs included)."""
-    from controlmm.pipeline import PlanConfig
-    from controlmm.pipeline.plan import resolve_inputs
-
     mapping = tmp_path / "apollo.json"
     mapping.write_text((Path(__file__).parents[1] / "retarget/mappings/apollo.json").read_text())
     for robot in (mapping, robot_mjcf("t1")):
