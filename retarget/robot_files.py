@@ -13,6 +13,11 @@ declare none and collide through explicit ``<pair>`` elements of their scene fil
 Menagerie's collision group (3) into colliders that touch the floor and obstacles but not
 each other (``contype`` 1, ``conaffinity`` 0), and adds the robot-robot pairs that the
 packaged robot's own scene declares (thighs, shins, arms against the pelvis).
+
+Bodies whose collision geoms already overlap in the robot's rest pose (``qpos0``; for example
+convex hulls of meshes around a knee and the ankle two links below it) are a property of the
+model, not of a motion: :func:`exclude_rest_contacts` excludes those body pairs, as MuJoCo
+excludes a parent and its child, so that the checks see the contacts a motion makes.
 """
 
 from __future__ import annotations
@@ -85,7 +90,34 @@ def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
     declare_collisions(spec, robot_scene(packaged) if packaged else None)
+    exclude_rest_contacts(spec)
     return spec
+
+
+def exclude_rest_contacts(spec: mujoco.MjSpec) -> list[tuple[str, str]]:
+    """Exclude the body pairs whose collision geoms overlap in the rest pose (in place).
+
+    The spec is compiled and its contacts found in ``qpos0``; each pair of named bodies other
+    than the world in contact with negative distance gets an ``<exclude>``. A spec that does
+    not compile is left unchanged (:func:`compile_robot` reports it). Returns the pairs.
+    """
+    try:
+        model = spec.compile()
+    except ValueError:
+        return []
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pairs: set[tuple[str, str]] = set()
+    for contact in data.contact[: data.ncon]:
+        if contact.dist >= 0:
+            continue
+        b1, b2 = (int(model.geom_bodyid[g]) for g in (contact.geom1, contact.geom2))
+        names = (model.body(b1).name, model.body(b2).name)
+        if b1 and b2 and b1 != b2 and all(names):
+            pairs.add((min(names), max(names)))
+    for name1, name2 in sorted(pairs):
+        spec.add_exclude(bodyname1=name1, bodyname2=name2)
+    return sorted(pairs)
 
 
 def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
