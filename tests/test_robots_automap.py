@@ -23,6 +23,7 @@ from controlmm.pipeline.plan import resolve_inputs
 from retarget import (
     infer_mapping,
     load_robot,
+    load_robot_spec,
     retarget_motion,
     robot_mjcf,
 )
@@ -312,3 +313,29 @@ def test_any_robot_spec_plans_validates_and_shows(tmp_path, motion):
     assert done.returncode in (0, 1) and "contact:" in done.stdout, done.stderr
     with pytest.raises(ControlMMError):
         load_robot(tmp_path / "nothing.json")
+
+
+def test_contacts_of_the_rest_pose_are_excluded(tmp_path):
+    """Geoms that overlap in ``qpos0`` (a knee hull reaching the ankle) are the model's, not a
+    motion's: the loaded robot excludes that body pair, and no other."""
+    src = robot_mjcf("g1")
+    spec = mujoco.MjSpec.from_file(str(src))
+    spec.meshdir = str(src.parent / "assets")
+    g1 = spec.compile()
+    data = mujoco.MjData(g1)
+    mujoco.mj_forward(g1, data)
+    knee, ankle = g1.body("left_knee_link").id, g1.body("left_ankle_roll_link").id
+    heel = next(g for g in range(g1.ngeom) if g1.geom_bodyid[g] == ankle and g1.geom_contype[g])
+    reach = data.xmat[knee].reshape(3, 3).T @ (data.geom_xpos[heel] - data.xpos[knee])
+    hull = spec.body("left_knee_link").add_geom()
+    hull.type, hull.size, hull.fromto = mujoco.mjtGeom.mjGEOM_CAPSULE, [0.03, 0, 0], [0, 0, 0, *reach]
+    hull.contype = hull.conaffinity = 1
+    path = tmp_path / "g1_long_knee.xml"
+    path.write_text(spec.to_xml())
+    loaded = load_robot_spec(path)
+    assert [(e.bodyname1, e.bodyname2) for e in loaded.excludes][-1:] == [
+        ("left_ankle_roll_link", "left_knee_link")
+    ]
+    assert len(loaded.excludes) == len(spec.excludes) + 1
+    report = check_trajectory(load_scene("empty", robot=str(path)), load_robot(path).model.qpos0[None], 30)
+    assert report.stats["self_collision_frames"] == 0, report.summary()
