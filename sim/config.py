@@ -158,7 +158,8 @@ class CheckConfig:
                 raise ControlMMError(f"CheckConfig.{f.name} must be a finite number >= 0; got {value!r}")
         if self.self_collision not in ("model", "capsules", "off"):
             raise ControlMMError(
-                f"CheckConfig.self_collision must be 'model', 'capsules' or 'off'; got {self.self_collision!r}"
+                "CheckConfig.self_collision must be 'model', 'capsules' or 'off'; "
+                f"got {self.self_collision!r}"
             )
         if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
             raise ControlMMError(f"CheckConfig.friction must be > 0 or None; got {self.friction!r}")

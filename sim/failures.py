@@ -113,7 +113,7 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1) - 1
-    return list(zip(starts.tolist(), ends.tolist()))
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
 def from_mask(
@@ -170,7 +170,7 @@ def from_events(
     run_ends = np.concatenate([run_starts[1:], [frames.size]]) - 1
     worst = np.maximum.reduceat(depth, run_starts)
     out = []
-    for a, b, d in zip(run_starts.tolist(), run_ends.tolist(), worst.tolist()):
+    for a, b, d in zip(run_starts.tolist(), run_ends.tolist(), worst.tolist(), strict=True):
         body, geom = label(int(keys[a]))
         out.append(Failure(kind, int(frames[a]), int(frames[b]), body, geom, float(d)))
     return out

@@ -51,7 +51,7 @@ def support_heights(
     out = np.full(centre.shape, np.nan)
     types = model.geom_type[geoms]
     sizes = model.geom_size[geoms]
-    for i, (kind, size) in enumerate(zip(types, sizes)):
+    for i, (kind, size) in enumerate(zip(types, sizes, strict=True)):
         ln = local_n[:, i]
         if kind == _T.mjGEOM_SPHERE:
             reach = np.full(ln.shape[0], size[0])

@@ -136,8 +136,9 @@ class Report:
             for k, v in self.stats.items()
         }
         for key in ("residual_force", "residual_moment", "tracking"):
-            if isinstance(stats.get(key), dict):
-                stats[key] = {k: json_number(v) for k, v in stats[key].items()}
+            part = stats.get(key)
+            if isinstance(part, dict):
+                stats[key] = {k: json_number(v) for k, v in part.items()}
         return {
             "format": FORMAT,
             "passed": bool(self.passed),
@@ -174,12 +175,14 @@ class Report:
         clear_txt = f", min clearance {clearance * 1000:.1f} mm" if clearance is not None else ""
         lines.append(
             f"  contact: obstacle penetration {s['max_penetration_m'] * 1000:.1f} mm (tol "
-            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor {s['floor_penetration_m'] * 1000:.1f} mm "
-            f"(tol {c.floor_penetration_m * 1000:.1f}); self-collision {s['self_collision_frames']} frames"
+            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor "
+            f"{s['floor_penetration_m'] * 1000:.1f} mm (tol {c.floor_penetration_m * 1000:.1f}); "
+            f"self-collision {s['self_collision_frames']} frames"
         )
         lines.append(
-            f"  joints: {s['joint_limit_violations']} frames past limits (max {s['max_joint_limit_violation_rad']:.4f} "
-            f"rad), peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
+            f"  joints: {s['joint_limit_violations']} frames past limits "
+            f"(max {s['max_joint_limit_violation_rad']:.4f} rad), "
+            f"peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
             f"{s['foot_sliding_m'] * 1000:.1f} mm in stance (peak {s['max_foot_slide_speed_mps']:.2f} m/s); "
             f"floating {s['floating_frames']} frames, flight {s['flight_frames']}"
         )
@@ -187,12 +190,16 @@ class Report:
         if rf is not None and rm is not None:
             lines.append(
                 f"  dynamics: residual force mean {rf['mean_ratio'] * 100:.1f}% / max "
-                f"{rf['max_ratio'] * 100:.1f}% of m g (warn {c.max_residual_force_ratio * 100:.0f}%), sustained "
-                f"{rf['sustained_max_ratio'] * 100:.1f}% (fail {c.max_sustained_residual_force_ratio * 100:.0f}%); "
-                f"residual moment max {rm['max_m'] * 1000:.0f} mm (warn {c.max_residual_moment_m * 1000:.0f}), "
-                f"sustained {rm['sustained_max_m'] * 1000:.0f} mm (fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
+                f"{rf['max_ratio'] * 100:.1f}% of m g (warn {c.max_residual_force_ratio * 100:.0f}%), "
+                f"sustained {rf['sustained_max_ratio'] * 100:.1f}% "
+                f"(fail {c.max_sustained_residual_force_ratio * 100:.0f}%); "
+                f"residual moment max {rm['max_m'] * 1000:.0f} mm "
+                f"(warn {c.max_residual_moment_m * 1000:.0f}), "
+                f"sustained {rm['sustained_max_m'] * 1000:.0f} mm "
+                f"(fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
                 f"torque peak {s['max_torque_ratio'] * 100:.0f}% of limit, sustained "
-                f"{s['max_sustained_torque_ratio'] * 100:.0f}% (fail {c.max_sustained_torque_ratio * 100:.0f}%)"
+                f"{s['max_sustained_torque_ratio'] * 100:.0f}% "
+                f"(fail {c.max_sustained_torque_ratio * 100:.0f}%)"
             )
         tr = s.get("tracking")
         if tr:

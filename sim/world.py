@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar, cast
 
 import mujoco
 import numpy as np
@@ -23,6 +24,9 @@ from scipy.spatial import ConvexHull, QhullError
 
 from controlmm.errors import ControlMMError
 from sim.geometry import support_heights
+
+_Derived = TypeVar("_Derived")
+"""The type of an object :meth:`CheckWorld.derived` builds (a model copy, a table)."""
 
 SetTime = Callable[[mujoco.MjData, float], None]
 """``set_time(data, t_seconds)``: writes the mocap obstacles' poses for time ``t`` into ``data``."""
@@ -97,11 +101,11 @@ class CheckWorld:
     hull_vertices: dict[int, np.ndarray] = field(default_factory=dict)
     _derived: dict = field(default_factory=dict, repr=False)
 
-    def derived(self, key: tuple, build: Callable[[], object]) -> object:
+    def derived(self, key: tuple, build: Callable[[], _Derived]) -> _Derived:
         """A model copy (or other derived object) built once per world and ``key``."""
         if key not in self._derived:
             self._derived[key] = build()
-        return self._derived[key]
+        return cast(_Derived, self._derived[key])
 
     @property
     def nq(self) -> int:
@@ -276,7 +280,7 @@ def _feet(
     mujoco.mj_kinematics(model, data)
     low = _lowest_point(model, data, robot_geoms, hulls)
     body_low: dict[int, float] = {}
-    for b, z in zip(body_of.tolist(), low.tolist()):
+    for b, z in zip(body_of.tolist(), low.tolist(), strict=True):
         body_low[b] = min(body_low.get(b, np.inf), z)
     floor = min(body_low.values())
     chosen = sorted(b for b, z in body_low.items() if z <= floor + FOOT_HEIGHT_BAND_M)
@@ -308,8 +312,8 @@ def make_world(
         return scene_or_model
     if isinstance(scene_or_model, mujoco.MjModel):
         model, scene = scene_or_model, None
-    elif isinstance(getattr(scene_or_model, "model", None), mujoco.MjModel):
-        model, scene = scene_or_model.model, scene_or_model
+    elif isinstance(held := getattr(scene_or_model, "model", None), mujoco.MjModel):
+        model, scene = held, scene_or_model
     else:
         raise ControlMMError(
             f"expected a mujoco.MjModel or a scene with a .model; got {type(scene_or_model).__name__}"
