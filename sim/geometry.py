@@ -1,7 +1,7 @@
 """Geometry helpers: how low a geom reaches along a direction, capsules fitted to meshes.
 
 MuJoCo collides meshes as their convex hulls, so the lowest point of a mesh geom is the
-lowest hull vertex; for primitives it follows from the size (robotics reference §5.1).
+lowest hull vertex; for primitives it follows from the size (MuJoCo XML reference, geom/size).
 """
 
 from __future__ import annotations

@@ -140,9 +140,9 @@ class Report:
             for k, v in self.stats.items()
         }
         for key in ("residual_force", "residual_moment", "tracking"):
-            value = stats.get(key)
-            if isinstance(value, dict):
-                stats[key] = {k: json_number(v) for k, v in value.items()}
+            part = stats.get(key)
+            if isinstance(part, dict):
+                stats[key] = {k: json_number(v) for k, v in part.items()}
         return {
             "format": FORMAT,
             "passed": bool(self.passed),
@@ -179,14 +179,14 @@ class Report:
         clear_txt = f", min clearance {clearance * 1000:.1f} mm" if clearance is not None else ""
         lines.append(
             f"  contact: obstacle penetration {s['max_penetration_m'] * 1000:.1f} mm (tol "
-            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; "
-            f"floor {s['floor_penetration_m'] * 1000:.1f} mm "
-            f"(tol {c.floor_penetration_m * 1000:.1f}); self-collision {s['self_collision_frames']} frames"
+            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor "
+            f"{s['floor_penetration_m'] * 1000:.1f} mm (tol {c.floor_penetration_m * 1000:.1f}); "
+            f"self-collision {s['self_collision_frames']} frames"
         )
         lines.append(
             f"  joints: {s['joint_limit_violations']} frames past limits "
-            f"(max {s['max_joint_limit_violation_rad']:.4f} "
-            f"rad), peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
+            f"(max {s['max_joint_limit_violation_rad']:.4f} rad), "
+            f"peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
             f"{s['foot_sliding_m'] * 1000:.1f} mm in stance (peak {s['max_foot_slide_speed_mps']:.2f} m/s); "
             f"floating {s['floating_frames']} frames, flight {s['flight_frames']}"
         )

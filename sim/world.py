@@ -6,7 +6,8 @@ obstacles, which robot bodies are feet, the joint limits and the moving obstacle
 itself when the sets are not given) or from anything shaped like ``scenes.Scene``
 (``.model``, ``.robot_geom_ids``, ``.floor_geom_ids``, ``.obstacle_geom_ids``, ``.set_time``).
 
-Automatic classification (robotics reference §4.2/§4.4): robot geoms are the collision geoms
+Automatic classification (MuJoCo's collision filtering: contype/conaffinity and the
+body tree, MuJoCo documentation, Computation > Collision detection): robot geoms are the collision geoms
 whose body's root is the free-joint body; floor geoms are the other plane geoms; obstacles
 are every other collision geom (static bodies and mocap bodies alike).
 """
@@ -24,7 +25,8 @@ from scipy.spatial import ConvexHull, QhullError
 from controlmm.errors import ControlMMError
 from sim.geometry import support_heights
 
-_T = TypeVar("_T")
+_Derived = TypeVar("_Derived")
+"""The type of an object :meth:`CheckWorld.derived` builds (a model copy, a table)."""
 
 SetTime = Callable[[mujoco.MjData, float], None]
 """``set_time(data, t_seconds)``: writes the mocap obstacles' poses for time ``t`` into ``data``."""
@@ -102,11 +104,11 @@ class CheckWorld:
     spec: mujoco.MjSpec | None = field(default=None, repr=False)
     _derived: dict = field(default_factory=dict, repr=False)
 
-    def derived(self, key: tuple, build: Callable[[], _T]) -> _T:
+    def derived(self, key: tuple, build: Callable[[], _Derived]) -> _Derived:
         """A model copy (or other derived object) built once per world and ``key``."""
         if key not in self._derived:
             self._derived[key] = build()
-        return cast(_T, self._derived[key])
+        return cast(_Derived, self._derived[key])
 
     @property
     def nq(self) -> int:
@@ -320,8 +322,8 @@ def make_world(
             raise ControlMMError(f"MuJoCo cannot compile the model: {' '.join(str(exc).split())}") from None
     if isinstance(scene_or_model, mujoco.MjModel):
         model, scene = scene_or_model, None
-    elif isinstance(candidate := getattr(scene_or_model, "model", None), mujoco.MjModel):
-        model, scene = candidate, scene_or_model
+    elif isinstance(held := getattr(scene_or_model, "model", None), mujoco.MjModel):
+        model, scene = held, scene_or_model
     else:
         raise ControlMMError(
             f"expected a mujoco.MjModel or a scene with a .model; got {type(scene_or_model).__name__}"

@@ -8,7 +8,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
-from controlmm.cli.args import add_force, add_motion_input, add_threads, motion_options, number
+from controlmm.cli.args import add_force, add_motion_input, add_robot, add_threads, motion_options, number
 from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
@@ -106,7 +106,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="with --motion: weight of the term that keeps the joints on the clip (default 1)",
     )
-    p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
+    add_robot(p)
     p.add_argument(
         "--seconds",
         type=float,

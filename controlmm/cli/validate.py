@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from controlmm.atomic import check_output_file
-from controlmm.cli.args import add_force, integer, seed
+from controlmm.cli.args import add_force, add_robot, integer, seed
 from controlmm.errors import ControlMMError
 
 PHYSICS_FILES = ("physics.npz", "physics_model.xml", "robot_physics.csv")
@@ -51,9 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="empty",
         help="scene name (see `controlmm scene list`) or MJCF file (default: empty)",
     )
-    p.add_argument(
-        "--robot", default=None, help="robot name or mapping .json (default: the file's robot, else g1)"
-    )
+    add_robot(p, default=None, default_text="the file's robot, else g1")
     p.add_argument(
         "--fps", type=float, default=None, help="frame rate (required for .csv; overrides the file's)"
     )

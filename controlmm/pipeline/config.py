@@ -30,7 +30,7 @@ class PlanConfig:
         control: a control-spec JSON path, a spec dict, or None. With neither ``text`` nor
             ``control`` given, the scene's suggested control is used (the bundled example);
             with a ``text`` of your own, no control unless you give one.
-        robot: packaged robot (``g1``, ``h1``) or a mapping ``.json``.
+        robot: packaged robot (``controlmm robots``), a humanoid MJCF ``.xml`` or a mapping ``.json``.
         seconds: motion length (2..9.8 s); None: 6 s without a control spec, with one 0.5 s past
             its last constraint (at least 2 s, at most 6 s unless a constraint comes later).
         seed: reproducibility (generation sampling).
