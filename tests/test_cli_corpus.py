@@ -141,6 +141,8 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
         assert run_cli(argv) == 2, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "error" in err, (argv, err)
+        if "moonwalk" in argv[-1]:
+            assert "'moonwalk'" in err and "sit_down" in err and "stairs" in err  # the known families
     assert (other / "thesis.tex").read_text() == "precious"
     assert not (tmp_path / "o").exists()
     assert run_cli(["eval"]) == 2

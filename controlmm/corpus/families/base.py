@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from controlmm.corpus.body import ArmPlan, BodyPlan, assemble, standing_pelvis_height
+from controlmm.corpus.body import ArmPlan, BodyPlan, assemble, chest_target, standing_pelvis_height
 from controlmm.corpus.curves import gentle_noise
 from controlmm.corpus.feet import FootTrack, Stance, foot_track, stance_bump, swing_bump
 from controlmm.corpus.gait import Gait, RootPath, plan_footholds
@@ -208,3 +208,26 @@ def set_ik(
     if elevation is not None:
         arm.elevation = arm.elevation + elevation * w
     arm.swing = arm.swing * (1.0 - w)
+
+
+def set_world_ik(
+    plan: BodyPlan,
+    side: str,
+    weight: np.ndarray,
+    world: np.ndarray,
+    pole: np.ndarray,
+    elevation: np.ndarray | None = None,
+) -> None:
+    """Like :func:`set_ik` with a wrist target in world coordinates (T, 3) or (3,) (an object on
+    the floor, a thigh, a wall): converted to the chest frame of the plan as it stands, so call it
+    after the trunk (pelvis, spine) is final. ``pole`` is in the chest frame."""
+    arm = plan.arms[side]
+    if elevation is not None:
+        arm.elevation = arm.elevation + elevation * np.clip(weight, 0.0, 1.0)
+    set_ik(arm, weight, chest_target(plan, side, world), pole)
+
+
+def axes(yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """Forward and left ground vectors (2,) as (x, z) of a heading ``yaw``."""
+    fwd, left = heading_vectors(np.array(yaw))
+    return fwd[[0, 2]], left[[0, 2]]
