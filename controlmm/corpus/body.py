@@ -145,6 +145,14 @@ class BodyPlan:
         value = getattr(self, name)
         return np.zeros(self.n) if value is None else np.asarray(value, dtype=np.float64)
 
+    def get_shift(self) -> np.ndarray:
+        """A copy of ``pelvis_shift`` (T, 3) (zeros when unset), for a family to add to."""
+        return (
+            np.zeros((self.n, 3))
+            if self.pelvis_shift is None
+            else np.array(self.pelvis_shift, dtype=np.float64)
+        )
+
 
 @dataclass
 class Torso:

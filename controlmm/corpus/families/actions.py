@@ -24,7 +24,7 @@ from controlmm.corpus.families.base import (
     times,
 )
 from controlmm.corpus.families.gestures import OTHER, gesture_timing, gesture_window, pole, target
-from controlmm.corpus.families.walking import _sample_travel, cadence
+from controlmm.corpus.families.walking import _sample_travel, cadence, walk_duty
 from controlmm.corpus.family import Family
 from controlmm.corpus.feet import ANKLE_HEIGHT, Stance, foot_track
 from controlmm.corpus.gait import Gait, RootPath
@@ -293,8 +293,8 @@ def _push_build(p: dict, rng: np.random.Generator) -> np.ndarray:
         set_ik(plan.arms[side], w, guard + ext[:, None] * (shove - guard), pole(side, 0.5, -1.0, -0.2, n))
     plan.pelvis_pitch = plan.get("pelvis_pitch") + 0.4 * p["lean"] * w
     plan.spine_pitch = plan.get("spine_pitch") + 0.6 * p["lean"] * w
-    shift = np.zeros((n, 3))
-    shift[:, 2] = 0.06 * ext
+    shift = plan.get_shift()
+    shift[:, 2] += 0.06 * ext
     plan.pelvis_shift = shift
     return finish(plan)
 
@@ -529,7 +529,7 @@ def _carry_build(p: dict, rng: np.random.Generator) -> np.ndarray:
     cad = cadence("walk", v)
     gait = Gait(
         cadence=cad,
-        duty=0.64,
+        duty=walk_duty(v) + 0.02,
         width=person.width,
         step_ref=v / cad,
         toe_out=person.toe_out,

@@ -17,7 +17,7 @@ from controlmm.corpus.families.postures import (
     sample_sit,
     seat_slot,
 )
-from controlmm.corpus.families.walking import cadence
+from controlmm.corpus.families.walking import cadence, walk_duty
 from controlmm.corpus.family import Built, Family
 from controlmm.corpus.gait import Gait, RootPath, plan_footholds
 from controlmm.corpus.scene import Scene
@@ -50,7 +50,7 @@ def _walk_gait(
     c = cadence("walk", v)
     return Gait(
         cadence=c if cad is None else cad,
-        duty=0.63,
+        duty=walk_duty(v),
         width=person.width,
         step_ref=v / c,
         toe_out=person.toe_out,
