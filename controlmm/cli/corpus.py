@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", help="output dataset directory")
     p.add_argument(
-        "--clips", type=integer(1), default=6400, help="number of clips (default 6400, the default corpus)"
+        "--clips", type=integer(1), default=9800, help="number of clips (default 9800, the default corpus)"
     )
     p.add_argument("--seed", type=seed, default=0, help="corpus seed (default 0)")
     p.add_argument(
