@@ -103,6 +103,12 @@ def test_kick_point_and_look_captions_are_true(index):
         for c in caps
         if " leg" in c.text or " foot" in c.text
     )
+    for family in ("kick", "walk_then_kick"):  # a count is claimed exactly where the words give one
+        _, caps, meta = _clip(family, index)
+        n = meta["params"]["kick"]["count"] if family == "walk_then_kick" else meta["params"]["count"]
+        words = ("once", "one time", "a single", "one kick") if n == 1 else ("twice", "two", "2 ")
+        for c in caps:
+            assert c.claims.get("count") == (n if any(w in c.text for w in words) else None), c.text
 
     j, caps, meta = _clip("point", index)
     hand = meta["params"]["hand"]

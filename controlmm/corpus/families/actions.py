@@ -193,7 +193,7 @@ FAMILIES.append(
         build=_kick_build,
         templates=KICK_TEMPLATES,
         slots=kick_slots,
-        core=lambda p: {"leg": p["leg"], "count": p["count"]},
+        core=lambda p: {"leg": p["leg"]},  # the count only where the words say it ({times}, {kicks})
     )
 )
 

@@ -162,7 +162,7 @@ FAMILIES.append(
             Template("a short walk {forward} ends as {subj} kicks {kind} with the {leg}", held=True),
         ),
         slots=lambda p: {"walk": WALK, "forward": FORWARD, **kick_slots(p["kick"])},
-        core=lambda p: {"travel": "forward", "leg": p["kick"]["leg"], "count": p["kick"]["count"]},
+        core=lambda p: {"travel": "forward", "leg": p["kick"]["leg"]},  # count: from {times} / {kicks}
     )
 )
 
