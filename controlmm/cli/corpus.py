@@ -63,12 +63,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise ControlMMError("--out is required (the dataset directory to write)")
-    check_output_dir(args.out, kind="corpus", force=args.force)
     families = None
-    if args.families:
+    if args.families is not None:
         families = tuple(f.strip() for f in args.families.split(",") if f.strip())
+        if not families:
+            raise ControlMMError(f"--families names no family; known families: {', '.join(family_names())}")
         for name in families:
-            get_family(name)
+            get_family(name)  # an unknown name: one line listing the known ones
+    check_output_dir(args.out, kind="corpus", force=args.force)
     config = CorpusConfig(clips=args.clips, seed=args.seed, families=families, captions=args.captions)
     summary = write_corpus(args.out, config, workers=args.workers, progress=not args.quiet, force=args.force)
     splits = ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
