@@ -77,10 +77,11 @@ def timing(j: np.ndarray) -> dict[str, float]:
     """Timing and balance figures of one clip (joints (T, 22, 3), 20 fps).
 
     speed: cruise speed of the pelvis (m/s, :attr:`Measures.cruise`); foot_peak: the fastest
-    toe joint (m/s, 20 fps frame differences, as the issue's figures were measured); cadence:
-    swing onsets of both feet per minute while the pelvis moves at >= half its cruise speed (NaN
-    for clips that travel less than 1 m); sway: peak-to-peak lateral offset (m) of the pelvis from the
-    ankles' midpoint, along the person's left (the weight shifting over the feet); trunk: peak-to-peak
+    toe joint (m/s, 20 fps frame differences, as in docs/corpus.md); cadence: swing onsets of
+    both feet per minute while the pelvis moves at >= half its cruise speed (NaN for clips that
+    travel less than 1 m or take no step); sway: peak-to-peak lateral offset (m) of the pelvis
+    from the ankles' midpoint, along the person's left (the weight shifting over the feet; a foot
+    that kicks or steps sideways moves the midpoint too); trunk: peak-to-peak
     side tilt (deg) of the pelvis -> neck line."""
     m = Measures(j, FPS)
     toe = np.linalg.norm(np.diff(j[:, [10, 11]], axis=0), axis=-1) * FPS
@@ -90,7 +91,7 @@ def timing(j: np.ndarray) -> dict[str, float]:
         moving = m.speed >= 0.5 * cruise
         seconds = moving.sum() / FPS
         steps = sum(swing_onsets(np.where(moving, toe[:, k], 0.0)) for k in range(2))
-        cadence = 60.0 * steps / seconds if seconds > 0.5 else float("nan")
+        cadence = 60.0 * steps / seconds if seconds > 0.5 and steps else float("nan")
     mid = 0.5 * (j[:, 7] + j[:, 8])
     _, left = m.frame
     lateral = ((j[:, 0] - mid) * left).sum(-1)
