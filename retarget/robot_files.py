@@ -22,6 +22,7 @@ excludes a parent and its child, so that the checks see the contacts a motion ma
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import mujoco
@@ -90,8 +91,19 @@ def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
     declare_collisions(spec, robot_scene(packaged) if packaged else None)
-    exclude_rest_contacts(spec)
+    if packaged is None:  # the packaged robots have none (tests/test_robots_automap.py checks it)
+        stat = path.stat()
+        for name1, name2 in _rest_contacts(str(path), stat.st_mtime_ns, stat.st_size):
+            spec.add_exclude(bodyname1=name1, bodyname2=name2)
     return spec
+
+
+@functools.lru_cache(maxsize=16)
+def _rest_contacts(path: str, mtime_ns: int, size: int) -> tuple[tuple[str, str], ...]:
+    """The rest-contact body pairs of a robot MJCF file, once per file version and process."""
+    spec = mujoco.MjSpec.from_file(path)
+    declare_collisions(spec)
+    return tuple(exclude_rest_contacts(spec))
 
 
 def exclude_rest_contacts(spec: mujoco.MjSpec) -> list[tuple[str, str]]:

@@ -28,6 +28,7 @@ from retarget import (
     robot_mjcf,
 )
 from retarget.compare import similarity_fit, stance_foot_speed
+from retarget.robot_files import exclude_rest_contacts
 from retarget.robots import PACKAGED_ROBOTS
 from scenes import load_scene
 from sim import check_trajectory
@@ -339,3 +340,10 @@ def test_contacts_of_the_rest_pose_are_excluded(tmp_path):
     assert len(loaded.excludes) == len(spec.excludes) + 1
     report = check_trajectory(load_scene("empty", robot=str(path)), load_robot(path).model.qpos0[None], 30)
     assert report.stats["self_collision_frames"] == 0, report.summary()
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_packaged_robots_have_no_contacts_in_their_rest_pose(robot):
+    """Loading a packaged robot skips the rest-contact search (a compile per load): that is right
+    only while none of them has overlapping colliders in ``qpos0``."""
+    assert exclude_rest_contacts(load_robot_spec(robot)) == []
