@@ -159,6 +159,12 @@ class RobotModel:
         nodes = {name: int(node) for name, node in zip(self.keypoint_names, self.nodes, strict=True)}
         return build_self_clearance(self.model, self.tree, nodes, self.feet, self.capsules, self.rest)
 
+    def prepare(self) -> RobotModel:
+        """Build now the collision geometry the solver otherwise builds on first use (capsules,
+        body floor, self-clearance): for a process that keeps robots warm between jobs."""
+        _ = self.body_floor, self.self_clearance
+        return self
+
     # -- lookups -------------------------------------------------------------------------
     def keypoint_index(self, joint: str) -> int:
         """Index into the keypoint arrays of a mapped human joint."""

@@ -8,6 +8,7 @@ import pytest
 
 from controlmm.batch import load_jobs, read_jsonl, scene_variations, write_summary
 from controlmm.batch.jobs import Job
+from controlmm.batch.payload import check_worlds
 from controlmm.batch.sources import folder_jobs
 from controlmm.batch.variations import jitter_scene
 from controlmm.errors import ControlMMError
@@ -133,3 +134,23 @@ def test_summary_counts_and_pass_rates_per_group(tmp_path):
     assert json.loads((tmp_path / "summary.json").read_text())["jobs"][2]["error"].startswith("ran longer")
     md = (tmp_path / "summary.md").read_text()
     assert "| g1 | 2 | 1 | 1 | 0 | 0 | 0 | 0 | 50.0 % |" in md and "| j1 | failed | foot_sliding:2" in md
+
+
+def test_workers_warm_the_worlds_their_jobs_check_in(tmp_path):
+    """check_worlds names each (scene, robot) of the retarget and validate jobs as the tasks look
+    them up (a robot file by its absolute path), the most used first; plans and bad lines add none."""
+    (tmp_path / "walk.npz").write_bytes(b"")
+    (tmp_path / "bot.xml").write_text("<mujoco/>")
+    jobs_file = _write(
+        tmp_path / "jobs.jsonl",
+        [
+            {"kind": "retarget", "motion": "walk.npz", "robot": "h1", "scene": "table", "id": "a"},
+            {"kind": "retarget", "motion": "walk.npz", "id": "b"},
+            {"kind": "validate", "trajectory": "walk.npz", "id": "c"},
+            {"kind": "retarget", "motion": "walk.npz", "robot": "bot.xml", "id": "d"},
+            {"kind": "plan", "scene": "pillars", "id": "e"},
+            {"kind": "retarget", "motion": "missing.npz", "robot": "op3", "id": "f"},
+        ],
+    )
+    worlds = check_worlds(load_jobs(jobs_file))
+    assert worlds == [("empty", "g1"), ("table", "h1"), ("empty", str((tmp_path / "bot.xml").resolve()))]

@@ -9,6 +9,7 @@ timeline) are made absolute and must be readable where the workers run.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
@@ -30,6 +31,23 @@ def plan_models(jobs: Sequence[Job]) -> list[str | None]:
             path = job.path("model")
             models.add(str(path.resolve()) if path is not None else None)
     return sorted(models, key=str)
+
+
+def check_worlds(jobs: Sequence[Job], most: int = 8) -> list[tuple[str, str]]:
+    """The (scene, robot) pairs the retarget and validate jobs check in, as the workers' tasks name
+    them (files as absolute paths): at most ``most`` (the worlds a worker keeps), the most used first."""
+    counts: Counter[tuple[str, str]] = Counter()
+    for job in jobs:
+        if job.kind in INPUT_FILES and not job.error:
+            scene, robot = (_argument(job, key) for key in ("scene", "robot"))
+            counts[(scene or "empty", robot or "g1")] += 1
+    return [world for world, _ in counts.most_common(most)]
+
+
+def _argument(job: Job, key: str) -> str | None:
+    """A scene or robot argument as :func:`payload` sends it."""
+    path = job.path(key)
+    return str(path.resolve()) if path is not None else job.args.get(key)
 
 
 def payload(job: Job) -> dict[str, Any]:

@@ -30,7 +30,7 @@ KILL_WAIT_S = 1.0
 """How long a timed-out job's worker may take to unwind before it is killed."""
 
 
-def _serve(conn: Connection, threads: int, models: list[str | None]) -> None:
+def _serve(conn: Connection, threads: int, models: list[str | None], worlds: list[tuple[str, str]]) -> None:
     """A worker process: set up, say ready, then run payloads until told to stop or the pipe closes.
 
     SIGTERM stops it: a job in progress unwinds (its temporary folder is removed), then the
@@ -41,7 +41,7 @@ def _serve(conn: Connection, threads: int, models: list[str | None]) -> None:
     os.environ["OMP_NUM_THREADS"] = str(threads)
     try:
         worker = load_worker()
-        conn.send(("ready", worker.setup(threads, models)))
+        conn.send(("ready", worker.setup(threads, models, worlds)))
         while True:
             payload = conn.recv()
             if payload is None:
@@ -75,16 +75,25 @@ class _Slot:
 
 
 class LocalPool:
-    """``workers`` processes with ``threads`` torch threads each, ``models`` loaded at start."""
+    """``workers`` processes with ``threads`` torch threads each, ``models`` and the (scene, robot)
+    ``worlds`` loaded at start."""
 
     name = "local"
 
-    def __init__(self, workers: int, *, threads: int = 1, models: list[str | None] | None = None) -> None:
+    def __init__(
+        self,
+        workers: int,
+        *,
+        threads: int = 1,
+        models: list[str | None] | None = None,
+        worlds: list[tuple[str, str]] | None = None,
+    ) -> None:
         if workers < 1:
             raise ControlMMError(f"workers must be at least 1; got {workers}")
         self.workers = workers
         self.threads = threads
         self.models = list(models or [])
+        self.worlds = list(worlds or [])
         self._ctx = mp.get_context("spawn")
         self._slots: list[_Slot] = []
         self._failures = 0
@@ -92,7 +101,10 @@ class LocalPool:
     def _spawn(self) -> _Slot:
         parent, child = self._ctx.Pipe()
         process = self._ctx.Process(
-            target=_serve, args=(child, self.threads, self.models), daemon=True, name="controlmm-batch-worker"
+            target=_serve,
+            args=(child, self.threads, self.models, self.worlds),
+            daemon=True,
+            name="controlmm-batch-worker",
         )
         process.start()
         child.close()

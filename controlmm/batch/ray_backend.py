@@ -57,10 +57,10 @@ def check_reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
 class _Actor:
     """A worker slot in Ray (made a Ray actor class by :class:`RayBackend`)."""
 
-    def __init__(self, threads: int, models: list[str | None]) -> None:
+    def __init__(self, threads: int, models: list[str | None], worlds: list[tuple[str, str]]) -> None:
         os.environ["OMP_NUM_THREADS"] = str(threads)
         self._worker = load_worker()
-        self._info = self._worker.setup(threads, models)
+        self._info = self._worker.setup(threads, models, worlds)
 
     def ready(self) -> dict[str, Any]:
         return self._info
@@ -83,7 +83,13 @@ class RayBackend:
     name = "ray"
 
     def __init__(
-        self, address: str, workers: int | None, *, threads: int = 1, models: list[str | None] | None = None
+        self,
+        address: str,
+        workers: int | None,
+        *,
+        threads: int = 1,
+        models: list[str | None] | None = None,
+        worlds: list[tuple[str, str]] | None = None,
     ) -> None:
         if address != "auto" and not ray.is_initialized():
             check_reachable(address)  # before any output is written
@@ -91,6 +97,7 @@ class RayBackend:
         self.workers = workers
         self.threads = threads
         self.models = list(models or [])
+        self.worlds = list(worlds or [])
         self._owns = False
         self._slots: list[_Slot] = []
         self._failures = 0
@@ -114,7 +121,7 @@ class RayBackend:
         self._slots = [self._spawn() for _ in range(self.workers)]
 
     def _spawn(self) -> _Slot:
-        actor = self._remote.remote(self.threads, self.models)
+        actor = self._remote.remote(self.threads, self.models, self.worlds)
         return _Slot(actor, actor.ready.remote())
 
     def idle(self) -> list[int]:

@@ -32,7 +32,7 @@ from controlmm import __version__
 from controlmm.atomic import check_output_dir, open_growing_dir, write_text
 from controlmm.batch.backend import Backend
 from controlmm.batch.jobs import Job
-from controlmm.batch.payload import payload, plan_models
+from controlmm.batch.payload import check_worlds, payload, plan_models
 from controlmm.batch.pool import LocalPool
 from controlmm.batch.store import BATCH_OUTPUT, RETRY_STATUSES, BatchStore
 from controlmm.batch.summary import write_summary
@@ -107,11 +107,11 @@ def cpu_count() -> int:
 
 
 def make_backend(config: BatchConfig, jobs: Sequence[Job]) -> Backend:
-    """The backend of ``config`` for ``jobs`` (plan models loaded by every worker at start)."""
-    models = plan_models(jobs)
+    """The backend of ``config`` for ``jobs`` (plan models, check worlds: loaded by every worker at start)."""
+    models, worlds = plan_models(jobs), check_worlds(jobs)
     if config.ray is None:
         workers = config.workers or max(1, min(cpu_count(), len(jobs)))
-        return LocalPool(workers, threads=config.threads, models=models)
+        return LocalPool(workers, threads=config.threads, models=models, worlds=worlds)
     try:
         # optional (the ray extra): imported only when --ray is given
         from controlmm.batch.ray_backend import RayBackend
@@ -120,7 +120,7 @@ def make_backend(config: BatchConfig, jobs: Sequence[Job]) -> Backend:
             "Ray is not installed: pip install -e '.[ray]' (or pip install ray), or leave out --ray "
             "for the local process pool"
         ) from None
-    return RayBackend(config.ray, config.workers, threads=config.threads, models=models)
+    return RayBackend(config.ray, config.workers, threads=config.threads, models=models, worlds=worlds)
 
 
 def run_batch(

@@ -30,6 +30,7 @@ from tqdm import tqdm
 from controlmm.atomic import OUTPUT_MARKER
 from controlmm.batch.tasks import TASKS, Warm
 from controlmm.errors import ControlMMError
+from retarget import load_robot
 
 _WARM = Warm()
 MAX_LOG_LINES = 20
@@ -41,10 +42,13 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def setup(threads: int = 1, models: list[str | None] | None = None) -> dict[str, Any]:
-    """Prepare this process: ``threads`` torch CPU threads, ``models`` loaded (None: the default).
+def setup(
+    threads: int = 1, models: list[str | None] | None = None, worlds: list[tuple[str, str]] | None = None
+) -> dict[str, Any]:
+    """Prepare this process: ``threads`` torch CPU threads, ``models`` loaded (None: the default),
+    the check ``worlds`` (scene, robot) and their robots' models built.
 
-    A model that fails to load is left for the job that needs it to report. Returns
+    A model or world that fails to load is left for the job that needs it to report. Returns
     ``{"worker": "host:pid", "pid": pid}``.
     """
     torch.set_num_threads(threads)
@@ -56,6 +60,10 @@ def setup(threads: int = 1, models: list[str | None] | None = None) -> dict[str,
     for model in models or []:
         with contextlib.suppress(Exception):
             _WARM.model(model)
+    for scene, robot in worlds or []:
+        with contextlib.suppress(Exception):
+            _WARM.world(scene, robot)
+            load_robot(robot).prepare()
     return {"worker": worker_name(), "pid": os.getpid()}
 
 
