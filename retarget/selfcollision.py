@@ -46,6 +46,10 @@ SELF_MARGIN = 0.02
 """Metres between an arm capsule and any other capsule that the solver keeps free."""
 
 
+TRUNK_MARGIN = 0.005
+"""Metres kept between the trunk's and a thigh link's capsules (enclosures: 0 is contact free)."""
+
+
 REST_SLACK = 0.005
 """A pair closer than the margin in the rest pose may come this much closer than there."""
 
@@ -292,7 +296,10 @@ def build_self_clearance(
     margin = np.minimum(SELF_MARGIN, rest_dist[0] - REST_SLACK)
     keep = np.ones(len(first), dtype=bool)
     for k in trunk_pairs:
-        if margin[k] < SELF_MARGIN:  # enclosures close at rest: calibrate on the real geometry
+        margin[k] = min(margin[k], TRUNK_MARGIN)
+        if (
+            rest_dist[0, k] - REST_SLACK < TRUNK_MARGIN
+        ):  # enclosures close at rest: calibrate on the real geometry
             swept = swept_margin(model, tree, sc, k)
             if swept is None:
                 keep[k] = False  # never touching in the sweep, or not sweepable
@@ -305,9 +312,11 @@ def build_self_clearance(
 
 SWEEP_STEPS = 9
 """Values per joint of the sweep that calibrates a trunk-thigh pair (:func:`swept_margin`)."""
+SWEEP_DEPTH = 0.002
+"""Metres deep the swept geoms must overlap to count as touching (the solver's own tolerance)."""
 SWEEP_JOINTS = 4
 """Most joints between a trunk body and a thigh link that :func:`swept_margin` sweeps."""
-SWEEP_SLACK = 0.004
+SWEEP_SLACK = 0.002
 """Metres added to the largest capsule distance at which the swept geoms touch."""
 
 
@@ -319,7 +328,9 @@ def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, 
     between the two bodies (at most ``SWEEP_JOINTS``) are swept over their ranges
     (``SWEEP_STEPS`` values each, +-pi for unlimited ones), the geoms' own distance measured
     by MuJoCo (``mj_geomDistance``, convex hulls for meshes): the margin is the largest
-    capsule distance of a pose where they touch, plus ``SWEEP_SLACK``. None: no swept pose
+    capsule distance of a pose where they overlap by more than ``SWEEP_DEPTH``, plus
+    ``SWEEP_SLACK`` (the grid is coarse: off it, overlaps up to about 8 mm may stay above the
+    margin, checked in the tests; ``controlmm validate`` allows 5 mm). None: no swept pose
     makes them touch, or the pair cannot be swept (the trunk body is not above the leg link,
     or more than ``SWEEP_JOINTS`` joints lie between them).
     """
@@ -352,7 +363,7 @@ def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, 
         data.qpos[:] = model.qpos0
         data.qpos[adr] = grid[t]
         mujoco.mj_kinematics(model, data)
-        touching[t] = mujoco.mj_geomDistance(model, data, g1, g2, 0.05, None) < 0.0
+        touching[t] = mujoco.mj_geomDistance(model, data, g1, g2, 0.05, None) < -SWEEP_DEPTH
     if not touching.any():
         return None
     return float(capsule[touching, 0].max()) + SWEEP_SLACK
