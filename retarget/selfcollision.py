@@ -16,7 +16,14 @@ robot's collision geoms (:class:`SelfClearance`):
   rest pose, comes at most ``REST_SLACK`` closer than there;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
   hips turned out, feet placed close together), and in each leg the links above the knee
-  with the links below the knee's own (a deep crouch), with the same margins.
+  with the links below the knee's own (a deep crouch), with the same margins;
+* the trunk (the pelvis and the bodies above it up to the shoulders) against the links above
+  each knee (a deep stoop or crouch folds the trunk onto the hips), but for a parent and its
+  child. Where their enclosures come closer than ``SELF_MARGIN`` in the rest pose (a pelvis
+  and the hip link hanging below it) the rest pose says nothing about contact: the margin is
+  calibrated on the real geoms by a sweep of the joints between them
+  (:func:`swept_margin`); a pair whose geoms never touch in the sweep, or that cannot be swept
+  (the trunk body not above the leg link, too many joints between them), is dropped.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -37,6 +44,10 @@ from retarget.kinematics import KinematicTree, Poses
 
 SELF_MARGIN = 0.02
 """Metres between an arm capsule and any other capsule that the solver keeps free."""
+
+
+TRUNK_MARGIN = 0.005
+"""Metres kept between the trunk's and a thigh link's capsules (enclosures: 0 is contact free)."""
 
 
 REST_SLACK = 0.005
@@ -249,6 +260,25 @@ def build_self_clearance(
                     if bj in lower:
                         first.append(i)
                         second.append(j)
+    # The trunk against the thighs (a deep stoop or crouch folds the trunk onto the hips): the
+    # trunk bodies the leg hangs from (the pelvis) against the links above each knee, but for a
+    # parent and its child and body pairs the model excludes (as MuJoCo does).
+    excluded = {frozenset((int(s_ >> 16), int(s_ & 0xFFFF))) for s_ in m.exclude_signature}
+    trunk_bodies = (trunk or set()) | shared
+    trunk_pairs: list[int] = []  # indices into first/second
+    for side in ("left", "right"):
+        if f"{side}_knee" not in keypoint_nodes:
+            continue
+        knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
+        thigh = {b for b in ancestors(knee)[1:] if b in leg}
+        for i, bi in enumerate(body_of):
+            if bi not in trunk_bodies:
+                continue
+            for j, bj in enumerate(body_of):
+                if bj in thigh and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
+                    trunk_pairs.append(len(first))
+                    first.append(i)
+                    second.append(j)
     if not first:
         return None
     sc = SelfClearance(
@@ -264,4 +294,82 @@ def build_self_clearance(
     rest_dist, _, _ = capsule_distances(rest, sc)
     # The rest pose is collision free: pairs closer than the margin there may come that close.
     margin = np.minimum(SELF_MARGIN, rest_dist[0] - REST_SLACK)
-    return SelfClearance(sc.node, sc.p0, sc.p1, sc.radius, sc.first, sc.second, sc.geom, margin)
+    keep = np.ones(len(first), dtype=bool)
+    for k in trunk_pairs:
+        margin[k] = min(margin[k], TRUNK_MARGIN)
+        if (
+            rest_dist[0, k] - REST_SLACK < TRUNK_MARGIN
+        ):  # enclosures close at rest: calibrate on the real geometry
+            swept = swept_margin(model, tree, sc, k)
+            if swept is None:
+                keep[k] = False  # never touching in the sweep, or not sweepable
+            else:
+                margin[k] = min(swept, margin[k])
+    return SelfClearance(
+        sc.node, sc.p0, sc.p1, sc.radius, sc.first[keep], sc.second[keep], sc.geom, margin[keep]
+    )
+
+
+SWEEP_STEPS = 9
+"""Values per joint of the sweep that calibrates a trunk-thigh pair (:func:`swept_margin`)."""
+SWEEP_DEPTH = 0.002
+"""Metres deep the swept geoms must overlap to count as touching (the solver's own tolerance)."""
+SWEEP_JOINTS = 4
+"""Most joints between a trunk body and a thigh link that :func:`swept_margin` sweeps."""
+SWEEP_SLACK = 0.002
+"""Metres added to the largest capsule distance at which the swept geoms touch."""
+
+
+def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, k: int) -> float | None:
+    """The margin of pair ``k`` (a trunk body and a link of the leg below it) from its real geoms.
+
+    Enclosing capsules of a pelvis and the hip link hanging below it overlap in every pose
+    (G1's by 1-5 cm), so the rest pose's distance says nothing about contact. The joints
+    between the two bodies (at most ``SWEEP_JOINTS``) are swept over their ranges
+    (``SWEEP_STEPS`` values each, +-pi for unlimited ones), the geoms' own distance measured
+    by MuJoCo (``mj_geomDistance``, convex hulls for meshes): the margin is the largest
+    capsule distance of a pose where they overlap by more than ``SWEEP_DEPTH``, plus
+    ``SWEEP_SLACK`` (the grid is coarse: off it, overlaps up to about 8 mm may stay above the
+    margin, checked in the tests; ``controlmm validate`` allows 5 mm). None: no swept pose
+    makes them touch, or the pair cannot be swept (the trunk body is not above the leg link,
+    or more than ``SWEEP_JOINTS`` joints lie between them).
+    """
+    trunk_body = int(tree.node_body[sc.node[sc.first[k]]])
+    joints: list[int] = []
+    b = int(tree.node_body[sc.node[sc.second[k]]])
+    while b != trunk_body:
+        if b <= 0:
+            return None
+        joints += range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b]))
+        b = int(model.body_parentid[b])
+    if len(joints) > SWEEP_JOINTS:
+        return None
+    col = [int(np.flatnonzero(tree.joint_ids == j)[0]) for j in joints]
+    lo = np.clip(tree.lower[col], -np.pi, np.pi)
+    hi = np.clip(tree.upper[col], -np.pi, np.pi)
+    grid = np.stack(
+        np.meshgrid(*(np.linspace(a, b_, SWEEP_STEPS) for a, b_ in zip(lo, hi, strict=True))), -1
+    ).reshape(-1, len(col))
+    q = np.tile(tree.qpos0, (len(grid), 1))
+    q[:, col] = grid
+    n = len(q)
+    root_pos, root_rot = np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1))
+    capsule, _, _ = capsule_distances(tree.forward(root_pos, root_rot, q), _one_pair(sc, k))
+    data = mujoco.MjData(model)
+    adr = model.jnt_qposadr[joints]
+    g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
+    touching = np.zeros(n, dtype=bool)
+    for t in range(n):
+        data.qpos[:] = model.qpos0
+        data.qpos[adr] = grid[t]
+        mujoco.mj_kinematics(model, data)
+        touching[t] = mujoco.mj_geomDistance(model, data, g1, g2, 0.05, None) < -SWEEP_DEPTH
+    if not touching.any():
+        return None
+    return float(capsule[touching, 0].max()) + SWEEP_SLACK
+
+
+def _one_pair(sc: SelfClearance, k: int) -> SelfClearance:
+    return SelfClearance(
+        sc.node, sc.p0, sc.p1, sc.radius, sc.first[k : k + 1], sc.second[k : k + 1], sc.geom, sc.margin[:1]
+    )

@@ -1,0 +1,64 @@
+"""Self-clearance pairs: the trunk against the thighs, margins calibrated on the real geometry.
+
+G1's pelvis and the hip-roll link below it overlap as enclosing capsules in every pose, so
+their margin comes from a sweep of the hip joints measured by MuJoCo on the real meshes.
+Checked here off the sweep's grid: random poses in which MuJoCo finds the geoms more than
+8 mm deep (``controlmm validate`` allows 5 mm; the sweep's grid is coarse) must all fall
+below the pair's margin, and the rest pose of every packaged robot must violate none.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from retarget import load_robot
+from retarget.robots import PACKAGED_ROBOTS
+from retarget.selfcollision import SELF_MARGIN, capsule_distances
+
+
+def _trunk_thigh_pairs(name: str) -> list[int]:
+    robot = load_robot(name)
+    sc = robot.self_clearance
+    assert sc is not None
+    root = int(robot.tree.node_body[0])
+    body = robot.capsules.body
+    return [k for k in range(sc.num_pairs) if body[sc.first[k]] == root and sc.margin[k] < SELF_MARGIN]
+
+
+@pytest.mark.parametrize("name", PACKAGED_ROBOTS)
+def test_rest_pose_violates_no_pair(name):
+    robot = load_robot(name)
+    sc = robot.self_clearance
+    assert sc is not None
+    dist, _, _ = capsule_distances(robot.rest, sc)
+    assert np.all(dist[0] > sc.margin), name
+
+
+def test_g1_pelvis_against_hip_links_from_the_real_meshes():
+    robot = load_robot("g1")
+    model, sc, tree = robot.model, robot.self_clearance, robot.tree
+    assert sc is not None
+    pairs = _trunk_thigh_pairs("g1")
+    names = {(model.body(int(robot.capsules.body[sc.second[k]])).name) for k in pairs}
+    assert {"left_hip_roll_link", "right_hip_roll_link"} <= names
+    # Random poses of every joint (not the sweep's grid): where the real geoms are > 8 mm deep,
+    # the capsule pair is below its margin, so the solver pushes them apart.
+    rng = np.random.default_rng(0)
+    lower, upper = np.clip(robot.lower, -np.pi, np.pi), np.clip(robot.upper, -np.pi, np.pi)
+    q = rng.uniform(lower, upper, (1500, len(lower)))
+    n = len(q)
+    dist, _, _ = capsule_distances(tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q), sc)
+    data = mujoco.MjData(model)
+    deep = 0
+    for k in pairs:
+        g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
+        for t in range(n):
+            data.qpos[:] = model.qpos0
+            data.qpos[7:] = q[t]
+            mujoco.mj_kinematics(model, data)
+            if mujoco.mj_geomDistance(model, data, g1, g2, 0.05, None) < -0.008:
+                deep += 1
+                assert dist[t, k] < sc.margin[k], (k, t, dist[t, k], sc.margin[k])
+    assert deep > 10  # the sample reaches the contacts it checks
