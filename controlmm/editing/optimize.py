@@ -121,8 +121,10 @@ def optimize_lbfgs(
     (line-search trials included) counts as one step and is checked per sample: the best evaluated
     state of each sample is kept, and a sample that meets the stopping rule is frozen there. The
     optimiser runs in chunks of ``chunk`` iterations; it restarts (fresh curvature history) whenever
-    samples drop out. Each sample's loss is divided by its initial value, so the first step's size
-    does not depend on the units of the loss.
+    samples drop out. A sample also drops out when a whole chunk did not lower its best loss (stalled:
+    its line searches find no decrease, and further chunks would repeat the same evaluations). Each
+    sample's loss is divided by its initial value, so the first step's size does not depend on the
+    units of the loss.
     """
     b = param.shape[0]
     view = (b,) + (1,) * (param.ndim - 1)
@@ -187,11 +189,21 @@ def optimize_lbfgs(
             active = active & ~state.done
         if state.count > evaluations or not bool(active.any()):
             break
-        before = state.count
+        before, best_before = state.count, state.kept_loss.clone()
         optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state.count))
         optimizer.step(closure)
         if state.count == before:  # converged to machine precision
             break
+        # A sample whose best loss did not improve over a whole chunk has stalled: its line searches
+        # found no decrease, and the next chunks would evaluate the same points again.
+        stalled = active & ~state.done & ~(state.kept_loss < best_before)
+        if bool(stalled.any()) and state.count <= evaluations:
+            active = active & ~stalled
+            if not bool(active.any()):
+                break
+            optimizer = new_optimizer()
+            with torch.no_grad():
+                x.copy_(torch.where(active.view(view), x, state.kept))
     return EditOutcome(
         param=state.kept,
         steps=state.used,

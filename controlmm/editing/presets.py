@@ -31,6 +31,7 @@ class EditingConfig:
     lr: float = 0.06  # AdamW learning rate of codebook editing with codebook_optimizer="adam"
     logits_lr: float = 0.3  # AdamW learning rate of logits editing
     logits_patience: int = 10  # logits editing stops on a plateau of this many steps (0: never)
+    logits_warm_start: bool = True  # each decoding iteration's editing starts from the last one's edit
     codebook_optimizer: str = (
         "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
     )
@@ -40,6 +41,7 @@ class EditingConfig:
     tolerance: float = 0.01  # metres: stop when every constraint is this close
     logits_tolerance: float = 0.03  # metres: logits editing stops when its motion estimate is this close
     hinge_weight: float = 10.0  # codebook editing: weight of the hinge on lagging constraints (Objective)
+    difference_weight: float = 30.0  # both editors: weight of the keyframe-difference term (Objective)
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)

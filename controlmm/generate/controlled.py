@@ -307,6 +307,7 @@ def _generate_chunk(
         tolerance=config.tolerance,
         loss_tolerance=config.loss_tolerance,
         hinge_weight=config.hinge_weight,
+        difference_weight=config.difference_weight,
     )
     cond = model.encode_text(texts)
     tokenizer, transformer = model.tokenizer, model.transformer
@@ -338,13 +339,20 @@ def _generate_chunk(
         objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean", hinge_weight=0.0
     )
 
+    carried: list[torch.Tensor] = []  # the previous iteration's edit (edited - predicted logits)
+
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
         known = ~state.is_mask & ~state.padding_mask
         fixed = torch.where(known[..., None], codebook[torch.where(known, state.ids, 0)], 0.0)
+        start = logits
+        if carried:  # warm start: the positions still masked keep the edit the last iteration found
+            start = logits + torch.where(state.is_mask[..., None], carried[-1], 0.0)
         with torch.enable_grad():
             outcome = logits_editing(
-                logits, state.is_mask, fixed, codebook, decode, logits_objective, config, generator
+                start, state.is_mask, fixed, codebook, decode, logits_objective, config, generator
             )
+        if config.logits_warm_start:
+            carried[:] = [outcome.param - logits]
         logit_steps.append(outcome.steps)
         return outcome.param
 

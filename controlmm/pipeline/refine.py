@@ -65,6 +65,7 @@ def edit_motion(
         terms=terms,
         tolerance=config.tolerance,
         loss_tolerance=config.loss_tolerance,
+        difference_weight=config.difference_weight,
     )
     latent, edit = edit_latent(model, latent, frames, objective, config)
     joints, features = decode_latent(model, latent, frames)

@@ -11,6 +11,7 @@ import torch
 from tqdm import tqdm
 
 from controlmm.atomic import atomic_path
+from controlmm.errors import ControlMMError
 from controlmm.text.base import TextEncoder
 
 
@@ -64,17 +65,20 @@ def embed_captions(
                     return CaptionEmbeddings(unique, vectors.float())
             except Exception:  # noqa: BLE001 - a bad cache is recomputed
                 pass
+    token_states = getattr(encoder, "encode_tokens", None)
+    if tokens and token_states is None:
+        raise ControlMMError(f"text encoder '{encoder.name}' has no token states (tokens={tokens})")
     chunks = []
     starts = range(0, len(unique), batch_size)
     for start in tqdm(
         starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress, leave=False
     ):
         texts = list(unique[start : start + batch_size])
-        chunks.append(encoder.encode_tokens(texts, tokens) if tokens else encoder.encode(texts))
+        chunks.append(token_states(texts, tokens) if token_states and tokens else encoder.encode(texts))
     if tokens:
         length = max((c.shape[1] for c in chunks), default=1)
         vectors = torch.zeros(len(unique), length, encoder.dim)
-        for start, chunk in zip(starts, chunks):
+        for start, chunk in zip(starts, chunks, strict=True):
             vectors[start : start + len(chunk), : chunk.shape[1]] = chunk
         stored = vectors.half()
         vectors = stored.float()  # what a later run reads back from the cache

@@ -167,6 +167,18 @@ class SceneSDF:
                 return geom.mesh
         raise ControlMMError(f"geom {geom_id} is not a mesh or height-field obstacle of this SDF")
 
+    @property
+    def has_costly_geoms(self) -> bool:
+        """Whether some obstacle is a mesh, height field or ellipsoid (the kinds evaluated
+        iteratively, at several microseconds per point; the others are closed forms)."""
+        return any(self._slices[k].stop > self._slices[k].start for k in (ELLIPSOID, MESH))
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(2, 3) world box (min, max corners, m) holding the obstacles (every key pose of moving
+        ones), the start pose and a 1 m margin: where the scene's motions happen."""
+        return self._extent.copy()
+
     def __call__(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Scene SDF (..., N) of world points (..., N, 3) at frame times ``t`` (see module doc)."""
         points = check_points(points)
@@ -174,14 +186,30 @@ class SceneSDF:
         times = None if t is None else check_times(t, lead, points)
         if not self._geoms:
             return torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
-        c = self._tensors(points)
         grad = points.requires_grad and torch.is_grad_enabled()
+        value, gradient = self.value_and_gradient(points.detach(), times, grad)
+        if gradient is None:
+            return value
+        return kernels.WithGradient.apply(points, value, gradient)
+
+    def value_and_gradient(
+        self, points: Tensor, times: Tensor | None, gradient: bool
+    ) -> tuple[Tensor, Tensor | None]:
+        """The SDF (..., N) of checked world points (..., N, 3) at checked frame times (None or
+        broadcast to ``points.shape[:-2]``) and, when ``gradient``, its exact gradient (..., N, 3);
+        no autograd (what :meth:`__call__` attaches)."""
+        lead, n = points.shape[:-2], points.shape[-2]
+        if not self._geoms:
+            value = torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
+            return value, torch.zeros_like(points) if gradient else None
+        c = self._tensors(points)
+        grad = gradient
         with torch.no_grad():
-            p, rot_t, pos, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
+            p, rot_t, pos, frames = self._posed(points, times, c)  # p (L, N', 3)
             local = kernels.to_local(p, frames)  # (L, 3, G, N')
             value, winner, closest = self._nearest(local, c, need_winner=grad)
             if not grad:
-                return value.reshape(*lead, n)
+                return value.reshape(*lead, n), None
             table = (
                 c["table"]
                 if rot_t is None
@@ -195,8 +223,8 @@ class SceneSDF:
                     dim=1,
                 ).T.contiguous()
             )
-            gradient = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
-        return kernels.WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
+            gradient_ = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
+        return value.reshape(*lead, n), gradient_.reshape(points.shape)
 
     def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every
@@ -223,11 +251,18 @@ class SceneSDF:
         if s.stop > s.start:
             cols.append(primitives.sdf_ellipsoid(local[:, :, s].permute(0, 2, 3, 1), c["axes"][:, None]))
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
-            cols.append(self._geoms[j].mesh(local[:, :, j].transpose(1, 2))[:, None])
+            cols.append(self._mesh_at(j)(local[:, :, j].transpose(1, 2))[:, None])
         out = torch.cat(cols, dim=1)[:, c["order"]]  # (L, G, N') in geom_ids order
         return out.transpose(1, 2).reshape(*lead, n, len(self._geoms))
 
     # -- the steps ------------------------------------------------------------------------------
+
+    def _mesh_at(self, j: int) -> MeshSDF:
+        """The MeshSDF of the kind-sorted geom ``j`` (a mesh or height field)."""
+        mesh = self._geoms[j].mesh
+        if mesh is None:
+            raise ControlMMError(f"obstacle geom {self._geoms[j].geom_id} has no mesh SDF")
+        return mesh
 
     def _posed(self, points: Tensor, times: Tensor | None, c: dict[str, Tensor]):
         """Points as (L, N', 3) and the geom poses they meet: L = 1 (all points share the poses)
@@ -243,14 +278,14 @@ class SceneSDF:
         else:
             times_k = times.reshape(1, -1).expand(len(self._tracks), -1)  # (K, L)
             p = points.reshape(-1, points.shape[-2], 3)
-        body_rot, body_pos = [], []
+        rots, positions = [], []
         for k, track in enumerate(self._tracks):
             pos_k, quat_k = track.pose(times_k[k])
-            body_rot.append(quat_to_mat(quat_k))
-            body_pos.append(pos_k)
+            rots.append(quat_to_mat(quat_k))
+            positions.append(pos_k)
         mv = c["moving"]
-        body_rot = torch.stack(body_rot, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
-        body_pos = torch.stack(body_pos, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
+        body_rot = torch.stack(rots, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
+        body_pos = torch.stack(positions, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
         rot_m = (body_rot @ c["rot"][mv]).transpose(-1, -2)  # geom-from-world
         pos_m = body_pos + (body_rot @ c["pos"][mv][..., None])[..., 0]
         if len(mv) == len(self._geoms):
@@ -270,11 +305,13 @@ class SceneSDF:
         num_l, _, num_g, num_n = local.shape
         x, y, z = local.unbind(1)  # (L, G, N') each
         first_cp = self._num_round
-        closest = closest_v = None
+        closest: Tensor | None = None
+        closest_v: Tensor | None = None
         if need_winner and num_g > first_cp:
             closest = local.new_zeros((num_l, 3, num_g - first_cp, num_n))
             closest_v = closest.permute(0, 2, 3, 1)  # (L, G - G_round, N', 3) view, for writing
-        best = winner = None
+        best: Tensor | None = None
+        winner: Tensor | None = None
 
         def merge(d: Tensor, offset: int) -> None:  # fold distances d (L, Gk, N') into best / winner
             nonlocal best, winner
@@ -286,7 +323,7 @@ class SceneSDF:
             if best is None:
                 best, winner = v, i
             else:
-                if need_winner:
+                if i is not None and winner is not None:  # (need_winner)
                     winner = torch.where(v < best, i, winner)
                 best = torch.minimum(best, v)
 
@@ -300,7 +337,7 @@ class SceneSDF:
             )
         s = self._slices[PLANE]
         if s.stop > s.start:
-            if need_winner:
+            if closest is not None:  # (with need_winner: planes have closest-point columns)
                 cp = slice(s.start - first_cp, s.stop - first_cp)
                 closest[:, 0:2, cp] = local[:, 0:2, s]
             merge(z[:, s], s.start)
@@ -326,7 +363,7 @@ class SceneSDF:
                 inside = (pts / axes).square_().sum(dim=-1).sub_(1.0)  # < 0 inside
                 exact = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside)
                 kernels.put(d, hit, exact)
-                if need_winner:
+                if closest_v is not None:
                     kernels.put(closest_v[:, cp], hit, q)
             merge(d, s.start)
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
@@ -338,9 +375,9 @@ class SceneSDF:
             hit = None if best is None else (d <= best).nonzero(as_tuple=True)
             pts = pts.reshape(-1, 3) if hit is None else pts[hit]
             if len(pts):
-                q, sgn = self._geoms[j].mesh.closest(pts.contiguous())
+                q, sgn = self._mesh_at(j).closest(pts.contiguous())
                 kernels.put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
-                if need_winner:
+                if closest_v is not None:
                     kernels.put(closest_v[:, j - first_cp], hit, q)
             merge(d[:, None], j)
         return best, winner, closest
@@ -373,6 +410,8 @@ class SceneSDF:
             norm2 = (x * x).addcmul_(y, y).addcmul_(z, z).clamp_min_(torch.finfo(diff.dtype).tiny)
             g_cp = diff.mul_((value / norm2)[:, None])
             g = g_cp if g is None else torch.where((winner >= first_cp)[:, None], g_cp, g)
+        if g is None:  # every geom kind is either a round one or has a closest point
+            raise ControlMMError("scene SDF has no obstacle geoms to take a gradient from")
         world = row[:, 0:3] * g[:, 0:1]  # R g = sum_k g_k (row k of R^T)
         world.addcmul_(row[:, 3:6], g[:, 1:2]).addcmul_(row[:, 6:9], g[:, 2:3])
         return world.transpose(1, 2)
