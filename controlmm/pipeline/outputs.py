@@ -13,7 +13,8 @@ robot.csv               one row per frame: root xyz, root quaternion xyzw, joint
 robot.npz               qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
 robot.json              the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
 report.json             the chosen round's simulation report (``passed``, penetrations, failures...)
-                        plus ``plan`` (inputs, chosen round) and ``rounds`` (every round's figures)
+                        plus ``plan`` (inputs, chosen round), ``rounds`` (every round's figures) and
+                        ``timing`` (wall seconds per stage, :mod:`controlmm.pipeline.timing`)
 render.mp4              the robot in the scene (MuJoCo; a matplotlib stick figure without OpenGL)
 plots/top_view.png      obstacles, paths, control targets and achieved positions from above
 plots/clearance.png     per-frame obstacle clearance and floor height of every round
@@ -24,11 +25,13 @@ plan.json               the settings of the run (to reproduce it)
 ======================  =======================================================================
 
 ``plots/`` is left out with ``PlanConfig(plots=False)`` and ``render.mp4`` with ``render=False``.
+Writing them is the ``outputs`` stage of ``result.timing`` (``report.json``'s ``timing``, written last).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 from controlmm.atomic import atomic_dir, write_text
@@ -61,10 +64,10 @@ def write_plan(
     config = result.config
     render = config.render if render is None else render
     backend = None
+    started = time.perf_counter()
     with atomic_dir(out, kind=PLAN_OUTPUT, force=force, make_parents=True) as tmp:
         save_motion(result.motion, tmp / "motion.npz")
         result.trajectory.save(tmp / "robot")
-        write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
         if config.plots:
             plots = tmp / "plots"
@@ -85,4 +88,8 @@ def write_plan(
                 progress=progress,
                 scene=result.scene,
             )
+        # last, so that its timing holds the outputs above
+        result.timing.seconds["outputs"] = time.perf_counter() - started
+        result.timing.stop()
+        write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
     return backend

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
@@ -39,6 +39,7 @@ from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from controlmm.pipeline.refine import edit_motion
+from controlmm.pipeline.timing import StageTimes
 from controlmm.timeline import as_timeline, generate_timeline
 from retarget import RobotTrajectory, load_robot, retarget_motion, robot_scale
 from scenes import Scene, load_scene, scene_loss_terms
@@ -59,7 +60,7 @@ class PlanRound:
     terms: list[str]  # names of the loss terms this round was generated with
     constraint_errors_m: list[float]
     editing: dict[str, Any]
-    seconds: dict[str, float]
+    seconds: dict[str, float]  # generate, retarget, check, and generate's stages (text, decoding, ...)
 
     @property
     def passed(self) -> bool:
@@ -107,6 +108,7 @@ class PlanResult:
     best: int
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    timing: StageTimes = field(default_factory=StageTimes)
 
     @property
     def final(self) -> PlanRound:
@@ -151,6 +153,7 @@ class PlanResult:
             "seconds": round(self.seconds, 3),
         }
         out["rounds"] = [r.to_dict() for r in self.rounds]
+        out["timing"] = self.timing.to_dict()
         return out
 
 
@@ -176,7 +179,7 @@ def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, 
 
 
 def plan(
-    config: PlanConfig = PlanConfig(),
+    config: PlanConfig | None = None,
     *,
     model: MotionModel | None = None,
     progress: bool = True,
@@ -185,12 +188,16 @@ def plan(
     """Plan a robot motion in a scene (see the module docstring).
 
     Args:
-        config: what to plan.
+        config: what to plan (default: ``PlanConfig()``, the bundled example).
         model: a loaded :class:`controlmm.models.MotionModel` (default: load ``config.model``).
         progress: progress bars and one line per stage on stderr.
         log: where stage lines go (default stderr); None with ``progress=False`` silences them.
+
+    ``result.timing`` holds the wall seconds of every stage (:mod:`controlmm.pipeline.timing`).
     """
     start = time.perf_counter()
+    config = PlanConfig() if config is None else config
+    timing = StageTimes(origin=start)
     say = _logger(progress, log)
     scene, text, spec, transform = resolve_inputs(config)
     error = start_pose_error(scene)
@@ -203,25 +210,32 @@ def plan(
     if model is None:
         say("loading the model")
         model = load_model(config.model)
-    body_joints = load_robot(config.robot).body_joints
+    body_joints: dict[str, Sequence[str]] = dict(load_robot(config.robot).body_joints)
     base_terms = scene_loss_terms(scene, transform, safe_distance=config.safe_distance_m)
     world = make_world(scene)
     editing = editing_preset(config.preset)
     extra: list[LossTerm] = []
     history: dict = {}  # feedback margins per robot body, across rounds
     rounds: list[PlanRound] = []
-    latent = None
+    latent: torch.Tensor | None = None
+    motion: Motion | None = None
+    timing.add("startup", time.perf_counter() - start)
     for index in range(config.rounds + 1):
         terms = base_terms + extra
         timer: dict[str, float] = {}
         t0 = time.perf_counter()
         if config.timeline is not None:  # a timeline is regenerated whole, its passes minimising every term
             say(f"round {index}: generating the timeline ({len(terms)} loss terms, preset {editing.name})")
-            motion, errors, record = _timeline(model, config, terms, transform, editing)
+            motion, errors, record = _timeline(model, config, config.timeline, terms, transform, editing)
+            phases = {"timeline": time.perf_counter() - t0}
         elif index == 0:
             say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
-            motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
+            motion, errors, record, latent, phases = _generate(
+                model, config, text, spec, terms, transform, editing
+            )
         else:
+            if latent is None or motion is None:  # round 0 generated both
+                raise RuntimeError("a feedback round needs the previous round's latent")
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
             edited = edit_motion(
                 model,
@@ -235,7 +249,9 @@ def plan(
                 metadata=motion.metadata,
             )
             motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
+            phases = edited.seconds
         timer["generate"] = time.perf_counter() - t0
+        timer.update(phases)
         t0 = time.perf_counter()
         traj = retarget_motion(motion, robot=config.robot, fps=config.fps, transform=transform)
         timer["retarget"] = time.perf_counter() - t0
@@ -243,17 +259,24 @@ def plan(
         report = check_trajectory(world, traj, config=config.check)
         timer["check"] = time.perf_counter() - t0
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
+        if index == 0:
+            timing.add_all(phases)
+            timing.add("retarget", timer["retarget"])
+            timing.add("checks", timer["check"])
+        else:
+            timing.add("feedback_rounds", timer["generate"] + timer["retarget"] + timer["check"])
         blocking = report.errors  # warnings (brief dynamic spikes) do not fail a round
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
         say(
             f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
-            f"in {sum(timer.values()):.1f} s"
+            f"in {timer['generate'] + timer['retarget'] + timer['check']:.1f} s"
         )
         # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
         # editing round (more codebook steps toward the targets), not more.
         settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
         if (report.passed and settled) or index == config.rounds:
             break
+        mark = time.perf_counter()
         extra = extra + feedback_terms(
             blocking,
             motion.joints,
@@ -265,6 +288,7 @@ def plan(
             config=config.feedback,
             history=history,
         )
+        timing.add("feedback_rounds", time.perf_counter() - mark)
     best = min(
         rounds,
         key=lambda r: (
@@ -274,6 +298,7 @@ def plan(
             max(r.constraint_errors_m, default=0.0),
         ),
     ).index
+    timing.stop()
     return PlanResult(
         config=config,
         scene=scene,
@@ -284,6 +309,7 @@ def plan(
         best=best,
         warnings=warnings,
         seconds=time.perf_counter() - start,
+        timing=timing,
     )
 
 
@@ -295,10 +321,11 @@ def _generate(
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
-):
+) -> tuple[Motion, list[float], dict[str, Any], torch.Tensor, dict[str, float]]:
     """Round 0: tokens by masked decoding (control model + logits editing), then codebook editing.
 
-    Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
+    Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim), wall seconds
+    per stage: text, decoding, logits_editing, codebook_editing, foot_contact).
     """
     out = generate_controlled(
         model,
@@ -311,23 +338,31 @@ def _generate(
         transform=transform,
         progress=False,
     )
+    phases = dict(out.records[0].phases)
+    mark = time.perf_counter()
     ids = out.ids[0].to(model.device)
     with torch.no_grad():
         latent = model.tokenizer.ids_to_latent(ids.reshape(1, ids.shape[0], -1))
     edited = edit_motion(
         model, latent, out.frames[0], spec, transform, terms, editing, text, metadata=out.motion.metadata
     )
+    phases["decoding"] = (
+        phases.get("decoding", 0.0) + time.perf_counter() - mark - sum(edited.seconds.values())
+    )
+    for stage, seconds in edited.seconds.items():
+        phases[stage] = phases.get(stage, 0.0) + seconds
     record = {
         "logits_steps": out.records[0].logits_steps,
         "control_model": out.records[0].control_model,
         **edited.record,
     }
-    return edited.motion, edited.errors, record, edited.latent
+    return edited.motion, edited.errors, record, edited.latent, phases
 
 
 def _timeline(
     model: MotionModel,
     config: PlanConfig,
+    timeline: str,
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
@@ -335,7 +370,7 @@ def _timeline(
     """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
     motion, info = generate_timeline(
         model,
-        as_timeline(config.timeline),
+        as_timeline(timeline),
         seed=config.seed,
         preset=editing,
         terms=terms,

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.text.base import check_texts, offline
+from controlmm.text.base import check_texts, offline, quiet_transformers
 from controlmm.text.embedding_cache import Embedding, EmbeddingCache
 from controlmm.text.truncation import warn_truncated
 
@@ -51,6 +51,7 @@ def _load(path: str, device: str) -> tuple[Any, torch.nn.Module]:
     # heavy (transformers, about 2-3 s): only when a text is not in the embedding cache
     from transformers import AutoModel, AutoTokenizer
 
+    quiet_transformers()
     tokenizer = AutoTokenizer.from_pretrained(path, local_files_only=True)
     model = AutoModel.from_pretrained(path, local_files_only=True).to(device).eval()
     return tokenizer, model

@@ -37,14 +37,16 @@ import hashlib
 import math
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-import trimesh
-from scipy.spatial import cKDTree
 
 from scenes.sdf.topology import edge_neighbour_table, pseudonormals, ring_table
 from scenes.sdf.triangles import closest_point_on_triangle, triangle_data, triangle_sq_distance
+
+if TYPE_CHECKING:
+    import trimesh
 
 Tensor = torch.Tensor
 
@@ -99,6 +101,8 @@ def closed_mesh(
     watertight with consistent winding (no inside exists) or ``convex_hull`` is asked, the
     convex hull is returned instead.
     """
+    import trimesh  # heavy (about 1 s with networkx): only scenes with meshes or height fields need it
+
     mesh = trimesh.Trimesh(
         np.asarray(vertices, dtype=np.float64),
         np.asarray(faces, dtype=np.int64),
@@ -153,13 +157,13 @@ class MeshSDF:
         key = (like.dtype, like.device)
         if key not in self._cache:
             g = self.grid
-            to = dict(dtype=like.dtype, device=like.device)
+            dtype, device = like.dtype, like.device
             self._cache[key] = {
-                "tri": torch.as_tensor(self.triangles, **to),
-                "data": triangle_data(torch.as_tensor(self.triangles, **to)),
-                "normals": torch.as_tensor(self.normals, **to),
-                "centre": torch.as_tensor(g.centre, **to),
-                "half": torch.as_tensor(g.half, **to),
+                "tri": torch.as_tensor(self.triangles, dtype=dtype, device=device),
+                "data": triangle_data(torch.as_tensor(self.triangles, dtype=dtype, device=device)),
+                "normals": torch.as_tensor(self.normals, dtype=dtype, device=device),
+                "centre": torch.as_tensor(g.centre, dtype=dtype, device=device),
+                "half": torch.as_tensor(g.half, dtype=dtype, device=device),
                 "shape": torch.as_tensor(g.shape, device=like.device),
                 "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=like.device).reshape(-1),
                 "ring": torch.as_tensor(self.ring.T.copy(), device=like.device),  # (K, F)
@@ -262,12 +266,15 @@ def _build_grid(
 ) -> _Grid:
     """Nested grids and the nearest triangle of their nodes (see the module docstring); ``ring``
     from :func:`scenes.sdf.topology.ring_table`."""
+    from scipy.spatial import cKDTree  # with trimesh: only scenes with meshes build these grids
+
     lo, hi = triangles.reshape(-1, 3).min(0), triangles.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
     half = (hi - lo) / 2 + pad
     levels = 1 + max(0, math.ceil(math.log2(float(np.max(((hi - lo) / 2 + reach) / half)))))
     pitch = max(pitch, float(np.cbrt(levels * np.prod(2 * half) / MAX_NODES)))
-    shape = tuple(int(v) for v in np.ceil(2 * half / pitch).astype(int) + 1)
+    nx, ny, nz = (int(v) for v in np.ceil(2 * half / pitch).astype(int) + 1)
+    shape = (nx, ny, nz)
     half = (np.asarray(shape) - 1) * pitch / 2  # >= the asked half extents, so levels still reach
 
     base_spacing = max(pitch / 2, math.sqrt(2 * float(mesh.area) / MAX_SAMPLES))
