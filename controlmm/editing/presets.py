@@ -32,6 +32,7 @@ class EditingConfig:
     logits_lr: float = 0.3  # AdamW learning rate of logits editing
     logits_patience: int = 10  # logits editing stops on a plateau of this many steps (0: never)
     logits_warm_start: bool = True  # each decoding iteration's editing starts from the last one's edit
+    logits_warm_patience: int = 5  # logits_patience of a warm-started iteration (it starts on the plateau)
     codebook_optimizer: str = (
         "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
     )
@@ -41,7 +42,7 @@ class EditingConfig:
     tolerance: float = 0.01  # metres: stop when every constraint is this close
     logits_tolerance: float = 0.03  # metres: logits editing stops when its motion estimate is this close
     hinge_weight: float = 10.0  # codebook editing: weight of the hinge on lagging constraints (Objective)
-    difference_weight: float = 30.0  # both editors: weight of the keyframe-difference term (Objective)
+    difference_weight: float = 30.0  # codebook editing: weight of the keyframe-difference term (Objective)
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
@@ -54,8 +55,11 @@ class EditingConfig:
                 raise ControlMMError(f"{name} must be a whole number >= 0; got {value!r}")
         if self.codebook_optimizer not in ("adam", "lbfgs"):
             raise ControlMMError(f"codebook_optimizer must be adam or lbfgs; got '{self.codebook_optimizer}'")
-        if self.logits_patience < 0:
-            raise ControlMMError(f"logits_patience must be >= 0; got {self.logits_patience}")
+        for name in ("logits_patience", "logits_warm_patience"):
+            if getattr(self, name) < 0:
+                raise ControlMMError(f"{name} must be >= 0; got {getattr(self, name)}")
+        if not self.difference_weight >= 0:
+            raise ControlMMError(f"difference_weight must be >= 0; got {self.difference_weight}")
         for name in ("lr", "logits_lr", "temperature", "contact_weight"):
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")

@@ -347,8 +347,13 @@ def _generate_chunk(
     use_control = control_logits is not None
 
     logits_objective = replace(
-        objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean", hinge_weight=0.0
+        objective,
+        tolerance=max(config.logits_tolerance, config.tolerance),
+        stop_on="mean",
+        hinge_weight=0.0,
+        difference_weight=0.0,
     )
+    warm_config = replace(config, logits_patience=config.logits_warm_patience)
 
     carried: list[torch.Tensor] = []  # the previous iteration's edit (edited - predicted logits)
 
@@ -356,12 +361,13 @@ def _generate_chunk(
         started = time.perf_counter()
         known = ~state.is_mask & ~state.padding_mask
         fixed = torch.where(known[..., None], codebook[torch.where(known, state.ids, 0)], 0.0)
-        start = logits
+        start, settings = logits, config
         if carried:  # warm start: the positions still masked keep the edit the last iteration found
             start = logits + torch.where(state.is_mask[..., None], carried[-1], 0.0)
+            settings = warm_config
         with torch.enable_grad():
             outcome = logits_editing(
-                start, state.is_mask, fixed, codebook, decode, logits_objective, config, generator
+                start, state.is_mask, fixed, codebook, decode, logits_objective, settings, generator
             )
         if config.logits_warm_start:
             carried[:] = [outcome.param - logits]
