@@ -10,8 +10,9 @@ split, pelvis control, the five densities (1, 2, 5 frames, 25 %, 100 % of the fr
 motion per case, batch 1, after one warm-up generation. The ablation generates each clip at its own
 length; the speed table generates every motion with 196 frames (the clip's targets in its first
 frames), the unit of the paper's Table 5. Both tables also report the foot-skating ratio of the same
-prompts and lengths generated without control, and the targets of issue 5 (accurate: Avg. err <= 1 cm,
-Traj. = Loc. = 0, <= 10 s per motion; editing cuts Avg. err >= 10x; skating <= uncontrolled + 0.01).
+prompts and lengths generated without control, and the project's control targets (accurate: Avg. err
+<= 1 cm, Traj. = Loc. = 0, <= 10 s per motion; editing cuts Avg. err >= 10x; skating <= uncontrolled
++ 0.01; docs/BENCHMARKS.md, "Control").
 
 Times: wall seconds per motion and CPU seconds per motion (this process, all threads); on a shared
 machine the wall time grows with the load (printed), the CPU time much less.
@@ -114,7 +115,7 @@ def print_table(title: str, rows: list[dict], skate_base: float, columns: list[s
 
 
 def check_targets(accurate: dict, unedited: list[tuple[str, dict]], skate_base: float) -> None:
-    """Print issue 5's targets against the measured figures."""
+    """Print the control targets (module docstring) against the measured figures."""
     print("\ntargets (issue 5):")
     ok = accurate["avg"] <= 0.01 and accurate["traj"] == 0 and accurate["loc"] == 0
     print(

@@ -14,6 +14,8 @@ Every file or directory the project writes goes through here:
   existing non-empty directory only when it holds a previous output of the same command
   (recorded by :func:`atomic_dir` in :data:`OUTPUT_MARKER`, and nothing else added to it)
   or with ``force``. A regular file is never replaced by a directory.
+* :func:`open_growing_dir` prepares a directory that a command fills over time, one entry
+  at a time (each written atomically): its marker says ``"files": null``, any entry it holds.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from typing import IO, Any
 from controlmm.errors import ControlMMError
 
 OUTPUT_MARKER = ".controlmm-output.json"
-"""File :func:`atomic_dir` writes into every output directory: ``{"kind": ..., "files": [...]}``."""
+"""File :func:`atomic_dir` writes into every output directory: ``{"kind": ..., "files": [...]}``;
+``"files": null`` marks a directory that grows (:func:`open_growing_dir`): any entry is the command's."""
 
 _NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 _TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)-[^.]+\.tmp(\..*)?$")
@@ -186,8 +189,12 @@ def _previous_output(path: Path, kind: str) -> bool:
     """Whether directory ``path`` holds a ``kind`` output written here, and nothing added to it."""
     try:
         marker = json.loads((path / OUTPUT_MARKER).read_text(encoding="utf-8"))
+        if marker["kind"] != kind:
+            return False
+        if marker["files"] is None:  # a growing directory (open_growing_dir): every entry is the command's
+            return True
         files = set(marker["files"]) | {OUTPUT_MARKER}
-        return marker["kind"] == kind and all(p.name in files for p in path.iterdir())
+        return all(p.name in files for p in path.iterdir())
     except (OSError, ValueError, KeyError, TypeError):
         return False
 
@@ -260,3 +267,32 @@ def atomic_dir(
         if error is not None:
             raise error from exc
         raise
+
+
+def open_growing_dir(
+    path: str | os.PathLike[str],
+    *,
+    kind: str,
+    force: bool = False,
+    flag: str = "--force",
+    make_parents: bool = False,
+) -> Path:
+    """Prepare directory ``path`` for a ``kind`` command that fills it over time; return it.
+
+    For outputs written entry by entry (each entry atomically, e.g. with :func:`atomic_dir`)
+    rather than in one piece. ``path`` must pass :func:`check_output_dir`: without ``force`` a
+    previous ``kind`` output is kept as it is (the command resumes it); with ``force`` whatever
+    a non-empty ``path`` holds (a previous ``kind`` output too) is moved aside and deleted, and
+    the command starts over in an empty directory. The directory is marked with
+    ``{"kind": kind, "files": null}`` in :data:`OUTPUT_MARKER`.
+    """
+    path = check_output_dir(path, kind=kind, force=force, flag=flag, make_parents=make_parents)
+    if force and path.is_dir() and any(path.iterdir()):
+        old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=_parent(path)))
+        os.replace(path, old / path.name)
+        shutil.rmtree(old, ignore_errors=True)
+    path.mkdir(parents=True, exist_ok=True)
+    marker = path / OUTPUT_MARKER
+    if not _previous_output(path, kind):
+        write_text(marker, json.dumps({"kind": kind, "files": None}) + "\n")
+    return path

@@ -4,11 +4,16 @@
 * :func:`load_array` - a ``.npy`` array or the arrays of a ``.npz`` archive, never unpickled:
   a file that is not a valid NPY/NPZ is "not a valid NPZ file", without numpy's advice to
   allow pickles (loading pickles runs code from the file).
+* :func:`load_pickle` - a pickle of plain data (numbers, strings, lists, dicts, numpy arrays) read
+  by a restricted unpickler: a pickle can name any Python callable to run while it loads, so only
+  numpy's array and dtype constructors and builtin containers are allowed, anything else refused.
 """
 
 from __future__ import annotations
 
+import io
 import os
+import pickle
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -83,3 +88,58 @@ def load_torch(path: str | os.PathLike[str], what: str = "checkpoint", hint: str
         raise InputFileError(
             f"{what} '{path}' is not a valid checkpoint ({reason}){'; ' + hint if hint else ''}"
         ) from None
+
+
+_PICKLE_GLOBALS = frozenset(
+    [(m, "_reconstruct") for m in ("numpy.core.multiarray", "numpy._core.multiarray")]
+    + [(m, "scalar") for m in ("numpy.core.multiarray", "numpy._core.multiarray")]
+    + [(m, "_frombuffer") for m in ("numpy.core.numeric", "numpy._core.numeric")]
+    + [("numpy", "ndarray"), ("numpy", "dtype"), ("_codecs", "encode"), ("collections", "OrderedDict")]
+    + [
+        ("builtins", n)
+        for n in ("dict", "list", "tuple", "set", "frozenset", "bytes", "bytearray", "str", "int", "float")
+        + ("complex", "bool", "slice", "range")
+    ]
+)
+"""(module, name) pairs a pickle may construct: numpy arrays, dtypes and scalars, builtin containers."""
+
+
+class _NotPlainData(pickle.UnpicklingError):
+    """A pickle asked for a global outside :data:`_PICKLE_GLOBALS`."""
+
+
+class _PlainDataUnpickler(pickle.Unpickler):
+    """An unpickler that refuses every global outside :data:`_PICKLE_GLOBALS`."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        if (module, name) in _PICKLE_GLOBALS or (module == "numpy.dtypes" and name.endswith("DType")):
+            return super().find_class(module, name)
+        raise _NotPlainData(f"it names '{module}.{name}', which is not plain data")
+
+
+def load_pickle(path: str | os.PathLike[str], what: str = "file") -> Any:
+    """The object of a pickle holding plain data only (numbers, strings, containers, numpy arrays).
+
+    A pickle may run any Python code while it loads; this reader allows only numpy's array, dtype
+    and scalar constructors and builtin containers (:data:`_PICKLE_GLOBALS`) and refuses the file
+    with a one-line InputFileError naming whatever else it asks for.
+    """
+    path = input_file(path, what)
+    try:
+        with open(path, "rb") as fh:
+            return _PlainDataUnpickler(io.BytesIO(fh.read())).load()
+    except _NotPlainData as exc:
+        raise InputFileError(
+            f"{what} '{path}' is refused: {exc} (a pickle can run code as it loads)"
+        ) from None
+    except (
+        pickle.UnpicklingError,
+        EOFError,
+        ValueError,
+        TypeError,
+        AttributeError,
+        IndexError,
+        KeyError,
+        MemoryError,
+    ) as exc:
+        raise InputFileError(f"{what} '{path}' is not a valid pickle ({type(exc).__name__})") from None

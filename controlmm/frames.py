@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, TypeAlias
+from typing import TYPE_CHECKING, TypeAlias, TypeVar, overload
 
 import numpy as np
 
@@ -35,14 +35,16 @@ HUMAN_TO_WORLD_AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0
 Array: TypeAlias = "np.ndarray | torch.Tensor"
 """A NumPy array or a torch tensor. torch is not imported here (it is heavy and a tensor can
 only exist once torch is loaded): :meth:`HumanToWorld._consts` finds it in ``sys.modules``."""
+ArrayT = TypeVar("ArrayT", np.ndarray, "torch.Tensor")
+"""Either array kind, the same one in and out."""
 
 
-def human_to_world_axes(points: Array) -> Array:
+def human_to_world_axes(points: ArrayT) -> ArrayT:
     """Canonical axis change (..., 3) human (Y up) -> world (Z up): (x, y, z) -> (z, x, y)."""
     return points[..., [2, 0, 1]]
 
 
-def world_to_human_axes(points: Array) -> Array:
+def world_to_human_axes(points: ArrayT) -> ArrayT:
     """Inverse of :func:`human_to_world_axes`: world (x, y, z) -> human (y, z, x)."""
     return points[..., [1, 2, 0]]
 
@@ -75,10 +77,22 @@ class HumanToWorld:
         rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         return rz @ HUMAN_TO_WORLD_AXES
 
+    @overload
+    def to_world(self, points: np.ndarray) -> np.ndarray: ...
+
+    @overload
+    def to_world(self, points: torch.Tensor) -> torch.Tensor: ...
+
     def to_world(self, points: Array) -> Array:
         """Human points (..., 3) -> world points (..., 3)."""
         rot, trans = self._consts(points)
         return self.scale * points @ rot.T + trans
+
+    @overload
+    def to_human(self, points: np.ndarray) -> np.ndarray: ...
+
+    @overload
+    def to_human(self, points: torch.Tensor) -> torch.Tensor: ...
 
     def to_human(self, points: Array) -> Array:
         """World points (..., 3) -> human points (..., 3)."""

@@ -5,8 +5,10 @@ Public API::
     from retarget import retarget_motion, robot_scale, RobotTrajectory
     traj = retarget_motion(motion, robot="g1", fps=50)   # or a mapping .json for any MJCF
     traj.save("out/walk")                                 # walk.csv, walk.npz, walk.json
+    save_trajectory(traj, "out/walk", ["lafan1", "beyondmimic", "gmr", "qpos"])  # + tracker formats
 """
 
+from retarget.exports import EXPORT_FORMATS, read_export, save_trajectory
 from retarget.mapping import Mapping, load_mapping, packaged_mappings
 from retarget.retarget_motion import check_fps, retarget_motion, robot_scale
 from retarget.robot_model import RobotModel, load_robot
@@ -16,6 +18,7 @@ from retarget.trajectory import RobotTrajectory
 
 __all__ = [
     "DEFAULT_ROBOT",
+    "EXPORT_FORMATS",
     "Mapping",
     "RobotModel",
     "RobotTrajectory",
@@ -25,8 +28,10 @@ __all__ = [
     "load_mapping",
     "load_robot",
     "packaged_mappings",
+    "read_export",
     "retarget_motion",
     "robot_mjcf",
     "robot_scale",
     "robot_scene",
+    "save_trajectory",
 ]

@@ -52,7 +52,9 @@ def robot_scale(robot: RobotSpec = "g1") -> float:
     return float(load_robot(robot).scale)
 
 
-def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray, float, dict[str, Any]]:
+def _motion_arrays(
+    motion: Motion | np.ndarray | str | Path, check_scale: bool = True
+) -> tuple[np.ndarray, float, dict[str, Any]]:
     """(joints (T, 22, 3) float64, fps, source info) from a Motion, an array or a file."""
     if isinstance(motion, (str, Path)):
         path = str(motion)
@@ -74,7 +76,8 @@ def _motion_arrays(motion: Motion | np.ndarray | str | Path) -> tuple[np.ndarray
         raise ShapeError("the motion has no frames")
     if not np.all(np.isfinite(joints)):
         raise ShapeError("motion joints contain NaN/inf values")
-    check_metre_scale(joints, f"motion '{info['path']}'" if info.get("path") else "motion")
+    if check_scale:
+        check_metre_scale(joints, f"motion '{info['path']}'" if info.get("path") else "motion")
     if not (np.isfinite(fps) and fps > 0):
         raise ShapeError(f"motion fps must be a positive number; got {fps}")
     info.update({"fps": float(fps), "frames": int(joints.shape[0])})
@@ -137,6 +140,7 @@ def retarget_motion(
     config: SolverConfig | None = None,
     metrics: bool = True,
     solver: str = "batched",
+    check_scale: bool = True,
 ) -> RobotTrajectory:
     """Retarget a human motion to a robot.
 
@@ -148,6 +152,8 @@ def retarget_motion(
             ``HumanToWorld(scale=robot_scale(robot))`` (start at the origin facing +X).
         config: solver settings (default: ``SolverConfig`` with the mapping's ``solver`` overrides).
         metrics: measure the result with MuJoCo (see :mod:`retarget.metrics`).
+        check_scale: refuse joints that do not look like a person in metres (a centimetre file,
+            say) with a one-line error; a generator's own output may skip it.
         solver: ``"batched"`` (default: all frames at once, :mod:`retarget.solver`) or
             ``"mink"`` (per-frame differential IK, :mod:`retarget.mink_ik`; optional packages).
 
@@ -155,7 +161,7 @@ def retarget_motion(
         A :class:`RobotTrajectory` (qpos in MuJoCo order at ``fps``).
     """
     with _blas_controller().limit(limits=1, user_api="blas"):
-        return _retarget(motion, robot, fps, transform, config, metrics, solver)
+        return _retarget(motion, robot, fps, transform, config, metrics, solver, check_scale)
 
 
 @functools.lru_cache(maxsize=1)
@@ -163,7 +169,7 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
-def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTrajectory:
+def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scale) -> RobotTrajectory:
     # Small dense/banded linear algebra: BLAS threads only add synchronisation (and on a
     # busy machine their spinning slows the solve many times), so one thread is used.
     start = time.perf_counter()
@@ -171,7 +177,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver) -> RobotTr
     if solver not in SOLVERS:
         raise ControlMMError(f"unknown solver '{solver}'; allowed: {', '.join(SOLVERS)}")
     rm = load_robot(robot)
-    joints, src_fps, info = _motion_arrays(motion)
+    joints, src_fps, info = _motion_arrays(motion, check_scale)
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
     targets = build_targets(rm, joints, src_fps, transform)
     if solver == "mink":

@@ -123,19 +123,22 @@ class RobotTrajectory:
         }
 
     # -- files -----------------------------------------------------------------------------------
-    def save(self, prefix: str | Path) -> dict[str, Path]:
-        """Write ``prefix.csv``, ``prefix.npz`` and ``prefix.json`` atomically; return the paths."""
+    def save(self, prefix: str | Path, csv: bool = True) -> dict[str, Path]:
+        """Write ``prefix.csv`` (unless ``csv`` is False), ``prefix.npz`` and ``prefix.json`` atomically;
+        return the paths. Other formats: :func:`retarget.exports.save_trajectory`."""
         prefix = Path(prefix)
         if prefix.suffix.lower() in (".csv", ".npz", ".json"):
             prefix = prefix.with_suffix("")
-        paths = {ext: prefix.with_name(prefix.name + "." + ext) for ext in ("csv", "npz", "json")}
+        exts = ("csv", "npz", "json") if csv else ("npz", "json")
+        paths = {ext: prefix.with_name(prefix.name + "." + ext) for ext in exts}
         meta = self.sidecar()
         names, body_pos, body_quat = self.body_poses()
-        rows = np.concatenate([self.qpos[:, 0:3], self.qpos[:, [4, 5, 6, 3]], self.qpos[:, 7:]], axis=1)
-        with atomic_open(paths["csv"], "w", encoding="ascii", newline="") as fh:
-            np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
-        arrays = {
-            "fps": np.float64(self.fps),
+        if csv:
+            rows = np.concatenate([self.qpos[:, 0:3], self.qpos[:, [4, 5, 6, 3]], self.qpos[:, 7:]], axis=1)
+            with atomic_open(paths["csv"], "w", encoding="ascii", newline="") as fh:
+                np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
+        arrays: dict[str, np.ndarray] = {
+            "fps": np.asarray(self.fps, dtype=np.float64),  # a 0-d array, as np.savez stores a scalar
             "qpos": self.qpos,
             "qvel": self.qvel(),
             "joint_names": np.array(self.joint_names),
@@ -148,7 +151,8 @@ class RobotTrajectory:
         if self.stance is not None:
             arrays["stance"] = self.stance
         with atomic_path(paths["npz"]) as tmp:
-            np.savez_compressed(tmp, **arrays)
+            # allow_pickle named so that no array of ``arrays`` can take the keyword.
+            np.savez_compressed(tmp, allow_pickle=False, **arrays)
         write_text(paths["json"], json.dumps(meta, indent=2) + "\n")
         return paths
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -16,6 +17,9 @@ import torch
 
 from controlmm.atomic import atomic_path
 from scenes.scene import Scene
+
+if TYPE_CHECKING:  # matplotlib is heavy: imported only when a picture is drawn
+    from matplotlib.axes import Axes
 
 
 def scene_bounds(scene: Scene, margin: float = 0.6) -> np.ndarray:
@@ -76,7 +80,7 @@ def render_scene(
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(2 * width / 100, height / 100 + 0.5), dpi=100)
-    for ax, image, title in zip(axes, images, ("perspective", "top view (X right, Y up)")):
+    for ax, image, title in zip(axes, images, ("perspective", "top view (X right, Y up)"), strict=True):
         ax.imshow(image)
         ax.set_title(title)
         ax.axis("off")
@@ -132,7 +136,8 @@ def _mujoco_views(scene: Scene, width: int, height: int, t: float) -> list[np.nd
 def occupancy_grid(
     scene: Scene, lo: np.ndarray, hi: np.ndarray, t: float, res: int = 140
 ) -> tuple[np.ndarray, ...]:
-    """Scene SDF on a (res, res, max(20, res // 3)) grid over the box lo..hi at time t: (xs, ys, zs, values)."""
+    """Scene SDF on a (res, res, max(20, res // 3)) grid over the box lo..hi at time t:
+    (xs, ys, zs, values)."""
     sdf = scene.sdf()
     xs, ys = np.linspace(lo[0], hi[0], res), np.linspace(lo[1], hi[1], res)
     zs = np.linspace(max(lo[2], 0.0), hi[2], max(20, res // 3))
@@ -197,7 +202,7 @@ def _matplotlib_views(scene: Scene, out: str | os.PathLike[str], t: float) -> No
     plt.close(fig)
 
 
-def _start_arrow(ax, scene: Scene) -> None:
+def _start_arrow(ax: Axes, scene: Scene) -> None:
     s = scene.start
     ax.annotate(
         "",

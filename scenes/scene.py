@@ -25,6 +25,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import TracebackType
 from typing import NamedTuple
 
 import mujoco
@@ -192,14 +193,14 @@ def _resolve(name_or_path: str | Path) -> Path:
 
 
 def _one_line(message: str) -> str:
-    return "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
+    return "; ".join(part.strip() for part in message.splitlines() if part.strip())
 
 
 def _spec_from_file(path: Path) -> mujoco.MjSpec:
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
-        raise InputFileError(f"malformed MJCF '{path}': {_one_line(exc)}") from None
+        raise InputFileError(f"malformed MJCF '{path}': {_one_line(str(exc))}") from None
 
 
 def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
@@ -207,7 +208,7 @@ def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
         try:
             return spec.compile()
         except ValueError as exc:
-            raise InputFileError(f"malformed MJCF '{path}': {_one_line(exc)}") from None
+            raise InputFileError(f"malformed MJCF '{path}': {_one_line(str(exc))}") from None
 
 
 def _metadata(spec: mujoco.MjSpec, path: Path) -> dict:
@@ -284,7 +285,7 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
 class _quiet_mujoco:
     """Silence MuJoCo's attach warnings (empty prefix on purpose: the robot keeps its names)."""
 
-    def __enter__(self):
+    def __enter__(self) -> _quiet_mujoco:
         self._old = mujoco.get_mju_user_warning()
         self._messages: list[str] = []
         mujoco.set_mju_user_warning(self._messages.append)
@@ -294,10 +295,14 @@ class _quiet_mujoco:
         warnings.filterwarnings("ignore", message=".*Attach conflict.*")
         return self
 
-    def __exit__(self, *exc):
-        self._catch.__exit__(*exc)
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self._catch.__exit__(exc_type, exc, traceback)
         mujoco.set_mju_user_warning(self._old)
-        return False
 
 
 def _classify_geoms(model: mujoco.MjModel, robot_root: str | None) -> tuple[tuple[int, ...], ...]:

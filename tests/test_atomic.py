@@ -1,3 +1,4 @@
+import json
 import os
 import shutil
 import subprocess
@@ -13,6 +14,7 @@ from controlmm.atomic import (
     atomic_path,
     check_output_dir,
     check_output_file,
+    open_growing_dir,
     sweep_stale_temps,
     write_text,
 )
@@ -86,6 +88,38 @@ def test_a_previous_output_with_a_users_file_added_needs_force(tmp_path):
         check_output_dir(out, kind="corpus")
     check_output_dir(out, kind="plan")
     check_output_dir(tmp_path / "empty", kind="plan")
+
+
+def test_a_growing_output_keeps_its_entries_and_is_resumed_without_force(tmp_path):
+    out = tmp_path / "batch"
+    assert open_growing_dir(out, kind="batch", make_parents=True) == out
+    assert json.loads((out / OUTPUT_MARKER).read_text()) == {"kind": "batch", "files": None}
+    with atomic_dir(out / "jobs" / "a", kind=None, make_parents=True) as d:  # entries added one by one
+        (d / "result.json").write_text("{}")
+    write_text(out / "summary.csv", "id\n")
+    check_output_dir(out, kind="batch")  # any entry of a growing output is the command's
+    open_growing_dir(out, kind="batch")  # resumed as it is
+    assert (out / "jobs" / "a" / "result.json").is_file()
+    with pytest.raises(ControlMMError, match=r"does not hold a previous 'plan' output"):
+        check_output_dir(out, kind="plan")
+    open_growing_dir(out, kind="batch", force=True)  # force: start over
+    assert [p.name for p in out.iterdir()] == [OUTPUT_MARKER]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["batch"]
+
+
+def test_a_growing_output_never_takes_over_a_users_directory(tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("years of work")
+    with pytest.raises(ControlMMError, match=r"not empty .* --force"):
+        open_growing_dir(out, kind="batch")
+    assert [p.name for p in out.iterdir()] == ["thesis.tex"]
+    open_growing_dir(out, kind="batch", force=True)
+    assert [p.name for p in out.iterdir()] == [OUTPUT_MARKER]
+    (out / OUTPUT_MARKER).write_text(json.dumps({"kind": "batch", "files": ["x"]}))
+    (out / "y").write_text("")  # a listed (not growing) output with an entry added needs force
+    with pytest.raises(ControlMMError, match="--force"):
+        check_output_dir(out, kind="batch")
 
 
 def test_a_regular_file_is_never_replaced_by_a_directory(tmp_path):

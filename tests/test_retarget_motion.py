@@ -247,7 +247,7 @@ def test_stance_feet_stay_in_place(exported, robot):
         slide = np.where(down, step, np.inf).min(axis=1)  # the geom that stayed down moved least
         contact = np.isfinite(slide)
         edges = np.flatnonzero(np.diff(np.concatenate([[0], contact.astype(int), [0]])))
-        for s, e in zip(edges[::2], edges[1::2]):
+        for s, e in zip(edges[::2], edges[1::2], strict=True):
             # H1's 5-joint legs (no ankle roll) cannot hold a foot flat and still in every pose.
             assert slide[s:e].max() < {"g1": 0.004, "h1": 0.01}[robot], (
                 f"{foot} slid {slide[s:e].max() * 1000:.1f} mm in one frame"
@@ -255,7 +255,7 @@ def test_stance_feet_stay_in_place(exported, robot):
             stances += 1
         for i, g in enumerate(geoms):  # each geom, while it stays down, stays where it touched
             runs = np.flatnonzero(np.diff(np.concatenate([[0], down[:, i].astype(int), [0]])))
-            for s, e in zip(runs[::2], runs[1::2]):
+            for s, e in zip(runs[::2], runs[1::2], strict=True):
                 drift = np.linalg.norm(gpos[s : e + 1, g, :2] - gpos[s, g, :2], axis=1).max()
                 assert drift < {"g1": 0.01, "h1": 0.03}[robot], (
                     f"{foot} slid {drift * 1000:.1f} mm in a stance"

@@ -60,7 +60,10 @@ def test_penetration_is_positive_and_decreases_along_the_gradient(beam, joints):
 
 def test_distances_are_world_metres_through_the_transform(joints):
     """A sphere at the scaled pelvis: the loss equals d - SDF in world metres, any scale/yaw."""
-    sphere_xml = '<mujoco><worldbody><body name="s" pos="{} {} {}"><geom type="sphere" size="0.1"/></body></worldbody></mujoco>'
+    sphere_xml = (
+        '<mujoco><worldbody><body name="s" pos="{} {} {}"><geom type="sphere" size="0.1"/></body>'
+        "</worldbody></mujoco>"
+    )
     for scale, yaw in [(0.78, 0.0), (1.2, 1.0)]:
         tf = HumanToWorld(scale=scale, yaw=yaw, translation=(1.0, -2.0, 0.0))
         pelvis_world = tf.to_world(joints[0, 0, 0].numpy())

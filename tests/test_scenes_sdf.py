@@ -232,9 +232,11 @@ def test_sdf_errors(tmp_path):
     torus = tmp_path / "torus.xml"
     torus.write_text(
         '<mujoco><extension><plugin plugin="mujoco.sdf.torus"><instance name="torus">'
-        '<config key="radius1" value="0.35"/><config key="radius2" value="0.15"/></instance></plugin></extension>'
+        '<config key="radius1" value="0.35"/><config key="radius2" value="0.15"/>'
+        "</instance></plugin></extension>"
         '<asset><mesh name="torus"><plugin instance="torus"/></mesh></asset><worldbody><body name="t">'
-        '<geom name="donut" type="sdf" mesh="torus"><plugin instance="torus"/></geom></body></worldbody></mujoco>'
+        '<geom name="donut" type="sdf" mesh="torus"><plugin instance="torus"/></geom>'
+        "</body></worldbody></mujoco>"
     )
     with pytest.raises(ControlMMError, match="geom 'donut' has type 'sdf'"):
         load_scene(str(torus), robot=None).sdf()
@@ -250,7 +252,8 @@ def test_open_mesh_falls_back_to_its_convex_hull():
 
 EVERY_PRIMITIVE_XML = """<mujoco>
   <custom>
-    <numeric name="controlmm.track.cart" data="0  1 -1 0.5  1 0 0 0   2  1 1 0.7  0.7071 0 0 0.7071   4  2 1 0.6  0 0 0 1"/>
+    <numeric name="controlmm.track.cart"
+             data="0  1 -1 0.5  1 0 0 0   2  1 1 0.7  0.7071 0 0 0.7071   4  2 1 0.6  0 0 0 1"/>
     <numeric name="controlmm.track.ball" data="0  3 0 1  1 0 0 0   3  3 0.5 0.4  0.9239 0.3827 0 0"/>
   </custom>
   <worldbody>

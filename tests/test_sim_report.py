@@ -81,7 +81,7 @@ def test_report_json_fields(failing_report, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["report.json"]  # no temporary file left
     back = load_report(path)
     assert back.passed is False and len(back.failures) == len(r.failures)
-    for a, b in zip(back.failures, r.failures):
+    for a, b in zip(back.failures, r.failures, strict=True):
         assert (a.kind, a.frame_start, a.frame_end, a.robot_body, a.obstacle_geom, a.joint, a.severity) == (
             b.kind,
             b.frame_start,

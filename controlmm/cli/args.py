@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from typing import TypedDict
 
 from controlmm.seeds import SEED_MAX
 
@@ -88,3 +89,52 @@ def add_threads(parser: argparse.ArgumentParser, default: int | None, note: str 
     parser.add_argument(
         "--threads", type=threads, default=default, help=f"torch CPU threads (default: {text}){note}"
     )
+
+
+UNIT_CHOICES = ("m", "cm", "mm", "in", "cmu")
+"""Length units a recorded motion may declare (``controlmm.motion.formats.conventions.UNITS``)."""
+
+
+def add_motion_input(parser: argparse.ArgumentParser) -> None:
+    """The options of a recorded motion in another convention (``controlmm.motion.load_motion``):
+    ``--up``, ``--source-fps``, ``--skeleton-map``, ``--units``."""
+    group = parser.add_argument_group(
+        "recorded motion (BVH of LAFAN1/CMU/Mixamo/SMPL naming, SMPL/SMPL-H/SMPL-X joint arrays; "
+        "docs/motion-formats.md)"
+    )
+    group.add_argument(
+        "--up", choices=("y", "z"), default=None, help="the file's up axis (default: detected from the body)"
+    )
+    group.add_argument(
+        "--source-fps",
+        type=number(1.0, 1000.0),
+        default=None,
+        metavar="FPS",
+        help="the file's frame rate (default: the file's; needed for a bare .npy/.pt array)",
+    )
+    group.add_argument(
+        "--skeleton-map",
+        default=None,
+        metavar="MAP.json",
+        help="mapping file for a skeleton of other joint names (SMPL joint -> your joint)",
+    )
+    group.add_argument(
+        "--units",
+        choices=UNIT_CHOICES,
+        default=None,
+        help="the file's length unit (default: detected for BVH; metres for joint arrays)",
+    )
+
+
+class MotionOptions(TypedDict):
+    """Keyword arguments of ``controlmm.motion.load_motion`` for a recorded motion."""
+
+    up: str | None
+    fps: float | None
+    mapping: str | None
+    units: str | None
+
+
+def motion_options(args: argparse.Namespace) -> MotionOptions:
+    """``load_motion`` keyword arguments from :func:`add_motion_input`'s options."""
+    return MotionOptions(up=args.up, fps=args.source_fps, mapping=args.skeleton_map, units=args.units)

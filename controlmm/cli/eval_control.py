@@ -37,7 +37,8 @@ six in turn, one per case: the paper's all-joints average); several separated by
 examples:
   controlmm eval control --preset accurate --joints pelvis --samples 50
   controlmm eval control --model MODEL_DIR --preset fast --joints cross --density 196 --json out.json
-  controlmm eval control --joints pelvis,each --real --uncontrolled --samples 64 --repeats 3 --batch-size 32"""
+  controlmm eval control --joints pelvis,each --real --uncontrolled --samples 64 --repeats 3 \
+      --batch-size 32"""
 
 
 if TYPE_CHECKING:
@@ -186,7 +187,8 @@ def run(args: argparse.Namespace) -> int:
     )
     judge = None
     if not args.no_quality:
-        # Default: the evaluator the model directory carries (import-official --evaluator), else the shipped one.
+        # Default: the evaluator the model directory carries (import-official --evaluator), else the
+        # shipped one.
         judge = evaluator.load_evaluator(args.evaluator or evaluator.model_evaluator(args.model))
     TableRow = control_table.TableRow
     rows = [TableRow("uncontrolled", modes[0], control_table.UNCONTROLLED)] if args.uncontrolled else []
@@ -205,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     unknown = getattr(judge, "unknown_word_share", None)
-    if unknown is not None:
+    if judge is not None and unknown is not None:
         share = unknown([c.text for c in table.evaluations[rows[0].name][0].cases])
         if share > 0.5:
             print(

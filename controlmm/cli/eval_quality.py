@@ -137,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     print(
-        f"quality on {args.data} ({args.split} split, {report.samples} samples per pass, {args.repeats} passes; "
+        f"quality on {args.data} ({args.split} split, {report.samples} samples per pass, "
+        f"{args.repeats} passes; "
         f"evaluator: {evaluator.name}; mean ± 95% CI)"
     )
     print(report.table())

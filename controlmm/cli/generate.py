@@ -31,7 +31,8 @@ Editing stops as soon as every constraint is within --tolerance (1 cm).
 
 examples:
   controlmm generate --text "a person walks forward and waves" --seconds 6 --seed 0 --out walk.npz
-  controlmm generate --text "someone jumps twice" --frames 120 --out jump.npz --plot jump.mp4 --model MODEL_DIR
+  controlmm generate --text "someone jumps twice" --frames 120 --out jump.npz --plot jump.mp4 \
+      --model MODEL_DIR
   controlmm generate --text "a person walks forward" --control spec.json --preset accurate --out walk.npz"""
 
 
@@ -257,7 +258,8 @@ def _run_controlled(
         motion.save_motion(clip, outs[i])
         errors = 100.0 * result.errors[i]
         print(
-            f"wrote {outs[i]} ({clip.num_frames} frames, {clip.seconds:.1f} s, seed {result.seed}): '{clip.text}'"
+            f"wrote {outs[i]} ({clip.num_frames} frames, {clip.seconds:.1f} s, seed {result.seed}): "
+            f"'{clip.text}'"
         )
         steps = (
             f"logits editing {sum(record.logits_steps)} steps" if record.logits_steps else "no logits editing"

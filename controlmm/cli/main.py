@@ -18,6 +18,8 @@ from controlmm.errors import ControlMMError
 
 SUBCOMMANDS: tuple[str, ...] = (
     "plan",
+    "studio",
+    "view",
     "generate",
     "timeline",
     "train",
@@ -28,6 +30,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "retarget",
     "scene",
     "validate",
+    "batch",
     "eval",
     "info",
 )

@@ -8,7 +8,7 @@ import time
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
-from controlmm.cli.args import add_force, add_threads
+from controlmm.cli.args import add_force, add_motion_input, add_threads, motion_options, number
 from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
@@ -34,7 +34,16 @@ empty or a previous plan output, anything else needs --force):
 
 With only --out it runs the bundled example: the 'table' scene, its prompt and its right-hand
 target beyond the table's edge. With --text and no --control the prompt runs unconstrained
-(apart from the obstacles). Exit status: 0 passed, 1 the checks still fail after the last
+(apart from the obstacles).
+
+With --motion FILE it edits a recorded clip instead of generating (BVH of LAFAN1/CMU/Mixamo/
+SMPL naming, SMPL/SMPL-H/SMPL-X joints in .npy/.npz/.pt, a Motion .npz; docs/motion-formats.md):
+the clip is encoded with the tokenizer and its tokens are codebook-edited against the scene's
+obstacles, --control targets and the simulation feedback, with a closeness term that keeps the
+joints as near the clip as the constraints allow. report.json ("clip") and the summary give the
+mean and largest joint displacement from the clip; plots/displacement.png shows them per frame.
+
+Exit status: 0 passed, 1 the checks still fail after the last
 round (the outputs are written anyway), 2 bad input."""
 
 EPILOG = """examples:
@@ -42,6 +51,8 @@ EPILOG = """examples:
   controlmm plan --scene pillars --seed 3 --out out/pillars
   controlmm plan --scene corridor --text "a person walks forward" --rounds 2 --out out/corridor
   controlmm plan --scene my_scene.xml --text "a person walks to the box" --control spec.json --out out/mine
+  controlmm plan --motion walk.bvh --scene table --out out/walk_table
+  controlmm plan --motion omomo.npy --source-fps 30 --up z --scene pillars --format all --out out/omomo
 scenes: controlmm scene list    control spec format: README (Spatial control)"""
 
 
@@ -72,13 +83,33 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="TIMELINE.json",
         help="body-part timeline spec instead of --text (see docs/timeline.md)",
     )
+    p.add_argument(
+        "--motion",
+        default=None,
+        metavar="FILE",
+        help="a recorded clip to edit into the scene instead of generating (see above)",
+    )
+    p.add_argument(
+        "--motion-start",
+        type=number(0.0),
+        default=0.0,
+        metavar="S",
+        help="with --motion: where the edited window starts in the clip, seconds (default 0)",
+    )
+    p.add_argument(
+        "--closeness",
+        type=number(0.0),
+        default=1.0,
+        help="with --motion: weight of the term that keeps the joints on the clip (default 1)",
+    )
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
     p.add_argument(
         "--seconds",
         type=float,
         default=None,
         help="motion length, 2 to 9.8 s (default: 6 s; with constraints, 0.5 s past the last one, "
-        "at least 2 s and at most 6 s unless a constraint comes later)",
+        "at least 2 s and at most 6 s unless a constraint comes later); with --motion the window "
+        "of the clip, 2 to 30 s (default: the whole clip)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed, 0 to 2^63 - 1 (default 0)")
     p.add_argument(
@@ -88,6 +119,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", default=None, help="model directory (default: the embedded default model)")
     p.add_argument(
         "--fps", type=float, default=50.0, help="robot trajectory rate, 10 to 1000 Hz (default 50)"
+    )
+    p.add_argument(
+        "--format",
+        default="lafan1",
+        metavar="FMT[,FMT]",
+        help="robot formats beside robot.npz/robot.json: lafan1 (robot.csv), qpos (robot_qpos.csv), "
+        "beyondmimic (robot_beyondmimic.npz, 50 fps), gmr (robot.pkl) or all (default lafan1)",
     )
     p.add_argument(
         "--safe-distance",
@@ -103,6 +141,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-render", action="store_true", help="skip render.mp4 (the slowest output)")
     p.add_argument("--no-plots", action="store_true", help="skip plots/*.png")
+    add_motion_input(p)
     add_force(p, "OUT whatever it holds (never a regular file)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines or bars")
     p.set_defaults(func=run)
@@ -133,6 +172,11 @@ def run(args: argparse.Namespace) -> int:
         render=not args.no_render,
         plots=not args.no_plots,
         timeline=args.timeline,
+        motion=args.motion,
+        motion_import=dict(motion_options(args)),
+        motion_start=args.motion_start,
+        closeness_weight=args.closeness,
+        formats=tuple(args.format.split(",")),
     )
     progress = not args.no_progress
     age = process_age()
@@ -141,11 +185,14 @@ def run(args: argparse.Namespace) -> int:
     result.timing.start_earlier(before)
     backend = write_plan(result, args.out, progress=progress, force=args.force)
     print(result.report.summary())
+    moved = dict(result.displacements()).get(result.best)
+    if moved is not None:
+        print(moved.summary())
     rounds = len(result.rounds)
     print(
         f"plan: {'PASSED' if result.passed else 'FAILED'} in round {result.best} of {rounds} "
         f"({'passed' if result.rounds[0].passed else 'failed'} before feedback), {result.seconds:.1f} s; "
-        f"wrote {args.out}/ (motion.npz, robot.csv, robot.npz, report.json"
+        f"wrote {args.out}/ (motion.npz, robot.npz, {', '.join(_format_files(config.formats))}, report.json"
         f"{', render.mp4 (' + backend + ')' if backend else ''}{'' if args.no_plots else ', plots/'})"
     )
     for name, err in zip(_constraint_names(result), result.final.constraint_errors_m, strict=True):
@@ -153,6 +200,11 @@ def run(args: argparse.Namespace) -> int:
     print(result.timing.summary())
     sys.stdout.flush()
     return 0 if result.passed else 1
+
+
+def _format_files(formats: tuple[str, ...]) -> list[str]:
+    tails = {"lafan1": ".csv", "qpos": "_qpos.csv", "beyondmimic": "_beyondmimic.npz", "gmr": ".pkl"}
+    return [f"robot{tails[f]}" for f in formats]
 
 
 def _constraint_names(result: PlanResult) -> list[str]:

@@ -6,10 +6,11 @@ import argparse
 from pathlib import Path
 
 from controlmm.atomic import check_output_file
-from controlmm.cli.args import add_force
+from controlmm.cli.args import add_force, add_motion_input, motion_options
 from controlmm.errors import ControlMMError
 
-HELP = """Plot a motion (.npz, .npy, .bvh).
+HELP = """Plot a motion (.npz, .npy, .bvh, .pt; recorded motion of other skeletons too, see
+docs/motion-formats.md).
   .png  skeleton snapshots over time (3-D) and a top view of pelvis, feet and wrists
   .gif / .mp4  a 3-D stick-figure animation with the pelvis trail (20 fps)
 Axes are the MuJoCo world's: X forward, Y left, Z up."""
@@ -22,8 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("motion", help="motion file (.npz, .npy, .bvh)")
+    p.add_argument("motion", help="motion file (.npz, .npy, .bvh, .pt)")
     p.add_argument("--out", required=True, help="output .png, .gif or .mp4")
+    add_motion_input(p)
     add_force(p, "--out")
     p.set_defaults(func=run)
 
@@ -37,6 +39,6 @@ def run(args: argparse.Namespace) -> int:
             f"unknown output format '{Path(args.out).suffix or args.out}'; allowed: .png, .gif, .mp4"
         )
     check_output_file(args.out, force=args.force)
-    motions.plot_or_animate(motions.load_motion(args.motion), args.out)
+    motions.plot_or_animate(motions.load_motion(args.motion, **motion_options(args)), args.out)
     print(f"wrote {args.out}")
     return 0

@@ -8,17 +8,25 @@ import sys
 from pathlib import Path
 
 from controlmm.atomic import check_output_file
-from controlmm.cli.args import add_force, integer, number, positive
+from controlmm.cli.args import add_force, add_motion_input, integer, motion_options, number, positive
 from controlmm.cli.gl import import_mujoco
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 
 HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
 
-Writes OUT.csv (Unitree LAFAN1-G1 / BeyondMimic rows: root x y z, root quaternion
-qx qy qz qw, joint angles in MJCF order; no header), OUT.npz (fps, qpos with wxyz
-quaternion, qvel, joint_names, body_names, body_pos_w, body_quat_w) and OUT.json (robot,
-source, scale, fps, metrics), then prints the metrics.
+The motion may be recorded motion of another skeleton (BVH with LAFAN1/CMU/Mixamo/SMPL names,
+SMPL/SMPL-H/SMPL-X joint arrays in .npy/.npz/.pt; see --up, --source-fps, --skeleton-map and
+docs/motion-formats.md): it is imported into the HumanML3D motion first (20 fps).
+
+Writes OUT.npz (fps, qpos with wxyz quaternion, qvel, joint_names, body_names, body_pos_w,
+body_quat_w) and OUT.json (robot, source, scale, fps, metrics), and the formats of --format
+(default lafan1), then prints the metrics:
+  lafan1       OUT.csv              Unitree LAFAN1-G1 / BeyondMimic rows: root x y z, root quaternion
+                                    qx qy qz qw (xyzw), joint angles in MJCF order; no header; --fps
+  qpos         OUT_qpos.csv         MuJoCo qpos rows: root x y z, quaternion qw qx qy qz (wxyz), joints
+  beyondmimic  OUT_beyondmimic.npz  BeyondMimic training file at 50 fps (quaternions wxyz)
+  gmr          OUT.pkl              GMR robot pickle: root_pos, root_rot (xyzw), dof_pos; --fps
 
 --robot takes a packaged robot (g1 = Unitree G1 29-DoF, h1 = Unitree H1) or a mapping .json
 that names any MJCF (see docs/retargeting.md). --render draws a video with MuJoCo's
@@ -26,9 +34,12 @@ offscreen renderer (MUJOCO_GL=egl unless set: Debian packages libegl1, libegl-me
 libgl1-mesa-dri) and falls back to a matplotlib stick figure when no GL backend loads.
 
 examples:
-  controlmm generate --text "a person walks forward" --out walk.npz && controlmm retarget walk.npz --out out/g1_walk
+  controlmm generate --text "a person walks forward" --out walk.npz \
+      && controlmm retarget walk.npz --out out/g1_walk
   controlmm retarget motion.npz --robot h1 --fps 30 --out out/h1 --render out/h1.mp4
-  controlmm retarget motion.npz --robot my_robot_mapping.json --out out/mine"""
+  controlmm retarget motion.npz --robot my_robot_mapping.json --out out/mine
+  controlmm retarget lafan1_walk.bvh --format lafan1,beyondmimic,gmr --out out/walk
+  controlmm retarget omomo_smplh.npy --source-fps 30 --up z --format all --out out/omomo"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,10 +49,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("motion", help="human motion (.npz, .npy, .bvh)")
+    p.add_argument("motion", help="human motion (.npz, .npy, .bvh, .pt)")
     p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
     p.add_argument("--fps", type=float, default=50.0, help="output frame rate, 10 to 1000 Hz (default 50)")
-    p.add_argument("--out", required=True, help="output prefix: writes OUT.csv, OUT.npz, OUT.json")
+    p.add_argument(
+        "--out", required=True, help="output prefix: writes OUT.npz, OUT.json and the --format files"
+    )
+    p.add_argument(
+        "--format",
+        default="lafan1",
+        metavar="FMT[,FMT]",
+        help="formats beside OUT.npz/OUT.json: lafan1, qpos, beyondmimic, gmr or all (default lafan1)",
+    )
     p.add_argument(
         "--yaw", type=number(), default=0.0, help="start heading in degrees about world Z (default 0: +X)"
     )
@@ -67,7 +86,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="auto: MuJoCo, else the stick figure (default); mujoco; stick",
     )
-    add_force(p, "OUT.csv/.npz/.json and the video")
+    add_motion_input(p)
+    add_force(p, "OUT.csv/.npz/.json, the --format files and the video")
     p.set_defaults(func=run)
 
 
@@ -108,24 +128,26 @@ def run(args: argparse.Namespace) -> int:
         raise ControlMMError(
             f"unknown video format '{Path(args.render).suffix or args.render}'; allowed: .mp4, .gif"
         )
-    for suffix in (".csv", ".npz", ".json"):
-        check_output_file(out.with_name(out.name + suffix), force=args.force)
-    if args.render:
-        check_output_file(args.render, force=args.force)
-    gl_note = import_mujoco("egl") if args.render else None
+    gl_note = import_mujoco("egl") if args.render else None  # the GL backend is chosen before MuJoCo loads
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
-    import retarget.render
+    import retarget.render  # (the package imports retarget.exports too)
     from controlmm import motion as motions
 
+    formats = retarget.exports.parse_formats(args.format)
+    for path in retarget.exports.output_paths(out, formats):
+        check_output_file(path, force=args.force)
+    if args.render:
+        check_output_file(args.render, force=args.force)
+
     retarget.check_fps(args.fps)
-    motion = motions.load_motion(args.motion)
+    motion = motions.load_motion(args.motion, **motion_options(args))
     scale = retarget.robot_scale(args.robot)
     transform = HumanToWorld(scale=scale, yaw=math.radians(args.yaw), translation=(args.x, args.y, 0.0))
     traj = retarget.retarget_motion(
         motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver
     )
     traj.source["path"] = str(args.motion)
-    paths = traj.save(out)
+    paths = retarget.exports.save_trajectory(traj, out, formats)
     print(
         f"retargeted {motion.num_frames} frames @ {motion.fps:g} fps -> {traj.robot_model().name}, "
         f"{traj.num_frames} frames @ {traj.fps:g} Hz"

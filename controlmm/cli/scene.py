@@ -37,8 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     show = actions.add_parser(
         "show",
         help="render a scene to PNG (perspective + top view)",
-        description="Render SCENE with MuJoCo offscreen (MUJOCO_GL=egl unless set) with the robot standing at the "
-        "start pose; without a working GL backend, draw matplotlib top and side views instead.",
+        description="Render SCENE with MuJoCo offscreen (MUJOCO_GL=egl unless set) with the robot "
+        "standing at the start pose; without a working GL backend, draw matplotlib top and side views "
+        "instead.",
     )
     show.add_argument("scene", help="scene name or MJCF file")
     show.add_argument("--out", required=True, help="output .png")

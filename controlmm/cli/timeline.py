@@ -127,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
             f"fixed entries drift {t['final_drift_cm']:.2f} cm; edges {edges}{probe}"
         )
     print(
-        f"  max drift {report['max_drift_cm']:.2f} cm, max boundary speed {report['max_boundary_speed_mps']:.2f} m/s"
+        f"  max drift {report['max_drift_cm']:.2f} cm, "
+        f"max boundary speed {report['max_boundary_speed_mps']:.2f} m/s"
     )
     if args.report:
         write_text(args.report, json.dumps(report, indent=2) + "\n")

@@ -13,9 +13,13 @@ HELP = """Check an existing robot trajectory in a MuJoCo scene (e.g. one written
 retargeter) with the same kinematic and dynamic checks as `controlmm plan`.
 
 Input: this project's robot.npz, any .npz with qpos (T, nq; root quaternion wxyz) and fps,
-or a Unitree LAFAN1 / BeyondMimic CSV (no header; xyz, qx qy qz qw, joints in MJCF order;
-give --fps, LAFAN1 is 30). Writes report.json (--out) and a per-frame plot beside it
-(report.png), and prints a short summary.
+a BeyondMimic training .npz (joint_pos, body_pos_w, body_quat_w; joints in MJCF order), a
+Unitree LAFAN1-G1 / BeyondMimic CSV (no header; xyz, qx qy qz qw, joints in MJCF order;
+give --fps, LAFAN1 is 30; --quat-order wxyz for raw MuJoCo qpos rows), or a GMR robot
+pickle (.pkl: root_pos, root_rot xyzw, dof_pos, fps; read by a restricted unpickler that
+builds numpy arrays and builtin containers only, since a pickle can run code as it loads).
+Writes report.json (--out) and a per-frame plot beside it (report.png), and prints a short
+summary.
 
 Exit status: 0 when every check passes, 1 when the trajectory fails a check, 2 on bad input."""
 
@@ -27,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("trajectory", help="robot trajectory (.npz or .csv)")
+    p.add_argument("trajectory", help="robot trajectory (.npz, .csv or .pkl)")
     p.add_argument(
         "--scene",
         default="empty",
@@ -38,6 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fps", type=float, default=None, help="frame rate (required for .csv; overrides the file's)"
+    )
+    p.add_argument(
+        "--quat-order",
+        choices=("xyzw", "wxyz"),
+        default="xyzw",
+        help="root quaternion order of a .csv: xyzw (LAFAN1-G1, default) or wxyz (MuJoCo qpos rows)",
     )
     p.add_argument("--out", required=True, help="report .json to write (a .png plot is written beside it)")
     p.add_argument("--no-plot", action="store_true", help="skip the per-frame plot")
@@ -57,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     import sim.files
     from retarget import DEFAULT_ROBOT
 
-    qpos, fps, file_robot = sim.files.load_qpos(args.trajectory, args.fps)
+    qpos, fps, file_robot = sim.files.load_qpos(args.trajectory, args.fps, args.quat_order)
     robot = args.robot or file_robot or DEFAULT_ROBOT
     if args.robot and file_robot and Path(file_robot).name != Path(args.robot).name:
         raise ControlMMError(f"--robot {args.robot} does not match the trajectory's robot '{file_robot}'")

@@ -174,7 +174,7 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     sp, sr, st = plan.get("spine_pitch"), plan.get("spine_roll"), plan.get("spine_twist") - 1.6 * twist
     rel = [rot_y(k * st) @ rot_x(k * sp) @ rot_z(-k * sr) for k in (1 / 3, 2 / 3, 1.0)]
     parent = pelvis
-    for j, r in zip((3, 6, 9), rel):
+    for j, r in zip((3, 6, 9), rel, strict=True):
         parent = parent + apply(r_pelvis @ r, REST[j]) * L[j]
         joints[:, j] = parent
     chest = r_pelvis @ rel[2]

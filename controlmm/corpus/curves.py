@@ -5,6 +5,8 @@ Times are in seconds; a clip of T frames at ``fps`` has times ``arange(T) / fps`
 
 from __future__ import annotations
 
+from typing import overload
+
 import numpy as np
 
 
@@ -79,6 +81,14 @@ def gentle_noise(
     return amplitude * sig / weight.sum()
 
 
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap angles to (-pi, pi]."""
+@overload
+def wrap_angle(a: float) -> float: ...
+
+
+@overload
+def wrap_angle(a: np.ndarray) -> np.ndarray: ...
+
+
+def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
+    """Wrap angles (rad) to (-pi, pi]: a float for a float, an array of the same shape for an array."""
     return np.angle(np.exp(1j * np.asarray(a, dtype=np.float64)))

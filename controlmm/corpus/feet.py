@@ -112,7 +112,7 @@ class Stance:
             vals = [k[1] for k in self.pitch_keys]
             extra = np.zeros_like(t)
             prev_t, prev_v = times[0], 0.0
-            for kt, kv in zip(times, vals):
+            for kt, kv in zip(times, vals, strict=True):
                 extra = np.where(t >= prev_t, prev_v + (kv - prev_v) * ramp(t, prev_t, kt), extra)
                 prev_t, prev_v = kt, kv
             p += extra
@@ -208,7 +208,7 @@ def swing_bump(tracks: dict[str, FootTrack], t: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=np.float64)
     out = np.zeros_like(t)
     for track in tracks.values():
-        for a, b in zip(track.stances[:-1], track.stances[1:]):
+        for a, b in zip(track.stances[:-1], track.stances[1:], strict=True):
             s = (t - a.t_off) / (b.t_on - a.t_off)
             inside = (s > 0.0) & (s < 1.0)
             out[inside] += np.sin(np.pi * s[inside])

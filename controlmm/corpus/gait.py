@@ -140,7 +140,7 @@ def plan_footholds(
         stance_time = _stance_time(gait, t1, t)
         xz, yaw = _target(path, t1 + gait.ref_frac * stance_time, side, gait.width, gait.toe_out)
         xz = _keep_apart(xz, yaw, side, stances, t1, gait.min_width)
-        move = np.linalg.norm(xz - cur.xz)
+        move = float(np.linalg.norm(xz - cur.xz))
         turn = abs(wrap_angle(yaw - cur.yaw))
         if move < gait.min_move and turn < gait.min_turn:
             continue
@@ -194,7 +194,7 @@ def _swing_windows(path: RootPath, gait: Gait, fps: float) -> list[tuple[str, fl
     start_phase = float(np.interp(gait.start, fine, phase))
     swing = 1.0 - gait.duty
     sides = (gait.first, "right" if gait.first == "left" else "left")
-    out = []
+    out: list[tuple[str, float, float]] = []
     j = 0
     while True:
         p0 = start_phase + 0.5 * j

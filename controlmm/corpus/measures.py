@@ -60,21 +60,21 @@ class Measures:
         """Distance travelled along the current facing, to the current left, and path length (m)."""
         step = np.diff(self.j[:, 0], axis=0)
         step[:, 1] = 0.0
-        f, l = self.frame
-        fm, lm = 0.5 * (f[1:] + f[:-1]), 0.5 * (l[1:] + l[:-1])
+        f, left = self.frame
+        fm, lm = 0.5 * (f[1:] + f[:-1]), 0.5 * (left[1:] + left[:-1])
         return float((step * fm).sum()), float((step * lm).sum()), float(np.linalg.norm(step, axis=-1).sum())
 
     def displacement(self, start: int = 0, end: int = -1) -> tuple[float, float]:
         """Pelvis displacement (forward, left) between two frames in the start frame's facing."""
-        f, l = self.frame
+        f, left = self.frame
         d = self.j[end, 0] - self.j[start, 0]
-        return float(d @ f[start]), float(d @ l[start])
+        return float(d @ f[start]), float(d @ left[start])
 
     def body(self, joint: int, origin: int = PELVIS) -> np.ndarray:
         """A joint relative to ``origin`` in the person's frame: (T, 3) as (left, up, forward)."""
-        f, l = self.frame
+        f, left = self.frame
         d = self.j[:, joint] - self.j[:, origin]
-        return np.stack([(d * l).sum(-1), d[:, 1], (d * f).sum(-1)], -1)
+        return np.stack([(d * left).sum(-1), d[:, 1], (d * f).sum(-1)], -1)
 
     def above(self, joint: int, other: int) -> np.ndarray:
         """Height of ``joint`` above ``other`` per frame (m)."""

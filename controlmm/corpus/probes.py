@@ -487,8 +487,10 @@ def probe(motion: Motion | np.ndarray, family: str, claims: dict[str, Any]) -> P
     """
     if family not in PROBES:
         raise ControlMMError(f"no probe for family '{family}'; known: {', '.join(PROBES)}")
-    joints = getattr(motion, "joints", motion)
-    fps = float(getattr(motion, "fps", 20.0))
+    if isinstance(motion, Motion):
+        joints, fps = motion.joints, float(motion.fps)
+    else:
+        joints, fps = motion, 20.0
     return ProbeResult(family, tuple(PROBES[family](Measures(joints, fps), dict(claims))))
 
 

@@ -156,16 +156,3 @@ WRIST_INDEX = {"left": 20, "right": 21}
 def hip_offset(side: str) -> np.ndarray:
     """Pelvis -> hip vector in the pelvis frame (3,)."""
     return REST[HIP_INDEX[side]] * L[HIP_INDEX[side]]
-
-
-def shoulder_offset(side: str) -> np.ndarray:
-    """Spine3 -> shoulder vector in the chest frame at rest (3,)."""
-    return (
-        REST[COLLAR_INDEX[side]] * L[COLLAR_INDEX[side]]
-        + REST[SHOULDER_INDEX[side]] * L[SHOULDER_INDEX[side]]
-    )
-
-
-def chest_height() -> float:
-    """Height of spine3 above the pelvis at rest (m)."""
-    return float(sum(REST[j][1] * L[j] for j in (3, 6, 9)))

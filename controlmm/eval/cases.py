@@ -152,9 +152,10 @@ def evaluate(
         progress: tqdm progress bar.
     """
     report = ProbeReport(split=split)
-    last_id, motion = None, None
+    last_id: str | None = None
+    motion: Motion | np.ndarray | None = None
     for case in tqdm(cases, desc="probes", unit="caption", disable=not progress):
-        if not per_clip or case.clip_id != last_id:
+        if motion is None or not per_clip or case.clip_id != last_id:
             motion, last_id = motion_for(case), case.clip_id
         report.add(case, check(case, motion))
     return report

@@ -1,4 +1,5 @@
-"""The spatial-control evaluation protocol of OmniControl/ControlMM (reference §8).
+"""The spatial-control evaluation protocol of OmniControl/ControlMM (the official MaskControl evaluation,
+https://github.com/exitudio/MaskControl).
 
 Cases come from held-out motions (the test split of a HumanML3D-format directory): per case a clip
 and one of its captions, the length rounded down to a multiple of 4 (at most 196 frames) with a
@@ -19,7 +20,7 @@ joints of frame t of the distance to the target, metres):
 - **Loc. err**: mean over cases of the fraction of keyframes with e_t > 0.5 m;
 - **Avg. err**: mean over cases of the mean e_t;
 - **foot-skating ratio** (:func:`controlmm.motion.geometry.foot_skating_ratio`) on the generated
-  motion's own frames (the official script also counts the padding frames up to 196, §11.12).
+  motion's own frames (the official script also counts the padding frames up to 196).
 
 Text-motion metrics (FID, R-precision, diversity) plug in through ``text_metrics``: any callable
 ``(generated motions, texts, ground-truth motions) -> {column: value}``.
@@ -113,7 +114,7 @@ def build_cases(
         count = density if density <= 5 else int(m * density / MAX_FRAMES)
         frames = rng.choice(m, size=max(1, min(count, m)), replace=False)
         mask = np.zeros((m, NUM_JOINTS), dtype=bool)
-        mask[np.ix_(frames, list(chosen))] = True
+        mask[np.ix_(frames, np.array(chosen, dtype=np.intp))] = True
         cases.append(ControlCase(sample.motion_id, text, m, targets, mask, density, chosen, feats))
     return cases
 
@@ -132,7 +133,8 @@ def _case_joints(mode: str, i: int, rng: np.random.Generator) -> tuple[int, ...]
 
 # -- metrics ----------------------------------------------------------------------------------------
 def keyframe_errors(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """e_t (|F|,): for each frame with a controlled joint, the mean distance (m) over its controlled joints."""
+    """e_t (|F|,): for each frame with a controlled joint, the mean distance (m) over its controlled
+    joints."""
     t = mask.shape[0]
     dist = np.linalg.norm(np.asarray(joints, dtype=np.float64)[:t] - targets, axis=-1)
     frames = np.flatnonzero(mask.any(-1))
@@ -142,7 +144,8 @@ def keyframe_errors(joints: np.ndarray, targets: np.ndarray, mask: np.ndarray) -
 def case_metrics(
     joints: np.ndarray, targets: np.ndarray, mask: np.ndarray, threshold: float = THRESHOLD
 ) -> dict[str, float]:
-    """Traj. fail (0/1), Loc. fail fraction, Avg. err (m) and the worst controlled-joint error (m) of one case."""
+    """Traj. fail (0/1), Loc. fail fraction, Avg. err (m) and the worst controlled-joint error (m) of one
+    case."""
     e = keyframe_errors(joints, targets, mask)
     if len(e) == 0:
         raise ControlMMError("a control case needs at least one controlled entry")
@@ -156,7 +159,8 @@ def case_metrics(
 
 
 def summarize(rows: Sequence[dict[str, float]]) -> dict[str, float]:
-    """Means of per-case metric dicts: traj -> Traj. err, loc -> Loc. err, avg -> Avg. err, ...; max -> max."""
+    """Means of per-case metric dicts: traj -> Traj. err, loc -> Loc. err, avg -> Avg. err, ...;
+    max -> max."""
     if not rows:
         return {}
     out = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "max"}
@@ -183,7 +187,7 @@ class ControlEvaluation:
         """Summary per density and over all cases (``"all"``)."""
         out: dict[str, dict[str, float]] = {}
         for d in sorted({c.density for c in self.cases}):
-            out[str(d)] = summarize([r for r, c in zip(self.rows, self.cases) if c.density == d])
+            out[str(d)] = summarize([r for r, c in zip(self.rows, self.cases, strict=True) if c.density == d])
         out["all"] = summarize(self.rows) | self.extra
         return out
 
@@ -217,7 +221,7 @@ class ControlEvaluation:
                     "joints": [JOINT_NAMES[j] for j in c.joints],
                 }
                 | r
-                for c, r in zip(self.cases, self.rows)
+                for c, r in zip(self.cases, self.rows, strict=True)
             ],
         }
 
@@ -262,7 +266,7 @@ def evaluate_control(
             seed=seed + start,
             batch_size=batch_size,
         )
-        for c, motion, record in zip(chunk, out.motions, out.records):
+        for c, motion, record in zip(chunk, out.motions, out.records, strict=True):
             row = case_metrics(motion.joints, c.targets, c.mask)
             row |= {
                 "skate": foot_skating_ratio(motion.joints, FPS),

@@ -1,4 +1,4 @@
-"""Text-motion quality metrics on evaluator embeddings (reference §8.4; Guo et al. 2022).
+"""Text-motion quality metrics on evaluator embeddings (Guo et al. 2022, as MoMask and MaskControl).
 
 Pure NumPy/SciPy functions of embedding arrays; the evaluator that produces the embeddings and
 the evaluation passes that feed them live in :mod:`controlmm.eval.quality`.
@@ -19,6 +19,7 @@ the evaluation passes that feed them live in :mod:`controlmm.eval.quality`.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,7 +167,7 @@ def multimodality(
     return float(np.linalg.norm(emb[:, first] - emb[:, second], axis=2).mean())
 
 
-def mean_ci(values) -> tuple[float, float]:
+def mean_ci(values: Iterable[float]) -> tuple[float, float]:
     """Mean and 95 % confidence half-width 1.96 std / sqrt(n) of repeated runs (std with ddof 0)."""
     v = np.asarray(list(values), dtype=np.float64)
     if v.size == 0:

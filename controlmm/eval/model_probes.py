@@ -18,6 +18,7 @@ reproducible for a given (cases, seed, batch size).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -27,6 +28,7 @@ from controlmm.corpus.probes import PROBES, ProbeCase
 from controlmm.errors import ControlMMError
 from controlmm.eval.cases import clip_features
 from controlmm.generate import MotionModel, generate
+from controlmm.models.rvqvae import RVQVAE
 from controlmm.motion import Motion
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
@@ -71,14 +73,14 @@ def generated_motions(
     seed: int = 0,
     batch_size: int = 32,
     progress: bool = False,
-    **generate_kwargs,
-) -> Callable[[ProbeCase], object]:
+    **generate_kwargs: Any,
+) -> Callable[[ProbeCase], Motion]:
     """Generate one motion per case (text ``case.caption``, ``case.frames`` frames) with a loaded
     :class:`~controlmm.models.MotionModel`; returns the ``motion_for`` function of
     :func:`controlmm.eval.cases.evaluate`."""
     if batch_size < 1:
         raise ControlMMError(f"batch size must be at least 1; got {batch_size}")
-    motions: dict[tuple[str, str], object] = {}
+    motions: dict[tuple[str, str], Motion] = {}
     starts = range(0, len(cases), batch_size)
     for k, start in enumerate(tqdm(starts, desc="generating", unit="batch", disable=not progress)):
         chunk = cases[start : start + batch_size]
@@ -91,10 +93,10 @@ def generated_motions(
             batch_size=batch_size,
             **generate_kwargs,
         )
-        for case, motion in zip(chunk, result.motions):
+        for case, motion in zip(chunk, result.motions, strict=True):
             motions[(case.clip_id, case.caption)] = motion
 
-    def motion_for(case: ProbeCase):
+    def motion_for(case: ProbeCase) -> Motion:
         return motions[(case.clip_id, case.caption)]
 
     return motion_for
@@ -102,20 +104,20 @@ def generated_motions(
 
 def tokenized_motions(
     model: MotionModel, data_dir: str, layers: int | None = None
-) -> Callable[[ProbeCase], object]:
+) -> Callable[[ProbeCase], Motion]:
     """The ground truth of each case passed through the model's tokenizer (encode, keep the first
     ``layers`` quantizer layers, default all, decode): what the token space can represent at all,
     the ceiling of any generator on top of it. Returns a ``motion_for`` for
     :func:`controlmm.eval.cases.evaluate`; clips are cropped to a multiple of 4 frames."""
     tokenizer = model.parts.get("tokenizer")
-    if tokenizer is None:
+    if not isinstance(tokenizer, RVQVAE):
         raise ControlMMError("this model directory has no tokenizer")
     total = tokenizer.cfg.num_quantizers
     if layers is not None and not 1 <= layers <= total:
         raise ControlMMError(f"layers must be between 1 and {total} for this tokenizer; got {layers}")
     dtype = next(tokenizer.parameters()).dtype
 
-    def motion_for(case: ProbeCase):
+    def motion_for(case: ProbeCase) -> Motion:
         features = clip_features(data_dir, case.clip_id)
         n = len(features) // 4 * 4
         x = torch.as_tensor(

@@ -1,6 +1,7 @@
 """Quality evaluation of text-to-motion: evaluation passes, the paper's columns, repeats, the table.
 
-Protocol (reference §8; MoMask/MaskControl evaluation scripts):
+Protocol (the evaluation scripts of MoMask, https://github.com/EricGuo5513/momask-codes, and MaskControl,
+https://github.com/exitudio/MaskControl):
 
 - an **evaluation pass** over a split (:class:`EvalSet.draw`): the captioned samples in a random
   order, a final incomplete group of 32 dropped; per sample a random caption, the length m rounded
@@ -30,6 +31,7 @@ from controlmm.eval import metrics as M
 from controlmm.eval.evaluator.base import Evaluator, MotionLike
 from controlmm.eval.scoring import MotionSet, columns_from_embeddings, quality_columns, score_motions
 from controlmm.generate import MotionModel, generate
+from controlmm.motion import Motion
 from controlmm.motion.skeleton import MAX_FRAMES, MIN_FRAMES
 
 COLUMNS = (
@@ -181,9 +183,16 @@ def model_generator(model: MotionModel, batch_size: int = 64, **generate_kwargs:
             batch_size=batch_size,
             **generate_kwargs,
         )
-        return [m.features[:f] for m, f in zip(result.motions, frames)]
+        return [_first_frames(m, f) for m, f in zip(result.motions, frames, strict=True)]
 
     return run
+
+
+def _first_frames(motion: Motion, frames: int) -> np.ndarray:
+    """The first ``frames`` feature frames (frames, 263) of a generated motion."""
+    if motion.features is None:
+        raise ControlMMError("a generated motion has no features")
+    return motion.features[:frames]
 
 
 # -- repeated evaluation ----------------------------------------------------------------------------

@@ -17,8 +17,9 @@ Every field is a plain value so a config round-trips through ``model.json`` (``a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any, TypeVar
+from typing import Any, TypedDict, TypeVar
 
 from controlmm.errors import ControlMMError
 from controlmm.text.config import CLIP_MODEL_ID, TEXT_ENCODER_DIMS, TextEncoderConfig
@@ -66,7 +67,7 @@ class TransformerConfig:
     ``pooled_row`` (not in MoMask; models on MiniLM token states only): besides one row per token
     state, one condition row for the states' pooled sentence vector (MiniLM's own pooling) through its
     own LayerNorm and Linear. The two views of a caption fail on different held-out wordings
-    (docs/BENCHMARKS.md, "Sentence vector and token states").
+    (docs/benchmarks-history.md, "Sentence vector and token states").
 
     ``relative_positions`` (not in MoMask): K > 0 adds a learned per-head attention bias for the offset
     between two motion tokens, clipped at K tokens (:mod:`controlmm.models.relative_position`); 0 = off.
@@ -125,7 +126,8 @@ class ResidualConfig:
 
 
 CONTROL_JOINT_SETS: dict[str, tuple[int, ...]] = {"pelvis": (0,), "all": (0, 10, 11, 15, 20, 21)}
-"""Joints the motion control model sees (reference §4.2): pelvis only, or pelvis, feet, head, wrists."""
+"""Joints the motion control model sees, as in the released MaskControl models: pelvis only, or pelvis,
+feet, head, wrists."""
 
 
 @dataclass(frozen=True)
@@ -159,8 +161,8 @@ class TokenViewConfig:
     reads) and the token states (what this transformer reads, at most ``tokens`` per caption). The two
     fail on different held-out wordings, so text-only decoding (``generate``) averages their
     classifier-free-guided log-probabilities at every iteration:
-    ``(1 - weight) * log p_sentence + weight * log p_tokens`` (docs/BENCHMARKS.md, "Sentence vector and
-    token states"). The part (``token_transformer.pt``, ``controlmm train token-transformer``) is
+    ``(1 - weight) * log p_sentence + weight * log p_tokens`` (docs/benchmarks-history.md, "Sentence
+    vector and token states"). The part (``token_transformer.pt``, ``controlmm train token-transformer``) is
     optional: without it decoding uses ``transformer`` alone. The motion control model extends
     ``transformer`` only, so ``generate_controlled`` (whatever its settings) does not use it.
     """
@@ -411,9 +413,26 @@ def _paper() -> ModelConfig:
     )
 
 
+class _SharedFields(TypedDict):
+    """The fields a preset gives both transformers (and the token-state member) alike."""
+
+    nb_code: int
+    code_dim: int
+    latent_dim: int
+    ff_size: int
+    num_heads: int
+    dropout: float
+    text_dim: int
+    max_len: int
+
+
+class _SharedFieldsWithDepth(_SharedFields):
+    num_layers: int
+
+
 def _demo() -> ModelConfig:
     tok = TokenizerConfig(width=128, code_dim=128, nb_code=512, num_quantizers=6)
-    common = dict(
+    common = _SharedFields(
         nb_code=512,
         code_dim=128,
         latent_dim=256,
@@ -427,7 +446,7 @@ def _demo() -> ModelConfig:
     # at a time): tokenizer 6.9 it/s (8.6 min), transformer 3.2 it/s (34.5 min), residual 3.6 it/s
     # (19.0 min), token-state transformer 2.6 it/s (20.1 min), control 1.8 it/s (14.5 min): 97 min in
     # all (docs/model-card.md). Both masked transformers use a relative position bias of 16 tokens
-    # (docs/BENCHMARKS.md, "Relative positions"); the residual transformer does not.
+    # (docs/benchmarks-history.md, "Relative positions"); the residual transformer does not.
     schedules = {
         "tokenizer": StageSchedule(
             iters=3500,
@@ -506,7 +525,7 @@ def _demo() -> ModelConfig:
 
 def _tiny() -> ModelConfig:
     tok = TokenizerConfig(width=32, code_dim=16, nb_code=32, num_quantizers=3, resnet_dropout=0.0)
-    common = dict(
+    common = _SharedFieldsWithDepth(
         nb_code=32,
         code_dim=16,
         latent_dim=32,
@@ -541,7 +560,7 @@ def _tiny() -> ModelConfig:
     )
 
 
-PRESETS: dict[str, Any] = {"paper": _paper, "demo": _demo, "tiny": _tiny}
+PRESETS: dict[str, Callable[[], ModelConfig]] = {"paper": _paper, "demo": _demo, "tiny": _tiny}
 """Preset name -> factory of its :class:`ModelConfig`."""
 
 

@@ -8,12 +8,16 @@ and return batch-first tensors.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from controlmm.errors import ControlMMError
+
+LayerHook = Callable[[int, torch.Tensor], torch.Tensor]
+"""``hook(i, x) -> x``: called after encoder layer ``i`` on its (S, B, D) output."""
 
 
 class InputProcess(nn.Module):
@@ -29,6 +33,8 @@ class InputProcess(nn.Module):
 
 class PositionalEncoding(nn.Module):
     """Sinusoidal table ``pe`` (max_len, 1, d) added to (S, B, d) inputs, then dropout."""
+
+    pe: torch.Tensor  # buffer (max_len, 1, d)
 
     def __init__(self, d_model: int, dropout: float, max_len: int) -> None:
         super().__init__()
@@ -120,7 +126,7 @@ def run_layers(
     layers: nn.ModuleList,
     x: torch.Tensor,
     padding_mask: torch.Tensor,
-    hook=None,
+    hook: LayerHook | None = None,
     attn_mask: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Run encoder layers one by one on (S, B, D) ``x``.

@@ -35,6 +35,7 @@ from torch import nn
 from controlmm.models.config import TransformerConfig
 from controlmm.models.layers import (
     InputProcess,
+    LayerHook,
     OutputProcess,
     PositionalEncoding,
     cosine_schedule,
@@ -123,7 +124,11 @@ class MaskTransformer(nn.Module):
         return self.relative_bias.attention_mask(mask, num_tokens, dtype)
 
     def run_layers(
-        self, h: torch.Tensor, mask: torch.Tensor, hook=None, num_tokens: int | None = None
+        self,
+        h: torch.Tensor,
+        mask: torch.Tensor,
+        hook: LayerHook | None = None,
+        num_tokens: int | None = None,
     ) -> torch.Tensor:
         """The encoder layers on (C+N, B, D); ``hook(i, h) -> h`` runs after layer i. ``num_tokens`` = N
         (the motion rows) is needed with the relative position bias."""

@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -39,7 +39,7 @@ from controlmm.assets import default_model_dir
 from controlmm.atomic import atomic_path, write_text
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.files import load_torch
-from controlmm.models.config import ModelConfig
+from controlmm.models.config import ModelConfig, TokenViewConfig
 from controlmm.models.mask_transformer import MaskTransformer
 from controlmm.models.residual_transformer import ResidualTransformer
 from controlmm.models.rvqvae import RVQVAE
@@ -65,7 +65,8 @@ PARTS: dict[str, PartSpec] = {}
 
 
 def train_command(part: str) -> str:
-    """The ``controlmm train`` subcommand that trains ``part`` (``token_transformer`` -> ``token-transformer``)."""
+    """The ``controlmm train`` subcommand that trains ``part`` (``token_transformer`` ->
+    ``token-transformer``)."""
     return part.replace("_", "-")
 
 
@@ -253,17 +254,17 @@ class MotionModel:
         return self.require("tokenizer")
 
     @property
-    def transformer(self):
-        return self.require("transformer")
+    def transformer(self) -> MaskTransformer:
+        return cast(MaskTransformer, self.require("transformer"))  # built by _build_transformer
 
     @property
-    def residual(self):
-        return self.parts.get("residual")
+    def residual(self) -> ResidualTransformer | None:
+        return cast(ResidualTransformer | None, self.parts.get("residual"))  # built by _build_residual
 
     @property
-    def token_transformer(self):
+    def token_transformer(self) -> MaskTransformer | None:
         """The token-state masked transformer of ``config.token_view``, or None (not trained)."""
-        return self.parts.get("token_transformer")
+        return cast(MaskTransformer | None, self.parts.get("token_transformer"))
 
     def require(self, name: str) -> nn.Module:
         if name not in self.parts:
@@ -303,11 +304,17 @@ class MotionModel:
         return vectors.to(self.device)
 
     def encode_token_states(self, texts: list[str]) -> torch.Tensor:
-        """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer (``config.token_view``)."""
+        """(B,) texts -> (B, L, 384) MiniLM token states for the token-state transformer
+        (``config.token_view``)."""
+        view = self._token_view()
+        self.text_encoder.warn_truncated(texts, view.tokens)
+        return self.text_encoder.encode_tokens(texts, view.tokens).to(self.device)
+
+    def _token_view(self) -> TokenViewConfig:
+        """``config.token_view``, or a clear error for a model without one."""
         if self.config.token_view is None:
             raise ControlMMError(f"model '{self.directory or 'this model'}' has no token_view configuration")
-        self.text_encoder.warn_truncated(texts, self.config.token_view.tokens)
-        return self.text_encoder.encode_tokens(texts, self.config.token_view.tokens).to(self.device)
+        return self.config.token_view
 
     def encode_text_views(self, texts: list[str]) -> tuple[torch.Tensor, torch.Tensor | None]:
         """:meth:`encode_text` and, when the model has a token-state transformer, :meth:`encode_token_states`
@@ -317,8 +324,9 @@ class MotionModel:
         both = getattr(self.text_encoder, "encode_with_tokens", None)
         if both is None or self.config.text_encoder.tokens:
             return self.encode_text(texts), self.encode_token_states(texts)
-        self.text_encoder.warn_truncated(texts, self.config.token_view.tokens)
-        vectors, states = both(texts, self.config.token_view.tokens)
+        view = self._token_view()
+        self.text_encoder.warn_truncated(texts, view.tokens)
+        vectors, states = both(texts, view.tokens)
         return self._checked_condition(vectors), states.to(self.device)
 
     def to(self, device: str | torch.device) -> MotionModel:

@@ -8,8 +8,9 @@ the frozen base stays in ``transformer.pt``)::
     first_zero_linear         Linear(D, D), zero-initialised: control tokens added to h_0
     mid_zero_linear.{i}       Linear(D, D) per layer, zero-initialised: residuals into the base
 
-Forward, one classifier-free-guidance branch (reference §4.1, including the non-standard wiring of
-the official code: the frozen base also receives the control-augmented input h_0)::
+Forward, one classifier-free-guidance branch (as the official MaskControl ``ControlTransformer``,
+https://github.com/exitudio/MaskControl, including its non-standard wiring: the frozen base also
+receives the control-augmented input h_0)::
 
     x_0 = [cond ; PE(poseEmbedding(tokens))]                (C+N, B, D)   frozen base modules, C = 1
                                                               (or the text token rows)
@@ -21,10 +22,11 @@ the official code: the frozen base also receives the control-augmented input h_0
 
 With every zero linear at zero, the logits are exactly the base model's.
 
-Control input (reference §4.2, Paper A.8): targets S (B, T, 22, 3), mask sigma (B, T, 22) and the
-current motion estimate G (B, T, 22, 3) decoded from the tokens known so far (masked positions take
-``mask_emb_vq``, the mean of the base codebook). For the control joints J (pelvis; or pelvis, feet,
-head, wrists): rel = (S - G) sigma, abs = S sigma, channels [rel_J xyz ..., abs_J xyz ...].
+Control input (ControlMM paper, appendix A.8, as the official code builds it): targets S (B, T, 22, 3),
+mask sigma (B, T, 22) and the current motion estimate G (B, T, 22, 3) decoded from the tokens known so
+far (masked positions take ``mask_emb_vq``, the mean of the base codebook). For the control joints J
+(pelvis; or pelvis, feet, head, wrists): rel = (S - G) sigma, abs = S sigma, channels
+[rel_J xyz ..., abs_J xyz ...].
 """
 
 from __future__ import annotations
@@ -97,7 +99,7 @@ class MotionControlModel(nn.Module):
         residuals = []
         g = h
         attn = base.attention_mask(mask, c.shape[0], h.dtype)  # the base's relative position bias, if any
-        for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear):
+        for layer, zero in zip(self.seqTransEncoder_control.layers, self.mid_zero_linear, strict=True):
             g = apply_layer(layer, g, mask, attn)
             residuals.append(zero(g))
         out = run_layers(base.seqTransEncoder.layers, h, mask, lambda i, x: x + residuals[i], attn)
@@ -137,7 +139,7 @@ def zero_linear(dim: int) -> nn.Linear:
 def control_input(
     targets: torch.Tensor, mask: torch.Tensor, current: torch.Tensor, joint_ids: tuple[int, ...]
 ) -> torch.Tensor:
-    """The control branch's input (B, 6 |J|, T) (reference §4.2).
+    """The control branch's input (B, 6 |J|, T) (the official ``encoder_control`` input).
 
     Args:
         targets: (B, T, 22, 3) target global joints (any value where not controlled).

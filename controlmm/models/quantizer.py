@@ -18,6 +18,8 @@ first-batch initialisation come from rank 0, so every process keeps identical co
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 import torch.distributed as dist
 import torch.nn.functional as F
@@ -32,6 +34,12 @@ def _distributed() -> bool:
 
 class QuantizeEMAReset(nn.Module):
     """One codebook with EMA updates and dead-code reset; works on (B, C, T) latents."""
+
+    # Buffers (registered in __init__).
+    codebook: torch.Tensor  # (nb_code, code_dim)
+    code_sum: torch.Tensor  # (nb_code, code_dim) EMA of the assigned latents' sum
+    code_count: torch.Tensor  # (nb_code,) EMA of the assignment counts
+    initted: torch.Tensor  # () bool: the codebook was initialised from a batch
 
     def __init__(self, nb_code: int, code_dim: int, mu: float) -> None:
         super().__init__()
@@ -98,7 +106,9 @@ class QuantizeEMAReset(nn.Module):
         self.codebook.copy_(usage * code_update + (1.0 - usage) * code_rand)
         return _perplexity(code_count)
 
-    def forward(self, x: torch.Tensor, temperature: float = 0.0):
+    def forward(
+        self, x: torch.Tensor, temperature: float = 0.0
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Quantize (B, C, T) -> (quantized (B, C, T), indices (B, T), commit loss, perplexity)."""
         b, c, t = x.shape
         flat = x.permute(0, 2, 1).reshape(b * t, c)
@@ -132,9 +142,15 @@ class ResidualVQ(nn.Module):
         self.layers = nn.ModuleList(QuantizeEMAReset(nb_code, code_dim, mu) for _ in range(num_quantizers))
 
     @property
+    def quantizers(self) -> list[QuantizeEMAReset]:
+        """``layers`` with their type (a type checker sees the items of an ``nn.ModuleList`` as plain
+        modules)."""
+        return cast(list[QuantizeEMAReset], list(self.layers))
+
+    @property
     def codebooks(self) -> torch.Tensor:
         """(Q, nb_code, code_dim) stacked codebooks."""
-        return torch.stack([layer.codebook for layer in self.layers])
+        return torch.stack([layer.codebook for layer in self.quantizers])
 
     def _draw_dropout_cut(self, device: torch.device) -> int:
         """Quantizer dropout: the last kept layer (Q = none dropped), the same on every process."""
@@ -145,7 +161,9 @@ class ResidualVQ(nn.Module):
             dist.broadcast(cut, src=0)
         return int(cut[0])
 
-    def forward(self, x: torch.Tensor, temperature: float = 0.0, force_dropout_index: int = -1):
+    def forward(
+        self, x: torch.Tensor, temperature: float = 0.0, force_dropout_index: int = -1
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Quantize (B, C, T).
 
         Returns:
@@ -155,7 +173,9 @@ class ResidualVQ(nn.Module):
         with torch.autocast(x.device.type, enabled=False):  # nearest-code search needs float32
             return self._forward(x.float(), temperature, force_dropout_index)
 
-    def _forward(self, x: torch.Tensor, temperature: float, force_dropout_index: int):
+    def _forward(
+        self, x: torch.Tensor, temperature: float, force_dropout_index: int
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         b, _, t = x.shape
         cut = self.num_quantizers
         if force_dropout_index >= 0:
@@ -164,8 +184,10 @@ class ResidualVQ(nn.Module):
             cut = self._draw_dropout_cut(x.device)
         residual = x
         quantized_out = torch.zeros_like(x)
-        indices, losses, perplexities = [], [], []
-        for i, layer in enumerate(self.layers):
+        indices: list[torch.Tensor] = []
+        losses: list[torch.Tensor] = []
+        perplexities: list[torch.Tensor] = []
+        for i, layer in enumerate(self.quantizers):
             if i > cut:
                 indices.append(torch.full((b, t), -1, dtype=torch.long, device=x.device))
                 continue
@@ -187,7 +209,7 @@ class ResidualVQ(nn.Module):
         """Deterministic indices (B, T, Q) of (B, C, T) latents with all layers (eval behaviour)."""
         residual = x
         indices = []
-        for layer in self.layers:
+        for layer in self.quantizers:
             b, c, t = residual.shape
             flat = residual.permute(0, 2, 1).reshape(b * t, c)
             code = layer.codebook
@@ -205,7 +227,7 @@ class ResidualVQ(nn.Module):
         if q < self.num_quantizers:
             indices = F.pad(indices, (0, self.num_quantizers - q), value=-1)
         codes = []
-        for i, layer in enumerate(self.layers):
+        for i, layer in enumerate(self.quantizers):
             idx = indices[..., i]
             vec = layer.dequantize(idx.clamp(min=0))
             codes.append(vec * (idx >= 0)[..., None].to(vec.dtype))
@@ -214,14 +236,14 @@ class ResidualVQ(nn.Module):
     def ema_state(self) -> dict[str, torch.Tensor]:
         """EMA statistics of every layer (for training checkpoints)."""
         state = {}
-        for i, layer in enumerate(self.layers):
+        for i, layer in enumerate(self.quantizers):
             state[f"{i}.code_sum"] = layer.code_sum.detach().clone()
             state[f"{i}.code_count"] = layer.code_count.detach().clone()
             state[f"{i}.initted"] = layer.initted.detach().clone()
         return state
 
     def load_ema_state(self, state: dict[str, torch.Tensor]) -> None:
-        for i, layer in enumerate(self.layers):
+        for i, layer in enumerate(self.quantizers):
             layer.code_sum.copy_(state[f"{i}.code_sum"])
             layer.code_count.copy_(state[f"{i}.code_count"])
             layer.initted.copy_(state[f"{i}.initted"])

@@ -8,7 +8,8 @@ tokens) makes such look-ups position independent::
     logits_h(i, j) += b_h[clamp(j - i, -K, K)]      for motion tokens i, j (K = max_distance)
 
 Condition rows (text) get no bias. The table starts at zero, so a new model starts exactly as MoMask's.
-Measured on the default corpus (docs/BENCHMARKS.md, "Relative positions"): the demo transformer's val.
+Measured on the default corpus (docs/benchmarks-history.md, "Relative positions"): the demo transformer's
+val.
 loss 1.411 -> 1.288 and +1.1 points of the held-out probes; the periodic arm families (claps, punches,
 waves) unchanged.
 """

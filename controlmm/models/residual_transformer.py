@@ -29,6 +29,7 @@ from torch import nn
 from controlmm.models.config import ResidualConfig
 from controlmm.models.layers import (
     InputProcess,
+    LayerHook,
     OutputProcess,
     PositionalEncoding,
     drop_condition,
@@ -81,7 +82,10 @@ class ResidualTransformer(nn.Module):
     def history(self, ids: torch.Tensor, q: int) -> torch.Tensor:
         """sum_{j<q} E_j[ids_j]: ids (B, N, >= q) with pads as pad_id -> (B, N, code_dim)."""
         emb = self.token_embed_weight
-        return sum(F.embedding(ids[..., j], emb[j]) for j in range(q))
+        out = torch.zeros(ids.shape[:-1] + (emb.shape[-1],), dtype=emb.dtype, device=emb.device)
+        for j in range(q):
+            out = out + F.embedding(ids[..., j], emb[j])
+        return out
 
     def forward(
         self,
@@ -90,7 +94,7 @@ class ResidualTransformer(nn.Module):
         cond: torch.Tensor,
         padding_mask: torch.Tensor,
         force_mask: bool = False,
-        hook=None,
+        hook: LayerHook | None = None,
     ) -> torch.Tensor:
         """Logits (B, N, K+1) of layer q.
 

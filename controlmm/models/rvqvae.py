@@ -18,6 +18,8 @@ channels-first. State-dict names match the official checkpoint:
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -113,13 +115,24 @@ class Decoder(nn.Module):
         return self.model(x).permute(0, 2, 1)
 
 
+class _ConvOptions(TypedDict):
+    """The options the encoder and the decoder share."""
+
+    width: int
+    down_t: int
+    stride_t: int
+    depth: int
+    growth: int
+    dropout: float
+
+
 class RVQVAE(nn.Module):
     """The motion tokenizer: encoder, residual quantizer, decoder."""
 
     def __init__(self, cfg: TokenizerConfig) -> None:
         super().__init__()
         self.cfg = cfg
-        conv = dict(
+        conv = _ConvOptions(
             width=cfg.width,
             down_t=cfg.down_t,
             stride_t=cfg.stride_t,
@@ -133,7 +146,7 @@ class RVQVAE(nn.Module):
             cfg.num_quantizers, cfg.nb_code, cfg.code_dim, cfg.mu, cfg.quantize_dropout_prob
         )
 
-    def forward(self, x: torch.Tensor):
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Training pass on normalised features (B, T, 263), T a multiple of 4.
 
         Returns (reconstruction (B, T, 263), commitment loss, perplexity, indices (B, T/4, Q)).

@@ -10,6 +10,7 @@ Leaf joints (feet, head, wrists) carry their parent's rotation and an End Site.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from scipy.spatial.transform import Rotation
 from controlmm.atomic import atomic_open
 from controlmm.errors import InputFileError
 from controlmm.motion.extract import check_joints
+from controlmm.motion.formats.bvh_import import read_bvh_file
 from controlmm.motion.quaternion import qbetween, quat_to_matrix
 from controlmm.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, RAW_OFFSETS
 
@@ -78,10 +80,31 @@ def _children_sorted(j: int) -> list[int]:
     return sorted(_CHILDREN[j])
 
 
-def write_bvh(path: str | Path, joints: np.ndarray, fps: float = 20.0) -> None:
-    """Write positions (T, 22, 3) (metres, Y up) as a BVH file (atomic)."""
+def write_bvh(
+    path: str | Path,
+    joints: np.ndarray,
+    fps: float = 20.0,
+    *,
+    names: Mapping[str, str] | None = None,
+    units_per_metre: float = 1.0,
+    insert: Mapping[str, str] | None = None,
+) -> None:
+    """Write positions (T, 22, 3) (metres, Y up) as a BVH file (atomic).
+
+    Args:
+        names: SMPL joint -> the name it gets in the file (default: the SMPL names), e.g. LAFAN1's.
+        units_per_metre: length unit of the file (100: centimetres).
+        insert: new joint name -> the SMPL joint it becomes the parent of: a pass-through joint with
+            zero offset and zero rotation (CMU-style ``LHipJoint`` above ``LeftUpLeg``); forward
+            kinematics is unchanged.
+    """
     joints = check_joints(joints, min_frames=1)
+    if not (np.isfinite(units_per_metre) and units_per_metre > 0):
+        raise InputFileError(f"units per metre must be a positive number; got {units_per_metre}")
+    label = {n: (names or {}).get(n, n) for n in JOINT_NAMES}
+    above = {child: new for new, child in (insert or {}).items()}
     glob, offsets = _fit_global_rotations(joints)
+    offsets = offsets * units_per_metre
     t = joints.shape[0]
     local = np.empty_like(glob)
     local[:, 0] = glob[:, 0]
@@ -93,11 +116,24 @@ def write_bvh(path: str | Path, joints: np.ndarray, fps: float = 20.0) -> None:
     euler = np.unwrap(euler, period=360.0, axis=0)
 
     lines = ["HIERARCHY"]
+    order: list[int | None] = []  # motion columns: a joint, or None for a pass-through joint
 
     def emit(j: int, depth: int) -> None:
+        if JOINT_NAMES[j] in above:
+            pad = "  " * depth
+            lines.extend(
+                [
+                    f"{pad}JOINT {above[JOINT_NAMES[j]]}",
+                    f"{pad}{{",
+                    f"{pad}  OFFSET 0.000000 0.000000 0.000000",
+                    f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation",
+                ]
+            )
+            order.append(None)
+            depth += 1
         pad = "  " * depth
         kind = "ROOT" if j == 0 else "JOINT"
-        lines.append(f"{pad}{kind} {JOINT_NAMES[j]}")
+        lines.append(f"{pad}{kind} {label[JOINT_NAMES[j]]}")
         lines.append(f"{pad}{{")
         off = np.zeros(3) if j == 0 else offsets[j]
         lines.append(f"{pad}  OFFSET {off[0]:.6f} {off[1]:.6f} {off[2]:.6f}")
@@ -105,131 +141,48 @@ def write_bvh(path: str | Path, joints: np.ndarray, fps: float = 20.0) -> None:
             lines.append(f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
         else:
             lines.append(f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation")
+        order.append(j)
         kids = _children_sorted(j)
         for c in kids:
             emit(c, depth + 1)
         if not kids:
-            end = RAW_OFFSETS[j] * _END_SITE
+            end = RAW_OFFSETS[j] * _END_SITE * units_per_metre
             lines.append(f"{pad}  End Site")
             lines.append(f"{pad}  {{")
             lines.append(f"{pad}    OFFSET {end[0]:.6f} {end[1]:.6f} {end[2]:.6f}")
             lines.append(f"{pad}  }}")
         lines.append(f"{pad}}}")
+        if JOINT_NAMES[j] in above:
+            lines.append(f"{'  ' * (depth - 1)}}}")
 
+    if JOINT_NAMES[0] in above:
+        raise InputFileError("a joint cannot be inserted above the root")
     emit(0, 0)
-    order = _depth_first()
+    zero = np.zeros(3)
     lines += ["MOTION", f"Frames: {t}", f"Frame Time: {1.0 / fps:.8f}"]
     for f in range(t):
-        vals = list(joints[f, 0]) + [v for j in order for v in euler[f, j]]
+        vals = list(joints[f, 0] * units_per_metre) + [
+            v for j in order for v in (zero if j is None else euler[f, j])
+        ]
         lines.append(" ".join(f"{v:.6f}" for v in vals))
     with atomic_open(path, "w", encoding="ascii") as fh:
         fh.write("\n".join(lines) + "\n")
-
-
-def _depth_first() -> list[int]:
-    out: list[int] = []
-
-    def visit(j: int) -> None:
-        out.append(j)
-        for c in _children_sorted(j):
-            visit(c)
-
-    visit(0)
-    return out
 
 
 def read_bvh(path: str | Path) -> tuple[np.ndarray, float]:
     """Read a BVH with the SMPL-22 joint names; return positions (T, 22, 3) and fps.
 
     Any channel order is accepted; joints are matched by name (extra joints are ignored).
+    Other skeletons (LAFAN1, CMU, Mixamo names, or a mapping file) are read by
+    :func:`controlmm.motion.load_motion`.
     """
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"BVH file '{path}' does not exist")
-    tokens = path.read_text(errors="replace").split()
-    try:
-        return _parse_bvh(tokens)
-    except InputFileError:
-        raise
-    except (ValueError, IndexError) as exc:
-        raise InputFileError(f"'{path}' is not a valid BVH file ({exc})") from exc
-
-
-def _parse_bvh(tokens: list[str]) -> tuple[np.ndarray, float]:
-    names, parents, offsets, channels = [], [], [], []
-    stack: list[int] = []
-    i = 0
-    if tokens[0] != "HIERARCHY":
-        raise ValueError("missing HIERARCHY")
-    i = 1
-    last = -1
-    while tokens[i] != "MOTION":
-        tok = tokens[i]
-        if tok in ("ROOT", "JOINT"):
-            names.append(tokens[i + 1])
-            parents.append(stack[-1] if stack else -1)
-            offsets.append(np.zeros(3))
-            channels.append([])
-            last = len(names) - 1
-            i += 2
-        elif tok == "End":
-            names.append(None)
-            parents.append(stack[-1])
-            offsets.append(np.zeros(3))
-            channels.append([])
-            last = len(names) - 1
-            i += 2
-        elif tok == "{":
-            stack.append(last)
-            i += 1
-        elif tok == "}":
-            stack.pop()
-            i += 1
-        elif tok == "OFFSET":
-            offsets[last] = np.array([float(v) for v in tokens[i + 1 : i + 4]])
-            i += 4
-        elif tok == "CHANNELS":
-            n = int(tokens[i + 1])
-            channels[last] = tokens[i + 2 : i + 2 + n]
-            i += 2 + n
-        else:
-            raise ValueError(f"unexpected token '{tok}'")
-    n_frames = int(tokens[i + 2])
-    frame_time = float(tokens[i + 5])
-    values = np.array([float(v) for v in tokens[i + 6 :]])
-    n_ch = sum(len(c) for c in channels)
-    if values.size != n_frames * n_ch:
-        raise ValueError(f"expected {n_frames}x{n_ch} motion values, found {values.size}")
-    values = values.reshape(n_frames, n_ch)
-
-    glob_rot = [None] * len(names)
-    glob_pos = [None] * len(names)
-    col = 0
-    for j in range(len(names)):
-        pos = np.tile(offsets[j], (n_frames, 1))
-        rot = np.tile(np.eye(3), (n_frames, 1, 1))
-        axes = ""
-        angles = []
-        for ch in channels[j]:
-            v = values[:, col]
-            col += 1
-            low = ch.lower()
-            if low.endswith("position"):
-                pos[:, "xyz".index(low[0])] = v
-            else:
-                axes += low[0].upper()
-                angles.append(v)
-        if axes:
-            rot = Rotation.from_euler(axes, np.stack(angles, -1), degrees=True).as_matrix()
-        p = parents[j]
-        if p < 0:
-            glob_pos[j], glob_rot[j] = pos, rot
-        else:
-            glob_pos[j] = glob_pos[p] + np.einsum("tij,tj->ti", glob_rot[p], pos)
-            glob_rot[j] = np.einsum("tij,tjk->tik", glob_rot[p], rot)
-    index = {n: k for k, n in enumerate(names) if n is not None}
+    anim = read_bvh_file(path)
+    index = {n: k for k, n in enumerate(anim.names)}
     missing = [n for n in JOINT_NAMES if n not in index]
     if missing:
         raise InputFileError(f"BVH lacks SMPL-22 joints: {', '.join(missing)}")
-    joints = np.stack([glob_pos[index[n]] for n in JOINT_NAMES], axis=1)
-    return joints.astype(np.float32), 1.0 / frame_time
+    joints = anim.positions[:, [index[n] for n in JOINT_NAMES]]
+    return joints.astype(np.float32), anim.fps

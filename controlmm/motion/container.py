@@ -48,7 +48,8 @@ class Motion:
             feats = np.asarray(self.features)
             if feats.shape != (joints.shape[0], FEATURE_DIM):
                 raise ShapeError(
-                    f"features must have shape ({joints.shape[0]}, {FEATURE_DIM}) to match the joints; got {feats.shape}"
+                    f"features must have shape ({joints.shape[0]}, {FEATURE_DIM}) to match the joints; "
+                    f"got {feats.shape}"
                 )
             check_finite(feats, "features")
             self.features = feats.astype(np.float32, copy=False)

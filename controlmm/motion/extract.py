@@ -76,7 +76,7 @@ def inverse_kinematics(joints: np.ndarray, smooth_forward: bool) -> np.ndarray:
     quats[:, 0] = root_quat
     for chain in KINEMATIC_CHAINS:
         rot = root_quat
-        for parent, child in zip(chain[:-1], chain[1:]):
+        for parent, child in zip(chain[:-1], chain[1:], strict=True):
             bone = joints[:, child] - joints[:, parent]
             bone = bone / np.linalg.norm(bone, axis=-1, keepdims=True)
             swing = qbetween(np.broadcast_to(RAW_OFFSETS[child], bone.shape), bone)
@@ -99,7 +99,7 @@ def uniform_skeleton(joints: np.ndarray, target_offsets: np.ndarray = TARGET_OFF
     out = np.empty_like(joints)
     out[:, 0] = joints[:, 0] * scale
     for chain in KINEMATIC_CHAINS:
-        for parent, child in zip(chain[:-1], chain[1:]):
+        for parent, child in zip(chain[:-1], chain[1:], strict=True):
             bone = joints[:, child] - joints[:, parent]
             norm = np.linalg.norm(bone, axis=-1, keepdims=True)
             direction = np.where(norm > 1e-12, bone / np.maximum(norm, 1e-12), RAW_OFFSETS[child])

@@ -29,50 +29,11 @@ def facing(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return forward, left
 
 
-def heading(joints: np.ndarray) -> np.ndarray:
-    """Unwrapped heading angle (T,) in radians; + is a turn to the person's left."""
-    forward, _ = facing(joints)
-    return np.unwrap(np.arctan2(forward[:, 0], forward[:, 2]))
-
-
-def heading_change(joints: np.ndarray, smooth: int = 5) -> float:
-    """Accumulated heading change (degrees) from the start to the end, on headings smoothed
-    over ``smooth`` frames (removes the gait's pelvis/shoulder oscillation)."""
-    h = uniform_filter1d(heading(joints), smooth, mode="nearest")
-    return float(np.degrees(h[-1] - h[0]))
-
-
-def pelvis_velocity_body(joints: np.ndarray, fps: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
-    """Pelvis ground velocity (T-1,) along the facing direction and to the person's left (m/s)."""
-    j = np.asarray(joints, dtype=np.float64)
-    step = np.diff(j[:, 0], axis=0) * fps
-    step[:, 1] = 0.0
-    forward, left = facing(j)
-    mid_f = forward[:-1] + forward[1:]
-    mid_l = left[:-1] + left[1:]
-    mid_f /= np.maximum(np.linalg.norm(mid_f, axis=-1, keepdims=True), 1e-9)
-    mid_l /= np.maximum(np.linalg.norm(mid_l, axis=-1, keepdims=True), 1e-9)
-    return (step * mid_f).sum(-1), (step * mid_l).sum(-1)
-
-
 def ground_speed(joints: np.ndarray, joint: int = 0, fps: float = 20.0, smooth: int = 5) -> np.ndarray:
     """Horizontal speed (T-1,) of a joint in m/s, smoothed over ``smooth`` frames."""
     j = np.asarray(joints, dtype=np.float64)
     v = np.linalg.norm(np.diff(j[:, joint][:, [0, 2]], axis=0), axis=-1) * fps
     return uniform_filter1d(v, smooth, mode="nearest") if smooth > 1 else v
-
-
-def displacement_in_start_frame(joints: np.ndarray, start: int = 0, end: int = -1) -> tuple[float, float]:
-    """Pelvis displacement (forward, left) in metres between two frames, expressed in the
-    facing frame of the ``start`` frame (averaged over 5 frames)."""
-    j = np.asarray(joints, dtype=np.float64)
-    forward, left = facing(j)
-    s = start if start >= 0 else len(j) + start
-    f0 = forward[s : s + 5].mean(0)
-    f0 /= np.linalg.norm(f0)
-    l0 = np.cross(UP, f0)
-    d = j[end, 0] - j[start, 0]
-    return float(d @ f0), float(d @ l0)
 
 
 def floor_height(joints: np.ndarray) -> float:
@@ -92,12 +53,13 @@ def segments(mask: np.ndarray, min_len: int = 1) -> list[tuple[int, int]]:
     """Runs of True in a boolean array as (start, end) with end exclusive, at least ``min_len`` long."""
     m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
     edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
     return [r for r in runs if r[1] - r[0] >= min_len]
 
 
 def foot_skating_ratio(joints: np.ndarray, fps: float = 20.0) -> float:
-    """Foot-skating ratio of the evaluation protocol (reference §8.3).
+    """Foot-skating ratio of the spatial-control evaluation (the "Foot Skating Ratio" of OmniControl
+    and ControlMM, Table 1 of "ControlMM: Controllable Masked Motion Generation", 2024).
 
     Feet = joints 10 and 11; v_t = planar speed (m/s) between t and t+1; v_bar = its 5-frame
     moving average (zero padded); a foot is in contact when its height is below 0.05 m at

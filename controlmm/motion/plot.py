@@ -52,7 +52,7 @@ def _setup_3d(ax, world: np.ndarray) -> None:
 
 def _draw_skeleton(ax, pose: np.ndarray, alpha: float = 1.0, lw: float = 2.0) -> list:
     artists = []
-    for chain, color in zip(KINEMATIC_CHAINS, _CHAIN_COLORS):
+    for chain, color in zip(KINEMATIC_CHAINS, _CHAIN_COLORS, strict=True):
         pts = pose[list(chain)]
         (line,) = ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, alpha=alpha, lw=lw)
         artists.append(line)
@@ -116,7 +116,7 @@ def render_motion_frames(motion: Motion, size: tuple[int, int] = (640, 480)) -> 
     label = ax.text2D(0.02, 0.95, "", transform=ax.transAxes, fontsize=8)
     try:
         for f in range(motion.num_frames):
-            for line, chain in zip(lines, KINEMATIC_CHAINS):
+            for line, chain in zip(lines, KINEMATIC_CHAINS, strict=True):
                 pts = world[f, list(chain)]
                 line.set_data_3d(pts[:, 0], pts[:, 1], pts[:, 2])
             trail.set_data_3d(world[: f + 1, 0, 0], world[: f + 1, 0, 1], np.zeros(f + 1))

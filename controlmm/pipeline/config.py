@@ -9,8 +9,10 @@ from typing import Any
 
 from controlmm.editing.presets import editing_preset
 from controlmm.errors import ControlMMError
+from controlmm.pipeline.clip import MAX_CLIP_SECONDS
 from controlmm.pipeline.feedback import FeedbackConfig
 from controlmm.seeds import check_seed
+from retarget.exports import parse_formats
 from sim.config import CheckConfig
 
 DEFAULT_SCENE = "table"
@@ -39,6 +41,15 @@ class PlanConfig:
         render: write ``render.mp4``; render_fps / render_size: its frame rate and (width, height).
         plots: write ``plots/*.png``.
         timeline: a body-part timeline spec (JSON path) instead of ``text`` (when supported).
+        motion: a recorded clip to edit instead of generating (any file of
+            ``controlmm.motion.load_motion``; :mod:`controlmm.pipeline.clip`); ``seconds`` then cuts it
+            (2 to 30 s from ``motion_start``) and only ``control`` given here constrains it.
+        motion_import: keyword arguments of ``load_motion`` for the clip (``up``, ``fps``, ``mapping``,
+            ``units``).
+        motion_start: where the edited window of the clip starts (s).
+        closeness_weight: weight of the term that keeps the edited motion on the clip.
+        formats: robot trajectory formats written beside ``robot.npz``/``robot.json``
+            (``retarget.exports``: lafan1, qpos, beyondmimic, gmr).
         feedback: how failures become loss terms.
         check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
     """
@@ -59,15 +70,22 @@ class PlanConfig:
     render_size: tuple[int, int] = (480, 360)
     plots: bool = True
     timeline: str | None = None
+    motion: str | None = None
+    motion_import: dict[str, Any] = field(default_factory=dict)
+    motion_start: float = 0.0
+    closeness_weight: float = 1.0
+    formats: tuple[str, ...] = ("lafan1",)
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
     check: CheckConfig = field(default_factory=CheckConfig)
 
     def __post_init__(self) -> None:
         if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
             raise ControlMMError(f"rounds must be a whole number from 0 to 10; got {self.rounds!r}")
-        if self.seconds is not None and not (math.isfinite(self.seconds) and 2.0 <= self.seconds <= 9.8):
+        longest = MAX_CLIP_SECONDS if self.motion is not None else 9.8
+        if self.seconds is not None and not (math.isfinite(self.seconds) and 2.0 <= self.seconds <= longest):
             raise ControlMMError(
-                f"seconds must be from 2 to 9.8 (40..196 frames at 20 fps); got {self.seconds}"
+                f"seconds must be from 2 to {longest:g} (40..{round(longest * 20)} frames at 20 fps); "
+                f"got {self.seconds}"
             )
         check_seed(self.seed)
         if not (math.isfinite(self.fps) and 10 <= self.fps <= 1000):
@@ -79,6 +97,13 @@ class PlanConfig:
         editing_preset(self.preset)  # an unknown preset fails here, naming the allowed ones
         if self.text is not None and self.timeline is not None:
             raise ControlMMError("give either a text prompt or a timeline, not both")
+        if self.motion is not None and self.timeline is not None:
+            raise ControlMMError("give either a motion to edit or a timeline, not both")
+        if not (math.isfinite(self.motion_start) and self.motion_start >= 0):
+            raise ControlMMError(f"motion start must be a time >= 0 s; got {self.motion_start}")
+        if not (math.isfinite(self.closeness_weight) and self.closeness_weight >= 0):
+            raise ControlMMError(f"closeness weight must be a number >= 0; got {self.closeness_weight}")
+        object.__setattr__(self, "formats", parse_formats(self.formats))
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)

@@ -37,7 +37,7 @@ of the editors' attention.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,7 +89,7 @@ def human_frames(
     return list(range(max(lo, 0), min(hi, num_frames - 1) + 1))
 
 
-def body_human_joints(body_joints: dict[str, Sequence[str]], body: str | None) -> list[int]:
+def body_human_joints(body_joints: Mapping[str, Sequence[str]], body: str | None) -> list[int]:
     """Human joint indices a robot body follows (the whole skeleton for None or an unknown body)."""
     if body is None or body not in body_joints:
         return list(range(len(JOINT_NAMES)))
@@ -100,7 +100,7 @@ def feedback_terms(
     failures: Sequence,
     previous: np.ndarray,
     *,
-    body_joints: dict[str, Sequence[str]],
+    body_joints: Mapping[str, Sequence[str]],
     transform: HumanToWorld,
     robot_fps: float,
     round_index: int,

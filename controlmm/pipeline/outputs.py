@@ -10,6 +10,8 @@ file                    content
 motion.npz              the human motion (HumanML3D joints and features, 20 fps, Y up) with the
                         control targets and errors (``controlmm.motion.load_motion``)
 robot.csv               one row per frame: root xyz, root quaternion xyzw, joint angles (rad)
+                        (``PlanConfig.formats``: lafan1, the default; also robot_qpos.csv,
+                        robot_beyondmimic.npz, robot.pkl: ``retarget.exports``)
 robot.npz               qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
 robot.json              the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
 report.json             the chosen round's simulation report (``passed``, penetrations, failures...)
@@ -20,6 +22,8 @@ plots/top_view.png      obstacles, paths, control targets and achieved positions
 plots/clearance.png     per-frame obstacle clearance and floor height of every round
 plots/report.png        the per-frame simulation report of the chosen round
 plots/motion.png        snapshots of the human motion
+plots/displacement.png  (a recorded clip) per frame: mean and largest joint distance to the clip
+source_motion.npz       (a recorded clip) the clip as imported (HumanML3D joints and features)
 plan.json               the settings of the run (to reproduce it)
 .controlmm-output.json  the files above: marks a plan output, which the next plan may replace
 ======================  =======================================================================
@@ -37,8 +41,10 @@ from pathlib import Path
 from controlmm.atomic import atomic_dir, write_text
 from controlmm.motion.io import save_motion
 from controlmm.motion.plot import plot_motion
+from controlmm.pipeline.clip import plot_displacement
 from controlmm.pipeline.plan import PlanResult
 from controlmm.pipeline.plots import plot_clearance, plot_top_view
+from retarget.exports import save_trajectory
 from retarget.render import render_trajectory
 from sim import plot_report
 
@@ -67,7 +73,9 @@ def write_plan(
     started = time.perf_counter()
     with atomic_dir(out, kind=PLAN_OUTPUT, force=force, make_parents=True) as tmp:
         save_motion(result.motion, tmp / "motion.npz")
-        result.trajectory.save(tmp / "robot")
+        save_trajectory(result.trajectory, tmp / "robot", config.formats)
+        if result.clip is not None:
+            save_motion(result.clip, tmp / "source_motion.npz")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
         if config.plots:
             plots = tmp / "plots"
@@ -77,6 +85,10 @@ def write_plan(
             title = f"{result.scene.name}: {result.text[:80]}"
             plot_report(result.report, plots / "report.png", title=title)
             plot_motion(result.motion, plots / "motion.png")
+            if result.clip is not None:
+                plot_displacement(
+                    result.displacements(), result.best, str(plots / "displacement.png"), result.reconstructed
+                )
         if render:
             width, height = config.render_size
             backend = render_trajectory(

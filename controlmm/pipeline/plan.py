@@ -16,6 +16,10 @@ Every later round adds the feedback terms of the failures found so far
 stops at the first round that passes with every constraint within 2 cm (one more editing round when a
 passing round misses a constraint) or after ``rounds`` feedback rounds; the result is the best round:
 passing first, then meeting the constraints, then the fewest failing frames.
+
+With ``PlanConfig(motion=FILE)`` round 0 edits a recorded clip instead of generating: its tokens
+are codebook-edited against the same losses plus a closeness term (:mod:`controlmm.pipeline.clip`),
+and every round reports how far the joints moved from the clip.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.generate import MotionModel, generate_controlled, load_model
 from controlmm.motion.container import Motion
+from controlmm.pipeline.clip import ClipEditor, Displacement, closeness_term, displacement, load_clip
 from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
@@ -46,7 +51,9 @@ from scenes import Scene, load_scene, scene_loss_terms
 from sim import Report, check_trajectory, make_world
 
 CONSTRAINT_TOLERANCE_M = 0.02
-"""A round meets its constraints when every one is within this (the control issue's check: 2 cm)."""
+"""A round meets its constraints when every one is within this (2 cm)."""
+_DEFAULT_CONFIG = PlanConfig()
+"""What :func:`plan` plans when given no config: the defaults of :class:`PlanConfig` (frozen)."""
 
 
 @dataclass
@@ -108,6 +115,8 @@ class PlanResult:
     best: int
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    clip: Motion | None = None  # the recorded clip a --motion plan edited
+    reconstructed: Displacement | None = None  # the clip's tokens alone against the clip
     timing: StageTimes = field(default_factory=StageTimes)
 
     @property
@@ -129,6 +138,12 @@ class PlanResult:
     @property
     def report(self) -> Report:
         return self.final.report
+
+    def displacements(self) -> list[tuple[int, Displacement]]:
+        """(round, joint displacement from the clip) of every round; empty without a clip."""
+        if self.clip is None:
+            return []
+        return [(r.index, displacement(r.motion.joints, self.clip.joints)) for r in self.rounds]
 
     def to_dict(self) -> dict[str, Any]:
         """``report.json``: the chosen round's simulation report plus the plan and every round."""
@@ -154,6 +169,18 @@ class PlanResult:
         }
         out["rounds"] = [r.to_dict() for r in self.rounds]
         out["timing"] = self.timing.to_dict()
+        if self.clip is not None:
+            moved = dict(self.displacements())
+            out["clip"] = {
+                "source": self.config.motion,
+                "import": self.clip.metadata.get("import"),
+                "frames": self.clip.num_frames,
+                "closeness_weight": self.config.closeness_weight,
+                "tokens_only": self.reconstructed.to_dict(per_frame=False) if self.reconstructed else None,
+                "displacement": moved[self.best].to_dict(),
+            }
+            for r in out["rounds"]:
+                r["clip_displacement"] = moved[r["round"]].to_dict(per_frame=False)
         return out
 
 
@@ -167,9 +194,13 @@ def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, 
         spec = ControlSpec.from_dict(config.control)
     elif config.control is not None:
         spec = ControlSpec.load(config.control)
-    elif config.text is None and config.timeline is None and scene.suggested_control:
+    elif (
+        config.text is None and config.timeline is None and config.motion is None and scene.suggested_control
+    ):
         spec = ControlSpec.from_dict(scene.suggested_control)
     text = config.text if config.text is not None else scene.suggested_prompt
+    if config.motion is not None and config.text is None:
+        text = f"recorded clip {config.motion}"
     if config.timeline is not None:
         timeline = as_timeline(config.timeline)  # a bad spec fails here, before any model is loaded
         text = "; ".join(f"{t.part} {t.start:g}-{t.end:g} s: {t.prompt}" for t in timeline.tracks)
@@ -179,7 +210,7 @@ def resolve_inputs(config: PlanConfig) -> tuple[Scene, str, ControlSpec | None, 
 
 
 def plan(
-    config: PlanConfig | None = None,
+    config: PlanConfig = _DEFAULT_CONFIG,
     *,
     model: MotionModel | None = None,
     progress: bool = True,
@@ -188,7 +219,7 @@ def plan(
     """Plan a robot motion in a scene (see the module docstring).
 
     Args:
-        config: what to plan (default: ``PlanConfig()``, the bundled example).
+        config: what to plan.
         model: a loaded :class:`controlmm.models.MotionModel` (default: load ``config.model``).
         progress: progress bars and one line per stage on stderr.
         log: where stage lines go (default stderr); None with ``progress=False`` silences them.
@@ -196,15 +227,21 @@ def plan(
     ``result.timing`` holds the wall seconds of every stage (:mod:`controlmm.pipeline.timing`).
     """
     start = time.perf_counter()
-    config = PlanConfig() if config is None else config
     timing = StageTimes(origin=start)
     say = _logger(progress, log)
     scene, text, spec, transform = resolve_inputs(config)
+    clip = (
+        load_clip(config.motion, config.motion_import, config.motion_start, config.seconds)
+        if config.motion is not None
+        else None
+    )
     error = start_pose_error(scene)
     if error:
         raise ControlMMError(error)
     sdf = scene.sdf() if scene.obstacle_geom_ids else None
     warnings = constraint_warnings(spec, transform, sdf) if spec else []
+    if clip is not None and clip.metadata.get("window_note"):
+        warnings.insert(0, str(clip.metadata["window_note"]))
     for w in warnings:
         print(f"controlmm: warning: {w}", file=sys.stderr)
     if model is None:
@@ -212,13 +249,15 @@ def plan(
         model = load_model(config.model)
     body_joints: dict[str, Sequence[str]] = dict(load_robot(config.robot).body_joints)
     base_terms = scene_loss_terms(scene, transform, safe_distance=config.safe_distance_m)
+    editor = ClipEditor(model, clip) if clip is not None else None
+    if clip is not None:
+        base_terms.append(closeness_term(clip.joints, weight=config.closeness_weight))
     world = make_world(scene)
     editing = editing_preset(config.preset)
     extra: list[LossTerm] = []
     history: dict = {}  # feedback margins per robot body, across rounds
     rounds: list[PlanRound] = []
-    latent: torch.Tensor | None = None
-    motion: Motion | None = None
+    latent: torch.Tensor | None = None  # the edited decoder latent of the last round (not with a timeline)
     timing.add("startup", time.perf_counter() - start)
     for index in range(config.rounds + 1):
         terms = base_terms + extra
@@ -226,17 +265,26 @@ def plan(
         t0 = time.perf_counter()
         if config.timeline is not None:  # a timeline is regenerated whole, its passes minimising every term
             say(f"round {index}: generating the timeline ({len(terms)} loss terms, preset {editing.name})")
-            motion, errors, record = _timeline(model, config, config.timeline, terms, transform, editing)
+            motion, errors, record = _timeline(model, config.timeline, config.seed, terms, transform, editing)
             phases = {"timeline": time.perf_counter() - t0}
+        elif editor is not None:
+            what = "the clip's tokens" if index == 0 else f"the clip with {len(extra)} feedback terms"
+            say(f"round {index}: codebook editing {what} ({len(terms)} loss terms, preset {editing.name})")
+            start_latent = editor.latent if index == 0 else latent
+            assert start_latent is not None  # round 0 set it
+            edited = editor.edit(
+                start_latent, spec, transform, terms, editing, text, metadata=editor.clip.metadata
+            )
+            motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
+            phases = edited.seconds or {"codebook_editing": time.perf_counter() - t0}
         elif index == 0:
             say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
             motion, errors, record, latent, phases = _generate(
                 model, config, text, spec, terms, transform, editing
             )
         else:
-            if latent is None or motion is None:  # round 0 generated both
-                raise RuntimeError("a feedback round needs the previous round's latent")
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
+            assert latent is not None  # round 0 set it (rounds without a timeline)
             edited = edit_motion(
                 model,
                 latent,
@@ -253,7 +301,10 @@ def plan(
         timer["generate"] = time.perf_counter() - t0
         timer.update(phases)
         t0 = time.perf_counter()
-        traj = retarget_motion(motion, robot=config.robot, fps=config.fps, transform=transform)
+        # check_scale off: a wrongly sized motion is the generator's failure, which the checks report
+        traj = retarget_motion(
+            motion, robot=config.robot, fps=config.fps, transform=transform, check_scale=False
+        )
         timer["retarget"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         report = check_trajectory(world, traj, config=config.check)
@@ -267,6 +318,9 @@ def plan(
             timing.add("feedback_rounds", timer["generate"] + timer["retarget"] + timer["check"])
         blocking = report.errors  # warnings (brief dynamic spikes) do not fail a round
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
+        if clip is not None:
+            moved = displacement(motion.joints, clip.joints)
+            worst += f", joints {moved.mean_m * 100:.1f} cm from the clip (max {moved.max_m * 100:.1f})"
         say(
             f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
             f"in {timer['generate'] + timer['retarget'] + timer['check']:.1f} s"
@@ -309,6 +363,8 @@ def plan(
         best=best,
         warnings=warnings,
         seconds=time.perf_counter() - start,
+        clip=clip,
+        reconstructed=editor.tokens_only() if editor is not None else None,
         timing=timing,
     )
 
@@ -361,17 +417,18 @@ def _generate(
 
 def _timeline(
     model: MotionModel,
-    config: PlanConfig,
     timeline: str,
+    seed: int,
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
 ) -> tuple[Motion, list[float], dict[str, Any]]:
-    """A body-part timeline (``controlmm.timeline``) generated with the loss terms in every pass."""
+    """A body-part timeline (``controlmm.timeline``, a JSON path) generated with the loss terms in
+    every pass."""
     motion, info = generate_timeline(
         model,
         as_timeline(timeline),
-        seed=config.seed,
+        seed=seed,
         preset=editing,
         terms=terms,
         transform=transform,

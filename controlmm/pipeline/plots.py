@@ -1,8 +1,8 @@
 """Pictures of a plan: the path against the obstacles, and the clearance of every round.
 
 * :func:`plot_top_view` - world top view: obstacle footprints (:func:`scenes.footprint.footprints`
-  at the heights the body reaches), the robot's pelvis and feet paths, the human hands, the control targets and
-  where the joints ended up, the start pose.
+  at the heights the body reaches), the robot's pelvis and feet paths, the human hands, the control
+  targets and where the joints ended up, the start pose.
 * :func:`plot_clearance` - per frame and per round: the robot's smallest distance to an obstacle
   (negative = penetration) and the lowest robot point above the floor, with the tolerances.
 """
@@ -63,7 +63,7 @@ def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
     if result.spec is not None:
         targets = result.spec.human_positions(result.transform)
         tw = result.transform.to_world(targets.astype(np.float64))
-        for c, target in zip(result.spec.constraints, tw):
+        for c, target in zip(result.spec.constraints, tw, strict=True):
             got = world_joints[min(c.frame, len(world_joints) - 1), c.joint]
             ax.plot([target[0]], [target[1]], "x", color="black", ms=9, mew=2)
             ax.plot([got[0]], [got[1]], "o", mfc="none", color="black", ms=8)
@@ -89,7 +89,8 @@ def plot_top_view(result, path: str | os.PathLike[str], dpi: int = 110) -> None:
         xlabel="x (m)",
         ylabel="y (m)",
         aspect="equal",
-        title=f"{scene.name}: {'PASSED' if result.passed else 'FAILED'} (round {result.best}) - {result.text[:70]}",
+        title=f"{scene.name}: {'PASSED' if result.passed else 'FAILED'} (round {result.best}) - "
+        f"{result.text[:70]}",
     )
     ax.legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()

@@ -6,7 +6,7 @@ the official MoMask/ControlMM text features) is used when its weights are on dis
 uses is its :class:`TextEncoderConfig` (``model.json``).
 """
 
-from controlmm.text.base import TextEncoder, check_texts
+from controlmm.text.base import TextEncoder, TokenTextEncoder, check_texts
 from controlmm.text.cache import CaptionEmbeddings, embed_captions
 from controlmm.text.config import TextEncoderConfig
 from controlmm.text.load import load_text_encoder
@@ -15,6 +15,7 @@ __all__ = [
     "CaptionEmbeddings",
     "TextEncoder",
     "TextEncoderConfig",
+    "TokenTextEncoder",
     "check_texts",
     "embed_captions",
     "load_text_encoder",

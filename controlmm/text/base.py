@@ -34,6 +34,15 @@ class TextEncoder(Protocol):
         ...
 
 
+@runtime_checkable
+class TokenTextEncoder(TextEncoder, Protocol):
+    """A :class:`TextEncoder` that also gives the token states its sentence vectors pool (MiniLM)."""
+
+    def encode_tokens(self, texts: Sequence[str], max_tokens: int) -> torch.Tensor:
+        """(B,) sentences -> (B, L, dim) float32 token states, zero rows padding, L <= ``max_tokens``."""
+        ...
+
+
 def check_texts(texts: Sequence[str]) -> list[str]:
     """The texts as a list of strings; one-line error for an empty or non-string entry."""
     if isinstance(texts, str):

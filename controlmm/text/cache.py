@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from controlmm.atomic import atomic_path
 from controlmm.errors import ControlMMError
-from controlmm.text.base import TextEncoder
+from controlmm.text.base import TextEncoder, TokenTextEncoder
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,11 @@ def embed_captions(
     the longest (``encoder.encode_tokens``); stored as float16 on disk (they are large), float32 here.
     """
     unique = tuple(dict.fromkeys(captions))
+    token_encoder = None
+    if tokens:
+        if not isinstance(encoder, TokenTextEncoder):
+            raise ControlMMError(f"text encoder '{encoder.name}' gives no token states (tokens={tokens})")
+        token_encoder = encoder
     path = None
     if cache_dir is not None:
         kind = f"{encoder.name}-tok{tokens}" if tokens else encoder.name
@@ -65,16 +70,15 @@ def embed_captions(
                     return CaptionEmbeddings(unique, vectors.float())
             except Exception:  # noqa: BLE001 - a bad cache is recomputed
                 pass
-    token_states = getattr(encoder, "encode_tokens", None)
-    if tokens and token_states is None:
-        raise ControlMMError(f"text encoder '{encoder.name}' has no token states (tokens={tokens})")
     chunks = []
     starts = range(0, len(unique), batch_size)
     for start in tqdm(
         starts, desc=f"text embeddings ({encoder.name})", unit="batch", disable=not progress, leave=False
     ):
         texts = list(unique[start : start + batch_size])
-        chunks.append(token_states(texts, tokens) if token_states and tokens else encoder.encode(texts))
+        chunks.append(
+            token_encoder.encode_tokens(texts, tokens) if token_encoder is not None else encoder.encode(texts)
+        )
     if tokens:
         length = max((c.shape[1] for c in chunks), default=1)
         vectors = torch.zeros(len(unique), length, encoder.dim)

@@ -17,13 +17,16 @@ import numpy as np
 import torch
 
 from controlmm.atomic import atomic_path
-from controlmm.errors import InputFileError
+from controlmm.errors import ControlMMError, InputFileError
 from controlmm.files import load_torch
 
 
 def rng_state() -> dict[str, Any]:
     """Every RNG's state as tensors and plain containers (loadable with ``weights_only=True``)."""
-    kind, keys, pos, has_gauss, gauss = np.random.get_state(legacy=True)
+    legacy = np.random.get_state(legacy=True)
+    if not isinstance(legacy, tuple):  # a dict only when the global generator is not MT19937
+        raise ControlMMError("numpy's global random generator is not MT19937; its state cannot be saved")
+    kind, keys, pos, has_gauss, gauss = legacy
     numpy_state = (kind, torch.from_numpy(keys.astype(np.int64)), int(pos), int(has_gauss), float(gauss))
     state = {"python": random.getstate(), "numpy": numpy_state, "torch": torch.get_rng_state()}
     if torch.cuda.is_available():

@@ -1,7 +1,8 @@
-"""Stage ``control``: masked consistency training of the motion control model (ControlMM §3.2).
+"""Stage ``control``: masked consistency training of the motion control model (ControlMM paper, §3.2).
 
 One step on a batch of captioned clips (normalised motion X, lengths m), base transformer and
-tokenizer frozen (reference §4.3):
+tokenizer frozen (as the official MaskControl ``ControlTransformer.forward``,
+https://github.com/exitudio/MaskControl, except where noted):
 
 1. tokens: base-layer ids of the frozen tokenizer; targets S = R(denorm(X)) (global joints);
 2. a control mask sigma (B, T, 22): ``trajectory`` (pelvis), ``random`` (one control joint),
@@ -11,7 +12,8 @@ tokenizer frozen (reference §4.3):
 4. the current motion estimate: codebook vectors of the corrupted ids, ``mask_emb_vq`` at [MASK]
    and pads, decoded by the frozen decoder (Paper A.8) -> the control input;
 5. logits of the base transformer steered by the control branch (text dropped with probability
-   ``cond_drop``, as the paper states; the released code never drops it, reference §11.6);
+   ``cond_drop``, as the paper states; the released code never drops it: its control training puts the
+   top-level module in eval mode, and its condition dropout checks that module's ``training`` flag);
 6. cross-entropy on every non-pad position;
 7. consistency loss: a differentiable estimate of the tokens mapped to codebook space,
    e = p C_0, decoded by the frozen decoder, joints recovered by the differentiable R(.), L1 error on
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -60,8 +62,9 @@ class ControlTraining:
     mode: control sampling: ``trajectory`` (pelvis), ``random`` (one control joint per sample),
         ``cross`` (random (frame, joint) pairs), ``mixed`` (each sample one of the three).
     density: number of controlled frames per sample: ``uniform`` = round(U(0, 1) x 196) clamped to
-        1..196 (the released code, reference §11.19); ``mixed`` = that or, with probability 1/2,
-        log-uniform over 1..m (sparse keyframes as often as dense trajectories).
+        1..196 whatever the clip's length (the released code; short clips are often fully controlled);
+        ``mixed`` = that or, with probability 1/2, log-uniform over 1..m (sparse keyframes as often as
+        dense trajectories).
     cond_drop: probability of training with the empty text (the CFG unconditional pass).
     """
 
@@ -101,7 +104,8 @@ def sample_control_mask(
     density: str = "uniform",
     generator: torch.Generator | None = None,
 ) -> torch.Tensor:
-    """Random control masks (B, num_frames, 22) bool for clips of ``lengths`` frames (reference §4.3).
+    """Random control masks (B, num_frames, 22) bool for clips of ``lengths`` frames (the released
+    code's training modes, step 2 of the module docstring).
 
     Frames are drawn among each clip's valid frames; see :class:`ControlTraining` for the modes.
     """
@@ -172,7 +176,7 @@ class ControlLoss(nn.Module):
         frame_lengths: torch.Tensor,
         generator: torch.Generator | None = None,
         hard_error: bool = False,
-    ):
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Loss and metrics for base ids (B, N), target joints (B, 4N, 22, 3), text (B, text_dim).
 
         Returns (loss, metrics) with ``ce``, ``acc``, ``ctrl`` (L1, m) and, with ``hard_error``,
@@ -188,7 +192,7 @@ class ControlLoss(nn.Module):
         sigma = sample_control_mask(
             frame_lengths, num_frames, self.control.joint_ids, s.mode, s.density, generator
         ).to(device)
-        # masking with the cosine schedule and BERT corruption (reference §4.3 step 4)
+        # masking with the cosine schedule and BERT corruption (step 3 of the module docstring)
         ratio = cosine_schedule(torch.rand(b, device=device, generator=generator))
         num_masked = (n * ratio).round().clamp(min=1)
         order = torch.rand(b, n, device=device, generator=generator).argsort(dim=-1)
@@ -269,7 +273,7 @@ class ControlStage(TextConditionedStage):
             )
         self.settings = ControlTraining(**{k: v for k, v in opts.items() if v is not None})
         self._set_control_config(replace(ctx.config.control, joints=joints))
-        self.base_transformer = ctx.base.transformer.eval()
+        self.base_transformer = ctx.trained_parts().transformer.eval()
 
     def _set_control_config(self, control: ControlConfig) -> None:
         """Use ``control`` for the branch (written to model.json by :meth:`create`)."""
@@ -292,7 +296,13 @@ class ControlStage(TextConditionedStage):
         return MotionControlModel(self.ctx.config).init_from_base(self.base_transformer)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return ControlLoss(model, self.base_transformer, self.tokenizer, self.ctx.normalizer, self.settings)
+        return ControlLoss(
+            cast(MotionControlModel, model),
+            self.base_transformer,
+            self.tokenizer,
+            self.ctx.normalizer,
+            self.settings,
+        )
 
     def targets(self, motion: torch.Tensor) -> torch.Tensor:
         """(B, T, 263) normalised motions -> (B, T, 22, 3) global joints (the control targets)."""

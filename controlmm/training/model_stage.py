@@ -58,6 +58,12 @@ class StageContext:
     resume: bool = False
     new_manifest: dict[str, Any] | None = None  # model.json to write: this run creates the directory
 
+    def trained_parts(self) -> MotionModel:
+        """``base``: the parts earlier stages trained (a stage that ``requires`` none has no ``base``)."""
+        if self.base is None:
+            raise ControlMMError(f"model directory '{self.model_dir}' was opened without its trained parts")
+        return self.base
+
 
 class ModelStage(Stage[StageContext]):
     """One part of a model directory; ``requires`` names the parts it is trained on (none: it creates

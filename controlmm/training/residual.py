@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 from torch import nn
 
@@ -15,7 +17,10 @@ class ResidualLoss(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, ids, cond, lengths):
+    def forward(
+        self, ids: torch.Tensor, cond: torch.Tensor, lengths: torch.Tensor
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Cross-entropy of the residual layers of (B, N, Q) ``ids``; (loss, metrics)."""
         loss, acc = self.model.residual_loss(ids, cond, lengths)
         return loss, {"loss": loss.detach(), "acc": acc.detach()}
 
@@ -27,14 +32,15 @@ class ResidualStage(TextConditionedStage):
         return ResidualTransformer(self.ctx.config.residual)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return ResidualLoss(model)
+        return ResidualLoss(cast(ResidualTransformer, model))
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
         gen = torch.Generator(self.ctx.device).manual_seed(VALIDATION_SEED + 3)
         total, acc_sum, n = 0.0, 0.0, 0
+        residual = cast(ResidualTransformer, model)
         for ids, cond, lengths in self.val_batches():
-            loss, acc = model.residual_loss(ids, cond, lengths, generator=gen)
+            loss, acc = residual.residual_loss(ids, cond, lengths, generator=gen)
             total += float(loss) * len(ids)
             acc_sum += float(acc) * len(ids)
             n += len(ids)

@@ -9,7 +9,7 @@ start at the origin); the share of base-layer codes in use.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import torch
 import torch.nn.functional as F
@@ -47,7 +47,8 @@ class TokenizerLoss(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, x: torch.Tensor):
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Reconstruction loss of (B, T, 263) normalised windows; (loss, metrics)."""
         recon, commit, perplexity, _ = self.model(x)
         loss = reconstruction_loss(recon, x, commit)
         return loss, {"loss": loss.detach(), "commit": commit.detach(), "perplexity": perplexity.detach()}
@@ -70,11 +71,11 @@ class TokenizerStage(ModelStage):
     def build_model(self) -> nn.Module:
         return RVQVAE(self.ctx.config.tokenizer)
 
-    def train_dataset(self):
+    def train_dataset(self) -> WindowDataset:
         return WindowDataset(self.train_motions, self.ctx.normalizer, self.window, seed=self.ctx.seed)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return TokenizerLoss(model)
+        return TokenizerLoss(cast(RVQVAE, model))
 
     def prepare(self, batch: Any) -> tuple:
         return (batch.to(self.ctx.device, non_blocking=True),)
@@ -103,11 +104,11 @@ class TokenizerStage(ModelStage):
         }
 
     def extra_state(self, model: nn.Module) -> dict[str, Any]:
-        return {"ema": model.quantizer.ema_state()}
+        return {"ema": cast(RVQVAE, model).quantizer.ema_state()}
 
     def load_extra_state(self, model: nn.Module, state: dict[str, Any]) -> None:
         if "ema" in state:
-            model.quantizer.load_ema_state(state["ema"])
+            cast(RVQVAE, model).quantizer.load_ema_state(state["ema"])
 
     def record(self) -> dict[str, Any]:
         return {

@@ -9,8 +9,9 @@ fixed crops and masks.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch import nn
@@ -35,7 +36,8 @@ class TextConditionedStage(ModelStage):
         self.train_samples = data.text_samples("train", progress=ctx.progress)
         self.val_samples = data.text_samples("val", progress=ctx.progress)
         captions = [c for s in self.train_samples + self.val_samples for c in s.captions]
-        encoder = ctx.base.text_encoder
+        base = ctx.trained_parts()
+        encoder = base.text_encoder
         emb = embed_captions(
             encoder,
             captions,
@@ -50,10 +52,10 @@ class TextConditionedStage(ModelStage):
             )
         self.caption_index = emb.index
         self.text_vectors = emb.vectors.to(ctx.device)
-        self.tokenizer = ctx.base.tokenizer.eval()
+        self.tokenizer = base.tokenizer.eval()
         self.unit = ctx.config.tokenizer.downsample
 
-    def train_dataset(self):
+    def train_dataset(self) -> TextMotionDataset:
         return TextMotionDataset(
             self.train_samples, self.ctx.normalizer, self.caption_index, unit=self.unit, seed=self.ctx.seed
         )
@@ -72,7 +74,8 @@ class TextConditionedStage(ModelStage):
         ids = self.tokens(motion)
         return ids, self.text_vectors[caption.to(self.ctx.device)], (lengths // self.unit).to(self.ctx.device)
 
-    def val_batches(self, batch_size: int = 64):
+    def val_batches(self, batch_size: int = 64) -> Iterator[tuple]:
+        """The val split's batches, as :meth:`prepare` gives them (fixed crops and captions)."""
         val = TextMotionDataset(
             self.val_samples,
             self.ctx.normalizer,
@@ -98,7 +101,10 @@ class MaskedLoss(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, ids, cond, lengths):
+    def forward(
+        self, ids: torch.Tensor, cond: torch.Tensor, lengths: torch.Tensor
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Masked-token cross-entropy on the base-layer ids of (B, N, Q) ``ids``; (loss, metrics)."""
         loss, acc = self.model.masked_loss(ids[..., 0], cond, lengths)
         return loss, {"loss": loss.detach(), "acc": acc.detach()}
 
@@ -110,14 +116,15 @@ class TransformerStage(TextConditionedStage):
         return MaskTransformer(self.ctx.config.transformer)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return MaskedLoss(model)
+        return MaskedLoss(cast(MaskTransformer, model))
 
     @torch.no_grad()
     def validate(self, model: nn.Module) -> dict[str, float]:
         gen = torch.Generator(self.ctx.device).manual_seed(VALIDATION_SEED + 2)
         total, acc_sum, n = 0.0, 0.0, 0
+        transformer = cast(MaskTransformer, model)
         for ids, cond, lengths in self.val_batches():
-            loss, acc = model.masked_loss(ids[..., 0], cond, lengths, generator=gen)
+            loss, acc = transformer.masked_loss(ids[..., 0], cond, lengths, generator=gen)
             total += float(loss) * len(ids)
             acc_sum += float(acc) * len(ids)
             n += len(ids)
@@ -136,7 +143,8 @@ class TokenTransformerStage(TransformerStage):
     configuration has one) are copied before training; the attention layers start fresh
     (:data:`WARM_START_SKIP`). Layers of their own keep more of the second view's own errors, which is
     what the ensemble gains from (held-out probes: 77.2 % with fresh layers, 76.5 % with every layer
-    copied; docs/BENCHMARKS.md).
+    copied; docs/benchmarks-history.md, "The shippable form: a token-state transformer beside the
+    sentence-vector one").
     """
 
     name = "token_transformer"
@@ -156,7 +164,7 @@ class TokenTransformerStage(TransformerStage):
 
     def build_model(self) -> nn.Module:
         model = super().build_model()
-        return warm_start(model, self.ctx.base.transformer, skip=WARM_START_SKIP)
+        return warm_start(model, self.ctx.trained_parts().transformer, skip=WARM_START_SKIP)
 
 
 WARM_START_SKIP = ("seqTransEncoder.",)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from torch.autograd.function import once_differentiable
+from torch.autograd.function import BackwardCFunction, FunctionCtx, once_differentiable
 
 from controlmm.errors import ShapeError
 
@@ -45,13 +45,6 @@ def cylinder_distance(x: Tensor, y: Tensor, z: Tensor, half_height: Tensor, radi
     inside = torch.maximum(radial, axial).clamp_max_(0)
     radial, axial = radial.clamp_min_(0), axial.clamp_min_(0)
     return radial.square_().addcmul_(axial, axial).sqrt_().add_(inside)
-
-
-def norm3(v: Tensor) -> Tensor:
-    """Euclidean norm over axis 1 of length 3, (L, 3, ...) -> (L, ...), by components (torch's
-    reductions over a short axis that is not the last one are slow)."""
-    x, y, z = v.unbind(1)
-    return (x * x).addcmul_(y, y).addcmul_(z, z).sqrt_()
 
 
 def round_gradient(p: Tensor, box: Tensor, disk: Tensor) -> Tensor:
@@ -106,13 +99,13 @@ class WithGradient(torch.autograd.Function):
     """``value`` as a function of ``points`` with the given ``gradient`` (..., N, 3) (first order)."""
 
     @staticmethod
-    def forward(ctx, points: Tensor, value: Tensor, gradient: Tensor) -> Tensor:
+    def forward(ctx: FunctionCtx, points: Tensor, value: Tensor, gradient: Tensor) -> Tensor:
         ctx.save_for_backward(gradient)
         return value.clone()
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, grad_out: Tensor):
+    def backward(ctx: BackwardCFunction, grad_out: Tensor) -> tuple[Tensor, None, None]:
         (gradient,) = ctx.saved_tensors
         return grad_out[..., None] * gradient, None, None
 

@@ -145,10 +145,6 @@ class MeshSDF:
         self.is_hull = False
         self._cache: dict[tuple[torch.dtype, torch.device], dict[str, Tensor]] = {}
 
-    @property
-    def num_triangles(self) -> int:
-        return len(self.faces)
-
     def bounds(self) -> np.ndarray:
         """(2, 3) min and max corner of the mesh (local frame)."""
         return np.stack([self.vertices.min(0), self.vertices.max(0)])
@@ -164,11 +160,11 @@ class MeshSDF:
                 "normals": torch.as_tensor(self.normals, dtype=dtype, device=device),
                 "centre": torch.as_tensor(g.centre, dtype=dtype, device=device),
                 "half": torch.as_tensor(g.half, dtype=dtype, device=device),
-                "shape": torch.as_tensor(g.shape, device=like.device),
-                "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=like.device).reshape(-1),
-                "ring": torch.as_tensor(self.ring.T.copy(), device=like.device),  # (K, F)
+                "shape": torch.as_tensor(g.shape, device=device),
+                "nearest": torch.as_tensor(g.nearest.astype(np.int64), device=device).reshape(-1),
+                "ring": torch.as_tensor(self.ring.T.copy(), device=device),  # (K, F)
                 "corners": torch.tensor(
-                    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], device=like.device
+                    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], device=device
                 ),
             }
         return self._cache[key]

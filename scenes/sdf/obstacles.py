@@ -90,6 +90,12 @@ class ObstacleGeom:
     def kind(self) -> int:
         return KIND[self.type_name]
 
+    def mesh_sdf(self) -> MeshSDF:
+        """The :class:`MeshSDF` of a mesh or height-field geom (an error for any other kind)."""
+        if self.mesh is None:
+            raise RuntimeError(f"geom {self.geom_id} ({self.type_name}) has no mesh SDF")
+        return self.mesh
+
 
 def make_geom(
     model: mujoco.MjModel,
@@ -177,42 +183,44 @@ def geom_constants(
 
     ``geoms`` sorted by kind, ``slices``: kind -> its columns; BOX and CYLINDER come first.
     """
-    to = dict(dtype=like.dtype, device=like.device)
+    device = like.device
+
+    def floats(values: np.ndarray) -> Tensor:  # in like's dtype and device
+        return torch.as_tensor(values, dtype=like.dtype, device=device)
+
     num_round = slices[CYLINDER].stop
     box, disk, ball = np.zeros((len(geoms), 3)), np.zeros(len(geoms)), np.zeros(len(geoms))
     for i, geom in enumerate(geoms[:num_round]):
         box[i], disk[i], ball[i] = primitives.round_params(geom.type_name, geom.size)
     axes = np.array([geom.size for geom in geoms[slices[ELLIPSOID]]]).reshape(-1, 3)
-    spheres = [geom.mesh.bounding_sphere() for geom in geoms[slices[MESH]]]
+    spheres = [geom.mesh_sdf().bounding_sphere() for geom in geoms[slices[MESH]]]
     moving = [i for i, geom in enumerate(geoms) if geom.track >= 0]
     c = {
-        "rot": torch.as_tensor(np.array([geom.rot for geom in geoms]).reshape(-1, 3, 3), **to),
-        "pos": torch.as_tensor(np.array([geom.pos for geom in geoms]).reshape(-1, 3), **to),
-        "box": torch.as_tensor(box, **to),
-        "disk": torch.as_tensor(disk, **to),
-        "ball": torch.as_tensor(ball, **to),
-        "axes": torch.as_tensor(axes, **to),
-        "axes_max": torch.as_tensor(axes.max(-1) if len(axes) else np.zeros(0), **to),
-        "mesh_centre": torch.as_tensor(np.array([s[0] for s in spheres]).reshape(-1, 3), **to),
-        "mesh_radius": torch.as_tensor(np.array([s[1] for s in spheres]), **to),
-        "moving": torch.as_tensor(moving, dtype=torch.long, device=like.device),
-        "moving_track": torch.as_tensor(
-            [geoms[i].track for i in moving], dtype=torch.long, device=like.device
-        ),
+        "rot": floats(np.array([geom.rot for geom in geoms]).reshape(-1, 3, 3)),
+        "pos": floats(np.array([geom.pos for geom in geoms]).reshape(-1, 3)),
+        "box": floats(box),
+        "disk": floats(disk),
+        "ball": floats(ball),
+        "axes": floats(axes),
+        "axes_max": floats(axes.max(-1) if len(axes) else np.zeros(0)),
+        "mesh_centre": floats(np.array([s[0] for s in spheres]).reshape(-1, 3)),
+        "mesh_radius": floats(np.array([s[1] for s in spheres])),
+        "moving": torch.as_tensor(moving, dtype=torch.long, device=device),
+        "moving_track": torch.as_tensor([geoms[i].track for i in moving], dtype=torch.long, device=device),
         # kind-sorted position of each geom_ids column
         "order": torch.as_tensor(
-            np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=like.device
+            np.argsort([geom.column for geom in geoms]), dtype=torch.long, device=device
         ),
     }
     sb, sc = slices[BOX], slices[CYLINDER]
     c["box_half"], c["box_ball"] = c["box"][sb, :, None].contiguous(), c["ball"][sb, None].contiguous()
     c["cyl_half"], c["cyl_radius"] = c["box"][sc, 2:].contiguous(), c["disk"][sc, None].contiguous()
-    c["closest_column"] = (torch.arange(len(geoms), device=like.device) - num_round).clamp_min(0)
+    c["closest_column"] = (torch.arange(len(geoms), device=device) - num_round).clamp_min(0)
     rot_t = c["rot"].transpose(-1, -2)
     c["table"] = torch.cat(
         [rot_t.reshape(-1, 9), c["pos"], c["box"], c["disk"][:, None]], dim=1
     ).T.contiguous()
-    c["frames"] = kernels.stack_frames(rot_t[None], c["pos"][None])
+    c["frames_weight"], c["frames_bias"] = kernels.stack_frames(rot_t[None], c["pos"][None])
     return c
 
 

@@ -25,6 +25,8 @@ and float64 on any device. The formulas are the ones checked against ``mj_geomDi
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import torch
 
 Tensor = torch.Tensor
@@ -82,7 +84,7 @@ def sdf_round(p: Tensor, box: Tensor, disk: Tensor, ball: Tensor) -> Tensor:
     return _norm(w.clamp_min(0)) + w.amax(dim=-1).clamp_max(0) - ball
 
 
-def round_params(geom_type: str, size) -> tuple[tuple[float, float, float], float, float]:
+def round_params(geom_type: str, size: Iterable[float]) -> tuple[tuple[float, float, float], float, float]:
     """(box half-extents, disk radius, ball radius) of :func:`sdf_round` for a MuJoCo sphere,
     capsule, cylinder or box of ``geom_size`` ``size``."""
     s = [float(v) for v in size]

@@ -153,10 +153,6 @@ class SceneSDF:
     # -- public surface ---------------------------------------------------------------------------
 
     @property
-    def num_geoms(self) -> int:
-        return len(self.geom_ids)
-
-    @property
     def is_moving(self) -> bool:
         return bool(self._tracks)
 
@@ -203,17 +199,17 @@ class SceneSDF:
             value = torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
             return value, torch.zeros_like(points) if gradient else None
         c = self._tensors(points)
-        grad = gradient
         with torch.no_grad():
-            p, rot_t, pos, frames = self._posed(points, times, c)  # p (L, N', 3)
+            p, poses, frames = self._posed(points, times, c)  # p (L, N', 3)
             local = kernels.to_local(p, frames)  # (L, 3, G, N')
-            value, winner, closest = self._nearest(local, c, need_winner=grad)
-            if not grad:
+            value, winner, closest = self._nearest(local, c, need_winner=gradient)
+            if winner is None:  # no gradient wanted (need_winner False)
                 return value.reshape(*lead, n), None
-            table = (
-                c["table"]
-                if rot_t is None
-                else torch.cat(  # (16, L * G), see _TABLE
+            if poses is None:
+                table = c["table"]
+            else:
+                rot_t, pos = poses
+                table = torch.cat(  # (16, L * G), see _TABLE
                     [
                         rot_t.reshape(-1, 9),
                         pos.reshape(-1, 3),
@@ -222,9 +218,8 @@ class SceneSDF:
                     ],
                     dim=1,
                 ).T.contiguous()
-            )
-            gradient_ = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
-        return value.reshape(*lead, n), gradient_.reshape(points.shape)
+            grad = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
+        return value.reshape(*lead, n), grad.reshape(points.shape)
 
     def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every
@@ -235,7 +230,7 @@ class SceneSDF:
         if not self._geoms:
             return points.new_zeros((*lead, n, 0))
         c = self._tensors(points)
-        p, _, _, frames = self._posed(points, times, c)
+        p, _, frames = self._posed(points, times, c)
         local = kernels.to_local(p, frames)  # (L, 3, G, N')
         r = self._num_round
         cols = [
@@ -251,41 +246,36 @@ class SceneSDF:
         if s.stop > s.start:
             cols.append(primitives.sdf_ellipsoid(local[:, :, s].permute(0, 2, 3, 1), c["axes"][:, None]))
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
-            cols.append(self._mesh_at(j)(local[:, :, j].transpose(1, 2))[:, None])
+            cols.append(self._geoms[j].mesh_sdf()(local[:, :, j].transpose(1, 2))[:, None])
         out = torch.cat(cols, dim=1)[:, c["order"]]  # (L, G, N') in geom_ids order
         return out.transpose(1, 2).reshape(*lead, n, len(self._geoms))
 
     # -- the steps ------------------------------------------------------------------------------
 
-    def _mesh_at(self, j: int) -> MeshSDF:
-        """The MeshSDF of the kind-sorted geom ``j`` (a mesh or height field)."""
-        mesh = self._geoms[j].mesh
-        if mesh is None:
-            raise ControlMMError(f"obstacle geom {self._geoms[j].geom_id} has no mesh SDF")
-        return mesh
-
-    def _posed(self, points: Tensor, times: Tensor | None, c: dict[str, Tensor]):
+    def _posed(
+        self, points: Tensor, times: Tensor | None, c: dict[str, Tensor]
+    ) -> tuple[Tensor, tuple[Tensor, Tensor] | None, tuple[Tensor, Tensor]]:
         """Points as (L, N', 3) and the geom poses they meet: L = 1 (all points share the poses)
         or one per leading index (per-frame mocap poses). Returns the points, the geom-from-world
-        rotations (L, G, 3, 3) and world origins (L, G, 3) of the geoms (None, None when static:
-        the precomputed table is used), and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for
+        rotations (L, G, 3, 3) and world origins (L, G, 3) of the geoms (None when static: the
+        precomputed table is used), and frames = (W (L, 3G, 3), bias (L, 3G, 1)) for
         ``kernels.to_local``."""
         if not self._tracks:
-            return points.reshape(1, -1, 3), None, None, c["frames"]
+            return points.reshape(1, -1, 3), None, (c["frames_weight"], c["frames_bias"])
         if times is None:
             times_k = points.new_tensor([float(tr.times[0]) for tr in self._tracks])[:, None]  # (K, 1)
             p = points.reshape(1, -1, 3)
         else:
             times_k = times.reshape(1, -1).expand(len(self._tracks), -1)  # (K, L)
             p = points.reshape(-1, points.shape[-2], 3)
-        rots, positions = [], []
+        track_rot, track_pos = [], []
         for k, track in enumerate(self._tracks):
             pos_k, quat_k = track.pose(times_k[k])
-            rots.append(quat_to_mat(quat_k))
-            positions.append(pos_k)
+            track_rot.append(quat_to_mat(quat_k))
+            track_pos.append(pos_k)
         mv = c["moving"]
-        body_rot = torch.stack(rots, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
-        body_pos = torch.stack(positions, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
+        body_rot = torch.stack(track_rot, dim=1)[:, c["moving_track"]]  # (L, Gm, 3, 3)
+        body_pos = torch.stack(track_pos, dim=1)[:, c["moving_track"]]  # (L, Gm, 3)
         rot_m = (body_rot @ c["rot"][mv]).transpose(-1, -2)  # geom-from-world
         pos_m = body_pos + (body_rot @ c["pos"][mv][..., None])[..., 0]
         if len(mv) == len(self._geoms):
@@ -295,9 +285,11 @@ class SceneSDF:
             rot_t = c["rot"].transpose(-1, -2).expand(num_l, -1, -1, -1).clone()
             pos = c["pos"].expand(num_l, -1, -1).clone()
             rot_t[:, mv], pos[:, mv] = rot_m, pos_m
-        return p, rot_t, pos, kernels.stack_frames(rot_t, pos)
+        return p, (rot_t, pos), kernels.stack_frames(rot_t, pos)
 
-    def _nearest(self, local: Tensor, c: dict[str, Tensor], need_winner: bool):
+    def _nearest(
+        self, local: Tensor, c: dict[str, Tensor], need_winner: bool
+    ) -> tuple[Tensor, Tensor | None, Tensor | None]:
         """The minimum (L, N') over geoms of points in every geom frame ``local`` (L, 3, G, N');
         when ``need_winner``, also its geom (kind-sorted index, (L, N')) and the closest points
         (L, 3, G - G_round, N') of the plane, ellipsoid and mesh columns (written where
@@ -318,14 +310,10 @@ class SceneSDF:
             if need_winner:
                 v, i = d.min(dim=1)
                 i = i + offset
+                winner = i if best is None or winner is None else torch.where(v < best, i, winner)
             else:
-                v, i = d.amin(dim=1), None
-            if best is None:
-                best, winner = v, i
-            else:
-                if i is not None and winner is not None:  # (need_winner)
-                    winner = torch.where(v < best, i, winner)
-                best = torch.minimum(best, v)
+                v = d.amin(dim=1)
+            best = v if best is None else torch.minimum(best, v)
 
         s = self._slices[BOX]
         if s.stop > s.start:
@@ -337,7 +325,7 @@ class SceneSDF:
             )
         s = self._slices[PLANE]
         if s.stop > s.start:
-            if closest is not None:  # (with need_winner: planes have closest-point columns)
+            if closest is not None:  # need_winner (planes follow the round geoms)
                 cp = slice(s.start - first_cp, s.stop - first_cp)
                 closest[:, 0:2, cp] = local[:, 0:2, s]
             merge(z[:, s], s.start)
@@ -363,7 +351,7 @@ class SceneSDF:
                 inside = (pts / axes).square_().sum(dim=-1).sub_(1.0)  # < 0 inside
                 exact = torch.linalg.vector_norm(pts - q, dim=-1).copysign_(inside)
                 kernels.put(d, hit, exact)
-                if closest_v is not None:
+                if closest_v is not None:  # need_winner
                     kernels.put(closest_v[:, cp], hit, q)
             merge(d, s.start)
         for j in range(self._slices[MESH].start, self._slices[MESH].stop):
@@ -375,11 +363,13 @@ class SceneSDF:
             hit = None if best is None else (d <= best).nonzero(as_tuple=True)
             pts = pts.reshape(-1, 3) if hit is None else pts[hit]
             if len(pts):
-                q, sgn = self._mesh_at(j).closest(pts.contiguous())
+                q, sgn = self._geoms[j].mesh_sdf().closest(pts.contiguous())
                 kernels.put(d, hit, sgn * torch.linalg.vector_norm(pts - q, dim=-1))
-                if closest_v is not None:
+                if closest_v is not None:  # need_winner
                     kernels.put(closest_v[:, j - first_cp], hit, q)
             merge(d[:, None], j)
+        if best is None:
+            raise RuntimeError("SceneSDF._nearest needs at least one obstacle geom")
         return best, winner, closest
 
     def _winner_gradient(
@@ -410,8 +400,8 @@ class SceneSDF:
             norm2 = (x * x).addcmul_(y, y).addcmul_(z, z).clamp_min_(torch.finfo(diff.dtype).tiny)
             g_cp = diff.mul_((value / norm2)[:, None])
             g = g_cp if g is None else torch.where((winner >= first_cp)[:, None], g_cp, g)
-        if g is None:  # every geom kind is either a round one or has a closest point
-            raise ControlMMError("scene SDF has no obstacle geoms to take a gradient from")
+        if g is None:
+            raise RuntimeError("SceneSDF._winner_gradient needs at least one obstacle geom")
         world = row[:, 0:3] * g[:, 0:1]  # R g = sum_k g_k (row k of R^T)
         world.addcmul_(row[:, 3:6], g[:, 1:2]).addcmul_(row[:, 6:9], g[:, 2:3])
         return world.transpose(1, 2)

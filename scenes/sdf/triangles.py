@@ -59,12 +59,6 @@ def closest_point_on_triangle(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> tup
     return q, feature
 
 
-def point_triangle_sq_distance(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> Tensor:
-    """Squared distance (...,) from ``p`` to triangle ``(a, b, c)`` (broadcast, (..., 3) each)."""
-    q, _ = closest_point_on_triangle(p, a, b, c)
-    return ((p - q) ** 2).sum(-1)
-
-
 TRIANGLE_DATA = 16
 """Rows of :func:`triangle_data`: a (3), b - a (3), c - a (3), unit normal (3), |ab|^2, ab.ac,
 |ac|^2, |bc|^2."""

@@ -23,7 +23,8 @@ def _one_torch_thread():
 
 @pytest.fixture(scope="session")
 def eval_corpus(tmp_path_factory) -> Path:
-    """64 clips, two of every family (51 train, 3 val, 10 test), 3 captions each; not in the default corpus."""
+    """64 clips, two of every family (51 train, 3 val, 10 test), 3 captions each; not in the default
+    corpus."""
     from controlmm.corpus import CorpusConfig, write_corpus
 
     out = tmp_path_factory.mktemp("evalcorpus") / "corpus"

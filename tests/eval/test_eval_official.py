@@ -67,7 +67,8 @@ WORDS = ["unk", "sos", "eos", "a", "person", "walk", "forward", "left", "hand", 
 
 
 def _write_official(root, state=None, glove=True):
-    """The official layout under ``root`` (a MoMask checkout); ``state="layout"`` writes an empty finest.tar."""
+    """The official layout under ``root`` (a MoMask checkout); ``state="layout"`` writes an empty
+    finest.tar."""
     t2m = root / "checkpoints" / "t2m"
     (t2m / "text_mot_match" / "model").mkdir(parents=True)
     g = torch.Generator().manual_seed(0)

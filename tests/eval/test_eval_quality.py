@@ -22,7 +22,7 @@ def test_eval_pass_follows_the_official_loader(eval_corpus):
     again, other = evalset.draw(3), evalset.draw(4)
     assert [s.name for s in run.samples] == [s.name for s in again.samples]
     assert [s.name for s in run.samples] != [s.name for s in other.samples]
-    by_name = dict(zip(evalset.names, evalset.motions))
+    by_name = dict(zip(evalset.names, evalset.motions, strict=True))
     for s in run.samples:
         full = by_name[s.name]
         assert s.frames % 4 == 0 and full.shape[0] - 8 < s.frames <= full.shape[0]
@@ -34,7 +34,8 @@ def test_eval_pass_follows_the_official_loader(eval_corpus):
 
 
 def test_shipped_evaluator_sanity(eval_corpus):
-    """Unseen clips: ground truth retrieves far above chance; FID 0 against itself, clearly worse when damaged."""
+    """Unseen clips: ground truth retrieves far above chance; FID 0 against itself, clearly worse when
+    damaged."""
     evaluator = load_evaluator()
     evalset = EvalSet.load(eval_corpus, "train")
     run = evalset.draw(0)
@@ -43,7 +44,7 @@ def test_shipped_evaluator_sanity(eval_corpus):
     real = columns_from_embeddings(texts, gt, gt)
     assert real["r_precision_top1"] > 0.4 and real["r_precision_top3"] > 0.7  # chance: 1/32, 3/32
     assert real["fid"] == pytest.approx(0.0, abs=1e-6)
-    full = dict(zip(evalset.names, evalset.motions))
+    full = dict(zip(evalset.names, evalset.motions, strict=True))
     recropped = quality_columns(
         evaluator, [full[s.name][: s.frames] for s in run.samples], run.captions, run.motions
     )

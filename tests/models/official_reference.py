@@ -1,6 +1,6 @@
 """Test helpers for the official-checkpoint import, independent of ``controlmm.models``.
 
-1. State_dicts with exactly the official names and shapes (reference-controlmm.md §9.2-9.5), random
+1. State_dicts with exactly the official names and shapes (as in the released MoMask / MaskControl `.tar` checkpoints), random
    values, written out in the official folder layout (``checkpoints/t2m/<name>/model/*.tar``,
    ``opt.txt``, ``meta/{mean,std}.npy``).
 2. A re-implementation of the official forward passes written straight from the official module
@@ -186,7 +186,8 @@ def write_opt(path: Path, options: dict) -> None:
 def write_official_checkpoints(
     root: Path, d: Dims, control_channels: int | None = 36, control_vq_same: bool = True
 ) -> dict:
-    """Write ``root/checkpoints/t2m/...`` as the official download scripts leave it; return the state_dicts."""
+    """Write ``root/checkpoints/t2m/...`` as the official download scripts leave it; return the
+    state_dicts."""
     t2m = root / "checkpoints" / "t2m"
     vq, base, res = official_vq_state(d), official_mask_state(d), official_residual_state(d)
     common = dict(dataset_name="t2m", checkpoints_dir="./checkpoints", gpu_id=0, milestones=[50000])

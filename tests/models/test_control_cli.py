@@ -1,4 +1,5 @@
-"""``generate --control``, ``train control``, ``eval control`` and the evaluation metrics on hand-made inputs."""
+"""``generate --control``, ``train control``, ``eval control`` and the evaluation metrics on hand-made
+inputs."""
 
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ def model(tiny_model_dir):
 
 
 def test_paper_preset_matches_the_official_control_branch():
-    """Names, tensor count and shapes of MaskControl's ControlTransformer branch (reference §9.5)."""
+    """Names, tensor count and shapes of MaskControl's ControlTransformer branch (MaskControl's released `ct2m_transformer` checkpoints)."""
     for joints, channels in (("pelvis", 6), ("all", 36)):
         cfg = replace(preset_config("paper"), control=ControlConfig(joints=joints))
         state = MotionControlModel(cfg).state_dict()
@@ -184,7 +184,7 @@ def test_one_training_step_reduces_the_consistency_loss(model, tiny_data):
         # measured with the deterministic expectation (the straight-through forward is piecewise constant)
         probe = ControlLoss(control, model.transformer, model.tokenizer, model.normalizer, settings)
 
-        def consistency():
+        def consistency(probe: ControlLoss = probe) -> float:
             with torch.no_grad():
                 return float(probe(*batch, generator=torch.Generator().manual_seed(3))[1]["ctrl"])
 

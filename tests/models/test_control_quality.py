@@ -64,20 +64,23 @@ def test_each_mode_cycles_the_six_joints(tiny_data):
     assert [c.joints for c in cases] == [(CONTROL_JOINTS[i % 6],) for i in range(8)]
     pelvis = build_cases(tiny_data, "pelvis", densities=(5,), samples=8, seed=0)
     assert [c.text for c in cases] == [c.text for c in pelvis]  # same clips, captions, crops, keyframes
-    assert all(np.array_equal(a.mask.any(-1), b.mask.any(-1)) for a, b in zip(cases, pelvis))
+    assert all(np.array_equal(a.mask.any(-1), b.mask.any(-1)) for a, b in zip(cases, pelvis, strict=True))
 
 
 def test_real_reference_recrops_the_same_clips(tiny_data):
     cases = build_cases(tiny_data, "pelvis", samples=12, seed=3)
     crops = recropped(tiny_data, cases, seed=3)
     assert len(crops) == 12 and crops[0].dtype == np.float32
-    for case, crop in zip(cases, crops):
+    for case, crop in zip(cases, crops, strict=True):
         clip = np.load(tiny_data / "new_joint_vecs" / f"{case.motion_id}.npy")
         m = len(crop)
         assert m % 4 == 0 and m > len(clip) - 8 - 1, (m, len(clip))
         assert any(np.array_equal(clip[i : i + m], crop) for i in range(len(clip) - m + 1))
-    assert any(len(c.features) != len(r) or not np.array_equal(c.features, r) for c, r in zip(cases, crops))
-    assert all(np.array_equal(a, b) for a, b in zip(crops, recropped(tiny_data, cases, seed=3)))
+    assert any(
+        len(c.features) != len(r) or not np.array_equal(c.features, r)
+        for c, r in zip(cases, crops, strict=True)
+    )
+    assert all(np.array_equal(a, b) for a, b in zip(crops, recropped(tiny_data, cases, seed=3), strict=True))
 
 
 def test_control_table_rows(tiny_control_dir, tiny_data, evaluator):
@@ -92,7 +95,7 @@ def test_control_table_rows(tiny_control_dir, tiny_data, evaluator):
     )
     summary = table.summary()
     assert list(summary) == ["Real", "uncontrolled", "pelvis", "all joints"]
-    for name, scores in table.rows.items():
+    for scores in table.rows.values():
         assert scores.runs == 2 and {"fid", "r_precision_top3", "diversity", "traj", "avg", "skate"} <= set(
             scores.values
         )

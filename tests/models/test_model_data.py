@@ -119,7 +119,7 @@ def test_length_bucketing_keeps_the_epoch_and_groups_similar_lengths():
     ]
     assert sorted(shards[0][0] + shards[1][0]) == sorted((int(i), 2) for i in bucketed[0])
     other = StepBatchSampler(200, 8, seed=1, epoch=3, lengths=lengths, bucket=5).batches()
-    assert any(not np.array_equal(a, b) for a, b in zip(bucketed, other))
+    assert any(not np.array_equal(a, b) for a, b in zip(bucketed, other, strict=True))
     with pytest.raises(ValueError, match="one length per item"):
         StepBatchSampler(200, 8, seed=1, epoch=2, lengths=lengths[:10], bucket=5)
 

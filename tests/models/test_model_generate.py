@@ -50,7 +50,7 @@ def test_lengths_from_seconds_or_frames():
 def test_shapes_lengths_and_outputs(model):
     result = generate(model, ["a person squats slowly", "someone bends over"], frames=[101, 48], seed=0)
     assert [m.num_frames for m in result.motions] == [101, 48]  # 26 tokens decoded, cropped to 101 frames
-    for motion, text in zip(result.motions, result.texts):
+    for motion, text in zip(result.motions, result.texts, strict=True):
         assert motion.joints.shape[1:] == (22, 3) and motion.features.shape[1] == 263
         assert motion.fps == 20.0 and motion.text == text and motion.metadata["seed"] == 0
         np.testing.assert_allclose(motion.joints[0, 0, [0, 2]], 0.0, atol=1e-6)  # starts at the origin

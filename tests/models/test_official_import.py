@@ -118,7 +118,7 @@ def test_opt_txt_values(tmp_path):
 
 
 def test_released_sizes_load_strictly_into_the_paper_preset():
-    """Official trees at the released sizes: the tensor counts of reference §9 and a strict load."""
+    """Official trees at the released sizes: the tensor counts of the released checkpoints and a strict load."""
     d = Dims.paper()
     vq, base, res = (
         official_vq_state(d, empty=True),
@@ -345,7 +345,8 @@ def test_cli_import_then_generate(official, tmp_path, tiny_clip_dir, capsys):
 
 
 def test_clip_float16_as_the_official_code(tiny_clip_dir):
-    """Official CLIP: float16 weights, LayerNorms computed in float32, HTML-unescaped text, no normalisation."""
+    """Official CLIP: float16 weights, LayerNorms computed in float32, HTML-unescaped text, no
+    normalisation."""
     from controlmm.text import load_text_encoder
     from controlmm.text.config import TextEncoderConfig
 
@@ -365,7 +366,8 @@ def test_clip_float16_as_the_official_code(tiny_clip_dir):
 
 
 def test_float64_forward_matches_to_rounding(official):
-    """In float64 the imported modules and the reference agree to 1e-10: the float32 gaps are rounding only."""
+    """In float64 the imported modules and the reference agree to 1e-10: the float32 gaps are rounding
+    only."""
     tree, out = official
     model = load_model(out)
     ids, pad, cond, gen = _inputs(seed=3)

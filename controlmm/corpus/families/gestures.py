@@ -99,26 +99,30 @@ def _wave_builder(side: str):
 
 
 WAVE_VERB = Slot(("waves", "is waving"), ("flaps",))
-for _side in ("left", "right"):
-    FAMILIES.append(
-        Family(
-            name=f"wave_{_side}",
-            group="gestures",
-            sample=_wave_sample,
-            build=_wave_builder(_side),
-            templates=(
-                Template("{subj} {wave} {poss} {hand}"),
-                Template("{subj} raises {poss} {hand} and waves"),
-                Template("{subj} {wave} hello with {poss} {hand}"),
-                Template("{subj} lifts {poss} {hand} above {poss} head and {wave} it"),
-                Template("{subj} {wave} goodbye using {poss} {hand}"),
-                Template("with {poss} {hand} raised, {subj} {wave} to someone", held=True),
-                Template("{subj} greets someone by waving {poss} {hand} overhead", held=True),
-            ),
-            slots=lambda p, s=_side: {"wave": WAVE_VERB, "hand": hand_slot(s)},
-            core=lambda p, s=_side: {"hand": s},
-        )
+
+
+def _wave_family(side: str) -> Family:
+    return Family(
+        name=f"wave_{side}",
+        group="gestures",
+        sample=_wave_sample,
+        build=_wave_builder(side),
+        templates=(
+            Template("{subj} {wave} {poss} {hand}"),
+            Template("{subj} raises {poss} {hand} and waves"),
+            Template("{subj} {wave} hello with {poss} {hand}"),
+            Template("{subj} lifts {poss} {hand} above {poss} head and {wave} it"),
+            Template("{subj} {wave} goodbye using {poss} {hand}"),
+            Template("with {poss} {hand} raised, {subj} {wave} to someone", held=True),
+            Template("{subj} greets someone by waving {poss} {hand} overhead", held=True),
+        ),
+        slots=lambda p: {"wave": WAVE_VERB, "hand": hand_slot(side)},
+        core=lambda p: {"hand": side},
     )
+
+
+for _side in ("left", "right"):
+    FAMILIES.append(_wave_family(_side))
 
 
 # raise arms -------------------------------------------------------------------------------

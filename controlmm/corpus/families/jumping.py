@@ -37,7 +37,8 @@ def _sample(rng, count_choices, forward: bool):
     dists = [rng.uniform(0.5, 1.1) if forward else rng.uniform(-0.03, 0.03) for _ in range(n)]
     gaps = [rng.uniform(0.0, 0.4) for _ in range(n)]
     idle = rng.uniform(0.3, 0.9)
-    total = idle + sum(PREP + PUSH + 2 * np.sqrt(2 * h / G) + ABSORB + g for h, g in zip(heights, gaps))
+    per_jump = (PREP + PUSH + 2 * np.sqrt(2 * h / G) + ABSORB + g for h, g in zip(heights, gaps, strict=True))
+    total = idle + sum(per_jump)
     total += RECOVER + rng.uniform(0.4, 1.0)
     return {
         "count": n,
@@ -116,7 +117,7 @@ def build_jumps(p: dict, rng: np.random.Generator) -> np.ndarray:
     for side in ("left", "right"):
         base, yaw = feet0[side]
         lst = [Stance(-np.inf, np.inf, base, yaw)]
-        for t0, t1, h, g0, vx in flights:
+        for t0, t1, h, _g0, vx in flights:
             lst[-1].t_off = t0
             lst[-1].lift_pitch = PUSH_PITCH
             lst[-1].lift_time = PUSH + 0.05
@@ -146,7 +147,9 @@ def build_jumps(p: dict, rng: np.random.Generator) -> np.ndarray:
 
 def _hermite(knots: list[tuple[float, float, float]], t: np.ndarray) -> np.ndarray:
     knots = sorted(knots, key=lambda k: k[0])
-    ts, ys, vs = [], [], []
+    ts: list[float] = []
+    ys: list[float] = []
+    vs: list[float] = []
     for kt, ky, kv in knots:
         if ts and kt <= ts[-1] + 1e-6:
             continue

@@ -57,7 +57,7 @@ def squat_keys(p: dict, start: float, stand: float) -> tuple[list[float], list[f
     """Key times, pelvis heights and depth fractions of ``count`` squats from ``start``."""
     ts, hs, fr = [start], [stand], [0.0]
     cursor = start
-    for k in range(p["count"]):
+    for _ in range(p["count"]):
         bottom = cursor + p["down"]
         ts += [bottom, bottom + p["hold"], bottom + p["hold"] + p["up"]]
         hs += [stand - p["depth"], stand - p["depth"], stand]

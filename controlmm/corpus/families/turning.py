@@ -106,27 +106,29 @@ def _turn_slots(p, side):
     }
 
 
-for _side in ("left", "right"):
-    FAMILIES.append(
-        Family(
-            name=f"turn_{_side}",
-            group="turning",
-            sample=_turn_sample,
-            build=_turn_builder(_side),
-            templates=(
-                Template("{subj} turns {dir}"),
-                Template("{subj} turns {deg} {dir}"),
-                Template("{subj} makes {noun} {dir}"),
-                Template("{subj} turns {dir} in place"),
-                Template("standing in place, {subj} turns {deg} {dir}"),
-                Template("{subj} does {noun} {dir} on the spot"),
-                Template("{subj} pivots {deg} {dir}", held=True),
-                Template("{subj} rotates {poss} body {dir} by {deg}", held=True),
-            ),
-            slots=lambda p, s=_side: _turn_slots(p, s),
-            core=lambda p, s=_side: {"direction": s, "in_place": True},
-        )
+def _turn_family(side: str) -> Family:
+    return Family(
+        name=f"turn_{side}",
+        group="turning",
+        sample=_turn_sample,
+        build=_turn_builder(side),
+        templates=(
+            Template("{subj} turns {dir}"),
+            Template("{subj} turns {deg} {dir}"),
+            Template("{subj} makes {noun} {dir}"),
+            Template("{subj} turns {dir} in place"),
+            Template("standing in place, {subj} turns {deg} {dir}"),
+            Template("{subj} does {noun} {dir} on the spot"),
+            Template("{subj} pivots {deg} {dir}", held=True),
+            Template("{subj} rotates {poss} body {dir} by {deg}", held=True),
+        ),
+        slots=lambda p: _turn_slots(p, side),
+        core=lambda p: {"direction": side, "in_place": True},
     )
+
+
+for _side in ("left", "right"):
+    FAMILIES.append(_turn_family(_side))
 
 
 # circle -----------------------------------------------------------------------------------
@@ -197,26 +199,29 @@ ROTATION = {
 }
 TURN_SIDE = {"clockwise": "right", "counterclockwise": "left"}
 
-for _rot in ("clockwise", "counterclockwise"):
-    FAMILIES.append(
-        Family(
-            name="circle_cw" if _rot == "clockwise" else "circle_ccw",
-            group="turning",
-            sample=_circle_sample,
-            build=_circle_builder(_rot),
-            templates=(
-                Template("{subj} {walk} in a circle {rot}"),
-                Template("{subj} {walk} {rot} in a circle"),
-                Template("{subj} walks around in a full circle {rot}"),
-                Template("{subj} {walk} in a circle, turning {side}"),
-                Template("{subj} circles {rot}"),
-                Template("{subj} makes a complete loop {rot}", held=True),
-                Template("{subj} {walk} in a round path, always turning {side}", held=True),
-            ),
-            slots=lambda p, r=_rot: {"walk": WALK, "rot": ROTATION[r], "side": side_slot(TURN_SIDE[r])},
-            core=lambda p, r=_rot: {"rotation": r},
-        )
+
+def _circle_family(rot: str) -> Family:
+    return Family(
+        name="circle_cw" if rot == "clockwise" else "circle_ccw",
+        group="turning",
+        sample=_circle_sample,
+        build=_circle_builder(rot),
+        templates=(
+            Template("{subj} {walk} in a circle {rot}"),
+            Template("{subj} {walk} {rot} in a circle"),
+            Template("{subj} walks around in a full circle {rot}"),
+            Template("{subj} {walk} in a circle, turning {side}"),
+            Template("{subj} circles {rot}"),
+            Template("{subj} makes a complete loop {rot}", held=True),
+            Template("{subj} {walk} in a round path, always turning {side}", held=True),
+        ),
+        slots=lambda p: {"walk": WALK, "rot": ROTATION[rot], "side": side_slot(TURN_SIDE[rot])},
+        core=lambda p: {"rotation": rot},
     )
+
+
+for _rot in ("clockwise", "counterclockwise"):
+    FAMILIES.append(_circle_family(_rot))
 
 
 # curve ------------------------------------------------------------------------------------
@@ -269,26 +274,28 @@ def _curve_builder(side: str):
     return build
 
 
-for _side in ("left", "right"):
-    FAMILIES.append(
-        Family(
-            name=f"curve_{_side}",
-            group="turning",
-            sample=_curve_sample,
-            build=_curve_builder(_side),
-            templates=(
-                Template("{subj} {walk} {forward} and curves {dir}"),
-                Template("{subj} {walk} along a curve {dir}"),
-                Template("{subj} {walk} in an arc {dir}"),
-                Template("{subj} {walk} {forward}, gradually bending {dir}"),
-                Template("{subj} follows a curved path {dir}"),
-                Template("{subj} veers {dir} while walking", held=True),
-                Template("walking {forward}, {subj} drifts {dir} in a wide arc", held=True),
-            ),
-            slots=lambda p, s=_side: {"walk": WALK, "forward": FORWARD, "dir": side_slot(s)},
-            core=lambda p, s=_side: {"direction": s},
-        )
+def _curve_family(side: str) -> Family:
+    return Family(
+        name=f"curve_{side}",
+        group="turning",
+        sample=_curve_sample,
+        build=_curve_builder(side),
+        templates=(
+            Template("{subj} {walk} {forward} and curves {dir}"),
+            Template("{subj} {walk} along a curve {dir}"),
+            Template("{subj} {walk} in an arc {dir}"),
+            Template("{subj} {walk} {forward}, gradually bending {dir}"),
+            Template("{subj} follows a curved path {dir}"),
+            Template("{subj} veers {dir} while walking", held=True),
+            Template("walking {forward}, {subj} drifts {dir} in a wide arc", held=True),
+        ),
+        slots=lambda p: {"walk": WALK, "forward": FORWARD, "dir": side_slot(side)},
+        core=lambda p: {"direction": side},
     )
+
+
+for _side in ("left", "right"):
+    FAMILIES.append(_curve_family(_side))
 
 
 # zigzag -----------------------------------------------------------------------------------

@@ -257,26 +257,28 @@ def _side_builder(side: str):
     return build
 
 
-for _side in ("left", "right"):
-    FAMILIES.append(
-        Family(
-            name=f"sidestep_{_side}",
-            group="walking",
-            sample=_side_sample,
-            build=_side_builder(_side),
-            templates=(
-                Template("{subj} sidesteps {dir}"),
-                Template("{subj} steps sideways {dir}"),
-                Template("{subj} shuffles sideways {dir}"),
-                Template("{subj} {walk} sideways {dir}"),
-                Template("{subj} moves {dir} with side steps"),
-                Template("{subj} slides {dir} with small side steps", held=True),
-                Template("with a few side steps {subj} moves {dir}", held=True),
-            ),
-            slots=lambda p, s=_side: {"walk": WALK, "dir": side_slot(s)},
-            core=lambda p, s=_side: {"direction": s},
-        )
+def _sidestep_family(side: str) -> Family:
+    return Family(
+        name=f"sidestep_{side}",
+        group="walking",
+        sample=_side_sample,
+        build=_side_builder(side),
+        templates=(
+            Template("{subj} sidesteps {dir}"),
+            Template("{subj} steps sideways {dir}"),
+            Template("{subj} shuffles sideways {dir}"),
+            Template("{subj} {walk} sideways {dir}"),
+            Template("{subj} moves {dir} with side steps"),
+            Template("{subj} slides {dir} with small side steps", held=True),
+            Template("with a few side steps {subj} moves {dir}", held=True),
+        ),
+        slots=lambda p: {"walk": WALK, "dir": side_slot(side)},
+        core=lambda p: {"direction": side},
     )
+
+
+for _side in ("left", "right"):
+    FAMILIES.append(_sidestep_family(_side))
 
 
 # crouch-walk ------------------------------------------------------------------------------

@@ -74,14 +74,3 @@ def side_slot(side: str, key: str = "direction") -> Slot:
 def hand_slot(side: str, key: str = "hand") -> Slot:
     """'left hand' / 'left arm'."""
     return Slot((f"{side} hand", f"{side} arm"), (), (key, side))
-
-
-def turn_angle_slot(angle: int) -> Slot:
-    """Words for a turn of 90/180/270/360 degrees."""
-    words = {
-        90: (("90 degrees", "a quarter turn", "ninety degrees"), ("a right angle",)),
-        180: (("180 degrees", "a half turn", "halfway around"), ("one hundred and eighty degrees",)),
-        270: (("270 degrees", "three quarters of a turn"), ("two hundred and seventy degrees",)),
-        360: (("360 degrees", "a full turn", "all the way around"), ("a complete circle",)),
-    }[angle]
-    return Slot(words[0], words[1], ("angle", angle))

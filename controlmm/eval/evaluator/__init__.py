@@ -14,6 +14,7 @@ evaluator.embed_motions([features])                    # (1, D); raw (T, 263) fe
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -47,10 +48,11 @@ __all__ = [
 ]
 
 
-def model_evaluator(model_dirs) -> Path | None:
+def model_evaluator(model_dirs: str | Path | Sequence[str | Path] | None) -> Path | None:
     """The evaluator a model directory carries (``MODEL_DIR/evaluator``, written by
     ``controlmm import-official --evaluator``) when exactly one model is given, else None."""
-    dirs = [d for d in (model_dirs if isinstance(model_dirs, (list, tuple)) else [model_dirs]) if d]
+    given = [model_dirs] if model_dirs is None or isinstance(model_dirs, (str, Path)) else list(model_dirs)
+    dirs = [d for d in given if d]
     if len(dirs) == 1 and (Path(dirs[0]) / "evaluator").is_dir():
         return Path(dirs[0]) / "evaluator"
     return None

@@ -54,10 +54,12 @@ def caption_text(caption: TextLike) -> str:
 
 def motion_features(motion: MotionLike) -> np.ndarray:
     """(T, 263) float32 features of a Motion or an array; joints-only motions are processed first."""
-    features = getattr(motion, "features", motion)
-    if features is None:  # a Motion without features: HumanML3D processing of its joints (T-1 frames)
-        features = joints_to_features(motion.joints)[0]
-    features = np.asarray(features, dtype=np.float32)
+    if not isinstance(motion, Motion):
+        features = np.asarray(motion, dtype=np.float32)
+    elif motion.features is not None:
+        features = np.asarray(motion.features, dtype=np.float32)
+    else:  # a Motion without features: HumanML3D processing of its joints (T-1 frames)
+        features = np.asarray(joints_to_features(motion.joints)[0], dtype=np.float32)
     if features.ndim != 2 or features.shape[1] != FEATURE_DIM:
         raise ShapeError(f"motion features must have shape (T, {FEATURE_DIM}); got {features.shape}")
     if not np.all(np.isfinite(features)):

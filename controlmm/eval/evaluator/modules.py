@@ -1,7 +1,7 @@
 """The project's text-motion evaluator: a motion encoder and a text encoder into one embedding space.
 
-It follows the layout of the HumanML3D evaluator (Guo et al. 2022; reference §8.4), scaled down to
-train on a CPU:
+It follows the layout of the HumanML3D evaluator (Guo et al. 2022, "Generating Diverse and Natural 3D
+Human Motions from Text", CVPR), scaled down to train on a CPU:
 
 - motion: normalised features without the 4 foot contacts (259-d) -> movement encoder (two stride-2
   convolutions, one step per 4 frames, + a linear layer) -> bidirectional GRU over the valid steps

@@ -1,7 +1,7 @@
 """The official HumanML3D evaluator (Guo et al. 2022), for users who have its files on disk.
 
 Nothing is downloaded. The modules below are written for this project but are structurally
-identical to the official ones (reference §8.4: same layers, same parameter names and shapes), so
+identical to the official ones (same layers, same parameter names and shapes), so
 the released ``finest.tar`` loads with ``strict=True``:
 
 - ``MovementConvEncoder(259, 512, 512)``: ``main.0`` Conv1d(259->512, k4, s2, p1), ``main.1`` Dropout 0.2,
@@ -36,6 +36,7 @@ import pickle
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -247,13 +248,13 @@ class _PlainUnpickler(pickle.Unpickler):
 
     ALLOWED = {("numpy", "dtype"), ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar")}
 
-    def find_class(self, module: str, name: str):
+    def find_class(self, module: str, name: str) -> Any:  # a class or function, as pickle's
         if (module, name) in self.ALLOWED:
             return super().find_class(module, name)
         raise pickle.UnpicklingError(f"refusing to load {module}.{name}")
 
 
-def _read_pickle(path: Path):
+def _read_pickle(path: Path) -> Any:  # whatever the file holds (the callers check what they use)
     try:
         with open(path, "rb") as fh:
             return _PlainUnpickler(fh).load()
@@ -414,10 +415,11 @@ def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu"
         ckpt = torch.load(files["finest"], map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001
         raise InputFileError(f"'{files['finest']}' is corrupt or unreadable ({type(exc).__name__})") from None
-    modules = {
-        "movement_encoder": MovementConvEncoder(),
-        "text_encoder": TextEncoderBiGRUCo(),
-        "motion_encoder": MotionEncoderBiGRUCo(),
+    movement, text, motion = MovementConvEncoder(), TextEncoderBiGRUCo(), MotionEncoderBiGRUCo()
+    modules: dict[str, nn.Module] = {
+        "movement_encoder": movement,
+        "text_encoder": text,
+        "motion_encoder": motion,
     }
     for key, module in modules.items():
         if not isinstance(ckpt, dict) or key not in ckpt:
@@ -429,9 +431,9 @@ def load_official_evaluator(root: str | Path, device: str | torch.device = "cpu"
     normalizer = Normalizer.load(files["mean"], files["std"])
     words = WordVectorizer(files["glove"])
     return OfficialEvaluator(
-        modules["movement_encoder"],
-        modules["text_encoder"],
-        modules["motion_encoder"],
+        movement,
+        text,
+        motion,
         words,
         normalizer,
         Path(root),

@@ -28,7 +28,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import torch
@@ -140,17 +140,27 @@ def tokenizer_config(state: State, folder: OfficialFolder, notes: list[str]) -> 
     )
 
 
-def _trunk_sizes(state: State, where: str) -> dict[str, int]:
+class _TrunkSizes(TypedDict):
+    """Sizes of a transformer trunk read from its state_dict (shared by both transformer configs)."""
+
+    num_layers: int
+    ff_size: int
+    latent_dim: int
+    text_dim: int
+    max_len: int
+
+
+def _trunk_sizes(state: State, where: str) -> _TrunkSizes:
     layers = _indices(state, r"seqTransEncoder\.layers\.(\d+)\.linear1\.weight")
     if not layers:
         raise InputFileError(f"{where}: no seqTransEncoder layers")
-    return {
-        "num_layers": len(layers),
-        "ff_size": int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
-        "latent_dim": int(_need(state, "cond_emb.weight", where).shape[0]),
-        "text_dim": int(state["cond_emb.weight"].shape[1]),
-        "max_len": int(_need(state, "position_enc.pe", where).shape[0]),
-    }
+    return _TrunkSizes(
+        num_layers=len(layers),
+        ff_size=int(state["seqTransEncoder.layers.0.linear1.weight"].shape[0]),
+        latent_dim=int(_need(state, "cond_emb.weight", where).shape[0]),
+        text_dim=int(state["cond_emb.weight"].shape[1]),
+        max_len=int(_need(state, "position_enc.pe", where).shape[0]),
+    )
 
 
 def transformer_config(state: State, folder: OfficialFolder, notes: list[str]) -> TransformerConfig:
@@ -203,7 +213,8 @@ def control_config(state: State, tokenizer: TokenizerConfig, where: str) -> Cont
 
 
 def paper_differences(config: ModelConfig) -> list[str]:
-    """Architecture fields where ``config`` differs from the ``paper`` preset (empty for the released models)."""
+    """Architecture fields where ``config`` differs from the ``paper`` preset (empty for the released
+    models)."""
     paper = preset_config("paper")
     out = []
     for part in ("tokenizer", "transformer", "residual"):
@@ -380,7 +391,7 @@ def _copy_evaluator(root: str | Path, dest: Path) -> dict[str, Any]:
     }
 
 
-def _compare_statistics(normalizer, meta: Path) -> str:
+def _compare_statistics(normalizer: Normalizer, meta: Path) -> str:
     """A note comparing the VQ statistics with the evaluator's (MaskControl denormalises its decoded motion
     with the evaluator loader's mean/std while the data were normalised with the VQ's; the released files
     are expected to agree)."""
@@ -414,8 +425,8 @@ def import_official(
     normalizer = Normalizer.load(meta / "mean.npy", meta / "std.npy")
     normalization = {
         "source": str(meta),
-        "description": "the official RVQ-VAE folder's meta/mean.npy and meta/std.npy, unchanged (their std of dims "
-        "0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
+        "description": "the official RVQ-VAE folder's meta/mean.npy and meta/std.npy, unchanged (their std "
+        "of dims 0-3 and 259-262 is HumanML3D's Std/25: MoMask's feat_bias 5 applied twice)",
         "feat_bias": config.feat_bias,
         "feat_bias_times": config.feat_bias_times,
     }

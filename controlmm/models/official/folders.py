@@ -2,8 +2,10 @@
 
 After the official download scripts, ``checkpoints/t2m/`` holds one folder per model::
 
-    rvq_nq6_dc512_nc512_noshare_qdp0.2/            RVQ-VAE: model/net_best_fid.tar, meta/{mean,std}.npy, opt.txt
-    t2m_nlayer8_nhead6_ld384_ff1024_cdp0.1_rvq6ns/ masked transformer: model/latest.tar (+ net_best_fid.tar), opt.txt
+    rvq_nq6_dc512_nc512_noshare_qdp0.2/            RVQ-VAE: model/net_best_fid.tar, meta/{mean,std}.npy,
+                                                   opt.txt
+    t2m_nlayer8_nhead6_ld384_ff1024_cdp0.1_rvq6ns/ masked transformer: model/latest.tar
+                                                   (+ net_best_fid.tar), opt.txt
     tres_nlayer8_ld384_ff1024_rvq6ns_cdp0.2_sw/    residual transformer: model/net_best_fid.tar, opt.txt
     z2024-08-23-01-27-51_CtrlNet_..._fixRandCond/  MaskControl, pelvis only: model/latest.tar, opt.txt
     z2024-08-27-21-07-55_CtrlNet_..._cross/        MaskControl, all joints: model/latest.tar, opt.txt
@@ -103,8 +105,9 @@ def find_momask(root: str | Path) -> dict[str, OfficialFolder]:
         if len(candidates) != 1:
             what = "none" if not candidates else ", ".join(c.name for c in candidates)
             raise InputFileError(
-                f"--momask '{root}': expected one {kind} folder '{released}' (or one '{NAME_PREFIXES[kind]}*' folder "
-                f"with model/{CHECKPOINT_FILES[kind][0]}) in {', '.join(str(d) for d in dirs) or root}; found {what}"
+                f"--momask '{root}': expected one {kind} folder '{released}' (or one "
+                f"'{NAME_PREFIXES[kind]}*' folder with model/{CHECKPOINT_FILES[kind][0]}) in "
+                f"{', '.join(str(d) for d in dirs) or root}; found {what}"
             )
         found[kind] = _folder(kind, candidates[0])
     meta = found["tokenizer"].folder / "meta"
