@@ -121,10 +121,11 @@ def optimize_lbfgs(
     (line-search trials included) counts as one step and is checked per sample: the best evaluated
     state of each sample is kept, and a sample that meets the stopping rule is frozen there. The
     optimiser runs in chunks of ``chunk`` iterations; it restarts (fresh curvature history) whenever
-    samples drop out. A sample also drops out when a whole chunk did not lower its best loss (stalled:
-    its line searches find no decrease, and further chunks would repeat the same evaluations). Each
-    sample's loss is divided by its initial value, so the first step's size does not depend on the
-    units of the loss.
+    samples drop out. A chunk that did not lower a sample's best loss (stalled: its line searches found
+    no decrease) restarts the optimiser from the best state with a fresh curvature history; a sample
+    that stalls again right after such a restart drops out (further chunks would repeat the same
+    evaluations). Each sample's loss is divided by its initial value, so the first step's size does
+    not depend on the units of the loss.
     """
     b = param.shape[0]
     view = (b,) + (1,) * (param.ndim - 1)
@@ -177,6 +178,7 @@ def optimize_lbfgs(
 
     # Nothing is done yet, so the first pass of the loop keeps this optimiser and x.
     optimizer = new_optimizer()
+    restarted = torch.zeros(b, dtype=torch.bool, device=device)  # restarted after a stall, last chunk
     while True:
         if bool((active & state.done).any()):
             active = active & ~state.done
@@ -198,12 +200,15 @@ def optimize_lbfgs(
         # found no decrease, and the next chunks would evaluate the same points again.
         stalled = active & ~state.done & ~(state.kept_loss < best_before)
         if bool(stalled.any()) and state.count <= evaluations:
-            active = active & ~stalled
+            active = active & ~(stalled & restarted)  # stalled twice in a row: drop out
+            restarted = stalled & active
             if not bool(active.any()):
                 break
             optimizer = new_optimizer()
-            with torch.no_grad():
-                x.copy_(torch.where(active.view(view), x, state.kept))
+            with torch.no_grad():  # every active sample restarts from its best state
+                x.copy_(state.kept)
+        else:
+            restarted = torch.zeros_like(active)
     return EditOutcome(
         param=state.kept,
         steps=state.used,
