@@ -1,6 +1,6 @@
 """Throughput of `controlmm batch`: jobs per minute on the local pool (1 and 2 workers) and on Ray.
 
-    python benchmarks/batch.py [--jobs 24] [--frames 60] [--repeat 1] [--no-ray]
+    python benchmarks/batch.py [--jobs 96] [--frames 120] [--repeat 3] [--no-ray]
 
 The jobs are retarget + validate jobs (G1, the empty scene) of ``--jobs`` clips of ``--frames``
 frames cut from the HumanML3D sample 012314 (``$CONTROLMM_SHARED/data/humanml3d``), the job a
@@ -82,9 +82,9 @@ def measure(jobs: list[Job], out: Path, config: BatchConfig) -> dict[str, float]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--jobs", type=int, default=24, help="retarget + validate jobs (default 24)")
-    parser.add_argument("--frames", type=int, default=60, help="frames per clip at 20 fps (default 60)")
-    parser.add_argument("--repeat", type=int, default=1, help="runs per backend, the best shown (default 1)")
+    parser.add_argument("--jobs", type=int, default=96, help="retarget + validate jobs (default 96)")
+    parser.add_argument("--frames", type=int, default=120, help="frames per clip at 20 fps (default 120)")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per backend, the best shown (default 3)")
     parser.add_argument("--no-ray", action="store_true", help="skip the Ray row")
     args = parser.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")

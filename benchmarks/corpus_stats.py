@@ -9,7 +9,9 @@ written ``new_joints`` (the HumanML3D joints the features describe):
 clips per family, clip lengths, foot-skating ratio (the ControlMM / OmniControl evaluation's: a foot below
 5 cm in two frames that moves faster than 0.5 m/s, also over 5 frames; ``controlmm.motion.geometry``),
 floor contact and penetration, joint speeds, bone lengths, knee hyper-extension and the
-probe pass rate on the ground truth.
+probe pass rate on the ground truth; and per family the timing and balance figures (travel speed,
+cadence, swing-foot peak speed, pelvis and trunk sway; :func:`timing`), with the swing-foot peak of
+the ``walk`` clips by speed, to compare with published gait data (docs/corpus.md, "Timing").
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from data_dirs import corpus_dir
 
-from controlmm.corpus import CorpusConfig, write_corpus
+from controlmm.corpus import CorpusConfig, family_names, write_corpus
+from controlmm.corpus.measures import Measures
 from controlmm.eval.cases import evaluate, ground_truth, list_cases
 from controlmm.motion.geometry import foot_skating_ratio
 from controlmm.motion.skeleton import BONE_LENGTHS, FPS, PARENTS
@@ -59,14 +62,65 @@ def contact_floor_penetration(j: np.ndarray) -> float:
     return max(0.0, floor - float(j[..., 1].min()))
 
 
+def swing_onsets(speed: np.ndarray, up: float = 1.0, down: float = 0.3) -> int:
+    """Number of swings of a foot: rises of its speed above ``up`` m/s after it fell below ``down``."""
+    count, armed = 0, True
+    for v in speed:
+        if armed and v > up:
+            count, armed = count + 1, False
+        elif not armed and v < down:
+            armed = True
+    return count
+
+
+def timing(j: np.ndarray) -> dict[str, float]:
+    """Timing and balance figures of one clip (joints (T, 22, 3), 20 fps).
+
+    speed: cruise speed of the pelvis (m/s, :attr:`Measures.cruise`); foot_peak: the fastest
+    toe joint (m/s, 20 fps frame differences, as in docs/corpus.md); cadence: swing onsets of
+    both feet per minute while the pelvis moves at >= half its cruise speed (NaN for clips that
+    travel less than 1 m or take no step); sway: peak-to-peak lateral offset (m) of the pelvis
+    from the ankles' midpoint, along the person's left (the weight shifting over the feet; a foot
+    that kicks or steps sideways moves the midpoint too); trunk: peak-to-peak
+    side tilt (deg) of the pelvis -> neck line."""
+    m = Measures(j, FPS)
+    toe = np.linalg.norm(np.diff(j[:, [10, 11]], axis=0), axis=-1) * FPS
+    cruise = m.cruise
+    cadence = float("nan")
+    if cruise >= 0.3 and m.travel[2] >= 1.0:
+        moving = m.speed >= 0.5 * cruise
+        seconds = moving.sum() / FPS
+        steps = sum(swing_onsets(np.where(moving, toe[:, k], 0.0)) for k in range(2))
+        cadence = 60.0 * steps / seconds if seconds > 0.5 and steps else float("nan")
+    mid = 0.5 * (j[:, 7] + j[:, 8])
+    _, left = m.frame
+    lateral = ((j[:, 0] - mid) * left).sum(-1)
+    neck = j[:, 12] - j[:, 0]
+    tilt = np.degrees(np.arctan2((neck * left).sum(-1), neck[:, 1]))
+    return {
+        "speed": cruise,
+        "foot_peak": float(toe.max()),
+        "cadence": cadence,
+        "sway": float(np.ptp(lateral)),
+        "trunk": float(np.ptp(tilt)),
+    }
+
+
+WALK_SPEED_BINS = ((0.55, 0.8), (0.9, 1.1), (1.25, 1.45), (1.6, 1.85))
+"""Walking-speed bins (m/s) for the swing-foot peak of the ``walk`` family."""
+
+
 def measure(root: Path) -> dict:
     ids = (root / "all.txt").read_text().split()
-    families, lengths, skate, pen, lowest_body, hyper, bone_err = Counter(), [], [], [], [], [], 0.0
+    families: Counter[str] = Counter()
+    lengths, skate, pen, lowest_body, hyper, bone_err = [], [], [], [], [], 0.0
     speeds = []
+    per_family: dict[str, list[dict[str, float]]] = {}
     for clip_id in ids:
         meta = json.loads((root / "meta" / f"{clip_id}.json").read_text())
         j = np.load(root / "new_joints" / f"{clip_id}.npy").astype(np.float64)
         families[meta["family"]] += 1
+        per_family.setdefault(meta["family"], []).append(timing(j))
         lengths.append(len(j))
         skate.append(foot_skating_ratio(j))
         pen.append(contact_floor_penetration(j))
@@ -75,7 +129,6 @@ def measure(root: Path) -> dict:
         bones = np.linalg.norm(j[:, 1:] - j[:, list(PARENTS[1:])], axis=-1)
         bone_err = max(bone_err, float(np.abs(bones - BONE_LENGTHS[1:]).max()))
         speeds.append((np.linalg.norm(np.diff(j, axis=0), axis=-1) * FPS).ravel())
-    speeds = np.concatenate(speeds)
     report = evaluate(list_cases(root, "all"), ground_truth(root), split="all", per_clip=True)
     return {
         "families": families,
@@ -85,10 +138,53 @@ def measure(root: Path) -> dict:
         "lowest_body": np.array(lowest_body),
         "hyper": np.array(hyper),
         "bone_err": bone_err,
-        "speeds": speeds,
+        "speeds": np.concatenate(speeds),
         "probes": report,
         "clips": len(ids),
+        "timing": per_family,
     }
+
+
+def timing_table(per_family: dict[str, list[dict[str, float]]]) -> str:
+    """Markdown table of the per-family timing and balance figures (medians over the clips)."""
+    lines = [
+        "| family | clips | speed (m/s) | cadence (steps/min) | swing-foot peak (m/s, median / p90) "
+        "| pelvis sway (cm) | trunk sway (deg) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name in sorted(per_family, key=family_names().index):
+        rows = per_family[name]
+        col = {k: np.array([r[k] for r in rows]) for k in rows[0]}
+        cad = col["cadence"][np.isfinite(col["cadence"])]
+        speed = np.median(col["speed"])
+        lines.append(
+            f"| {name} | {len(rows)} | {speed:.2f} | {np.median(cad):.0f} | "
+            if len(cad)
+            else f"| {name} | {len(rows)} | {speed:.2f} | - | "
+        )
+        lines[-1] += (
+            f"{np.median(col['foot_peak']):.2f} / {np.percentile(col['foot_peak'], 90):.2f} | "
+            f"{100 * np.median(col['sway']):.1f} | {np.median(col['trunk']):.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def walk_peaks(per_family: dict[str, list[dict[str, float]]]) -> str:
+    """Markdown table: the ``walk`` family's swing-foot peak by walking speed."""
+    rows = per_family.get("walk", [])
+    lines = [
+        "| walk speed (m/s) | clips | cadence (steps/min) | swing-foot peak (m/s, mean / max) |",
+        "|---|---|---|---|",
+    ]
+    for lo, hi in WALK_SPEED_BINS:
+        sel = [r for r in rows if lo <= r["speed"] <= hi]
+        if not sel:
+            continue
+        peak = np.array([r["foot_peak"] for r in sel])
+        cad = np.array([r["cadence"] for r in sel])
+        cells = (f"{lo:.2f}-{hi:.2f}", str(len(sel)), f"{np.nanmedian(cad):.0f}")
+        lines.append(f"| {' | '.join(cells)} | {peak.mean():.2f} / {peak.max():.2f} |")
+    return "\n".join(lines)
 
 
 def write_histogram(lengths: np.ndarray, path: Path) -> None:
@@ -98,7 +194,7 @@ def write_histogram(lengths: np.ndarray, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5, 2.6), dpi=90)
-    ax.hist(lengths, bins=np.arange(40, 200, 8), color="#1f77b4", edgecolor="white")
+    ax.hist(lengths, bins=list(range(40, 200, 8)), color="#1f77b4", edgecolor="white")
     ax.set_xlabel("clip length (frames at 20 fps)")
     ax.set_ylabel("clips")
     ax.set_title(f"corpus clip lengths (n={len(lengths)})", fontsize=10)
@@ -139,8 +235,6 @@ def main(argv: list[str] | None = None) -> int:
         f"families {len(m['families'])}"
     )
     print("\n| family | clips |\n|---|---|")
-    from controlmm.corpus import family_names
-
     for name in sorted(m["families"], key=lambda f: family_names().index(f)):
         print(f"| {name} | {m['families'][name]} |")
     hist, _ = np.histogram(lengths, bins=LENGTH_BINS)
@@ -172,6 +266,10 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| measure | value |\n|---|---|")
     for k, v in rows:
         print(f"| {k} | {v} |")
+    print("\nTiming and balance per family (medians over clips; see timing()):\n")
+    print(timing_table(m["timing"]))
+    print("\nSwing-foot peak of the walk family by speed:\n")
+    print(walk_peaks(m["timing"]))
     if args.png:
         write_histogram(lengths, Path(args.png))
         print(f"\nwrote {args.png}")

@@ -1,8 +1,8 @@
 """Where the benchmarks find their data: the default corpus and the real HumanML3D sample clip.
 
 The default corpus is ``data/corpus-default`` under the repository root, built once by
-``controlmm corpus --out data/corpus-default --clips 6400 --seed 0`` (docs/corpus.md; about 4.5 min
-on 2 cores, 1 GB). The real clip 012314 is looked up in ``$CONTROLMM_SHARED/data/humanml3d`` (default
+``controlmm corpus --out data/corpus-default --clips 9800 --seed 0`` (docs/corpus.md; about 17 min
+on 2 shared cores, 1.5 GB). The real clip 012314 is looked up in ``$CONTROLMM_SHARED/data/humanml3d`` (default
 ``../shared`` beside the repository root), the folder the tests use. A missing input ends the
 benchmark with one line that says how to get it.
 """
@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # only for the annotation: importing the model code pulls in 
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CORPUS = ROOT / "data" / "corpus-default"
-BUILD_CORPUS = "controlmm corpus --out data/corpus-default --clips 6400 --seed 0"
+BUILD_CORPUS = "controlmm corpus --out data/corpus-default --clips 9800 --seed 0"
 REAL_CLIP = "012314"
 
 

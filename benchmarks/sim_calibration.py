@@ -5,7 +5,7 @@
 
 Clean motion should pass: every clip here is a real human clip (HumanML3D 012314) or a
 procedural corpus clip (``controlmm/corpus``; default ``data/corpus-default``, built by
-``controlmm corpus --out data/corpus-default --clips 6400 --seed 0``, docs/corpus.md), from its
+``controlmm corpus --out data/corpus-default --clips 9800 --seed 0``, docs/corpus.md), from its
 ``test`` split, the first ``--per-family`` clips of every family in id order. Each is
 retargeted with ``retarget_motion(..., fps=50)`` and checked with ``sim.check_trajectory`` in
 the ``empty`` scene with the default ``CheckConfig``. Printed:

@@ -133,6 +133,19 @@ def save_trajectory(
 
 
 # -- writers ---------------------------------------------------------------------------------------
+def lafan1_rows(qpos: np.ndarray) -> np.ndarray:
+    """LAFAN1-G1 / BeyondMimic CSV rows (T, nq) of MuJoCo qpos (T, nq; free joint first, root
+    quaternion wxyz): root x y z, root quaternion qx qy qz qw (xyzw), joint angles in MJCF order."""
+    return np.concatenate([qpos[:, 0:3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:]], axis=1)
+
+
+def write_lafan1_csv(qpos: np.ndarray, path: str | Path) -> None:
+    """The LAFAN1-G1 / BeyondMimic CSV of MuJoCo qpos rows (:func:`lafan1_rows`): no header, 17
+    significant digits, the rate is the caller's (``sim.physics`` writes 50 fps)."""
+    with atomic_open(path, "w", encoding="ascii", newline="") as fh:
+        np.savetxt(fh, lafan1_rows(qpos), fmt="%.17g", delimiter=",")
+
+
 def write_qpos_csv(traj: RobotTrajectory, path: str | Path) -> None:
     """MuJoCo qpos rows (root quaternion wxyz), no header, 17 significant digits."""
     with atomic_open(path, "w", encoding="ascii", newline="") as fh:

@@ -6,8 +6,10 @@ frame moves that leg's own joints (those between the trunk and that foot) so tha
 reaches its locked target: Gauss-Newton on the foot's position (and orientation, at 0.05
 m/rad, for legs with six or more joints; a five-joint leg such as H1's keeps the solver's
 foot orientation), all frames at once; a step that does not lower a frame's error is
-undone. The correction is then faded out around each stance with the lock weight and
-smoothed over time (Gaussian, sigma = 1 frame), so that pinning adds no jerk.
+undone, and a frame whose correction would turn a joint by more than PIN_MAX_CHANGE keeps
+the solver's pose (the lock is out of the leg's reach there). The correction is then faded
+out around each stance with the lock weight and smoothed over time (Gaussian, sigma = 1
+frame), so that pinning adds no jerk.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ from retarget.targets import Targets
 
 PIN_L_ROT = 0.05
 """Metres per radian of foot orientation error when pinning (position first)."""
+PIN_MAX_CHANGE = 0.2
+"""Largest joint change (rad) pinning may make in a frame; larger ones are not applied there."""
 
 
 def pin_stance_feet(
@@ -73,8 +77,11 @@ def pin_stance_feet(
             step = np.linalg.solve(jt @ jac + 1e-5 * np.eye(len(leg)), -(jt @ res[..., None]))[..., 0]
             cur = np.clip(np.where(better[:, None], cur, best) + step, lo, hi)
         # Correction over all frames: exact in stance, faded by the lock weight around it, smoothed.
+        # A frame whose leg would have to swing far (an unreachable lock: another IK branch)
+        # keeps the solver's pose: pinning fixes millimetres, it does not re-pose a leg.
         delta = np.zeros((len(q), len(leg)))
-        delta[frames] = best - start
+        change = best - start
+        delta[frames] = np.where((np.abs(change).max(axis=1) <= PIN_MAX_CHANGE)[:, None], change, 0.0)
         near = np.flatnonzero((lock > 0) & ~np.isin(np.arange(len(q)), frames))
         if len(near):
             nearest = frames[np.abs(near[:, None] - frames[None, :]).argmin(axis=1)]

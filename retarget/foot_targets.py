@@ -21,6 +21,10 @@ PITCH_SMOOTH_SECONDS = 0.05
 """Gaussian sigma (s) of a contact foot's pitch (flat, heel strike, toe-off) over time."""
 LOCK_GAIN = 30.0
 """Weight multiplier of the foot targets during stance (locked feet)."""
+FOOT_GAP = 0.02
+"""Metres kept between the two feet's soles sideways where they are side by side."""
+OVERLAP_RAMP = 0.05
+"""Lengthwise distance (m) between the footprints over which the sideways gap fades out."""
 
 
 def foot_heading_pitch(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
@@ -45,10 +49,10 @@ def rot_y(angle: np.ndarray) -> np.ndarray:
 
 def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     """Heel and toe pivots (3,) of a foot in its node frame: the centres of its rearmost and
-    foremost sole points (the collision points within 3 mm of the sole, rest pose, world +X
+    foremost sole points (the collision points within 3 mm of the sole, the foot flat, world +X
     forward). A foot rolling about a pivot keeps that point's height and place."""
     f = robot.feet[side]
-    rot = robot.rest.rot[0, f.node]
+    rot = robot.foot_flat_rot[side]
     world = f.points @ rot.T
     low = world[:, 2] - f.radius
     sole = low <= low.min() + 0.003
@@ -56,6 +60,122 @@ def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     front = sole & (x >= x[sole].max() - 0.01)
     back = sole & (x <= x[sole].min() + 0.01)
     return f.points[back].mean(axis=0), f.points[front].mean(axis=0)
+
+
+def footprint(robot: RobotModel, side: str) -> np.ndarray:
+    """(x_min, x_max, y_min, y_max) of a flat foot's collision geometry around its ankle keypoint (m;
+    x forward, y left)."""
+    f = robot.feet[side]
+    rot = robot.foot_flat_rot[side]
+    rel = (f.points - robot.offsets[robot.keypoint_index(f"{side}_ankle")]) @ rot.T
+    r = f.radius
+    return np.array(
+        [(rel[:, 0] - r).min(), (rel[:, 0] + r).max(), (rel[:, 1] - r).min(), (rel[:, 1] + r).max()]
+    )
+
+
+def _heading_axes(pelvis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, y, heading): the horizontal forward and left axes (T, 3) of the pelvis frames
+    (T, 3, 3) and their heading (T,) about +Z."""
+    x = pelvis[:, :, 0].copy()
+    x[:, 2] = 0.0
+    x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-9)
+    y = np.stack([-x[:, 1], x[:, 0], np.zeros(len(x))], axis=1)
+    return x, y, np.arctan2(x[:, 1], x[:, 0])
+
+
+def feet_shortfall(
+    robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """How far (m, (T,), signed) the left ankle target must move relative to the right one along
+    the pelvis heading's left axis (T, 3) for the robot's feet not to overlap.
+
+    Each foot's footprint (:func:`footprint`) is turned by the human foot's heading (``world``:
+    the scaled human (T, 22, 3)); where the two overlap lengthwise the left one must lie
+    FOOT_GAP left of the right one (or, feet crossed, right of it: whichever is nearer), the
+    need fading out over OVERLAP_RAMP of lengthwise gap.
+    """
+    kl, kr = robot.keypoint_index("left_ankle"), robot.keypoint_index("right_ankle")
+    x, y, pelvis_heading = _heading_axes(pelvis)
+    extent = {}
+    for side in ("left", "right"):
+        box = footprint(robot, side)
+        corners = np.array([[box[i], box[j]] for i in (0, 1) for j in (2, 3)])  # (4, 2)
+        turn = foot_heading_pitch(world, side)[0] - pelvis_heading  # (T,)
+        c, s_ = np.cos(turn)[:, None], np.sin(turn)[:, None]
+        cx = c * corners[:, 0] - s_ * corners[:, 1]  # (T, 4) in the pelvis heading frame
+        cy = s_ * corners[:, 0] + c * corners[:, 1]
+        extent[side] = (cx.min(axis=1), cx.max(axis=1), cy.min(axis=1), cy.max(axis=1))
+    fl, fr = extent["left"], extent["right"]
+    d = kp_pos[:, kl] - kp_pos[:, kr]
+    dx, dy = np.sum(d * x, axis=1), np.sum(d * y, axis=1)
+    overlap = np.minimum(dx + fl[1], fr[1]) - np.maximum(dx + fl[0], fr[0])  # > 0: side by side
+    share = np.clip(1.0 + overlap / OVERLAP_RAMP, 0.0, 1.0)
+    # Apart: the left foot left of the right one (dy >= beside) or, crossed, right of it
+    # (dy <= -crossed); short of both, the nearer of the two.
+    beside = (fr[3] - fl[2] + FOOT_GAP) * share
+    crossed = (fl[3] - fr[2] + FOOT_GAP) * share
+    left = np.maximum(beside - dy, 0.0)
+    right = np.maximum(dy + crossed, 0.0)
+    return np.where(left <= right, left, -right), y
+
+
+def _move_foot(robot: RobotModel, kp_pos: np.ndarray, side: str, delta: np.ndarray) -> None:
+    for joint in (f"{side}_ankle", f"{side}_foot"):
+        if robot.has_keypoint(joint):
+            kp_pos[:, robot.keypoint_index(joint)] += delta
+
+
+def space_feet(robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray) -> None:
+    """Push the feet targets apart sideways where the robot's feet would overlap (in place).
+
+    The limb targets follow the scaled human's feet (:func:`retarget.targets.fit_limbs_to_human`),
+    and a robot's feet may be wider or longer than the scaled human's. Per frame, each side
+    moves half the :func:`feet_shortfall` along the pelvis heading's left axis, its toe with it.
+    """
+    if not all(robot.has_keypoint(n) for n in ("left_ankle", "right_ankle")):
+        return
+    short, y = feet_shortfall(robot, kp_pos, world, pelvis)
+    for side, sign in (("left", 0.5), ("right", -0.5)):
+        _move_foot(robot, kp_pos, side, sign * short[:, None] * y)
+
+
+def separate_locks(
+    robot: RobotModel,
+    kp_pos: np.ndarray,
+    world: np.ndarray,
+    pelvis: np.ndarray,
+    runs: dict[str, np.ndarray],
+    alpha_xy: dict[str, np.ndarray],
+    passes: int = 2,
+) -> None:
+    """Move whole foot locks apart where the two locked feet would overlap (in place).
+
+    A lock is one place per contact run, the mean of the run's targets, so two locks may
+    overlap although every frame's targets were spaced (:func:`space_feet`). Each run of
+    each foot (``runs[side]``: (T,) run index per frame, -1 outside) moves by one constant
+    vector, half the largest :func:`feet_shortfall` over its frames along their mean left
+    axis, weighted by the run's horizontal lock weight ``alpha_xy[side]`` (T,): the locked
+    foot stays still.
+    """
+    if not all(robot.has_keypoint(n) for n in ("left_ankle", "right_ankle")):
+        return
+    for _ in range(passes):
+        short, y = feet_shortfall(robot, kp_pos, world, pelvis)
+        if not np.any(np.abs(short) > 1e-6):
+            return
+        for side, sign in (("left", 0.5), ("right", -0.5)):
+            owner = runs[side]
+            for run in np.unique(owner[owner >= 0]):
+                frames = owner == run
+                need = frames & (np.abs(short) > 1e-6)
+                if not need.any():
+                    continue
+                axis = y[need].mean(axis=0)
+                axis /= max(float(np.linalg.norm(axis)), 1e-9)
+                worst = short[need][np.argmax(np.abs(short[need]))]
+                shift = sign * float(worst) * axis
+                _move_foot(robot, kp_pos, side, np.where(frames, alpha_xy[side], 0.0)[:, None] * shift)
 
 
 def feet_targets(
@@ -74,13 +194,14 @@ def feet_targets(
     ori_kp: list[int],
     ori_rot: np.ndarray,
     ori_w: np.ndarray,
-) -> None:
+) -> np.ndarray:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
     Each contact run gets one place and heading. Within it the foot is flat while the human
     foot is flat, and otherwise pitches with the human foot about its heel pivot (toe up: a
     heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
     (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
+    Returns (T,) the contact run each frame's lock belongs to (-1 where the foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     foot_node = robot.nodes[ka]
@@ -89,13 +210,13 @@ def feet_targets(
         for k in range(len(robot.joints))
         if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
     ]
-    rest_rot = robot.rest.rot[0, foot_node]
-    rest_pos = robot.rest.pos[0, foot_node]
+    rest_rot = robot.foot_flat_rot[side]  # the foot flat on the floor, facing +X
+    flat_height = robot.foot_flat_height[side]  # its node's height then
     heading, elevation = foot_heading_pitch(world, side)
     ref = flat_stance if flat_stance.any() else contact
     flat = np.median(elevation[ref]) if ref.any() else np.median(elevation)
     # Swing: shift the foot keypoints vertically so the human stance height is the robot's.
-    ankle_rest_h = robot.rest_keypoints[ka, 2] - robot.floor_z
+    ankle_rest_h = flat_height + float((rest_rot @ robot.offsets[ka])[2])
     ref_h = kp_pos[ref, ka, 2] if ref.any() else np.sort(kp_pos[:, ka, 2])[: max(1, len(kp_pos) // 20)]
     lift = ankle_rest_h - float(np.median(ref_h))
     for k in same_node:
@@ -105,6 +226,7 @@ def feet_targets(
     lock_rot = swing_rot.copy()
     lock_node = kp_pos[:, ka] - np.einsum("tij,j->ti", swing_rot, robot.offsets[ka])
     runs = true_runs(contact)
+    owner_out = np.full(len(world), -1)
     if runs:
         # In contact: flat when both heel and toe are down, else rolling on the pivot that
         # the human's pitch puts on the floor (never rolling onto the lifted end).
@@ -125,9 +247,10 @@ def feet_targets(
             frames[:, None] - ends[None, :], 0
         )
         owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
-        height = rest_pos[2] - robot.floor_z + STANCE_CLEARANCE
+        height = flat_height + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
             sel = (owner == i) & (alpha_xy > 0)
+            owner_out[sel] = i
             pick = np.arange(s, e)
             if flat_stance[s:e].any():
                 pick = pick[flat_stance[s:e]]
@@ -152,3 +275,4 @@ def feet_targets(
         delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
         ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
         ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
+    return owner_out

@@ -72,3 +72,12 @@ def collision_geoms(model: mujoco.MjModel, body: int) -> list[int]:
         for g in range(model.ngeom)
         if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])
     ]
+
+
+_SIGNS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
+
+
+def aabb_corners(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """The 8 corners (8, 3) of geom ``g``'s bounding box (MuJoCo's ``geom_aabb``) in its body frame."""
+    centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+    return model.geom_pos[g] + (centre + _SIGNS * half) @ quat_to_mat(model.geom_quat[g]).T

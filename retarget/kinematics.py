@@ -207,10 +207,10 @@ class KinematicTree:
         for i in range(1, n):
             depth[i] = depth[self.node_parent[i]] + 1
         self.levels = [np.flatnonzero(depth == d) for d in range(1, depth.max() + 1)]
-        k = skew(self.jnt_axis)
+        axis_skew = skew(self.jnt_axis)
         self._fixed_k0 = self.fixed_rot.copy()
-        self._fixed_k1 = self.fixed_rot @ k
-        self._fixed_k2 = self.fixed_rot @ (k @ k)
+        self._fixed_k1 = self.fixed_rot @ axis_skew
+        self._fixed_k2 = self.fixed_rot @ (axis_skew @ axis_skew)
         self._fixed_axis = (self.fixed_rot @ self.jnt_axis[..., None])[..., 0]
         self._fixed_jpos = self.fixed_pos + (self.fixed_rot @ self.jnt_pos[..., None])[..., 0]
         self._node_jidx = np.maximum(self.node_joint, 0)

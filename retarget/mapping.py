@@ -52,8 +52,8 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float, float]] = {
     "pelvis": (3.0, 0.0, 2.0),
     "left_hip": (0.3, 1.0, 0.0),
     "right_hip": (0.3, 1.0, 0.0),
-    "left_knee": (1.0, 2.0, 0.0),
-    "right_knee": (1.0, 2.0, 0.0),
+    "left_knee": (3.0, 2.0, 0.0),
+    "right_knee": (3.0, 2.0, 0.0),
     "left_ankle": (3.0, 2.0, 1.0),
     "right_ankle": (3.0, 2.0, 1.0),
     "left_foot": (2.0, 1.0, 0.0),
@@ -62,10 +62,10 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float, float]] = {
     "head": (0.3, 0.5, 0.0),
     "left_shoulder": (0.5, 1.0, 0.0),
     "right_shoulder": (0.5, 1.0, 0.0),
-    "left_elbow": (1.0, 2.0, 0.0),
-    "right_elbow": (1.0, 2.0, 0.0),
-    "left_wrist": (1.5, 2.0, 0.0),
-    "right_wrist": (1.5, 2.0, 0.0),
+    "left_elbow": (3.0, 2.0, 0.0),
+    "right_elbow": (3.0, 2.0, 0.0),
+    "left_wrist": (3.0, 2.0, 0.0),
+    "right_wrist": (3.0, 2.0, 0.0),
 }
 """Weights used when a keypoint entry leaves them out (unlisted joints: 0.5, 1.0, 0.0)."""
 
@@ -324,7 +324,7 @@ def load_mapping(name_or_path: str | Path) -> Mapping:
                 hint = f" (robot '{key}' is packaged but has no shipped mapping; pass a mapping file)"
             raise ControlMMError(
                 f"unknown robot '{text}'{hint}; known robots: {', '.join(known)}; "
-                "or pass a mapping .json file"
+                "or pass a mapping .json or a humanoid MJCF .xml"
             )
         source = f"packaged:{key}"
     else:

@@ -11,8 +11,9 @@ such frame pairs. The feet roll (heel strike, flat, toe-off): the ankle moves wh
 geom on the floor stays put, so slip is measured at the contact: per frame pair, the
 horizontal displacement of the foot's collision geom that is down in both frames and moved
 least (as :mod:`sim.kinematic` does). Per stance: *sliding* = the largest horizontal
-distance of a down geom from where it touched down, while it stays down (mm), *path* = the foot body's horizontal path length (mm, includes the
-roll); *skate* = mean contact slide per contact frame (PhysDiff's skate, mm).
+distance of a down geom from where it touched down, while it stays down (mm), *path* = the
+foot body's horizontal path length (mm, includes the roll); *skate* = mean contact slide per
+contact frame (PhysDiff's skate, mm).
 """
 
 from __future__ import annotations
@@ -123,7 +124,7 @@ def geom_lowest_z(model: mujoco.MjModel, rep: Replay, geoms: list[int] | tuple[i
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[False], mask, [False]])
     edges = np.flatnonzero(np.diff(padded.astype(int)))
-    return list(zip(edges[::2], edges[1::2]))
+    return list(zip(edges[::2], edges[1::2], strict=True))
 
 
 def trajectory_metrics(

@@ -39,7 +39,7 @@ def _mink() -> ModuleType:
 def _model_with_sites(robot: RobotModel) -> mujoco.MjModel:
     """The robot MJCF with one site per keypoint (``kp_<joint>``) at its offset."""
     spec = mujoco.MjSpec.from_file(str(robot.mjcf))
-    for name, node, off in zip(robot.keypoint_names, robot.nodes, robot.offsets):
+    for name, node, off in zip(robot.keypoint_names, robot.nodes, robot.offsets, strict=True):
         body = robot.model.body(int(robot.tree.node_body[node])).name
         spec.body(body).add_site(name=f"kp_{name}", pos=off.tolist())
     return spec.compile()
@@ -60,7 +60,7 @@ def solve_mink(
     model = _model_with_sites(robot)
     config = mink.Configuration(model)
     tasks, frame_tasks = [], []
-    for k, kp in enumerate(robot.mapping.keypoints):
+    for kp in robot.mapping.keypoints:
         task = mink.FrameTask(
             f"kp_{kp.joint}", "site", position_cost=1.0, orientation_cost=0.0, lm_damping=1.0
         )

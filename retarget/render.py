@@ -104,10 +104,9 @@ def stick_frames(
     traj: RobotTrajectory, width: int = 640, height: int = 480, fps: float = 25.0
 ) -> Iterator[np.ndarray]:
     """RGB frames of the robot's bodies as a 3-D stick figure (parent -> child lines)."""
-    import matplotlib  # heavy, and only the stick-figure fallback draws with it
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    # heavy, and only the stick-figure fallback draws with it (Agg: no display needed)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     robot = traj.robot_model()
     model = robot.model
@@ -116,7 +115,8 @@ def stick_frames(
     idx = _frame_indices(traj, fps)
     lo, hi = pos.reshape(-1, 3).min(0), pos.reshape(-1, 3).max(0)
     centre, half = (lo + hi) / 2, max((hi - lo)[:2].max() / 2, 0.8) + 0.2
-    fig = plt.figure(figsize=(width / 100, height / 100), dpi=100)
+    fig = Figure(figsize=(width / 100, height / 100), dpi=100)
+    canvas = FigureCanvasAgg(fig)
     ax = fig.add_subplot(projection="3d")
     try:
         for t in idx:
@@ -134,13 +134,13 @@ def stick_frames(
             p = pos[t]
             for b, par in enumerate(parents):
                 if par >= 0:
-                    ax.plot(*zip(p[par], p[b]), color="#1f77b4", lw=2)
+                    ax.plot(*zip(p[par], p[b], strict=True), color="#1f77b4", lw=2)
             ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=6, color="#d62728")
             ax.set_title(f"{robot.name}  t = {t / traj.fps:.2f} s (stick figure)")
-            fig.canvas.draw()
-            yield np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+            canvas.draw()
+            yield np.asarray(canvas.buffer_rgba())[..., :3].copy()
     finally:
-        plt.close(fig)
+        fig.clear()
 
 
 def render_trajectory(

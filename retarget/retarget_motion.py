@@ -179,11 +179,12 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     rm = load_robot(robot)
     joints, src_fps, info = _motion_arrays(motion, check_scale)
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
-    targets = build_targets(rm, joints, src_fps, transform)
+    config = config if config is not None else SolverConfig(**rm.mapping.solver)
+    targets = build_targets(rm, joints, src_fps, transform, config)
     if solver == "mink":
         sol = solve_mink(rm, targets)
     else:
-        sol = solve(rm, targets, config or SolverConfig(**rm.mapping.solver))
+        sol = solve(rm, targets, config)
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)

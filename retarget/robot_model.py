@@ -11,29 +11,20 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
-from controlmm.motion.skeleton import BONE_LENGTHS, JOINT_INDEX, JOINT_NAMES, PARENTS
+from controlmm.motion.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
+from retarget.automap import auto_mapping
 from retarget.bodyfloor import BodyFloor, build_body_floor
 from retarget.capsules import Capsules, robot_capsules
 from retarget.geoms import FloorPoints, collision_geoms, geom_points
+from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_PELVIS_HEIGHT
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.mapping import Mapping, load_mapping
-from retarget.robots import robot_mjcf
+from retarget.robot_files import compile_robot, robot_mjcf_path
 from retarget.selfcollision import SelfClearance, build_self_clearance
-
-HUMAN_ANKLE_HEIGHT = 0.055
-"""Height (m) of the HumanML3D ankle joint above the floor in stance (median of the real clip 012314)."""
-
-HUMAN_HIP_HEIGHT = float(
-    (BONE_LENGTHS[4] + BONE_LENGTHS[7] + BONE_LENGTHS[5] + BONE_LENGTHS[8]) / 2 + HUMAN_ANKLE_HEIGHT
-)
-"""Hip-joint height (m) of the HumanML3D reference skeleton standing straight (thigh + shank + ankle)."""
-
-HUMAN_PELVIS_HEIGHT = HUMAN_HIP_HEIGHT + 0.084
-"""Pelvis height (m) standing straight (hips sit 0.084 m below the pelvis joint on the reference skeleton)."""
+from retarget.soles import flat_tilt
 
 
 class RobotModel:
@@ -52,20 +43,18 @@ class RobotModel:
         rest_q: (nj,) rest joint angles (qpos0 clipped to those ranges).
         rest: Poses of the rest pose with the root at the world origin, identity rotation.
         floor_z: lowest foot point (m) of the rest pose (subtract it to stand on the floor).
+        foot_flat_rot: {"left"|"right": (3, 3)} world rotation of each foot's node standing flat
+            on its sole, facing as in the rest pose (:func:`retarget.soles.flat_tilt`: the rest
+            orientation for feet that are flat in ``qpos0``); foot_flat_height: the node
+            origin's height (m) above the floor then.
         scale: the human -> robot uniform scale.
         body_joints: every robot body name -> human joint names it follows.
     """
 
     def __init__(self, mapping: Mapping) -> None:
         self.mapping = mapping
-        path = Path(mapping.robot) if mapping.robot.endswith(".xml") else robot_mjcf(mapping.robot)
-        if not path.is_file():
-            raise InputFileError(f"robot MJCF '{path}' does not exist")
-        try:
-            self.model = mujoco.MjModel.from_xml_path(str(path))
-        except ValueError as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else "invalid MJCF"
-            raise InputFileError(f"cannot load robot MJCF '{path}': {first}") from None
+        path = robot_mjcf_path(mapping.robot)
+        self.model = compile_robot(mapping.robot)
         self.mjcf = path
         m = self.model
         self.tree = tree = KinematicTree(m)
@@ -143,6 +132,14 @@ class RobotModel:
         self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
         self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
         self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)
+        # Flat feet: the rest orientation tilted until the sole lies on the floor.
+        self.foot_flat_rot: dict[str, np.ndarray] = {}
+        self.foot_flat_height: dict[str, float] = {}
+        for side, f in self.feet.items():
+            rest_rot = self.rest.rot[0, f.node]
+            rot = flat_tilt(f.points, f.radius, rest_rot) @ rest_rot
+            self.foot_flat_rot[side] = rot
+            self.foot_flat_height[side] = float(-((f.points @ rot.T)[:, 2] - f.radius).min())
         self.scale = mapping.scale if mapping.scale is not None else self._auto_scale()
         self.body_joints = self._body_joints()
 
@@ -209,7 +206,7 @@ class RobotModel:
                     f"which is not in {self.mjcf.name}"
                 )
         own: dict[int, list[str]] = {}
-        for kp, node in zip(self.keypoint_names, self.nodes):
+        for kp, node in zip(self.keypoint_names, self.nodes, strict=True):
             own.setdefault(int(self.tree.node_body[node]), []).append(kp)
         children: dict[int, list[int]] = {}
         for b in range(1, m.nbody):
@@ -251,7 +248,8 @@ def _load_cached(key: str) -> RobotModel:
 
 
 def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:
-    """A :class:`RobotModel` from a packaged robot name, a mapping file path or a :class:`Mapping`."""
+    """A :class:`RobotModel` from a packaged robot name, a mapping file path, a humanoid MJCF path
+    (mapped automatically, :mod:`retarget.automap`) or a :class:`Mapping`."""
     if isinstance(robot, RobotModel):
         return robot
     if isinstance(robot, Mapping):
@@ -264,10 +262,17 @@ def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:
             return _load_cached_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
         return _load_cached(text)  # raises the one-line error
     if text.lower().endswith(".xml"):
-        raise ControlMMError(
-            f"'{text}' is an MJCF file; pass a mapping .json that names it (see docs/retargeting.md)"
-        )
+        path = Path(text).expanduser()
+        if not path.is_file():
+            raise InputFileError(f"robot MJCF '{text}' does not exist")
+        stat = path.stat()
+        return _load_cached_mjcf(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     return _load_cached(text.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached_mjcf(path: str, mtime: int, size: int) -> RobotModel:
+    return RobotModel(auto_mapping(path))
 
 
 @functools.lru_cache(maxsize=16)

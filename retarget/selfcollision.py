@@ -14,8 +14,9 @@ robot's collision geoms (:class:`SelfClearance`):
   and ankle bodies: out of reach but for touching the toes); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
-* the left leg's geoms (above the foot) are paired with the right leg's (crossing steps,
-  hips turned out), with the same margins.
+* the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
+  hips turned out, feet placed close together), and in each leg the links above the knee
+  with the links below the knee's own (a deep crouch), with the same margins.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -183,13 +184,16 @@ def build_self_clearance(
         for b in range(1, m.nbody):  # the wrist body's descendants (hands)
             if wrist in ancestors(b):
                 arm[b] = side_i
-    # Legs: the bodies from below the trunk down to each foot (the feet themselves are left
-    # to the foot locks: a stance foot is placed where the human's was).
+    # Legs: the bodies from below the trunk down to each foot and the foot's own (toes):
+    # the feet follow the human's, which may stand closer together than the robot's allow.
     leg: dict[int, int] = {}
     for side_i, side in enumerate(("left", "right")):
         ankle = int(tree.node_body[feet[side].node])
-        for b in ancestors(ankle)[1:]:
+        for b in ancestors(ankle):
             leg[b] = side_i
+        for b in range(1, m.nbody):
+            if ankle in ancestors(b):
+                leg[b] = side_i
     shared = set(ancestors(int(tree.node_body[feet["left"].node]))) & set(
         ancestors(int(tree.node_body[feet["right"].node]))
     )
@@ -231,6 +235,20 @@ def build_self_clearance(
             if leg.get(bj) == 1:
                 first.append(i)
                 second.append(j)
+    # Within a leg: the thigh against the foot and the links between the knee and the foot (a
+    # deep crouch folds a short leg's foot onto its hip).
+    for side in ("left", "right"):
+        if f"{side}_knee" not in keypoint_nodes:
+            continue
+        knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
+        upper = {b for b in ancestors(knee)[1:] if b in leg}
+        lower = {b for b in leg if knee in ancestors(b) and b != knee}
+        for i, bi in enumerate(body_of):
+            if bi in upper:
+                for j, bj in enumerate(body_of):
+                    if bj in lower:
+                        first.append(i)
+                        second.append(j)
     if not first:
         return None
     sc = SelfClearance(

@@ -99,15 +99,16 @@ def _upsample(
 def solve(
     robot: RobotModel,
     targets: Targets,
-    config: SolverConfig = SolverConfig(),
+    config: SolverConfig | None = None,
     init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Solution:
     """Run the solver on ``targets``; see the module docstring.
 
     Coarse to fine (``config.levels``, without ``init``): each level solves every k-th frame
     for a few iterations and its interpolation starts the next level; the last level is
-    every frame.
+    every frame. ``config``: default ``SolverConfig()``.
     """
+    config = config if config is not None else SolverConfig()
     start = time.perf_counter()
     n = len(targets.kp_pos)
     levels = [(k, it) for k, it in config.levels if k == 1 or n >= 4 * k] if init is None else []
@@ -156,7 +157,7 @@ def violation_spans(bad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     grow = np.convolve(bad, np.ones(2 * REFINE_PAD + 1), mode="same") > 0
     padded = np.concatenate([[False], grow, [False]]).astype(int)
     edges = np.flatnonzero(np.diff(padded))
-    spans = [(max(a - 2, 0), min(b + 2, n), a, b) for a, b in zip(edges[::2], edges[1::2])]
+    spans = [(max(a - 2, 0), min(b + 2, n), a, b) for a, b in zip(edges[::2], edges[1::2], strict=True)]
     if not spans:
         return np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0, dtype=int)
     idx = np.concatenate([np.arange(lo, hi) for lo, hi, _, _ in spans])

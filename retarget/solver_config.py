@@ -27,7 +27,7 @@ class SolverConfig:
     w_vel_root: float = 0.5
     w_vel_joint: float = 0.1
     w_acc_root: float = 100.0
-    w_acc_joint: float = 5.0
+    w_acc_joint: float = 8.0
     exact_acceleration: bool = False
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
     levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
@@ -61,3 +61,9 @@ class SolverConfig:
     w_body_floor_coarse: float = 100.0
     """Weight of the body-floor term at the coarse levels: a stiff floor from the start would
     lift a straight-legged initial guess off the ground."""
+    human_leg_share: float = 1.0
+    """How far (0-1) the knee, ankle and toe targets move from the robot-proportioned legs (the
+    robot's bone lengths along the human's bones, from the robot's own hips) to the scaled
+    human's joint positions (:func:`retarget.targets.fit_limbs_to_human`)."""
+    human_arm_share: float = 1.0
+    """The same for the elbow and wrist targets (from the robot's own shoulders)."""

@@ -42,6 +42,23 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2], edges[1::2], strict=True))
 
 
+def smoothed_foot(joints: np.ndarray, fps: float, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """(ankle, toe) positions (T, 3) of one foot, smoothed over ~STANCE_SMOOTH_SECONDS when T >= 4."""
+    a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
+    if len(joints) >= 4:
+        sigma = STANCE_SMOOTH_SECONDS * fps
+        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
+        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
+    return a, t
+
+
+def horizontal_speed(p: np.ndarray, fps: float, combine: np.ufunc) -> np.ndarray:
+    """(T,) horizontal speed (m/s) of points (T, 3), T >= 2: each frame ``combine``s its arriving
+    and leaving steps (np.maximum: fast on either side; np.minimum: slow on either side)."""
+    d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
+    return combine(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
+
+
 def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     """Human stance frames (T,) bool of one foot from HumanML3D joints (metres, Y up).
 
@@ -49,24 +66,15 @@ def detect_stance(joints: np.ndarray, fps: float, side: str) -> np.ndarray:
     0.35 m/s horizontally (positions smoothed over ~0.075 s first, so that jittery input
     still plants its feet); gaps of one frame are filled and runs shorter than 0.15 s dropped.
     """
-    a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
+    a, t = smoothed_foot(joints, fps, side)
     n = len(joints)
-    if n >= 4:
-        sigma = STANCE_SMOOTH_SECONDS * fps
-        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
-        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
     if n < 2:
         return np.array([a[0, 1] < STANCE_ANKLE_HEIGHT and t[0, 1] < STANCE_TOE_HEIGHT])
-
-    def speed(p: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
-        return np.maximum(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
-
     ok = (
         (a[:, 1] < STANCE_ANKLE_HEIGHT)
         & (t[:, 1] < STANCE_TOE_HEIGHT)
-        & (speed(a) < STANCE_SPEED)
-        & (speed(t) < STANCE_SPEED)
+        & (horizontal_speed(a, fps, np.maximum) < STANCE_SPEED)
+        & (horizontal_speed(t, fps, np.maximum) < STANCE_SPEED)
     )
     for s, e in true_runs(~ok):  # fill one-frame gaps inside stance
         if 0 < s and e < n and e - s <= 1:
@@ -113,24 +121,16 @@ def detect_contacts(
     flat-stance heights of that foot (HumanML3D puts the floor at the lowest joint).
     """
     st = detect_stance(joints, fps, side) if stance is None else stance
-    a, t = joints[:, JOINT_INDEX[f"{side}_ankle"]], joints[:, JOINT_INDEX[f"{side}_foot"]]
+    a, t = smoothed_foot(joints, fps, side)
     n = len(joints)
-    if n >= 4:
-        sigma = STANCE_SMOOTH_SECONDS * fps
-        a = gaussian_filter1d(a.astype(np.float64), sigma, axis=0, mode="nearest")
-        t = gaussian_filter1d(t.astype(np.float64), sigma, axis=0, mode="nearest")
     if n < 2:
         return st.copy(), st.copy(), st.copy()
-
-    def speed(p: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1) * fps
-        return np.minimum(np.concatenate([d[:1], d]), np.concatenate([d, d[-1:]]))
 
     low = max(1, n // 20)
     a_ref = float(np.median(a[st, 1])) if st.any() else float(np.sort(a[:, 1])[:low].mean())
     t_ref = float(np.median(t[st, 1])) if st.any() else float(np.sort(t[:, 1])[:low].mean())
-    heel = (a[:, 1] < a_ref + CONTACT_RISE) & (speed(a) < CONTACT_SPEED)
-    toe = (t[:, 1] < t_ref + CONTACT_RISE) & (speed(t) < STANCE_SPEED)
+    heel = (a[:, 1] < a_ref + CONTACT_RISE) & (horizontal_speed(a, fps, np.minimum) < CONTACT_SPEED)
+    toe = (t[:, 1] < t_ref + CONTACT_RISE) & (horizontal_speed(t, fps, np.minimum) < STANCE_SPEED)
     contact = st | heel | toe
     for s, e in true_runs(~contact):  # fill one-frame gaps
         if 0 < s and e < n and e - s <= 1:

@@ -8,6 +8,12 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
    rigid trunk links (pelvis -> hips/spine1, spine3 -> neck/collars/shoulders/head) rotate
    the robot offset with the human pelvis or torso frame; limb bones keep the human bone
    direction with the robot's length. The refined targets have the robot's proportions.
+   Then the limb targets (knees, ankles, toes, elbows, wrists) move by
+   ``SolverConfig.human_leg_share`` / ``human_arm_share`` toward the scaled human's own joint positions
+   (:func:`fit_limbs_to_human`): a robot whose hips are wider than the scaled human's
+   brings its knees and feet in under the human's instead of standing on its own hip width,
+   its feet kept far enough apart sideways not to overlap (:func:`retarget.foot_targets.space_feet`,
+   and whole foot locks moved apart by :func:`retarget.foot_targets.separate_locks`).
 3. **Orientations** from bone directions: pelvis frame (hip axis + hips -> pelvis), torso
    frame (collar axis + spine3 -> neck), foot frames (ankle -> toe heading and pitch). The
    trunk's heading counts fully, its tilt at ``TRUNK_TILT``.
@@ -28,8 +34,9 @@ import numpy as np
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.foot_targets import STANCE_CLEARANCE, feet_targets
+from retarget.foot_targets import STANCE_CLEARANCE, feet_targets, separate_locks, space_feet
 from retarget.robot_model import RobotModel
+from retarget.solver_config import SolverConfig
 from retarget.stance import RAMP_SECONDS, detect_contacts, detect_stance, lock_ramp, slowness
 
 FRAME_CHILDREN = {
@@ -40,6 +47,11 @@ FRAME_CHILDREN = {
 
 SWING_CLEARANCE = 0.015
 """Outside stance the solver keeps the foot at least this high (m): feet are planted or clearly lifted."""
+LEG_JOINTS = ("left_knee", "right_knee", "left_ankle", "right_ankle")
+ARM_JOINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
+"""Keypoints that :func:`fit_limbs_to_human` moves toward the scaled human's joints."""
+TOE_ANKLE = {"left_foot": "left_ankle", "right_foot": "right_ankle"}
+"""Toe keypoints move with their ankle (the robot's foot stays rigid)."""
 TRUNK_TILT = 0.3
 """Weight factor of the pelvis/torso tilt (roll, pitch) against their heading: the human's
 neutral trunk tilt is not well defined from joints, the heading is."""
@@ -121,8 +133,9 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
     side, the arm's frontal-plane angle (shoulder -> wrist target in the torso frame,
     lateral against downward) is raised to ``minimum`` by rotating the elbow and wrist
     targets about the torso's forward axis through the shoulder; the correction is weighted
-    by how much the arm points down (none for an arm held forward, sideways or up), so it is
-    continuous in time. The solver's self-clearance term handles the rest (squats, crossing).
+    by how much the arm points down and lies in the frontal plane (none for an arm held
+    forward, sideways or up), and is at most ``minimum``, so it is continuous in time. The
+    solver's self-clearance term handles the rest (squats, crossing).
     """
     x_axis = torso[..., :, 0]  # (T, 3) torso forward
     for sign, side in ((1.0, "left"), (-1.0, "right")):
@@ -135,8 +148,12 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
         down = np.maximum(-local[:, 2], 0.0)
         lateral = sign * local[:, 1]
         angle = np.arctan2(lateral, np.maximum(down, 1e-9))
-        share = down / np.maximum(np.linalg.norm(local, axis=1), 1e-9)
-        delta = np.maximum(minimum - angle, 0.0) * share * sign  # rotation about torso x
+        length = np.maximum(np.linalg.norm(local, axis=1), 1e-9)
+        # Only an arm hanging beside the body passes through the hips: the correction fades
+        # with how far the arm points forward or back, and is at most ``minimum`` (an arm
+        # reaching across the front is not swung out).
+        share = down / length * (1.0 - np.abs(local[:, 0]) / length)
+        delta = np.clip(minimum - angle, 0.0, minimum) * share * sign  # rotation about torso x
         if not np.any(delta):
             continue
         c, s_ = np.cos(delta)[:, None], np.sin(delta)[:, None]
@@ -148,8 +165,42 @@ def abduct_arms(robot: RobotModel, kp_pos: np.ndarray, torso: np.ndarray, minimu
             kp_pos[:, k] = kp_pos[:, ks] + along + perp * c + np.cross(x_axis, perp) * s_
 
 
-def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: HumanToWorld) -> Targets:
-    """Targets for ``joints`` (T, 22, 3) human frame (metres, Y up) at ``fps``."""
+def fit_limbs_to_human(
+    robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, leg_share: float, arm_share: float
+) -> None:
+    """Move the limb targets toward the scaled human's joints (in place): the legs' by
+    ``leg_share``, the arms' by ``arm_share`` (0: as refined, 1: at the human's joints).
+
+    ``kp_pos`` (T, K, 3): the refined targets (robot proportions); ``world`` (T, 22, 3): the
+    scaled human in the world. Knees, ankles, elbows and wrists move toward the human's own
+    joint positions, each toe by its ankle's shift (the robot's foot stays rigid); the trunk
+    (pelvis, hips, spine, shoulders, head) keeps the robot's proportions. With shares of 1 the
+    robot's feet and hands go where the human's are, which is what a position fit to the
+    human measures; the solver's self-clearance term keeps the legs and arms apart.
+    """
+    shift = {}
+    for names, share in ((LEG_JOINTS, leg_share), (ARM_JOINTS, arm_share)):
+        for name in names:
+            if share > 0 and robot.has_keypoint(name):
+                k = robot.keypoint_index(name)
+                shift[name] = share * (world[:, robot.joints[k]] - kp_pos[:, k])
+    for name, delta in shift.items():
+        kp_pos[:, robot.keypoint_index(name)] += delta
+    for toe, ankle in TOE_ANKLE.items():
+        if robot.has_keypoint(toe) and ankle in shift:
+            kp_pos[:, robot.keypoint_index(toe)] += shift[ankle]
+
+
+def build_targets(
+    robot: RobotModel,
+    joints: np.ndarray,
+    fps: float,
+    transform: HumanToWorld,
+    config: SolverConfig | None = None,
+) -> Targets:
+    """Targets for ``joints`` (T, 22, 3) human frame (metres, Y up) at ``fps``; ``config``
+    (default: the robot's :class:`SolverConfig`) gives ``human_leg_share`` and ``human_arm_share``."""
+    config = config if config is not None else SolverConfig(**robot.mapping.solver)
     joints = np.asarray(joints, dtype=np.float64)
     world = np.asarray(transform.to_world(joints), dtype=np.float64)
     t_len, k_len = len(world), len(robot.joints)
@@ -181,6 +232,8 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
             seg_parent.append(a)
             seg_child.append(k)
             seg_weight.append(mapping.keypoints[k].segment_weight)
+    fit_limbs_to_human(robot, kp_pos, world, config.human_leg_share, config.human_arm_share)
+    space_feet(robot, kp_pos, world, frames["pelvis"])
     if mapping.arm_abduction > 0:
         abduct_arms(robot, kp_pos, frames["spine3"], mapping.arm_abduction)
     kp_weight = np.tile([kp.position_weight for kp in mapping.keypoints], (t_len, 1)).astype(float)
@@ -194,8 +247,10 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         node_rest = robot.rest.rot[0, robot.nodes[k]]
         if kp.joint in frames:
             rot = frames[kp.joint] @ node_rest
-        else:  # feet: heading and pitch relative to the stance pitch (filled in below)
-            rot = np.tile(node_rest, (t_len, 1, 1))
+        else:  # feet: heading and pitch relative to the stance pitch (filled in below), flat foot
+            side = kp.joint.split("_")[0]
+            on_foot = robot.nodes[k] == robot.feet[side].node
+            rot = np.tile(robot.foot_flat_rot[side] if on_foot else node_rest, (t_len, 1, 1))
         ori_kp.append(k)
         ori_axes.append((TRUNK_TILT, TRUNK_TILT, 1.0) if kp.joint in frames else (1.0, 1.0, 1.0))
         ori_rot.append(rot)
@@ -203,7 +258,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
     ori_rot_a = np.stack(ori_rot, axis=1) if ori_rot else np.zeros((t_len, 0, 3, 3))
     ori_w_a = np.stack(ori_w, axis=1) if ori_w else np.zeros((t_len, 0))
 
-    stance, lock, clearance = {}, {}, {}
+    stance, lock, clearance, runs, lock_xy = {}, {}, {}, {}, {}
     for side in ("left", "right"):
         flat = detect_stance(joints, fps, side)
         contact, heel, toe = detect_contacts(joints, fps, side, flat)
@@ -217,7 +272,8 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
         # Horizontally the foot holds its contact place a little longer (RAMP_SECONDS more):
         # it lands and takes off vertically instead of sliding in or out.
         alpha_xy = lock_ramp(contact, fps, hold=max(1, int(round(RAMP_SECONDS * fps))))
-        feet_targets(
+        lock_xy[side] = alpha_xy
+        runs[side] = feet_targets(
             robot,
             side,
             world,
@@ -234,6 +290,7 @@ def build_targets(robot: RobotModel, joints: np.ndarray, fps: float, transform: 
             ori_rot_a,
             ori_w_a,
         )
+    separate_locks(robot, kp_pos, world, frames["pelvis"], runs, lock_xy)
 
     return Targets(
         fps=float(fps),

@@ -1,9 +1,10 @@
-"""Scenes: a Z-up MuJoCo world (floor + static or mocap obstacles) with a robot attached by name.
+"""Scenes: a Z-up MuJoCo world (floor + static or mocap obstacles) with a robot attached.
 
 A scene MJCF holds **no joints**: obstacles sit in static bodies (children of the world
 without joints) or in mocap bodies moved along keyframe tracks (:mod:`scenes.tracks`). The robot
-is attached from its own MJCF (``retarget.robots.robot_mjcf``) with ``mujoco.MjSpec`` and keeps
-its joint and body names, so ``model.nq`` and the qpos layout are the robot's own.
+(a packaged name, an MJCF path or a mapping ``.json``) is attached from its own MJCF
+(``retarget.robot_files.load_robot_spec``) with ``mujoco.MjSpec`` and keeps its joint and body
+names, so ``model.nq`` and the qpos layout are the robot's own.
 
 Optional metadata lives in the MJCF's ``<custom>`` section, so a user's own scene file loads
 exactly like a packaged one::
@@ -33,7 +34,7 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
-from retarget.robots import robot_mjcf
+from retarget.robot_files import load_robot_spec
 from scenes.registry import list_scenes, scene_path
 from scenes.sdf.scene_sdf import SceneSDF
 from scenes.tracks import TRACK_PREFIX, MocapTrack
@@ -57,7 +58,7 @@ class Scene:
         name: scene name (the file stem for user files).
         path: the scene's MJCF file.
         model: compiled ``mujoco.MjModel``, the robot attached when ``robot`` is set.
-        robot: robot name or None.
+        robot: the robot argument (packaged name, MJCF or mapping path) or None.
         description, suggested_prompt: documentation strings ("" when absent).
         suggested_control: control-spec dict (``{"coords": "world", "constraints": [...]}``) or None.
         start: :class:`StartPose` where the motion starts.
@@ -65,6 +66,8 @@ class Scene:
         floor_geom_ids: upward-facing plane geoms of static bodies.
         robot_geom_ids: every geom of the robot (visual and collision).
         tracks: keyframe tracks of mocap bodies, by body name.
+        spec: the ``mujoco.MjSpec`` ``model`` was compiled from (the physics check saves the
+            robot + scene as one MJCF file from it).
     """
 
     name: str
@@ -79,6 +82,7 @@ class Scene:
     floor_geom_ids: tuple[int, ...]
     robot_geom_ids: tuple[int, ...]
     tracks: dict[str, MocapTrack] = field(default_factory=dict)
+    spec: mujoco.MjSpec | None = field(default=None, repr=False, compare=False)
     _sdf: SceneSDF | None = field(default=None, repr=False)
 
     @property
@@ -140,7 +144,8 @@ def load_scene(
     robot: str | None = "g1",
     edit_spec: Callable[[mujoco.MjSpec], None] | None = None,
 ) -> Scene:
-    """Load a packaged scene by name, or any scene MJCF file, and attach ``robot`` by name.
+    """Load a packaged scene by name, or any scene MJCF file, and attach ``robot`` (a packaged
+    robot name, a robot MJCF path or a mapping ``.json``).
 
     ``edit_spec`` may change the ``mujoco.MjSpec`` just before it is compiled (for example
     :func:`scenes.probe.add_probe`); geoms it adds after the scene's keep the scene's geom ids.
@@ -173,6 +178,7 @@ def load_scene(
         robot_geom_ids=robot_ids,
         floor_geom_ids=floor_ids,
         obstacle_geom_ids=obstacle_ids,
+        spec=spec,
         **meta,
     )
 
@@ -255,10 +261,10 @@ def _tracks(spec: mujoco.MjSpec, path: Path) -> dict[str, MocapTrack]:
 def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
     """Attach the robot's body tree (names unchanged); return the name of its root body.
 
-    ``robot`` is a packaged robot name or the path of a robot MJCF (``.xml``).
+    ``robot`` is a packaged robot name, the path of a robot MJCF (``.xml``) or a mapping
+    ``.json`` naming one (:func:`retarget.robot_files.load_robot_spec`: colliders declared).
     """
-    path = Path(robot) if str(robot).lower().endswith(".xml") else robot_mjcf(robot)
-    robot_spec = mujoco.MjSpec.from_file(str(path))
+    robot_spec = load_robot_spec(robot)
     default_opt, scene_opt, robot_opt = mujoco.MjSpec().option, spec.option, robot_spec.option
     for attr in (
         "timestep",

@@ -15,6 +15,7 @@ from sim.config import CheckConfig
 from sim.dynamics import DynamicsResult
 from sim.failures import sort_failures
 from sim.kinematic import KinematicResult
+from sim.physics import PhysicsResult
 from sim.report import Report, json_number
 from sim.tracking import TrackingResult
 from sim.world import CheckWorld
@@ -36,11 +37,12 @@ def build_report(
     dyn: DynamicsResult | None = None,
     trk: TrackingResult | None = None,
     extra: dict[str, Any] | None = None,
+    phys: PhysicsResult | None = None,
 ) -> Report:
-    """Assemble a :class:`Report` from the kinematic, dynamics and tracking results."""
+    """Assemble a :class:`Report` from the kinematic, dynamics, tracking and physics results."""
     T = kin.num_frames
     failures = list(kin.failures)
-    for part in (dyn, trk):
+    for part in (dyn, trk, phys):
         failures += part.failures if part is not None else []
     failures = sort_failures(failures)
     errors = [f for f in failures if f.is_error]
@@ -71,6 +73,7 @@ def build_report(
         "max_torque_ratio": None,
         "max_sustained_torque_ratio": None,
         "tracking": None,
+        "physics": None,
     }
     frames: dict[str, np.ndarray] = {
         "time_s": np.arange(T) / fps,
@@ -129,6 +132,9 @@ def build_report(
         }
         frames["tracking_joint_error_rad"] = trk.joint_error
         frames["tracking_root_height_m"] = trk.root_height
+    if phys is not None:
+        stats["physics"] = phys.to_dict()
+        frames.update(phys.frames())
     per_body = {}
     for i, b in enumerate(world.robot_bodies):
         values = {
@@ -153,4 +159,5 @@ def build_report(
         kinematic=kin,
         dynamics=dyn,
         tracking=trk,
+        physics=phys,
     )

@@ -7,10 +7,12 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from controlmm.errors import ControlMMError
 from sim.assemble import build_report
 from sim.config import CheckConfig
 from sim.dynamics import dynamics_check
 from sim.kinematic import kinematic_check
+from sim.physics import PhysicsConfig, check_start, track
 from sim.report import Report
 from sim.tracking import tracking_check
 from sim.trajectory import validate_qpos, velocities_and_accelerations
@@ -28,6 +30,8 @@ def check_trajectory(
     obstacle_geom_ids: Iterable[int] | None = None,
     set_time: SetTime | None = None,
     foot_bodies: Sequence[str] | None = None,
+    physics: PhysicsConfig | None = None,
+    progress: bool = False,
 ) -> Report:
     """Replay a robot trajectory in a MuJoCo scene and check it (contract 4).
 
@@ -41,6 +45,9 @@ def check_trajectory(
         config: thresholds and options (:class:`~sim.config.CheckConfig`).
         robot_geom_ids, floor_geom_ids, obstacle_geom_ids, set_time, foot_bodies: override
             the scene's (or the automatic) geom sets, mocap motion and feet.
+        physics: settings of the physics execution check, run last when ``config.physics``
+            (default ``PhysicsConfig()``); its result is ``report.physics``.
+        progress: a progress bar for the physics execution check.
 
     Returns:
         A :class:`~sim.report.Report`; ``report.passed`` is True when no failure is an error
@@ -48,7 +55,8 @@ def check_trajectory(
 
     Raises:
         ControlMMError: bad qpos (width other than nq, NaN/inf), fps outside [1, 1000], a
-            model without a free joint (one-line messages).
+            model without a free joint; with ``config.physics`` also a trajectory of one frame,
+            a first pose inside the floor or an obstacle (one-line messages).
     """
     config = config or CheckConfig()
     if hasattr(qpos, "qpos"):
@@ -67,6 +75,11 @@ def check_trajectory(
         )
     )
     q, rate = validate_qpos(world, qpos, fps)
+    physics_config = (physics or PhysicsConfig()) if config.physics else None
+    if physics_config is not None:  # bad input fails before any work
+        if q.shape[0] < 2:
+            raise ControlMMError("the physics check needs at least 2 frames; got 1")
+        check_start(world, q[0], physics_config)
     timings: dict[str, float] = {}
     cpu: dict[str, float] = {}
 
@@ -92,6 +105,27 @@ def check_trajectory(
         if config.tracking
         else None
     )
+    phys = None
+    if physics_config is not None:
+        if dyn is None:
+            dyn = timed(
+                "dynamics_s",
+                lambda: dynamics_check(world, q, qvel, qacc, kin.support, config, rate, kin.supported),
+            )
+        phys = timed(
+            "physics_s",
+            lambda: track(
+                q,
+                world,
+                physics_config,
+                fps=rate,
+                check=config,
+                qvel=qvel,
+                dynamics=dyn,
+                flight=kin.flight,
+                progress=progress,
+            ),
+        )
     extra = {
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
         "cpu_s": {k: round(v, 4) for k, v in cpu.items()},
@@ -100,7 +134,7 @@ def check_trajectory(
         "obstacles": [world.geom_label(g) for g in world.obstacle_geoms],
         "floor": [world.geom_label(g) for g in world.floor_geoms],
     }
-    return build_report(world, rate, config, kin, dyn, trk, extra=extra)
+    return build_report(world, rate, config, kin, dyn, trk, extra=extra, phys=phys)
 
 
 def check_pose(scene: object, qpos: np.ndarray, config: CheckConfig | None = None) -> Report:

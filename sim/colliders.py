@@ -1,6 +1,7 @@
 """Collision-only copies of the model used by the kinematic replay.
 
-The user's model is never modified. Two copies are made (robotics reference §4.2-§4.4):
+The user's model is never modified. Two copies are made (MuJoCo's collision filters: contype/conaffinity,
+``<exclude>``, ``<pair>`` and the parent-child filter, MuJoCo documentation, Collision detection):
 
 * the **scene model** collides the robot with the floor and the obstacles through a
   dedicated contype/conaffinity bit (robot geoms: contype; floor and obstacles: conaffinity),

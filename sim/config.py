@@ -116,6 +116,9 @@ class CheckConfig:
         tracking_kp, tracking_kd: PD gains of that replay (N m/rad, N m s/rad).
         fall_height_ratio: the robot has fallen when its root height drops below this fraction
             of the reference root height.
+        physics: also execute the trajectory in physics with the predictive tracking controller
+            (``sim.track``; slow: seconds of computation per second of motion). Its settings are
+            a ``sim.PhysicsConfig`` given to ``check_trajectory(physics=...)``.
     """
 
     obstacle_penetration_m: float = 0.005
@@ -148,6 +151,7 @@ class CheckConfig:
     tracking_kp: float = 500.0
     tracking_kd: float = 10.0
     fall_height_ratio: float = 0.6
+    physics: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -158,7 +162,8 @@ class CheckConfig:
                 raise ControlMMError(f"CheckConfig.{f.name} must be a finite number >= 0; got {value!r}")
         if self.self_collision not in ("model", "capsules", "off"):
             raise ControlMMError(
-                f"CheckConfig.self_collision must be 'model', 'capsules' or 'off'; got {self.self_collision!r}"
+                "CheckConfig.self_collision must be 'model', 'capsules' or 'off'; "
+                f"got {self.self_collision!r}"
             )
         if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
             raise ControlMMError(f"CheckConfig.friction must be > 0 or None; got {self.friction!r}")

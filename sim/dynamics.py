@@ -1,6 +1,6 @@
 """Dynamic feasibility: the "hand of god" a kinematic motion needs, and joint torques.
 
-Per frame (robotics reference §4.5/§4.6):
+Per frame (MuJoCo's inverse dynamics, ``mj_inverse``; MuJoCo documentation, Computation):
 
 1. ``mj_inverse`` with every constraint disabled (contacts included: MuJoCo's soft contact
    model would turn the kinematic data's penetrations into huge forces) on ``qpos`` and the

@@ -15,7 +15,10 @@ floating               metres between the robot's lowest point and the nearest s
 residual_force         non-physical root force needed, as a fraction of m g
 residual_moment        non-physical moment about the centre of mass / (m g), metres
 torque_limit           |torque| / limit of ``joint`` (a ratio; > 1 is over the limit)
-tracking_fall          metres the root dropped below its reference height (PD replay)
+tracking_fall          metres the root dropped below its reference height (PD replay or the
+                       physics execution check)
+tracking_error         metres between the executed and the reference position of the root (world)
+                       or of an end effector (relative to the root), physics execution check
 =====================  =======================================================================
 
 Frame ranges are inclusive: ``frame_start <= t <= frame_end``.
@@ -47,6 +50,7 @@ KINDS = (
     "residual_moment",
     "torque_limit",
     "tracking_fall",
+    "tracking_error",
 )
 
 
@@ -113,7 +117,7 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1) - 1
-    return list(zip(starts.tolist(), ends.tolist()))
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
 def from_mask(
@@ -170,7 +174,7 @@ def from_events(
     run_ends = np.concatenate([run_starts[1:], [frames.size]]) - 1
     worst = np.maximum.reduceat(depth, run_starts)
     out = []
-    for a, b, d in zip(run_starts.tolist(), run_ends.tolist(), worst.tolist()):
+    for a, b, d in zip(run_starts.tolist(), run_ends.tolist(), worst.tolist(), strict=True):
         body, geom = label(int(keys[a]))
         out.append(Failure(kind, int(frames[a]), int(frames[b]), body, geom, float(d)))
     return out

@@ -1,7 +1,7 @@
 """Geometry helpers: how low a geom reaches along a direction, capsules fitted to meshes.
 
 MuJoCo collides meshes as their convex hulls, so the lowest point of a mesh geom is the
-lowest hull vertex; for primitives it follows from the size (robotics reference §5.1).
+lowest hull vertex; for primitives it follows from the size (MuJoCo XML reference, geom/size).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def support_heights(
     out = np.full(centre.shape, np.nan)
     types = model.geom_type[geoms]
     sizes = model.geom_size[geoms]
-    for i, (kind, size) in enumerate(zip(types, sizes)):
+    for i, (kind, size) in enumerate(zip(types, sizes, strict=True)):
         ln = local_n[:, i]
         if kind == _T.mjGEOM_SPHERE:
             reach = np.full(ln.shape[0], size[0])

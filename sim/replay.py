@@ -100,7 +100,7 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
         ("scene", floor_gap, obstacle_gap, merged),
         lambda: scene_model(world, floor_gap, obstacle_gap, with_self=merged),
     )
-    passes = [(ms, mujoco.MjData(ms), [])]
+    passes: list[tuple[mujoco.MjModel, mujoco.MjData, list]] = [(ms, mujoco.MjData(ms), [])]
     if config.self_collision == "capsules":
         mself = world.derived(("self", True), lambda: self_model(world, capsules=True))
         passes.append((mself, mujoco.MjData(mself), []))
@@ -153,7 +153,7 @@ def replay(world: CheckWorld, qpos: np.ndarray, half: np.ndarray, fps: float, co
         )
         data = mujoco.MjData(world.model)
         for t_ in range(T if moving else 1):
-            if moving:
+            if moving and mocap is not None:
                 data.mocap_pos[:] = mocap[0][t_ * (substeps + 1)]
                 data.mocap_quat[:] = mocap[1][t_ * (substeps + 1)]
             mujoco.mj_kinematics(world.model, data)

@@ -10,7 +10,8 @@
      "error_count", "warning_count", "error_kinds",
      "residual_force": {"mean_ratio", "p95_ratio", "max_ratio", "max_N", "sustained_max_ratio"},
      "residual_moment": {"mean_m", "p95_m", "max_m", "sustained_max_m"}, "max_torque_ratio",
-     "max_sustained_torque_ratio", "tracking": {...} | null, "per_body": {body: {...}},
+     "max_sustained_torque_ratio", "tracking": {...} | null, "physics": {...} | null,
+     "per_body": {body: {...}},
      "failures": [{"kind", "frame_start", "frame_end", "robot_body", "obstacle_geom", "depth", "joint",
                    "severity"}],
      "frames": {name: [per-frame values]}, "feet", "joints", "config", "extra"}
@@ -36,6 +37,8 @@ from sim.config import CheckConfig
 from sim.dynamics import DynamicsResult
 from sim.failures import Failure
 from sim.kinematic import KinematicResult
+from sim.physics import PhysicsResult
+from sim.physics.result import physics_summary
 from sim.tracking import TrackingResult
 
 FORMAT = "controlmm.sim.report/1"
@@ -85,6 +88,7 @@ class Report:
     kinematic: KinematicResult | None = None
     dynamics: DynamicsResult | None = None
     tracking: TrackingResult | None = None
+    physics: PhysicsResult | None = None
 
     # The contract's named statistics, as attributes.
     @property
@@ -136,8 +140,9 @@ class Report:
             for k, v in self.stats.items()
         }
         for key in ("residual_force", "residual_moment", "tracking"):
-            if isinstance(stats.get(key), dict):
-                stats[key] = {k: json_number(v) for k, v in stats[key].items()}
+            part = stats.get(key)
+            if isinstance(part, dict):
+                stats[key] = {k: json_number(v) for k, v in part.items()}
         return {
             "format": FORMAT,
             "passed": bool(self.passed),
@@ -174,12 +179,14 @@ class Report:
         clear_txt = f", min clearance {clearance * 1000:.1f} mm" if clearance is not None else ""
         lines.append(
             f"  contact: obstacle penetration {s['max_penetration_m'] * 1000:.1f} mm (tol "
-            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor {s['floor_penetration_m'] * 1000:.1f} mm "
-            f"(tol {c.floor_penetration_m * 1000:.1f}); self-collision {s['self_collision_frames']} frames"
+            f"{c.obstacle_penetration_m * 1000:.1f}){clear_txt}; floor "
+            f"{s['floor_penetration_m'] * 1000:.1f} mm (tol {c.floor_penetration_m * 1000:.1f}); "
+            f"self-collision {s['self_collision_frames']} frames"
         )
         lines.append(
-            f"  joints: {s['joint_limit_violations']} frames past limits (max {s['max_joint_limit_violation_rad']:.4f} "
-            f"rad), peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
+            f"  joints: {s['joint_limit_violations']} frames past limits "
+            f"(max {s['max_joint_limit_violation_rad']:.4f} rad), "
+            f"peak speed {s['max_joint_velocity_ratio'] * 100:.0f}% of limit; feet: slid "
             f"{s['foot_sliding_m'] * 1000:.1f} mm in stance (peak {s['max_foot_slide_speed_mps']:.2f} m/s); "
             f"floating {s['floating_frames']} frames, flight {s['flight_frames']}"
         )
@@ -187,17 +194,24 @@ class Report:
         if rf is not None and rm is not None:
             lines.append(
                 f"  dynamics: residual force mean {rf['mean_ratio'] * 100:.1f}% / max "
-                f"{rf['max_ratio'] * 100:.1f}% of m g (warn {c.max_residual_force_ratio * 100:.0f}%), sustained "
-                f"{rf['sustained_max_ratio'] * 100:.1f}% (fail {c.max_sustained_residual_force_ratio * 100:.0f}%); "
-                f"residual moment max {rm['max_m'] * 1000:.0f} mm (warn {c.max_residual_moment_m * 1000:.0f}), "
-                f"sustained {rm['sustained_max_m'] * 1000:.0f} mm (fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
+                f"{rf['max_ratio'] * 100:.1f}% of m g (warn {c.max_residual_force_ratio * 100:.0f}%), "
+                f"sustained {rf['sustained_max_ratio'] * 100:.1f}% "
+                f"(fail {c.max_sustained_residual_force_ratio * 100:.0f}%); "
+                f"residual moment max {rm['max_m'] * 1000:.0f} mm "
+                f"(warn {c.max_residual_moment_m * 1000:.0f}), "
+                f"sustained {rm['sustained_max_m'] * 1000:.0f} mm "
+                f"(fail {c.max_sustained_residual_moment_m * 1000:.0f}); "
                 f"torque peak {s['max_torque_ratio'] * 100:.0f}% of limit, sustained "
-                f"{s['max_sustained_torque_ratio'] * 100:.0f}% (fail {c.max_sustained_torque_ratio * 100:.0f}%)"
+                f"{s['max_sustained_torque_ratio'] * 100:.0f}% "
+                f"(fail {c.max_sustained_torque_ratio * 100:.0f}%)"
             )
         tr = s.get("tracking")
         if tr:
             state = f"fell at {tr['time_up_s']:.2f} s" if tr["fell"] else "stayed up"
             lines.append(f"  PD tracking: {state}, joint error mean {tr['mean_joint_error_rad']:.3f} rad")
+        ph = s.get("physics")
+        if ph:
+            lines.append(physics_summary(ph))
         for f in self.failures[:max_failures]:  # errors first
             lines.append(f"  - {f.describe(self.fps)}")
         if len(self.failures) > max_failures:

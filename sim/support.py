@@ -166,7 +166,7 @@ def support_measures(
     floating = np.zeros(T, dtype=bool)
     g = float(np.linalg.norm(m.opt.gravity))
     edge = int(round(config.flight_edge_s * fps))
-    for a, b in runs(~supported):
+    for a, b in runs(np.asarray(~supported, dtype=bool)):
         span = slice(a, b + 1)
         # The take-off and landing impulses of a kinematic motion are smeared over the frames
         # around the contact (20 fps source, splines): the centre of mass may still rise just

@@ -2,7 +2,7 @@
 
 A trajectory is ``qpos (T, nq)`` in MuJoCo order (free joint xyz + quaternion wxyz, then the
 joints) sampled at ``fps``. Velocities come from ``mj_differentiatePos`` (quaternion-aware;
-the free joint's angular velocity is in the root body frame, robotics reference §4.5).
+the free joint's angular velocity is in the root body frame, as MuJoCo defines ``qvel``).
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ obstacles, which robot bodies are feet, the joint limits and the moving obstacle
 itself when the sets are not given) or from anything shaped like ``scenes.Scene``
 (``.model``, ``.robot_geom_ids``, ``.floor_geom_ids``, ``.obstacle_geom_ids``, ``.set_time``).
 
-Automatic classification (robotics reference §4.2/§4.4): robot geoms are the collision geoms
+Automatic classification (MuJoCo's collision filtering: contype/conaffinity and the
+body tree, MuJoCo documentation, Computation > Collision detection): robot geoms are the collision geoms
 whose body's root is the free-joint body; floor geoms are the other plane geoms; obstacles
 are every other collision geom (static bodies and mocap bodies alike).
 """
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar, cast
 
 import mujoco
 import numpy as np
@@ -22,6 +24,9 @@ from scipy.spatial import ConvexHull, QhullError
 
 from controlmm.errors import ControlMMError
 from sim.geometry import support_heights
+
+_Derived = TypeVar("_Derived")
+"""The type of an object :meth:`CheckWorld.derived` builds (a model copy, a table)."""
 
 SetTime = Callable[[mujoco.MjData, float], None]
 """``set_time(data, t_seconds)``: writes the mocap obstacles' poses for time ``t`` into ``data``."""
@@ -77,6 +82,8 @@ class CheckWorld:
         mass: total robot mass (kg).
         set_time: moves mocap obstacles for a time (seconds), or None when nothing moves.
         hull_vertices: convex-hull vertices (V, 3) in the geom frame, per robot mesh geom.
+        spec: the ``mujoco.MjSpec`` the model was compiled from, when known (the physics check
+            saves the model from it); None for a world made from a bare ``MjModel``.
 
     Reuse one world across checks of the same scene: the collision and inverse-dynamics
     copies of the model are built on first use and kept (:meth:`derived`).
@@ -94,13 +101,14 @@ class CheckWorld:
     mass: float
     set_time: SetTime | None = None
     hull_vertices: dict[int, np.ndarray] = field(default_factory=dict)
+    spec: mujoco.MjSpec | None = field(default=None, repr=False)
     _derived: dict = field(default_factory=dict, repr=False)
 
-    def derived(self, key: tuple, build: Callable[[], object]) -> object:
+    def derived(self, key: tuple, build: Callable[[], _Derived]) -> _Derived:
         """A model copy (or other derived object) built once per world and ``key``."""
         if key not in self._derived:
             self._derived[key] = build()
-        return self._derived[key]
+        return cast(_Derived, self._derived[key])
 
     @property
     def nq(self) -> int:
@@ -275,7 +283,7 @@ def _feet(
     mujoco.mj_kinematics(model, data)
     low = _lowest_point(model, data, robot_geoms, hulls)
     body_low: dict[int, float] = {}
-    for b, z in zip(body_of.tolist(), low.tolist()):
+    for b, z in zip(body_of.tolist(), low.tolist(), strict=True):
         body_low[b] = min(body_low.get(b, np.inf), z)
     floor = min(body_low.values())
     chosen = sorted(b for b, z in body_low.items() if z <= floor + FOOT_HEIGHT_BAND_M)
@@ -295,9 +303,9 @@ def make_world(
 
     Args:
         scene_or_model: a compiled ``mujoco.MjModel`` (robot + scene, one free joint), a
-            ``CheckWorld`` (returned as is), or an object with ``.model`` and optionally
-            ``.robot_geom_ids``, ``.floor_geom_ids``, ``.obstacle_geom_ids``, ``.set_time``
-            (``scenes.Scene``).
+            ``mujoco.MjSpec`` (compiled here and kept), a ``CheckWorld`` (returned as is), or
+            an object with ``.model`` and optionally ``.robot_geom_ids``, ``.floor_geom_ids``,
+            ``.obstacle_geom_ids``, ``.set_time`` and ``.spec`` (``scenes.Scene``).
         robot_geom_ids, floor_geom_ids, obstacle_geom_ids: explicit geom sets (override both
             the scene's and the automatic classification).
         set_time: ``set_time(data, t)`` moving mocap obstacles (default: the scene's).
@@ -305,10 +313,17 @@ def make_world(
     """
     if isinstance(scene_or_model, CheckWorld):
         return scene_or_model
+    spec: mujoco.MjSpec | None = None
+    if isinstance(scene_or_model, mujoco.MjSpec):
+        spec = scene_or_model
+        try:
+            scene_or_model = spec.compile()
+        except ValueError as exc:
+            raise ControlMMError(f"MuJoCo cannot compile the model: {' '.join(str(exc).split())}") from None
     if isinstance(scene_or_model, mujoco.MjModel):
         model, scene = scene_or_model, None
-    elif isinstance(getattr(scene_or_model, "model", None), mujoco.MjModel):
-        model, scene = scene_or_model.model, scene_or_model
+    elif isinstance(held := getattr(scene_or_model, "model", None), mujoco.MjModel):
+        model, scene = held, scene_or_model
     else:
         raise ControlMMError(
             f"expected a mujoco.MjModel or a scene with a .model; got {type(scene_or_model).__name__}"
@@ -341,6 +356,9 @@ def make_world(
         raise ControlMMError(f"geoms {overlap.tolist()} are both robot and floor/obstacle geoms")
     if set_time is None and scene is not None:
         set_time = getattr(scene, "set_time", None)
+    scene_spec = getattr(scene, "spec", None)
+    if spec is None and isinstance(scene_spec, mujoco.MjSpec):
+        spec = scene_spec
 
     robot_bodies = np.flatnonzero(model.body_rootid == model.body_rootid[root])
     robot_bodies = np.concatenate([[root], robot_bodies[robot_bodies != root]])
@@ -358,4 +376,5 @@ def make_world(
         mass=float(model.body_subtreemass[root]),
         set_time=set_time,
         hull_vertices=hulls,
+        spec=spec,
     )

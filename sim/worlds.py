@@ -1,7 +1,7 @@
 """Minimal worlds for checks without the scene library: a packaged robot on a plane floor.
 
-``robot_world("g1", obstacles=[Obstacle(...)])`` compiles the Menagerie robot (from
-``retarget.robots.robot_mjcf``) into a world with a floor plane named ``floor`` and one
+``robot_world("g1", obstacles=[Obstacle(...)])`` (its spec: ``robot_spec``) compiles the Menagerie robot
+(from ``retarget.robot_files.load_robot_spec``) into a world with a floor plane named ``floor`` and one
 joint-less body per static obstacle (or a mocap body for moving ones), so that the qpos
 layout equals the robot's. The real scene library lives in ``scenes``; this is for
 ``check_trajectory`` on a bare floor, for tests and for benchmarks.
@@ -11,13 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError
-from retarget.robots import robot_mjcf
+from retarget.robot_files import load_robot_spec
 from sim.geometry import support_heights
 from sim.world import make_world
 
@@ -44,9 +43,14 @@ class Obstacle:
 
 
 def robot_world(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bool = True) -> mujoco.MjModel:
-    """Compile ``robot`` (a packaged robot name or an MJCF path) with a floor and obstacles."""
-    path = Path(robot) if str(robot).endswith(".xml") else robot_mjcf(robot)
-    spec = mujoco.MjSpec.from_file(str(path))  # the robot's own spec: options and keyframes kept
+    """Compile ``robot`` (a packaged name, an MJCF path or a mapping .json) with a floor and obstacles."""
+    return robot_spec(robot, obstacles, floor).compile()
+
+
+def robot_spec(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bool = True) -> mujoco.MjSpec:
+    """The ``mujoco.MjSpec`` of :func:`robot_world` (``make_world`` keeps it: the physics check
+    saves the model from it)."""
+    spec = load_robot_spec(robot)  # the robot's own spec: options and keyframes kept, colliders declared
     if floor:
         spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
     for ob in obstacles:
@@ -59,7 +63,7 @@ def robot_world(robot: str = "g1", obstacles: Sequence[Obstacle] = (), floor: bo
         else:
             body = spec.worldbody.add_body(name=f"{ob.name}_body")
             body.add_geom(name=ob.name, type=_TYPES[ob.type], size=size, pos=list(ob.pos), quat=list(ob.quat))
-    return spec.compile()
+    return spec
 
 
 def standing_qpos(model: mujoco.MjModel) -> np.ndarray:

@@ -174,11 +174,11 @@ def test_scene_show_lists_the_robots_retarget_and_plan_list(tmp_path, capsys, sa
     src = tmp_path / "walk.npy"
     np.save(src, sample_joints[:20])
     errors = [
-        one_line_error(capsys, argv, "t1")
+        one_line_error(capsys, argv, "nao")
         for argv in (
-            ["scene", "show", "table", "--robot", "t1", "--out", str(tmp_path / "s.png")],
-            ["retarget", str(src), "--robot", "t1", "--out", str(tmp_path / "r")],
-            ["plan", "--robot", "t1", "--out", str(tmp_path / "p"), "--no-render"],
+            ["scene", "show", "table", "--robot", "nao", "--out", str(tmp_path / "s.png")],
+            ["retarget", str(src), "--robot", "nao", "--out", str(tmp_path / "r")],
+            ["plan", "--robot", "nao", "--out", str(tmp_path / "p"), "--no-render"],
         )
     ]
     known = {e.split("known robots:")[1] for e in errors}

@@ -19,7 +19,7 @@ from controlmm.motion import features_to_joints_np
 from controlmm.motion.normalization import FEATURE_GROUPS
 from controlmm.motion.skeleton import BONE_LENGTHS, PARENTS
 
-N_CLIPS = 64  # two clips per family
+N_CLIPS = 98  # two clips per family
 
 
 @pytest.fixture(scope="module")

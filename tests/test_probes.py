@@ -18,7 +18,7 @@ from controlmm.motion import Motion
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):
     out = tmp_path_factory.mktemp("probes") / "c"
-    write_corpus(out, CorpusConfig(clips=64, seed=2024), workers=1, progress=False)
+    write_corpus(out, CorpusConfig(clips=2 * len(family_names()), seed=2024), workers=1, progress=False)
     return out
 
 
@@ -34,7 +34,7 @@ def test_every_family_has_a_probe():
 
 def test_probes_pass_on_ground_truth(corpus):
     cases = list_cases(corpus, "all")
-    assert len(cases) == 64 * 3
+    assert len(cases) == 2 * len(family_names()) * 3
     report = evaluate(cases, ground_truth(corpus), split="all", per_clip=True)
     assert report.rate == 1.0, report.table()
     assert set(report.counts) == set(family_names())
@@ -110,3 +110,49 @@ def test_list_cases_rejects_missing_or_malformed_data(tmp_path, corpus):
         list_cases(tmp_path)
     with pytest.raises(ControlMMError, match="split"):
         list_cases(corpus, "everything")
+
+
+def test_probes_of_the_new_families_fail_on_wrong_pairs():
+    swap = {"left": "right", "right": "left"}
+    for family, flip in (("sit_down", "stand_up"), ("lie_down", "stand_up")):
+        motion, meta = _motion(family)
+        claim = meta["params"][flip]
+        assert probe(motion, family, {flip: claim}).passed
+        assert not probe(motion, family, {flip: not claim}).passed
+    kick, meta = _motion("kick")
+    p = meta["params"]
+    assert probe(kick, "kick", {"leg": p["leg"], "kick": p["kind"], "count": p["count"]}).passed
+    assert not probe(kick, "kick", {"leg": swap[p["leg"]]}).passed
+    assert not probe(
+        kick, "kick", {"leg": p["leg"], "kick": "side" if p["kind"] == "front" else "front"}
+    ).passed
+    assert not probe(kick, "kick", {"leg": p["leg"], "count": p["count"] + 1}).passed
+    point, meta = _motion("point")
+    p = meta["params"]
+    assert not probe(point, "point", {"hand": swap[p["hand"]]}).passed
+    wrong_where = p["hand"] if p["where"] == "ahead" else "ahead"
+    assert not probe(point, "point", {"hand": p["hand"], "where": wrong_where}).passed
+    for index in range(3):
+        look, meta = _motion("look_around", index)
+        side = meta["params"]["look"]
+        if side != "both":
+            assert not probe(look, "look_around", {"look": swap[side]}).passed
+            assert not probe(look, "look_around", {"look": "both"}).passed
+    for family in ("platform", "stairs"):
+        motion, meta = _motion(family)
+        v = meta["params"]["vertical"]
+        assert not probe(motion, family, {"vertical": "down" if v == "up" else "up"}).passed
+    walk, _ = _motion("walk")
+    for family in ("step_over", "carry", "stairs", "platform"):
+        assert not probe(walk, family, {}).passed, family
+    pick, meta = _motion("pick_up")
+    style = meta["params"]["style"]
+    assert not probe(pick, "pick_up", {"style": "stoop" if style == "squat" else "squat"}).passed
+    bow, meta = _motion("bow")
+    assert not probe(bow, "bow", {"count": meta["params"]["count"] + 1}).passed
+    assert not probe(_motion("squat")[0], "bow", {}).passed
+    assert not probe(_motion("raise_both_arms")[0], "stretch_arms", {}).passed
+    assert not probe(_motion("reach_forward")[0], "push", {}).passed
+    assert not probe(_motion("squat")[0], "sit_down", {}).passed
+    assert not probe(_motion("kneel")[0], "lie_down", {}).passed
+    assert not probe(_motion("walk_then_squat")[0], "walk_then_sit", {}).passed

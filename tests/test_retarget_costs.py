@@ -42,7 +42,7 @@ from retarget.solver import _solve, solve
 from retarget.solver_config import SolverConfig
 from retarget.targets import Targets, build_targets, take_frames
 
-FRAMES = np.arange(34, 50)
+FRAMES = np.arange(26, 42)
 """Frames of the kneel clip where the knee reaches the floor and the arms come close to the legs."""
 EPS = 1e-6
 

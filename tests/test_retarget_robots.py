@@ -13,7 +13,7 @@ import pytest
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
-from retarget import load_mapping, load_robot, retarget_motion, robot_mjcf, robot_scale
+from retarget import load_robot, retarget_motion, robot_mjcf, robot_scale
 from retarget.robot_model import HUMAN_HIP_HEIGHT
 
 T1_MAPPING = {
@@ -112,10 +112,10 @@ def test_third_robot_from_a_mapping_file_only(tmp_path, short_motion):
 
 
 def test_bad_inputs_raise_one_line_errors(tmp_path, short_motion):
-    with pytest.raises(ControlMMError, match="unknown robot 'nao'.*known robots: g1, h1"):
+    with pytest.raises(
+        ControlMMError, match="unknown robot 'nao'.*known robots: apollo, berkeley_humanoid, g1, h1"
+    ):
         retarget_motion(short_motion, robot="nao")
-    with pytest.raises(ControlMMError, match="no shipped mapping"):
-        load_mapping("t1")
     bad = dict(T1_MAPPING, keypoints=dict(T1_MAPPING["keypoints"], left_knee={"body": "Knee_Left"}))
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(bad))
@@ -179,7 +179,7 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, sample_features, capsys):
         json.dumps(dict(T1_MAPPING, keypoints=dict(T1_MAPPING["keypoints"], head={"body": "Head_Link"})))
     )
     cases = [
-        ((motion, "--robot", "nao"), "known robots: g1, h1"),
+        ((motion, "--robot", "nao"), "known robots: apollo, berkeley_humanoid, g1, h1, op3, t1"),
         ((motion, "--robot", bad_map), "Head_Link"),
         ((motion, "--fps", "0"), "out of range"),
         ((motion, "--render", tmp_path / "x.avi"), "allowed: .mp4, .gif"),

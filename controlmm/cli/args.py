@@ -91,6 +91,22 @@ def add_threads(parser: argparse.ArgumentParser, default: int | None, note: str 
     )
 
 
+ROBOT_HELP = (
+    "a packaged robot (g1, h1, t1, apollo, berkeley_humanoid, op3: see `controlmm robots`), "
+    "a humanoid MJCF .xml (mapped automatically) or a mapping .json"
+)
+
+
+def add_robot(parser: argparse.ArgumentParser, default: str | None = "g1", default_text: str = "") -> None:
+    """``--robot NAME|ROBOT.xml|MAPPING.json``: the robot, as everywhere a robot is taken."""
+    parser.add_argument(
+        "--robot",
+        default=default,
+        metavar="NAME|ROBOT.xml|MAPPING.json",
+        help=f"{ROBOT_HELP} (default: {default_text or default})",
+    )
+
+
 UNIT_CHOICES = ("m", "cm", "mm", "in", "cmu")
 """Length units a recorded motion may declare (``controlmm.motion.formats.conventions.UNITS``)."""
 

@@ -28,6 +28,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "convert",
     "plot",
     "retarget",
+    "robots",
     "scene",
     "validate",
     "batch",

@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
-from controlmm.cli.args import add_force, add_motion_input, add_threads, motion_options, number
+from controlmm.cli.args import add_force, add_motion_input, add_robot, add_threads, motion_options, number
 from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
@@ -21,9 +22,11 @@ HELP = """Plan a humanoid robot motion in a MuJoCo scene, check it in simulation
 Generates a human motion from the prompt with ControlMM (spatial constraints met by logits and
 codebook editing, obstacles avoided through SDF losses of the scene), retargets it to the robot,
 replays it in MuJoCo (obstacle/floor penetration, self-collision, joint limits, foot sliding,
-inverse dynamics) and, when a check fails, turns every failure into an extra editing loss and
-generates again, up to --rounds times. Writes into OUT (complete or not at all; OUT may be new,
-empty or a previous plan output, anything else needs --force):
+inverse dynamics; with --physics last of all an execution in physics by a predictive tracking
+controller through the robot's actuators: falls and tracking-error spans) and, when a check
+fails, turns every failure into an extra editing loss and generates again, up to --rounds times.
+Writes into OUT (complete or not at all; OUT may be new, empty or a previous plan output,
+anything else needs --force):
 
   motion.npz        human motion (HumanML3D joints/features, 20 fps)
   robot.csv         root xyz, root quaternion xyzw, joint angles (rad) per frame (Unitree/BeyondMimic)
@@ -31,6 +34,10 @@ empty or a previous plan output, anything else needs --force):
   report.json       passed, max_penetration_m, floor_penetration_m, failures, ... and every round
   render.mp4        the robot in the scene (MuJoCo; a stick figure when no OpenGL backend loads)
   plots/*.png       top view (path, obstacles, targets), clearance per round, sim report, motion
+  physics.npz, physics_model.xml, robot_physics.csv
+                    with --physics: the executed states and the ctrl of every mj_step, the
+                    simulated robot + scene as one MJCF file (replay: docs/simulation-checks.md),
+                    the executed motion at 50 fps
 
 With only --out it runs the bundled example: the 'table' scene, its prompt and its right-hand
 target beyond the table's edge. With --text and no --control the prompt runs unconstrained
@@ -102,7 +109,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="with --motion: weight of the term that keeps the joints on the clip (default 1)",
     )
-    p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
+    add_robot(p)
     p.add_argument(
         "--seconds",
         type=float,
@@ -138,6 +145,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         1,
         "; the editing loops are small and sequential: on a busy machine more threads spin-wait "
         "and run slower",
+    )
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="execute every round in MuJoCo physics with the predictive tracking controller as the "
+        "last check (slow: seconds per second of motion); writes physics.npz, physics_model.xml, "
+        "robot_physics.csv",
     )
     p.add_argument("--no-render", action="store_true", help="skip render.mp4 (the slowest output)")
     p.add_argument("--no-plots", action="store_true", help="skip plots/*.png")
@@ -178,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
         closeness_weight=args.closeness,
         formats=tuple(args.format.split(",")),
     )
+    config = replace(config, check=replace(config.check, physics=args.physics))
     progress = not args.no_progress
     age = process_age()
     before = age if age is not None else time.perf_counter() - _LOADED  # the command's start-up
@@ -193,7 +208,8 @@ def run(args: argparse.Namespace) -> int:
         f"plan: {'PASSED' if result.passed else 'FAILED'} in round {result.best} of {rounds} "
         f"({'passed' if result.rounds[0].passed else 'failed'} before feedback), {result.seconds:.1f} s; "
         f"wrote {args.out}/ (motion.npz, robot.npz, {', '.join(_format_files(config.formats))}, report.json"
-        f"{', render.mp4 (' + backend + ')' if backend else ''}{'' if args.no_plots else ', plots/'})"
+        f"{', render.mp4 (' + backend + ')' if backend else ''}{'' if args.no_plots else ', plots/'}"
+        f"{', physics.npz, physics_model.xml, robot_physics.csv' if result.report.physics else ''})"
     )
     for name, err in zip(_constraint_names(result), result.final.constraint_errors_m, strict=True):
         print(f"  constraint {name}: {err * 100:.2f} cm")

@@ -8,7 +8,15 @@ import sys
 from pathlib import Path
 
 from controlmm.atomic import check_output_file
-from controlmm.cli.args import add_force, add_motion_input, integer, motion_options, number, positive
+from controlmm.cli.args import (
+    add_force,
+    add_motion_input,
+    add_robot,
+    integer,
+    motion_options,
+    number,
+    positive,
+)
 from controlmm.cli.gl import import_mujoco
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
@@ -28,8 +36,11 @@ body_quat_w) and OUT.json (robot, source, scale, fps, metrics), and the formats 
   beyondmimic  OUT_beyondmimic.npz  BeyondMimic training file at 50 fps (quaternions wxyz)
   gmr          OUT.pkl              GMR robot pickle: root_pos, root_rot (xyzw), dof_pos; --fps
 
---robot takes a packaged robot (g1 = Unitree G1 29-DoF, h1 = Unitree H1) or a mapping .json
-that names any MJCF (see docs/retargeting.md). --render draws a video with MuJoCo's
+--robot takes a packaged robot (g1 = Unitree G1 29-DoF, h1 = Unitree H1, t1 = Booster T1,
+apollo = Apptronik Apollo, berkeley_humanoid = Berkeley Humanoid, op3 = Robotis OP3; see
+`controlmm robots`), any floating-base humanoid MJCF .xml (its mapping is inferred from the
+kinematic tree and geometry) or a mapping .json that names any MJCF (see
+docs/retargeting.md). --render draws a video with MuJoCo's
 offscreen renderer (MUJOCO_GL=egl unless set: Debian packages libegl1, libegl-mesa0,
 libgl1-mesa-dri) and falls back to a matplotlib stick figure when no GL backend loads.
 
@@ -37,6 +48,7 @@ examples:
   controlmm generate --text "a person walks forward" --out walk.npz \
       && controlmm retarget walk.npz --out out/g1_walk
   controlmm retarget motion.npz --robot h1 --fps 30 --out out/h1 --render out/h1.mp4
+  controlmm retarget motion.npz --robot my_humanoid.xml --out out/mine
   controlmm retarget motion.npz --robot my_robot_mapping.json --out out/mine
   controlmm retarget lafan1_walk.bvh --format lafan1,beyondmimic,gmr --out out/walk
   controlmm retarget omomo_smplh.npy --source-fps 30 --up z --format all --out out/omomo"""
@@ -50,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("motion", help="human motion (.npz, .npy, .bvh, .pt)")
-    p.add_argument("--robot", default="g1", help="packaged robot (g1, h1) or a mapping .json (default: g1)")
+    add_robot(p)
     p.add_argument("--fps", type=float, default=50.0, help="output frame rate, 10 to 1000 Hz (default 50)")
     p.add_argument(
         "--out", required=True, help="output prefix: writes OUT.npz, OUT.json and the --format files"

@@ -8,11 +8,11 @@ import os
 from pathlib import Path
 
 from controlmm.atomic import check_output_file
-from controlmm.cli.args import add_force, integer, number
+from controlmm.cli.args import ROBOT_HELP, add_force, integer, number
 from controlmm.errors import ControlMMError
 
 HELP = """Scenes are MuJoCo worlds (Z up, metres) with a floor and static or moving obstacles; the
-robot (Unitree G1 by default) is attached by name. SCENE is a packaged scene name (see
+robot (Unitree G1 by default) is attached by name, MJCF or mapping. SCENE is a packaged scene name (see
 'controlmm scene list') or the path of your own MJCF file (no joints: static bodies and mocap
 bodies only)."""
 
@@ -46,7 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     show.add_argument(
         "--robot",
         default="g1",
-        help="robot to attach, as for retarget and plan (g1, h1 or a mapping .json), or 'none' (default g1)",
+        metavar="NAME|ROBOT.xml|MAPPING.json",
+        help=f"robot to attach: {ROBOT_HELP}, or 'none' (default g1)",
     )
     show.add_argument(
         "--time", type=number(0.0), default=0.0, help="time (s) on moving obstacles' tracks (default 0)"
@@ -112,9 +113,11 @@ def run_show(args: argparse.Namespace) -> int:
     _check_png(args.out, args.force)
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     import scenes.render
-    from retarget import load_mapping
+    from retarget import load_robot
 
-    robot = None if args.robot.strip().lower() in ("none", "") else load_mapping(args.robot).robot
+    robot = None if args.robot.strip().lower() in ("none", "") else args.robot
+    if robot is not None:
+        load_robot(robot)  # an unknown robot or a bad mapping fails here, in one line
     scene = scenes.load_scene(args.scene, robot=robot)
     backend = scenes.render.render_scene(scene, args.out, width=args.width, height=args.height, t=args.time)
     if backend != "mujoco":

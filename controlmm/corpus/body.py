@@ -108,6 +108,7 @@ class BodyPlan:
 
     Angles in radians, lengths in metres, directions in the body frame (x left, y up,
     z forward). ``root_xz``/``yaw``: the path and heading; ``feet``: planned foot tracks;
+    ``knee_out``/``knee_up``: how much the knees bend outwards / upwards (sitting on the floor);
     ``pelvis_height``: nominal pelvis height (an upper bound: lowered for leg reach);
     ``pelvis_shift``: (T, 3) pelvis offset in the heading frame; pelvis and spine
     pitch/roll/twist; ``head_pitch``/``head_yaw`` relative to the heading; arms.
@@ -132,6 +133,7 @@ class BodyPlan:
     twist_gain: float = 0.18
     roll_gain: float = 1.2
     knee_out: float = 0.15
+    knee_up: float | np.ndarray = 0.0
     reach: float = 0.995
     extras: dict = field(default_factory=dict)
 
@@ -143,9 +145,29 @@ class BodyPlan:
         value = getattr(self, name)
         return np.zeros(self.n) if value is None else np.asarray(value, dtype=np.float64)
 
+    def get_shift(self) -> np.ndarray:
+        """A copy of ``pelvis_shift`` (T, 3) (zeros when unset), for a family to add to."""
+        return (
+            np.zeros((self.n, 3))
+            if self.pelvis_shift is None
+            else np.array(self.pelvis_shift, dtype=np.float64)
+        )
 
-def assemble(plan: BodyPlan) -> np.ndarray:
-    """Build joint positions (T, 22, 3), metres, Y up, from a plan."""
+
+@dataclass
+class Torso:
+    """The trunk of an assembled plan: ``joints`` (T, 22, 3) with the pelvis, spine, neck, head,
+    collars and shoulders placed (arms and legs still zero), the pelvis and chest orientations
+    (T, 3, 3) and the fore-aft foot separation ``stride`` (T,) that drives the arm swing."""
+
+    joints: np.ndarray
+    r_pelvis: np.ndarray
+    chest: np.ndarray
+    stride: np.ndarray
+
+
+def torso(plan: BodyPlan) -> Torso:
+    """Steps 1-3 of :func:`assemble` without the arms and legs (pelvis, spine, head, shoulders)."""
     n = plan.n
     yaw = plan.get("yaw")
     fwd, left = heading_vectors(yaw)
@@ -187,16 +209,35 @@ def assemble(plan: BodyPlan) -> np.ndarray:
     )
     joints[:, 15] = joints[:, 12] + apply(head_rot, REST[15]) * L[15]
 
-    # 3. Shoulder girdle and arms.
+    # 3. Shoulder girdle.
     for side in SIDES:
-        arm = plan.arms[side]
         sign = SIDE_SIGN[side]
-        elev = rot_z(sign * arm.elevation)
+        elev = rot_z(sign * plan.arms[side].elevation)
         c, s = COLLAR_INDEX[side], SHOULDER_INDEX[side]
         joints[:, c] = joints[:, 9] + apply(chest @ elev, REST[c]) * L[c]
         joints[:, s] = joints[:, c] + apply(chest @ elev, REST[s]) * L[s]
+    return Torso(joints=joints, r_pelvis=r_pelvis, chest=chest, stride=stride)
+
+
+def chest_target(plan: BodyPlan, side: str, world: np.ndarray) -> np.ndarray:
+    """A world-space wrist target (T, 3) or (3,) as the chest-frame offset from the ``side``
+    shoulder (what :class:`ArmPlan` ``target`` holds), for the plan as it stands."""
+    tr = torso(plan)
+    rel = (
+        np.broadcast_to(np.asarray(world, dtype=np.float64), (plan.n, 3)) - tr.joints[:, SHOULDER_INDEX[side]]
+    )
+    return np.einsum("tji,tj->ti", tr.chest, rel)
+
+
+def assemble(plan: BodyPlan) -> np.ndarray:
+    """Build joint positions (T, 22, 3), metres, Y up, from a plan."""
+    tr = torso(plan)
+    joints, r_pelvis, chest = tr.joints, tr.r_pelvis, tr.chest
+    feet = plan.feet
+    pelvis = joints[:, 0]
+    for side in SIDES:
         joints[:, ELBOW_INDEX[side]], joints[:, WRIST_INDEX[side]] = _arm(
-            plan, side, chest, joints[:, s], stride
+            plan, side, chest, joints[:, SHOULDER_INDEX[side]], tr.stride
         )
 
     # 4. Legs.
@@ -205,6 +246,9 @@ def assemble(plan: BodyPlan) -> np.ndarray:
         hip = pelvis + apply(r_pelvis, hip_offset(side))
         joints[:, HIP_INDEX[side]] = hip
         pole = knee_pole(track.yaw, r_pelvis, side, plan.knee_out)
+        pole = unit(
+            pole + np.asarray(plan.knee_up, dtype=np.float64).reshape(-1, 1) * np.array([0.0, 1.0, 0.0])
+        )
         knee, ankle = two_bone_ik(hip, track.ankle, pole, THIGH[side], SHIN[side], max_reach=0.9995)
         joints[:, KNEE_INDEX[side]] = knee
         joints[:, ANKLE_INDEX[side]] = ankle

@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import overload
 
 import numpy as np
+from scipy.interpolate import CubicHermiteSpline, PchipInterpolator
 
 
 def smoothstep(x: np.ndarray) -> np.ndarray:
@@ -56,6 +57,29 @@ def keyframes(t: np.ndarray, times: list[float] | np.ndarray, values: list | np.
         seg = (t >= times[k - 1]).reshape(w.shape)
         out = np.where(seg, values[k - 1] + w * (values[k] - values[k - 1]), out)
     return out
+
+
+def smooth_keys(t: np.ndarray, times: list[float] | np.ndarray, values: list | np.ndarray) -> np.ndarray:
+    """Shape-preserving (PCHIP) interpolation through keyframes, holding before the first and
+    after the last: unlike :func:`keyframes` the motion flows through intermediate keys (it only
+    rests at the first and last key and where the values turn back), so a sit-down or a bow has
+    no pauses.
+
+    Args:
+        t: (T,) query times.
+        times: (K,) increasing key times (K >= 2).
+        values: (K, ...) key values.
+
+    Returns:
+        (T, ...) values.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    tq = np.clip(np.asarray(t, dtype=np.float64), times[0], times[-1])
+    slopes = PchipInterpolator(times, values, axis=0).derivative()(times)
+    slopes[0] = 0.0
+    slopes[-1] = 0.0
+    return CubicHermiteSpline(times, values, slopes, axis=0)(tq)
 
 
 def integrate(rate: np.ndarray, fps: float) -> np.ndarray:

@@ -29,6 +29,7 @@ import torch
 from tqdm import tqdm
 
 from controlmm.atomic import atomic_dir, check_output_dir
+from controlmm.corpus.family import Built
 from controlmm.corpus.probes import probe
 from controlmm.corpus.processing import process
 from controlmm.corpus.registry import family_names, get_family
@@ -129,7 +130,8 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt]))
         params = family.sample(rng)
-        raw = family.build(params, rng)
+        built = family.build(params, rng)
+        raw, scene = (built.joints, built.scene) if isinstance(built, Built) else (built, None)
         features, joints, positions = process(raw)
         text_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.index, attempt, 7]))
         caps = family.captions(params, text_rng, held_out=spec.split == "test", count=captions)
@@ -153,6 +155,8 @@ def make_clip(spec: ClipSpec, captions: int = 3) -> tuple[np.ndarray, np.ndarray
         "captions": [c.to_json() for c in caps],
         "retry_reasons": reasons,
     }
+    if scene is not None:
+        meta["scene"] = scene.to_clip_frame(raw[0], positions[0])
     return features, joints, caps, meta
 
 

@@ -8,9 +8,19 @@ from typing import Any
 
 import numpy as np
 
+from controlmm.corpus.scene import Scene
 from controlmm.corpus.text.templates import Caption, Slot, Template, render
 
 Params = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Built:
+    """What a family that moves around objects builds: the joints (T + 1, 22, 3) and the scene
+    (seat, platform, stairs, obstacle) in the same world frame."""
+
+    joints: np.ndarray
+    scene: Scene
 
 
 @dataclass(frozen=True)
@@ -21,7 +31,8 @@ class Family:
         name: registry name (also the probe's name).
         group: family module ("walking", "turning", "jumping", "lowering", "gestures", "combos").
         sample: rng -> JSON-serialisable parameters (speed, direction, hand, count...).
-        build: (params, rng) -> joints (T + 1, 22, 3), metres, Y up; T in 40..196.
+        build: (params, rng) -> joints (T + 1, 22, 3), metres, Y up; T in 40..196; or a
+            :class:`Built` (joints and scene geometry).
         templates: caption patterns.
         slots: params -> fillers of the patterns' fields (with claims).
         core: params -> claims every caption of the family makes.
@@ -30,7 +41,7 @@ class Family:
     name: str
     group: str
     sample: Callable[[np.random.Generator], Params]
-    build: Callable[[Params, np.random.Generator], np.ndarray]
+    build: Callable[[Params, np.random.Generator], np.ndarray | Built]
     templates: tuple[Template, ...]
     slots: Callable[[Params], dict[str, Slot]]
     core: Callable[[Params], dict[str, Any]] = lambda p: {}

@@ -144,26 +144,106 @@ def plan_footholds(
         turn = abs(wrap_angle(yaw - cur.yaw))
         if move < gait.min_move and turn < gait.min_turn:
             continue
-        _roll(cur, xz, yaw, side, gait, t0, t1, stance_time)
-        cur.t_off = t0
-        nxt = Stance(t_on=t1, t_off=np.inf, xz=xz, yaw=yaw)
-        fwd = _forward_amount(cur, xz, yaw)
-        ratio = min(abs(fwd) / gait.step_ref, 1.2)
-        # Any real step lifts the toes clear of the floor (>= 7.5 cm at the ankle).
-        nxt.clearance = max(
-            gait.clearance * (0.55 + 0.45 * min(move / gait.step_ref, 1.0)), 0.075 if move > 0.1 else 0.05
-        )
-        if fwd >= 0 and gait.strike == "heel":
-            nxt.land_pitch = gait.heel_pitch * ratio
-        else:
-            nxt.land_pitch = -gait.fore_pitch * max(ratio, 0.3 if gait.strike == "fore" else 0.0)
-        nxt.land_time = min(0.12, 0.3 * stance_time)
-        nxt.swing_shape = "run" if gait.strike == "fore" else "walk"
-        nxt.lift_skew = float(np.clip(fwd / gait.step_ref, -1.0, 1.0))
-        stances[side].append(nxt)
+        _append_step(stances[side], side, t0, t1, xz, yaw, gait, stance_time)
     for side in ("left", "right"):
         for st in stances[side]:
             _add_pivot(st, path, side, gait)
+    return stances
+
+
+def _append_step(
+    stances: list[Stance],
+    side: str,
+    t0: float,
+    t1: float,
+    xz: np.ndarray,
+    yaw: float,
+    gait: Gait,
+    stance_time: float,
+    ground: float = 0.0,
+) -> Stance:
+    """End the foot's current stance at ``t0`` (with its push-off roll) and add the stance that
+    lands at ``t1`` on ``xz`` (heel or forefoot strike, swing clearance from the step length)."""
+    cur = stances[-1]
+    _roll(cur, xz, yaw, side, gait, t0, t1, stance_time)
+    cur.t_off = t0
+    nxt = Stance(t_on=t1, t_off=np.inf, xz=np.asarray(xz, dtype=np.float64), yaw=float(yaw), ground=ground)
+    move = float(np.linalg.norm(nxt.xz - cur.xz))
+    fwd = _forward_amount(cur, nxt.xz, yaw)
+    ratio = min(abs(fwd) / gait.step_ref, 1.2)
+    # Any real step lifts the toes clear of the floor (>= 7.5 cm at the ankle).
+    nxt.clearance = max(
+        gait.clearance * (0.55 + 0.45 * min(move / gait.step_ref, 1.0)), 0.075 if move > 0.1 else 0.05
+    )
+    if fwd >= 0 and gait.strike == "heel":
+        nxt.land_pitch = gait.heel_pitch * ratio
+    else:
+        nxt.land_pitch = -gait.fore_pitch * max(ratio, 0.3 if gait.strike == "fore" else 0.0)
+    nxt.land_time = min(0.12, 0.3 * stance_time)
+    nxt.swing_shape = "run" if gait.strike == "fore" else "walk"
+    nxt.lift_skew = float(np.clip(fwd / gait.step_ref, -1.0, 1.0))
+    stances.append(nxt)
+    return nxt
+
+
+@dataclass
+class Step:
+    """One planned step: ``side`` lifts off at ``t_off`` and lands at ``t_on`` on ``xz`` (x, z),
+    turned to ``yaw``, on a surface ``ground`` m high."""
+
+    side: str
+    t_off: float
+    t_on: float
+    xz: np.ndarray
+    yaw: float
+    ground: float = 0.0
+
+
+def plan_steps(
+    initial: dict[str, tuple[np.ndarray, float]],
+    steps: list[Step],
+    gait: Gait,
+    ground: dict[str, float] | None = None,
+) -> dict[str, list[Stance]]:
+    """Stances of both feet from explicit steps (terrain: stairs, a platform, an obstacle),
+    with the same heel-toe roll and swing clearance rules as :func:`plan_footholds`.
+
+    Args:
+        initial: starting footholds {side: ((x, z), yaw)}.
+        steps: the steps in time order (each foot's own steps must not overlap).
+        gait: roll angles, clearance and step length reference.
+        ground: starting surface height of each foot (default 0).
+
+    Returns:
+        {"left": [...], "right": [...]}: stances in time order (first from -inf, last to +inf).
+    """
+    stances = {
+        side: [
+            Stance(
+                t_on=-np.inf,
+                t_off=np.inf,
+                xz=np.asarray(initial[side][0], dtype=np.float64),
+                yaw=float(initial[side][1]),
+                ground=(ground or {}).get(side, 0.0),
+            )
+        ]
+        for side in ("left", "right")
+    }
+    ordered = sorted(steps, key=lambda st: st.t_off)
+    for k, step in enumerate(ordered):
+        nxt = next((st for st in ordered[k + 1 :] if st.side == step.side), None)
+        stance_time = (nxt.t_off - step.t_on) if nxt else 2.0 * gait.duty / float(np.mean(gait.cadence))
+        _append_step(
+            stances[step.side],
+            step.side,
+            step.t_off,
+            step.t_on,
+            step.xz,
+            step.yaw,
+            gait,
+            stance_time,
+            step.ground,
+        )
     return stances
 
 

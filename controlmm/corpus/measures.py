@@ -88,3 +88,24 @@ class Measures:
     @property
     def pelvis_height(self) -> np.ndarray:
         return self.j[:, 0, 1]
+
+    @cached_property
+    def stand_height(self) -> float:
+        """Highest pelvis height over the clip (m), smoothed over 5 frames: standing."""
+        return float(uniform_filter1d(self.pelvis_height, 5, mode="nearest").max())
+
+    @cached_property
+    def trunk_pitch(self) -> np.ndarray:
+        """Forward tilt (degrees, T) of the trunk (pelvis -> neck) from the vertical, + towards the facing."""
+        f, _ = self.frame
+        d = self.j[:, 12] - self.j[:, 0]
+        return np.degrees(np.arctan2((d * f).sum(-1), d[:, 1]))
+
+    @cached_property
+    def level(self) -> np.ndarray:
+        """Height (m, T) of the lowest foot joint (ankles, toes): the surface the person stands on."""
+        return self.j[:, [7, 8, 10, 11], 1].min(1)
+
+    def rise(self, frames: int = 5) -> float:
+        """Change of :attr:`level` (m) from the first to the last ``frames`` frames (medians)."""
+        return float(np.median(self.level[-frames:]) - np.median(self.level[:frames]))

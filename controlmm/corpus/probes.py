@@ -440,6 +440,321 @@ def _walk_then_squat(m, c):
     ]
 
 
+# --- postures ---------------------------------------------------------------------------
+
+
+def _longest(mask: np.ndarray) -> int:
+    runs = geo.segments(mask)
+    return max((b - a for a, b in runs), default=0)
+
+
+def _ankles_ahead(m: Measures) -> np.ndarray:
+    """How far (m, T) the ankles' midpoint lies ahead of the pelvis along the facing."""
+    return 0.5 * (m.body(7)[:, 2] + m.body(8)[:, 2])
+
+
+def _seated(m: Measures) -> np.ndarray:
+    """Frames sitting on a seat: pelvis lowered >= 15 cm, the feet >= 22 cm in front of it, the
+    trunk upright (<= 30 deg)."""
+    return (m.pelvis_height <= m.stand_height - 0.15) & (_ankles_ahead(m) >= 0.22) & (m.trunk_pitch <= 30.0)
+
+
+def _end_checks(m: Measures, c: dict, down: str, low: float) -> list[Check]:
+    """``stand_up`` claims: back at standing height at the end, or still down (pelvis <= ``low``)."""
+    end = float(m.pelvis_height[-3:].mean())
+    if c.get("stand_up") is True:
+        top = m.stand_height - 0.08
+        return [_c("final_pelvis_m", end, end >= top, f">= {top:.2f} m (standing again)")]
+    if c.get("stand_up") is False:
+        return [_c("final_pelvis_m", end, end <= low, f"<= {low:.2f} m (still {down})")]
+    return []
+
+
+def _sit_down(m, c):
+    seated = _seated(m)
+    run = _longest(seated)
+    checks = [_c("seated_frames", run, run >= 15, ">= 15 frames seated (pelvis down, feet ahead, trunk up)")]
+    checks += _end_checks(m, c, "seated", m.stand_height - 0.15)
+    if c.get("stand_up") is False:
+        checks.append(
+            _c("seated_at_end", float(seated[-3:].all()), bool(seated[-3:].all()), "seated at the end")
+        )
+    return checks
+
+
+def _lie_down(m, c):
+    lying = (m.pelvis_height <= 0.3) & (m.trunk_pitch <= -60.0)
+    run = _longest(lying)
+    return [
+        _c(
+            "lying_frames",
+            run,
+            run >= 8,
+            ">= 8 frames lying on the back (pelvis <= 0.3 m, trunk >= 60 deg back)",
+        )
+    ] + _end_checks(m, c, "lying", 0.3)
+
+
+def _bow_count(m: Measures) -> int:
+    return geo.count_dips(-m.trunk_pitch, -25.0, -12.0)
+
+
+def _bow(m, c):
+    dip = m.stand_height - float(m.pelvis_height.min())
+    checks = [_c("pelvis_dip_m", dip, dip <= 0.15, "<= 0.15 m (bending at the hips, not the knees)")]
+    if "count" in c:
+        return _count_check("bows", _bow_count(m), c) + checks
+    n = _bow_count(m)
+    return [_c("bows", n, n >= 1, ">= 1 forward bend of the trunk past 25 deg")] + checks
+
+
+def _pick_up(m, c):
+    low = float(m.j[:, [20, 21], 1].min())
+    dip = m.stand_height - float(m.pelvis_height.min())
+    fwd, left = m.displacement()
+    checks = [
+        _c("wrist_min_height_m", low, low <= 0.35, "<= 0.35 m (a hand down at the floor)"),
+        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.5, "<= 0.5 m (in place)"),
+    ]
+    checks += _end_checks(m, {"stand_up": True}, "", 0.0)
+    if c.get("style") == "squat":
+        checks.append(_c("pelvis_dip_m", dip, dip >= 0.38, ">= 0.38 m (squatting)"))
+    elif c.get("style") == "stoop":
+        top = float(m.trunk_pitch.max())
+        checks.append(_c("pelvis_dip_m", dip, dip < 0.38, "< 0.38 m (not a squat)"))
+        checks.append(_c("trunk_pitch_deg", top, top >= 65.0, ">= 65 deg (bending over)"))
+    return checks
+
+
+# --- actions ----------------------------------------------------------------------------
+
+ANKLES = {"left": 7, "right": 8}
+
+
+def _kick_checks(m: Measures, c: dict) -> list[Check]:
+    leg = c.get("leg", "left")
+    ankle, other = ANKLES[leg], ANKLES["right" if leg == "left" else "left"]
+    y = m.j[:, ankle, 1]
+    top = int(np.argmax(y))
+    near = slice(max(top - int(m.fps), 0), top + int(m.fps) + 1)
+    other_top = float(m.j[near, other, 1].max())
+    checks = [
+        _c(f"{leg}_ankle_height_m", y[top], y[top] >= 0.3, ">= 0.3 m above the floor"),
+        _c(
+            "other_ankle_height_m",
+            other_top,
+            other_top <= 0.2,
+            "<= 0.2 m within 1 s of the kick (standing on the other foot)",
+        ),
+    ]
+    rel = m.body(ankle)[top]
+    if c.get("kick") == "front":
+        checks.append(_c("kick_forward_m", rel[2], rel[2] >= 0.3, ">= 0.3 m in front of the pelvis"))
+    elif c.get("kick") == "side":
+        out = _sign(leg) * rel[0]
+        checks.append(
+            _c(
+                "kick_sideways_m",
+                out,
+                out >= 0.3 and out >= rel[2],
+                f">= 0.3 m to the {leg}, more than forward",
+            )
+        )
+    if "count" in c:
+        checks += _count_check("kicks", geo.count_dips(-y, -0.3, -0.15), c)
+    return checks
+
+
+def _kick(m, c):
+    fwd, left = m.displacement()
+    return _kick_checks(m, c) + [
+        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.5, "<= 0.5 m (in place)")
+    ]
+
+
+def _stretch_arms(m, c):
+    out_l, out_r = m.body(20, CHEST)[:, 0], -m.body(21, CHEST)[:, 0]
+    level = np.maximum(np.abs(m.above(20, 16)), np.abs(m.above(21, 17)))
+    wide = (np.minimum(out_l, out_r) >= 0.55) & (level <= 0.2)
+    return [
+        _c(
+            "arms_out_frames",
+            wide.sum(),
+            wide.sum() >= 8,
+            ">= 8 frames with both wrists >= 0.55 m to their sides, within 0.2 m of shoulder height",
+        )
+    ]
+
+
+def _push(m, c):
+    ahead = np.minimum(m.body(20, CHEST)[:, 2], m.body(21, CHEST)[:, 2])
+    high = np.minimum(m.above(20, PELVIS), m.above(21, PELVIS))
+    low = np.maximum(m.above(20, HEAD), m.above(21, HEAD))
+    apart = np.linalg.norm(m.j[:, 20] - m.j[:, 21], axis=-1)
+    both = (ahead >= 0.42) & (high >= 0.1) & (low <= 0.0) & (apart <= 0.65)
+    return [
+        _c(
+            "both_hands_out_frames",
+            both.sum(),
+            both.sum() >= 5,
+            ">= 5 frames with both wrists >= 0.42 m in front of the chest, between pelvis and head",
+        )
+    ]
+
+
+def _head_yaw(m: Measures) -> np.ndarray:
+    """Head turn (degrees, T) from the neck -> head direction relative to the body, + to the left."""
+    d = m.body(15, 12)
+    return np.degrees(np.arctan2(d[:, 0], d[:, 2]))
+
+
+def _look_around(m, c):
+    yaw = _head_yaw(m)
+    hi, lo = float(yaw.max()), float(yaw.min())
+    fwd, left = m.displacement()
+    checks = [
+        _c("displacement_m", np.hypot(fwd, left), np.hypot(fwd, left) <= 0.4, "<= 0.4 m (in place)"),
+        _c("turn_deg", m.turn, abs(m.turn) <= 40.0, "|turn| <= 40 (the body keeps facing the same way)"),
+    ]
+    look = c.get("look", "both")
+    if look in ("both", "left"):
+        checks.append(_c("head_left_deg", hi, hi >= 30.0, ">= 30 deg to the left"))
+    if look in ("both", "right"):
+        checks.append(_c("head_right_deg", -lo, -lo >= 30.0, ">= 30 deg to the right"))
+    if look == "left":
+        checks.append(_c("head_right_deg", -lo, -lo <= 15.0, "<= 15 deg to the right"))
+    if look == "right":
+        checks.append(_c("head_left_deg", hi, hi <= 15.0, "<= 15 deg to the left"))
+    return checks
+
+
+ELBOWS = {"left": 18, "right": 19}
+
+
+def _point(m, c):
+    hand = c["hand"]
+    wrist, shoulder = HANDS[hand]
+    other, other_shoulder = HANDS["right" if hand == "left" else "left"]
+    upper = m.j[:, ELBOWS[hand]] - m.j[:, shoulder]
+    fore = m.j[:, wrist] - m.j[:, ELBOWS[hand]]
+    cos = (upper * fore).sum(-1) / np.maximum(
+        np.linalg.norm(upper, axis=-1) * np.linalg.norm(fore, axis=-1), 1e-9
+    )
+    rel = m.body(wrist, shoulder)
+    out = (cos >= np.cos(np.radians(35.0))) & (np.linalg.norm(rel, axis=-1) >= 0.45) & (rel[:, 1] >= -0.25)
+    other_up = float(m.above(other, other_shoulder).max())
+    checks = [
+        _c(
+            f"{hand}_arm_out_frames", out.sum(), out.sum() >= 10, ">= 10 frames with the arm straight and out"
+        ),
+        _c("other_wrist_above_shoulder_m", other_up, other_up <= -0.15, "<= -0.15 (the other arm down)"),
+    ]
+    if "where" in c and out.any():
+        d = np.median(rel[out], axis=0)
+        side, ahead = float(d[0]), float(d[2])
+        if c["where"] == "ahead":
+            checks.append(
+                _c("point_forward_m", ahead, ahead >= 0.3 and ahead >= abs(side), "ahead >= |sideways|")
+            )
+        else:
+            s = _sign(c["where"])
+            checks.append(
+                _c(
+                    "point_sideways_m",
+                    s * side,
+                    s * side >= 0.3 and s * side >= ahead,
+                    f"to the {c['where']}",
+                )
+            )
+    return checks
+
+
+def _carry(m, c):
+    moving = np.concatenate([[False], m.speed > 0.3])
+    ahead = np.minimum(m.body(20)[:, 2], m.body(21)[:, 2])
+    share = float((ahead[moving] >= 0.2).mean()) if moving.any() else 0.0
+    return _forward_travel(m, 1.0) + [
+        _c("hands_in_front_share", share, share >= 0.8, ">= 0.8 of the walk with both wrists >= 0.2 m ahead")
+    ]
+
+
+# --- terrain ----------------------------------------------------------------------------
+
+
+def _step_over(m, c):
+    lifts = [float(m.j[:, a, 1].max()) for a in (7, 8)]
+    rise = m.rise()
+    return _forward_travel(m, 0.8) + [
+        _c("lower_ankle_peak_m", min(lifts), min(lifts) >= 0.25, ">= 0.25 m (both feet lifted over)"),
+        _c("level_change_m", rise, abs(rise) <= 0.08, "|change| <= 0.08 m (the same floor after)"),
+    ]
+
+
+def _vertical(m: Measures, c: dict, lo: float, hi: float) -> list[Check]:
+    rise = m.rise()
+    if c.get("vertical") == "up":
+        return [_c("level_change_m", rise, lo <= rise <= hi, f"+{lo}..+{hi} m (up)")]
+    if c.get("vertical") == "down":
+        return [_c("level_change_m", rise, -hi <= rise <= -lo, f"-{hi}..-{lo} m (down)")]
+    return [_c("level_change_m", abs(rise), lo <= abs(rise) <= hi, f"|change| {lo}..{hi} m")]
+
+
+def _platform(m, c):
+    fwd, _ = m.displacement()
+    return _vertical(m, c, 0.1, 0.45) + [_c("forward_m", fwd, fwd >= 0.2, ">= 0.2 m forward")]
+
+
+def _stairs(m, c):
+    fwd, _ = m.displacement()
+    return _vertical(m, c, 0.3, 1.5) + [_c("forward_m", fwd, fwd >= 0.6, ">= 0.6 m forward")]
+
+
+# --- sequences --------------------------------------------------------------------------
+
+
+def _walk_before(m: Measures, end: int, minimum: float = 1.0) -> Check:
+    fwd, _ = m.displacement(0, max(end, 1))
+    return _c("walk_before_m", fwd, fwd >= minimum, f">= {minimum} m forward first")
+
+
+def _walk_then_sit(m, c):
+    seated = _seated(m)
+    first = int(np.argmax(seated)) if seated.any() else len(seated) - 1
+    run = _longest(seated)
+    return [
+        _walk_before(m, first),
+        _c("turn_deg", abs(m.turn), abs(m.turn) >= 120.0, "|turn| >= 120 (turned around)"),
+        _c("seated_frames", run, run >= 12, ">= 12 frames seated"),
+        _c("seated_at_end", float(seated[-3:].all()), bool(seated[-3:].all()), "seated at the end"),
+    ]
+
+
+def _walk_then_kick(m, c):
+    ankle = ANKLES[c.get("leg", "left")]
+    top = int(np.argmax(m.j[:, ankle, 1]))
+    return [_walk_before(m, top)] + _kick_checks(m, c)
+
+
+def _walk_then_bow(m, c):
+    deepest = int(np.argmax(m.trunk_pitch))
+    return [_walk_before(m, deepest)] + _bow(m, c)
+
+
+def _pick_up_and_carry(m, c):
+    low = m.j[:, [20, 21], 1].min(1)
+    k = int(np.argmin(low))
+    fwd, _ = m.displacement(k, -1)
+    moving = np.concatenate([[False], m.speed > 0.3])
+    moving[: k + 1] = False
+    ahead = np.minimum(m.body(20)[:, 2], m.body(21)[:, 2])
+    share = float((ahead[moving] >= 0.2).mean()) if moving.any() else 0.0
+    return [
+        _c("wrist_min_height_m", low[k], low[k] <= 0.35, "<= 0.35 m (a hand down at the floor)"),
+        _c("walk_after_m", fwd, fwd >= 1.0, ">= 1 m forward after picking up"),
+        _c("hands_in_front_share", share, share >= 0.8, ">= 0.8 of the walk with both wrists >= 0.2 m ahead"),
+    ]
+
+
 PROBES: dict[str, Callable[[Measures, dict], list[Check]]] = {
     "walk": _walk,
     "jog": _jog,
@@ -473,6 +788,23 @@ PROBES: dict[str, Callable[[Measures, dict], list[Check]]] = {
     "walk_and_wave": _walk_and_wave,
     "turn_then_walk": _turn_then_walk,
     "walk_then_squat": _walk_then_squat,
+    "sit_down": _sit_down,
+    "lie_down": _lie_down,
+    "bow": _bow,
+    "pick_up": _pick_up,
+    "kick": _kick,
+    "stretch_arms": _stretch_arms,
+    "push": _push,
+    "look_around": _look_around,
+    "point": _point,
+    "carry": _carry,
+    "step_over": _step_over,
+    "platform": _platform,
+    "stairs": _stairs,
+    "walk_then_sit": _walk_then_sit,
+    "walk_then_kick": _walk_then_kick,
+    "walk_then_bow": _walk_then_bow,
+    "pick_up_and_carry": _pick_up_and_carry,
 }
 """The probe of each motion family, by name."""
 

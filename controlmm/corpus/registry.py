@@ -11,12 +11,37 @@ from __future__ import annotations
 from collections.abc import Iterable
 from types import ModuleType
 
-from controlmm.corpus.families import combos, gestures, jumping, lowering, reaching, turning, walking
+from controlmm.corpus.families import (
+    actions,
+    combos,
+    gestures,
+    jumping,
+    lowering,
+    postures,
+    reaching,
+    sequences,
+    terrain,
+    turning,
+    walking,
+)
 from controlmm.corpus.family import Family
 from controlmm.errors import ControlMMError
 
-GROUPS: tuple[ModuleType, ...] = (walking, turning, jumping, lowering, gestures, reaching, combos)
-"""The family modules in registry order (travelling first, compositions last)."""
+GROUPS: tuple[ModuleType, ...] = (
+    walking,
+    turning,
+    jumping,
+    lowering,
+    gestures,
+    reaching,
+    combos,
+    postures,
+    actions,
+    terrain,
+    sequences,
+)
+"""The family modules in registry order (the 32 first families, then postures, actions, terrain and
+sequences; the order of the families is the order of ``controlmm corpus --list``)."""
 
 
 def _by_name(families: Iterable[Family]) -> dict[str, Family]:

@@ -14,6 +14,7 @@ from controlmm.pipeline.feedback import FeedbackConfig
 from controlmm.seeds import check_seed
 from retarget.exports import parse_formats
 from sim.config import CheckConfig
+from sim.physics import PhysicsConfig
 
 DEFAULT_SCENE = "table"
 """The bundled example: a table to keep clear of and a right-hand target beyond its edge."""
@@ -29,7 +30,7 @@ class PlanConfig:
         control: a control-spec JSON path, a spec dict, or None. With neither ``text`` nor
             ``control`` given, the scene's suggested control is used (the bundled example);
             with a ``text`` of your own, no control unless you give one.
-        robot: packaged robot (``g1``, ``h1``) or a mapping ``.json``.
+        robot: packaged robot (``controlmm robots``), a humanoid MJCF ``.xml`` or a mapping ``.json``.
         seconds: motion length (2..9.8 s); None: 6 s without a control spec, with one 0.5 s past
             its last constraint (at least 2 s, at most 6 s unless a constraint comes later).
         seed: reproducibility (generation sampling).
@@ -51,7 +52,9 @@ class PlanConfig:
         formats: robot trajectory formats written beside ``robot.npz``/``robot.json``
             (``retarget.exports``: lafan1, qpos, beyondmimic, gmr).
         feedback: how failures become loss terms.
-        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults).
+        check: thresholds of the simulation checks (``sim.CheckConfig``; default: its defaults);
+            ``CheckConfig(physics=True)`` executes every round in physics as its last check.
+        physics: settings of that physics execution check (``sim.PhysicsConfig``).
     """
 
     scene: str = DEFAULT_SCENE
@@ -77,6 +80,7 @@ class PlanConfig:
     formats: tuple[str, ...] = ("lafan1",)
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
     check: CheckConfig = field(default_factory=CheckConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
 
     def __post_init__(self) -> None:
         if isinstance(self.rounds, bool) or not isinstance(self.rounds, int) or not 0 <= self.rounds <= 10:
@@ -108,6 +112,7 @@ class PlanConfig:
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["check"] = self.check.to_dict()
+        out["physics"] = self.physics.to_dict()
         if isinstance(self.control, (str, Path)):
             out["control"] = str(self.control)
         return out

@@ -21,11 +21,12 @@ floating                *support*: the lowest foot joint no higher than in the r
                         frames (5th percentile)
 dynamics and limits     *smoothness*: the body's joints' accelerations (and the pelvis'; the
 (residual_force,        trunk's for a whole-robot wrench) at most half the failed round's
-residual_moment,
-torque_limit,
+residual_moment,        (a physics fall or a tracking-error span of the root smooths the trunk
+torque_limit,           and pelvis; a foot's or a hand's span that limb)
 joint_velocity,
 joint_limit,
-tracking_fall)
+tracking_fall,
+tracking_error)
 ======================  ===================================================================
 
 Terms built from the failed round's motion (lift, separation, support, smoothness) compare with
@@ -59,6 +60,7 @@ SMOOTH_KINDS = (
     "joint_velocity",
     "joint_limit",
     "tracking_fall",
+    "tracking_error",
 )
 
 

@@ -25,6 +25,10 @@ plots/motion.png        snapshots of the human motion
 plots/displacement.png  (a recorded clip) per frame: mean and largest joint distance to the clip
 source_motion.npz       (a recorded clip) the clip as imported (HumanML3D joints and features)
 plan.json               the settings of the run (to reproduce it)
+physics.npz             with the physics check (``CheckConfig(physics=True)``): the executed
+                        states at every simulation step and the ctrl of every mj_step
+physics_model.xml       the robot + scene + actuators the physics check simulated (one MJCF file)
+robot_physics.csv       the executed motion at 50 fps (Unitree LAFAN1-G1 / BeyondMimic rows)
 .controlmm-output.json  the files above: marks a plan output, which the next plan may replace
 ======================  =======================================================================
 
@@ -46,7 +50,7 @@ from controlmm.pipeline.plan import PlanResult
 from controlmm.pipeline.plots import plot_clearance, plot_top_view
 from retarget.exports import save_trajectory
 from retarget.render import render_trajectory
-from sim import plot_report
+from sim import plot_report, save_certificate
 
 PLAN_OUTPUT = "plan"
 """The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
@@ -77,6 +81,8 @@ def write_plan(
         if result.clip is not None:
             save_motion(result.clip, tmp / "source_motion.npz")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
+        if result.report.physics is not None:
+            save_certificate(result.report.physics, tmp)
         if config.plots:
             plots = tmp / "plots"
             plots.mkdir()

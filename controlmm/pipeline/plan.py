@@ -48,7 +48,8 @@ from controlmm.pipeline.timing import StageTimes
 from controlmm.timeline import as_timeline, generate_timeline
 from retarget import RobotTrajectory, load_robot, retarget_motion, robot_scale
 from scenes import Scene, load_scene, scene_loss_terms
-from sim import Report, check_trajectory, make_world
+from sim import CheckWorld, Report, check_trajectory, make_world
+from sim.physics import check_start
 
 CONSTRAINT_TOLERANCE_M = 0.02
 """A round meets its constraints when every one is within this (2 cm)."""
@@ -96,6 +97,7 @@ class PlanRound:
             "self_collision_frames": int(r.self_collision_frames),
             "foot_sliding_m": round(float(r.foot_sliding_m), 6),
             "constraint_errors_m": [round(e, 5) for e in self.constraint_errors_m],
+            "physics": _physics_figures(r.stats.get("physics")),
             "loss_terms": list(self.terms),
             "editing": self.editing,
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
@@ -219,7 +221,7 @@ def plan(
     """Plan a robot motion in a scene (see the module docstring).
 
     Args:
-        config: what to plan.
+        config: what to plan (default ``PlanConfig()``: the bundled example).
         model: a loaded :class:`controlmm.models.MotionModel` (default: load ``config.model``).
         progress: progress bars and one line per stage on stderr.
         log: where stage lines go (default stderr); None with ``progress=False`` silences them.
@@ -307,7 +309,7 @@ def plan(
         )
         timer["retarget"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        report = check_trajectory(world, traj, config=config.check)
+        report = _check(world, traj, config, index, say, progress)
         timer["check"] = time.perf_counter() - t0
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
         if index == 0:
@@ -435,6 +437,35 @@ def _timeline(
     )
     summary = {k: info[k] for k in ("max_drift_cm", "max_boundary_speed_mps") if k in info}
     return motion, [], {"timeline": summary}
+
+
+def _check(
+    world: CheckWorld,
+    traj: RobotTrajectory,
+    config: PlanConfig,
+    index: int,
+    say: Callable[[str], None],
+    progress: bool,
+) -> Report:
+    """A round's simulation checks; the physics execution last, unless the motion starts inside the
+    scene (a generated motion is no bad input: its penetration fails the round and is fed back)."""
+    check = config.check
+    if check.physics:
+        try:
+            check_start(world, traj.qpos[0], config.physics)
+            say(f"round {index}: executing the motion in physics ({traj.num_frames / traj.fps:.1f} s)")
+        except ControlMMError as exc:
+            say(f"round {index}: no physics execution: {exc}")
+            check = replace(check, physics=False)
+    return check_trajectory(world, traj, config=check, physics=config.physics, progress=progress)
+
+
+def _physics_figures(physics: dict[str, Any] | None) -> dict[str, Any] | None:
+    """A round's physics verdict and main figures (None without the physics check)."""
+    if not physics:
+        return None
+    keys = ("passed", "fell", "time_up_s", "mean_root_error_m", "max_root_error_m", "max_torque_ratio")
+    return {k: physics[k] for k in keys}
 
 
 def _logger(progress: bool, log: TextIO | None) -> Callable[[str], None]:

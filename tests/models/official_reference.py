@@ -1,8 +1,8 @@
 """Test helpers for the official-checkpoint import, independent of ``controlmm.models``.
 
-1. State_dicts with exactly the official names and shapes (as in the released MoMask / MaskControl `.tar` checkpoints), random
-   values, written out in the official folder layout (``checkpoints/t2m/<name>/model/*.tar``,
-   ``opt.txt``, ``meta/{mean,std}.npy``).
+1. State_dicts with exactly the official names and shapes (as in the released MoMask /
+   MaskControl `.tar` checkpoints), random values, written out in the official folder layout
+   (``checkpoints/t2m/<name>/model/*.tar``, ``opt.txt``, ``meta/{mean,std}.npy``).
 2. A re-implementation of the official forward passes written straight from the official module
    definitions with plain tensor ops on those raw state_dicts (no ``nn.Module`` of this project, no
    ``nn.TransformerEncoderLayer``): RVQ-VAE decoding from token ids, masked-transformer logits,

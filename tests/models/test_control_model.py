@@ -27,7 +27,8 @@ def model(tiny_model_dir):
 
 
 def test_paper_preset_matches_the_official_control_branch():
-    """Names, tensor count and shapes of MaskControl's ControlTransformer branch (MaskControl's released `ct2m_transformer` checkpoints)."""
+    """Names, tensor count and shapes of MaskControl's ControlTransformer branch (MaskControl's
+    released `ct2m_transformer` checkpoints)."""
     for joints, channels in (("pelvis", 6), ("all", 36)):
         cfg = replace(preset_config("paper"), control=ControlConfig(joints=joints))
         state = MotionControlModel(cfg).state_dict()

@@ -118,7 +118,8 @@ def test_opt_txt_values(tmp_path):
 
 
 def test_released_sizes_load_strictly_into_the_paper_preset():
-    """Official trees at the released sizes: the tensor counts of the released checkpoints and a strict load."""
+    """Official trees at the released sizes: the tensor counts of the released checkpoints and a
+    strict load."""
     d = Dims.paper()
     vq, base, res = (
         official_vq_state(d, empty=True),

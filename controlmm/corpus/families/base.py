@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from controlmm.corpus.body import ArmPlan, BodyPlan, assemble, standing_pelvis_height
-from controlmm.corpus.curves import gentle_noise
+from controlmm.corpus.body import ArmPlan, BodyPlan, assemble, chest_target, standing_pelvis_height
+from controlmm.corpus.curves import gentle_noise, window
 from controlmm.corpus.feet import FootTrack, Stance, foot_track, stance_bump, swing_bump
 from controlmm.corpus.gait import Gait, RootPath, plan_footholds
 from controlmm.corpus.rig import SIDE_SIGN, heading_vectors
@@ -87,12 +87,37 @@ def idle_arms(rng: np.random.Generator, t: np.ndarray) -> dict[str, ArmPlan]:
     return arms
 
 
-def standing_plan(
-    rng: np.random.Generator, person: Person, t: np.ndarray, stances: dict[str, list[Stance]] | None = None
-) -> BodyPlan:
-    """A person standing in place (feet planted, breathing, small sway of head and arms).
+def balance(rng: np.random.Generator, t: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Postural sway of a person standing (T,) each, metres in the heading frame: a slow drift of
+    the pelvis over the feet (about 1 cm, 0.08-0.3 Hz) plus, in clips over 3 s, one or two weight
+    shifts onto one leg (25-45 % of the way to that foot, eased in over 0.6-1.2 s, held 0.5-2 s).
 
-    ``stances`` overrides the feet (e.g. a step back before kneeling)."""
+    Returns the lateral (+ left) and fore-aft (+ forward) pelvis offsets."""
+    lateral = gentle_noise(rng, t, rng.uniform(0.006, 0.014), (0.08, 0.3))
+    fore = gentle_noise(rng, t, rng.uniform(0.004, 0.01), (0.08, 0.3))
+    shifts = int(rng.choice([0, 1, 2], p=[0.25, 0.5, 0.25])) if t[-1] > 3.0 else int(rng.random() < 0.4)
+    side = float(rng.choice([-1.0, 1.0]))
+    for _ in range(shifts):
+        rise, hold = rng.uniform(0.6, 1.2), rng.uniform(0.5, 2.0)
+        start = rng.uniform(0.0, max(t[-1] - 2.0 * rise - hold, 0.1))
+        amount = side * rng.uniform(0.25, 0.45) * 0.5 * width
+        lateral = lateral + amount * window(t, start, start + 2.0 * rise + hold, rise)
+        side = -side
+    return lateral, fore
+
+
+def standing_plan(
+    rng: np.random.Generator,
+    person: Person,
+    t: np.ndarray,
+    stances: dict[str, list[Stance]] | None = None,
+    still: np.ndarray | None = None,
+) -> BodyPlan:
+    """A person standing in place (feet planted, breathing, postural sway and weight shifts of the
+    pelvis with the trunk balancing over it, small sway of head and arms).
+
+    ``stances`` overrides the feet (e.g. a step back before kneeling); ``still`` (T,) in [0, 1]
+    scales the standing sway (0 while walking)."""
     n = len(t)
     yaw = np.full(n, person.yaw0)
     if stances is None:
@@ -102,6 +127,11 @@ def standing_plan(
     root = 0.5 * (feet["left"].ankle + feet["right"].ankle)[:, [0, 2]]
     root = gaussian_filter1d(root, 3.0, axis=0, mode="nearest")
     height = np.full(n, person.stand_height) + gentle_noise(rng, t, 0.004, (0.2, 0.4))
+    lateral, fore = balance(rng, t, person.width)
+    weight = np.ones(n) if still is None else np.clip(still, 0.0, 1.0)
+    lateral, fore = lateral * weight, fore * weight
+    shift = np.zeros((n, 3))
+    shift[:, 0], shift[:, 2] = lateral, fore
     return BodyPlan(
         fps=float(FPS),
         root_xz=root,
@@ -109,9 +139,12 @@ def standing_plan(
         feet=feet,
         pelvis_height=height,
         arms=idle_arms(rng, t),
+        pelvis_shift=shift,
+        # The loaded hip rises (the free side drops) and the trunk leans back over the feet.
+        pelvis_roll=-1.5 * lateral,
         pelvis_pitch=np.full(n, 0.5 * person.lean) + gentle_noise(rng, t, 0.01),
-        spine_pitch=np.full(n, 0.5 * person.lean) + gentle_noise(rng, t, 0.015),
-        spine_roll=gentle_noise(rng, t, 0.015),
+        spine_pitch=np.full(n, 0.5 * person.lean) + gentle_noise(rng, t, 0.015) - 0.6 * fore,
+        spine_roll=gentle_noise(rng, t, 0.015) - 1.2 * lateral,
         spine_twist=gentle_noise(rng, t, 0.03),
         head_pitch=np.full(n, person.head_pitch) + gentle_noise(rng, t, 0.04),
         head_yaw=gentle_noise(rng, t, 0.08),
@@ -145,10 +178,10 @@ def locomotion_plan(
             path, gait, float(FPS), initial=person.initial_feet(path.xz[0], float(path.yaw[0]))
         )
     feet = {s: foot_track(s, stances[s], t) for s in SIDES}
-    plan = standing_plan(rng, person, t, stances=stances)
+    act = activity(feet, t)
+    plan = standing_plan(rng, person, t, stances=stances, still=1.0 - act)
     plan.root_xz = path.xz
     plan.yaw = path.yaw.copy()
-    act = activity(feet, t)
     speed = np.linalg.norm(np.gradient(path.xz, axis=0), axis=-1) * FPS
     if style.kind in ("jog", "run"):
         comp = stance_bump(feet, t)
@@ -208,3 +241,26 @@ def set_ik(
     if elevation is not None:
         arm.elevation = arm.elevation + elevation * w
     arm.swing = arm.swing * (1.0 - w)
+
+
+def set_world_ik(
+    plan: BodyPlan,
+    side: str,
+    weight: np.ndarray,
+    world: np.ndarray,
+    pole: np.ndarray,
+    elevation: np.ndarray | None = None,
+) -> None:
+    """Like :func:`set_ik` with a wrist target in world coordinates (T, 3) or (3,) (an object on
+    the floor, a thigh, a wall): converted to the chest frame of the plan as it stands, so call it
+    after the trunk (pelvis, spine) is final. ``pole`` is in the chest frame."""
+    arm = plan.arms[side]
+    if elevation is not None:
+        arm.elevation = arm.elevation + elevation * np.clip(weight, 0.0, 1.0)
+    set_ik(arm, weight, chest_target(plan, side, world), pole)
+
+
+def axes(yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """Forward and left ground vectors (2,) as (x, z) of a heading ``yaw``."""
+    fwd, left = heading_vectors(np.array(yaw))
+    return fwd[[0, 2]], left[[0, 2]]

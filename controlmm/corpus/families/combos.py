@@ -9,7 +9,7 @@ from controlmm.corpus.families.base import Person, Style, finish, frames_for, lo
 from controlmm.corpus.families.gestures import add_wave
 from controlmm.corpus.families.lowering import apply_squats
 from controlmm.corpus.families.turning import ANGLE_DEG, ANGLE_NOUN, SIGN
-from controlmm.corpus.families.walking import cadence
+from controlmm.corpus.families.walking import cadence, walk_duty
 from controlmm.corpus.family import Family
 from controlmm.corpus.gait import Gait, RootPath
 from controlmm.corpus.text.templates import Slot, Template
@@ -28,7 +28,7 @@ def _walk_gait(person: Person, v: float, first: str, start: float) -> Gait:
     cad = cadence("walk", v)
     return Gait(
         cadence=cad,
-        duty=0.63,
+        duty=walk_duty(v),
         width=person.width,
         step_ref=v / cad,
         toe_out=person.toe_out,
@@ -133,7 +133,7 @@ def _turnwalk_build(p, rng):
     path = RootPath.from_velocity(t, speed, 0.0, yaw, FPS)
     cad = cadence("walk", p["speed"])
     gait = Gait(
-        cadence=np.where(t < b, 2.6, cad),
+        cadence=np.where(t < b, 2.1, cad),
         duty=0.6,
         width=person.width,
         step_ref=p["speed"] / cad,

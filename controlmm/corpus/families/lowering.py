@@ -83,8 +83,8 @@ def apply_squats(plan, p: dict, t: np.ndarray, start: float, person: Person) -> 
     height = keyframes(t, ts, hs)
     frac = keyframes(t, ts, fr)
     plan.pelvis_height = np.minimum(plan.pelvis_height, height)
-    shift = np.zeros((len(t), 3))
-    shift[:, 2] = -0.16 * frac * (p["depth"] / 0.4)
+    shift = plan.get_shift()
+    shift[:, 2] += -0.16 * frac * (p["depth"] / 0.4)
     plan.pelvis_shift = shift
     plan.pelvis_pitch = plan.get("pelvis_pitch") + 0.35 * frac
     plan.spine_pitch = plan.get("spine_pitch") + 0.25 * frac
@@ -188,8 +188,8 @@ def _kneel_build(p, rng):
         else [0.0, -0.15, -back_shift, -back_shift, -back_shift]
     )
     frac = keyframes(t, key_t, [0.0, 0.1, 1.0, 1.0, 0.0 if p["stand_up"] else 1.0])
-    shift = np.zeros((n, 3))
-    shift[:, 2] = keyframes(t, key_t, shift_z)
+    shift = plan.get_shift()
+    shift[:, 2] += keyframes(t, key_t, shift_z)
     plan.pelvis_shift = shift
     plan.pelvis_pitch = plan.get("pelvis_pitch") + 0.05 * frac
     plan.spine_pitch = plan.get("spine_pitch") + 0.12 * frac

@@ -6,7 +6,7 @@ import numpy as np
 
 from controlmm.corpus.curves import keyframes, ramp, window
 from controlmm.corpus.families.base import Person, Style, finish, frames_for, locomotion_plan, times
-from controlmm.corpus.families.walking import cadence
+from controlmm.corpus.families.walking import cadence, walk_duty
 from controlmm.corpus.family import Family
 from controlmm.corpus.gait import Gait, RootPath
 from controlmm.corpus.text.templates import Slot, Template
@@ -54,7 +54,7 @@ def turn_in_place(
     xz = np.zeros((len(t), 2)) if path_xz is None else path_xz
     path = RootPath(t=t, xz=xz, yaw=yaw)
     gait = Gait(
-        cadence=2.6,
+        cadence=2.1,  # steps/s: stepping round on the spot, a little faster than walking
         duty=0.55,
         width=person.width,
         step_ref=0.3,
@@ -172,7 +172,7 @@ def _circle_builder(rotation: str):
         cad = cadence("walk", v)
         gait = Gait(
             cadence=cad,
-            duty=0.63,
+            duty=walk_duty(v),
             width=person.width,
             step_ref=v / cad,
             toe_out=person.toe_out,
@@ -261,7 +261,7 @@ def _curve_builder(side: str):
         cad = cadence("walk", v)
         gait = Gait(
             cadence=cad,
-            duty=0.63,
+            duty=walk_duty(v),
             width=person.width,
             step_ref=v / cad,
             toe_out=person.toe_out,
@@ -340,7 +340,7 @@ def _zigzag_build(p, rng):
     cad = cadence("walk", v)
     gait = Gait(
         cadence=cad,
-        duty=0.63,
+        duty=walk_duty(v),
         width=person.width,
         step_ref=v / cad,
         toe_out=person.toe_out,

@@ -1,0 +1,311 @@
+"""The physics execution check (``sim.track``): executability, discrimination and speed on G1.
+
+    python benchmarks/physics.py                              # all three parts, 2 clips per family
+    python benchmarks/physics.py --per-family 1 --parts speed,discrimination
+    python benchmarks/physics.py --data data/corpus-1280 --json out/physics.json
+
+(a) *Executability*: the first ``--per-family`` clips of every family of the corpus ``test``
+split (default ``data/corpus-default``; docs/corpus.md) are retargeted to G1 at 50 fps and
+checked in the ``empty`` scene; those that pass the kinematic and dynamic checks are executed
+in physics. Per family: how many stayed up, how many also kept the mean root error within
+10 cm (the target: >= 90 %), how many passed the physics verdict (no fall, no tracking-error
+span), the mean root error.
+
+(b) *Discrimination*: motions made infeasible on purpose from the first walk clips of the
+split: the root lifted 0.4 m for 2 s without a jump (legs unchanged), the walk played 3x faster,
+the whole robot (feet included) teleported 0.5 m sideways. Each must fail (target: 100 %).
+
+(c) *Speed*: seconds of motion per second of wall time on a 6 s G1 walk (a corpus walk clip
+cut or held to 6 s) for the physics check (``PhysicsConfig()`` defaults: 2 rollout threads), the
+open-loop PD replay (``CheckConfig(tracking=True)``) and, when the optional ``peers`` extra is
+installed (``pip install -e ".[peers]"``, or lighter: ``pip install --no-deps holosoma-inference``
+plus ``pip install onnxruntime onnx``), holosoma's G1 whole-body tracking policy (ONNX) on its
+own dance clip (``benchmarks/holosoma_peer.py``). Required >= 0.25x real time, goal 0.5x.
+
+Wall time depends on what else runs on the machine: the load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from collections import defaultdict
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+from data_dirs import ROOT, corpus_dir
+
+sys.path.insert(0, str(ROOT))
+
+FPS = 50.0
+PARTS = ("executability", "discrimination", "speed")
+SPEED_SECONDS = 6.0
+ROOT_TARGET_M = 0.10
+
+_WORLD: dict = {}
+
+
+def _world():
+    from scenes import load_scene
+    from sim import make_world
+
+    if "g1" not in _WORLD:
+        _WORLD["g1"] = make_world(load_scene("empty", robot="g1"))
+    return _WORLD["g1"]
+
+
+def _clips(corpus: Path, per_family: int, families: list[str] | None) -> list[tuple[str, str]]:
+    """(family, id) of the first ``per_family`` test clips of each family, in id order."""
+    chosen: dict[str, list[str]] = defaultdict(list)
+    for cid in sorted((corpus / "test.txt").read_text().split()):
+        family = json.loads((corpus / "meta" / f"{cid}.json").read_text())["family"]
+        if (not families or family in families) and len(chosen[family]) < per_family:
+            chosen[family].append(cid)
+    return [(f, c) for f in sorted(chosen) for c in chosen[f]]
+
+
+def _retarget(corpus: Path, cid: str) -> np.ndarray:
+    from controlmm.motion import Motion
+    from retarget import retarget_motion
+
+    joints = np.load(corpus / "new_joints" / f"{cid}.npy").astype(np.float32)
+    return retarget_motion(Motion(joints=joints, fps=20.0), "g1", fps=FPS, metrics=False).qpos
+
+
+def _physics(q: np.ndarray, threads: int, samples: int | None) -> dict:
+    from sim import PhysicsConfig, track
+
+    config = PhysicsConfig(threads=threads, **({} if samples is None else {"samples": samples}))
+    start = time.perf_counter()
+    r = track(q, _world(), config, fps=FPS)
+    s = r.stats
+    return {
+        "passed": r.passed,
+        "fell": r.fell,
+        "time_up_s": s["time_up_s"],
+        "mean_root_error_m": s["mean_root_error_m"],
+        "max_root_error_m": s["max_root_error_m"],
+        "kinds": sorted({f.kind for f in r.failures}),
+        "realtime_factor": s["realtime_factor"],
+        "realtime_factor_cpu": s["realtime_factor_cpu"],
+        "wall_s": time.perf_counter() - start,
+        "seconds": (q.shape[0] - 1) / FPS,
+        "simulated_s": s["simulated_s"],
+    }
+
+
+def _executability_job(job: tuple[str, str, str, int, int | None]) -> dict:
+    from sim import check_trajectory
+
+    family, cid, corpus, threads, samples = job
+    q = _retarget(Path(corpus), cid)
+    report = check_trajectory(_world(), q, FPS)
+    out = {"family": family, "id": cid, "kinematic_passed": report.passed}
+    if report.passed:
+        out.update(_physics(q, threads, samples))
+    return out
+
+
+def executability(corpus: Path, per_family: int, families, workers: int, samples: int | None) -> list[dict]:
+    threads = max(1, 2 // workers)
+    jobs = [(f, c, str(corpus), threads, samples) for f, c in _clips(corpus, per_family, families)]
+    if workers > 1:
+        with Pool(workers) as pool:
+            rows = pool.map(_executability_job, jobs, chunksize=1)
+    else:
+        rows = [_executability_job(j) for j in jobs]
+    by_family: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        by_family[r["family"]].append(r)
+    print("\n(a) executability of kinematically passing test clips (G1, empty scene)")
+    header = (
+        "| family | clips | kin. pass | stayed up | up and root <= 10 cm | physics passed | root err cm |"
+    )
+    print(header)
+    print("|" + "|".join("-" * (len(c)) for c in header.split("|")[1:-1]) + "|")
+    totals = np.zeros(5)
+    for family in sorted(by_family):
+        fam = by_family[family]
+        run = [r for r in fam if r["kinematic_passed"]]
+        up = [r for r in run if not r["fell"]]
+        good = [r for r in up if r["mean_root_error_m"] <= ROOT_TARGET_M]
+        ok = [r for r in run if r["passed"]]
+        err = np.mean([r["mean_root_error_m"] for r in run]) * 100 if run else float("nan")
+        totals += (len(fam), len(run), len(up), len(good), len(ok))
+        print(
+            f"| {family} | {len(fam)} | {len(run)} | {_pct(len(up), len(run))} | "
+            f"{_pct(len(good), len(run))} | {_pct(len(ok), len(run))} | {err:.1f} |"
+        )
+    n, k, u, g, p = totals.astype(int)
+    print(f"| **all** | {n} | {k} | {_pct(u, k)} | {_pct(g, k)} | {_pct(p, k)} | |")
+    return rows
+
+
+def _pct(a: int, b: int) -> str:
+    return f"{a}/{b} ({100.0 * a / b:.0f} %)" if b else "-"
+
+
+def _infeasible(q: np.ndarray) -> dict[str, np.ndarray]:
+    """The three infeasible versions of a walk (qpos at 50 fps)."""
+    lifted = q.copy()
+    t = np.arange(q.shape[0]) / FPS
+    start = min(1.0, t[-1] / 4)
+    ramp = np.clip((t - start) / 0.2, 0, 1) * np.clip((start + 2.0 - t) / 0.2, 0, 1)
+    lifted[:, 2] += 0.4 * ramp  # floats up over 0.2 s, stays 2 s, comes down: no jump, legs unchanged
+    fast = q[::3].copy()  # the same walk in a third of the time
+    teleport = q.copy()
+    teleport[q.shape[0] // 3 :, 1] += 0.5  # the whole robot, feet included, jumps 0.5 m sideways
+    return {"root lifted 0.4 m for 2 s": lifted, "walk 3x faster": fast, "feet teleported 0.5 m": teleport}
+
+
+def discrimination(corpus: Path, bases: int, samples: int | None) -> list[dict]:
+    from sim import check_trajectory
+
+    walks = [c for f, c in _clips(corpus, bases, ["walk"])]
+    rows = []
+    for cid in walks:
+        base = _retarget(corpus, cid)
+        for what, q in _infeasible(base).items():
+            kin = check_trajectory(_world(), q, FPS)
+            phys = _physics(q, 2, samples)
+            rows.append({"base": cid, "what": what, "kinematic_failed": not kin.passed, **phys})
+    print("\n(b) discrimination: motions made infeasible on purpose must fail the physics check")
+    print("| base clip | infeasible motion | physics verdict | failure kinds | fell at s | kinematic check |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        fell = f"{r['time_up_s']:.2f}" if r["fell"] else "-"
+        print(
+            f"| {r['base']} | {r['what']} | {'FAILED' if not r['passed'] else 'passed'} | "
+            f"{', '.join(r['kinds']) or '-'} | {fell} | {'failed' if r['kinematic_failed'] else 'passed'} |"
+        )
+    caught = sum(not r["passed"] for r in rows)
+    print(f"caught: {_pct(caught, len(rows))}")
+    return rows
+
+
+def _six_seconds(corpus: Path) -> tuple[str, np.ndarray]:
+    """A corpus walk cut (or its last frame held) to 6 s."""
+    cid = _clips(corpus, 1, ["walk"])[0][1]
+    q = _retarget(corpus, cid)
+    n = int(SPEED_SECONDS * FPS) + 1
+    if q.shape[0] < n:
+        q = np.concatenate([q, np.repeat(q[-1:], n - q.shape[0], axis=0)])
+    return cid, q[:n]
+
+
+def speed(corpus: Path, samples: int | None) -> list[dict]:
+    from sim import CheckConfig, check_trajectory
+
+    cid, q = _six_seconds(corpus)
+    rows = []
+    phys = _physics(q, 2, samples)
+    rows.append(
+        {
+            "method": "physics check (predictive sampling, 2 threads)",
+            "clip": f"walk {cid}",
+            "seconds": phys["simulated_s"],
+            "time_up_s": phys["time_up_s"],
+            "controller_rt": phys["realtime_factor"],
+            "call_rt": phys["simulated_s"] / phys["wall_s"],
+            "cpu_rt": phys["realtime_factor_cpu"],
+            "stayed_up": not phys["fell"],
+        }
+    )
+    report = check_trajectory(_world(), q, FPS, CheckConfig(dynamics=False, tracking=True))
+    t, t_cpu = report.extra["timings_s"]["tracking_s"], report.extra["cpu_s"]["tracking_s"]
+    tr = report.stats["tracking"]
+    rows.append(
+        {
+            "method": "open-loop PD replay (CheckConfig(tracking=True))",
+            "clip": f"walk {cid}",
+            "seconds": SPEED_SECONDS,
+            "time_up_s": tr["time_up_s"],
+            "controller_rt": SPEED_SECONDS / t,
+            "call_rt": SPEED_SECONDS / t,
+            "cpu_rt": SPEED_SECONDS / t_cpu,
+            "stayed_up": not tr["fell"],
+        }
+    )
+    try:
+        from holosoma_peer import run_dance_policy
+    except ImportError as exc:  # the optional peer: only with the ``peers`` extra installed
+        print(f"# holosoma peer skipped: {exc}", file=sys.stderr)
+    else:
+        peer = run_dance_policy(SPEED_SECONDS)
+        rows.append(
+            {
+                "method": "holosoma G1 WBT policy (ONNX, PPO)",
+                "clip": "its own dance clip",
+                "seconds": peer["simulated_s"],
+                "time_up_s": peer["time_up_s"],
+                "controller_rt": peer["realtime_factor"],
+                "call_rt": peer["realtime_factor"],
+                "cpu_rt": peer["realtime_factor_cpu"],
+                "stayed_up": not peer["fell"],
+            }
+        )
+    print(f"\n(c) speed on {os.cpu_count()} CPU cores: seconds of motion per wall second (G1, 6 s clip)")
+    print(
+        "| method | clip | motion s simulated | x real time: control loop | whole call | "
+        "per dedicated core-s (CPU) | up |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['method']} | {r['clip']} | {r['seconds']:.2f} | {r['controller_rt']:.2f} | "
+            f"{r['call_rt']:.2f} | {r['cpu_rt']:.2f} | "
+            f"{'yes' if r['stayed_up'] else 'fell at ' + format(r['time_up_s'], '.2f') + ' s'} |"
+        )
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", default=None, help="corpus directory (default data/corpus-default)")
+    parser.add_argument("--per-family", type=int, default=2, help="test clips per family for (a) (default 2)")
+    parser.add_argument("--families", default=None, help="comma-separated families for (a) (default: all)")
+    parser.add_argument("--bases", type=int, default=2, help="walk clips made infeasible for (b) (default 2)")
+    parser.add_argument(
+        "--parts", default=",".join(PARTS), help=f"comma-separated parts (default {','.join(PARTS)})"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="processes for (a) (default 1: 2 rollout threads)"
+    )
+    parser.add_argument(
+        "--samples", type=int, default=None, help="rollouts per planning step (default: PhysicsConfig)"
+    )
+    parser.add_argument("--json", default=None, help="also write every row to this JSON file")
+    args = parser.parse_args()
+    parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        sys.exit(f"unknown part(s) {', '.join(unknown)}; allowed: {', '.join(PARTS)}")
+    corpus = corpus_dir(args.data)
+    families = args.families.split(",") if args.families else None
+    load = os.getloadavg()[0]
+    start = time.perf_counter()
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}, "
+        f"MuJoCo {__import__('mujoco').__version__}; load average at start {load:.1f}; corpus {corpus}"
+    )
+    out: dict = {}
+    if "executability" in parts:
+        out["executability"] = executability(corpus, args.per_family, families, args.workers, args.samples)
+    if "discrimination" in parts:
+        out["discrimination"] = discrimination(corpus, args.bases, args.samples)
+    if "speed" in parts:
+        out["speed"] = speed(corpus, args.samples)
+    print(f"\ntotal {time.perf_counter() - start:.0f} s; load average now {os.getloadavg()[0]:.1f}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,329 @@
+"""Retargeting side by side: every robot, and the G1 against holosoma-retargeting and GMR.
+
+    python benchmarks/retarget_peers.py                                  # every packaged robot, ours
+    python benchmarks/retarget_peers.py --corpus data/corpus-default --clips 10 \
+        --holosoma-python .venv-holosoma/bin/python --json out/peers.json
+
+Motions: the real HumanML3D clip 012314 resampled to 30 fps (the rate both peers assume),
+the first ``--clips`` clips of ``--corpus`` (a ``controlmm corpus`` folder), and, when
+holosoma-retargeting is available, the real OMOMO mocap clips it ships (SMPL-H: its first 22
+joints are HumanML3D's), fed to each retargeter in its own format.
+
+Per trajectory, measured the same way for every retargeter (:mod:`retarget.compare`, the
+simulation check of ``controlmm validate`` on the ``empty`` scene):
+
+* fit: mean / p95 distance (cm) of the robot's pelvis, knees, ankles, elbows and wrists
+  (the mapping's points) to the human's joints after one similarity alignment;
+* limits: frames with a joint outside its MJCF range; floor: deepest point of any
+  collision geom below the floor (mm); self: frames with a self-collision deeper than 5 mm;
+* stance: mean horizontal speed of the foot bodies while the human's foot is in contact
+  (cm/s); jerk: joint jerk RMS (rad/s^3);
+* frames/s: output frames (30 fps) per second of wall time (ours: best of ``--repeats`` runs
+  once loaded; holosoma: one run of its script, loading included).
+
+Peers run in their own virtual environments, never imported here:
+holosoma-retargeting 0.1.0 (PyPI) needs mujoco <= 3.11, so ``--holosoma-python`` names the
+Python of an environment made with ``python3 -m venv .venv-holosoma && .venv-holosoma/bin/pip
+install torch==2.13.0 && .venv-holosoma/bin/pip install holosoma-retargeting==0.1.0
+mujoco==3.3.7`` (``benchmarks/peers/holosoma_driver.py`` runs there). GMR (github.com/YanjieZe/GMR,
+not on PyPI) takes LAFAN1-named BVH bones with LAFAN1's bone frames; no converter to those
+frames exists here, so it is listed as unavailable with the figures measured on 012314 in an
+earlier session (docs/BENCHMARKS.md). A peer that cannot run is reported, never faked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from data_dirs import ROOT, real_clip
+
+sys.path.insert(0, str(ROOT))
+
+from controlmm.frames import HumanToWorld  # noqa: E402
+from controlmm.motion import Motion, load_motion  # noqa: E402
+from retarget import load_robot, retarget_motion  # noqa: E402
+from retarget.compare import joint_jerk_rms, resample_human, similarity_fit, stance_foot_speed  # noqa: E402
+from retarget.metrics import geom_lowest_z, replay  # noqa: E402
+from retarget.robots import PACKAGED_ROBOTS  # noqa: E402
+from scenes import load_scene  # noqa: E402
+from sim import check_trajectory  # noqa: E402
+
+FPS = 30.0
+"""Output rate of every retargeter (holosoma and GMR label their output 30 fps)."""
+HUMAN_HEIGHT_ABOVE_HEAD = 0.12
+"""Metres from the HumanML3D head joint to the crown: the human height holosoma scales by."""
+GMR_RECORDED = {
+    "motion": "real 012314",
+    "fit_cm": 5.3,
+    "jerk": 2631.0,
+    "fps": 118.0,
+    "note": "recorded (reference-peers): feet hover 2.5-11 cm in 177 of 254 frames; validate fails",
+}
+
+
+def human_motions(corpus: Path | None, clips: int) -> dict[str, tuple[Motion, np.ndarray]]:
+    """name -> (the motion as loaded, its HumanML3D joints (T, 22, 3) resampled to FPS)."""
+    out = {}
+    sources = [("real 012314", real_clip())]
+    if corpus is not None:
+        sources += [
+            (f"corpus {p.stem}", p) for p in sorted((corpus / "new_joint_vecs").glob("*.npy"))[:clips]
+        ]
+    for name, path in sources:
+        m = load_motion(path)
+        frames = int(np.floor((m.num_frames - 1) / m.fps * FPS)) + 1
+        out[name] = (m, resample_human(m.joints, m.fps, frames, FPS))
+    return out
+
+
+def measure(robot_name: str, qpos: np.ndarray, human: np.ndarray, seconds: float, frames_in: int) -> dict:
+    """The figures of one trajectory (see the module docstring)."""
+    robot = load_robot(robot_name)
+    fit = similarity_fit(robot, qpos, FPS, human, FPS)
+    model = robot.model
+    hinge = [j for j in range(model.njnt) if model.jnt_type[j] in (2, 3) and model.jnt_limited[j]]
+    adr = model.jnt_qposadr[hinge]
+    q = qpos[:, adr]
+    lo, hi = model.jnt_range[hinge, 0], model.jnt_range[hinge, 1]
+    limits = int(np.any((q < lo) | (q > hi), axis=1).sum())
+    rep = replay(model, qpos)
+    root = model.body_rootid[robot.tree.node_body[0]]
+    geoms = [
+        g
+        for g in range(model.ngeom)
+        if model.body_rootid[model.geom_bodyid[g]] == root
+        and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+    floor = float(max(0.0, -geom_lowest_z(model, rep, geoms).min()) * 1000.0)
+    report = check_trajectory(load_scene("empty", robot=robot_name), qpos, FPS)
+    return {
+        "fit_cm": 100 * fit.mean,
+        "fit_p95_cm": 100 * fit.p95,
+        "limits": limits,
+        "floor_mm": floor,
+        "self_frames": int(report.stats["self_collision_frames"]),
+        "validate": bool(report.passed),
+        "errors": report.stats["error_kinds"],
+        "stance_cm_s": 100 * stance_foot_speed(robot, qpos, FPS, human, FPS),
+        "jerk": joint_jerk_rms(qpos, FPS),
+        "fps": frames_in / seconds if seconds > 0 else float("nan"),
+        "frames": int(len(qpos)),
+    }
+
+
+def ours(robot: str, motion: Motion, repeats: int) -> tuple[np.ndarray, float]:
+    """Our qpos at FPS for a motion (at its own rate) and the best wall time of ``repeats``
+    runs (the robot loaded once before)."""
+    retarget_motion(Motion(joints=motion.joints[:10], fps=motion.fps), robot, fps=FPS, metrics=False)  # load
+    best, qpos = float("inf"), np.zeros(0)
+    for _ in range(repeats):
+        start = time.perf_counter()
+        qpos = retarget_motion(motion, robot, fps=FPS, metrics=False).qpos
+        best = min(best, time.perf_counter() - start)
+    return qpos, best
+
+
+def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tuple[dict, dict, str]:
+    """Run holosoma on ``motions`` and export its demo clips; (qpos and seconds per motion, demo
+    motions (SMPL-22, Y up) with holosoma's own qpos and seconds, a note)."""
+    driver = ROOT / "benchmarks" / "peers" / "holosoma_driver.py"
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp_dir = Path(tmp)
+        arrays: dict[str, np.ndarray] = {}
+        keys = {}
+        for i, (name, (_, joints)) in enumerate(motions.items()):
+            key = f"m{i}"
+            keys[key] = name
+            # Z up as (x, y, z) -> (z, x, y); the first frame away from the origin (holosoma's
+            # facing estimate fails at xy = 0)
+            arrays[key] = np.asarray(HumanToWorld(scale=1.0, translation=(1.0, 1.0, 0.0)).to_world(joints))
+            arrays[f"{key}__height"] = np.array(float(joints[:, 15, 1].max()) + HUMAN_HEIGHT_ABOVE_HEAD)
+        np.savez(tmp_dir / "in.npz", names=np.array(list(keys)), **arrays)
+        runs = [
+            [
+                str(python),
+                str(driver),
+                "--input",
+                str(tmp_dir / "in.npz"),
+                "--output",
+                str(tmp_dir / "out.npz"),
+            ],
+            [str(python), str(driver), "--export-demo", str(tmp_dir / "demo.npz")],
+        ]
+        for cmd in runs:
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode != 0:
+                tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
+                return {}, {}, f"holosoma failed: {tail[0][:200]}"
+        results = {}
+        with np.load(tmp_dir / "out.npz") as out:
+            for key, name in keys.items():
+                results[name] = (np.asarray(out[key]), float(out[f"{key}__seconds"]))
+        demo = {}
+        with np.load(tmp_dir / "demo.npz") as out:
+            for name in (str(n) for n in out["names"]):
+                zup = np.asarray(out[name])  # (T, 22, 3) Z up, 30 fps
+                yup = zup[..., [1, 2, 0]]  # the inverse of (x, y, z) -> (z, x, y)
+                demo[f"omomo {name}"] = (
+                    yup,
+                    np.asarray(out[f"{name}__qpos"]),
+                    float(out[f"{name}__seconds"]),
+                )
+    return results, demo, "holosoma-retargeting 0.1.0 (own environment, mujoco 3.3.7)"
+
+
+def table(rows: list[dict], keys: list[str]) -> str:
+    cols = [
+        ("retargeter", "{}"),
+        ("robot", "{}"),
+        ("motions", "{}"),
+        ("fit cm", "{:.2f}"),
+        ("p95 cm", "{:.1f}"),
+        ("limits", "{}"),
+        ("floor mm", "{:.1f}"),
+        ("self frames", "{}"),
+        ("validate", "{}"),
+        ("stance cm/s", "{:.2f}"),
+        ("jerk", "{:.0f}"),
+        ("frames/s", "{:.0f}"),
+    ]
+    names = {
+        "retargeter": "retargeter",
+        "robot": "robot",
+        "motions": "motions",
+        "fit cm": "fit_cm",
+        "p95 cm": "fit_p95_cm",
+        "limits": "limits",
+        "floor mm": "floor_mm",
+        "self frames": "self_frames",
+        "validate": "validate",
+        "stance cm/s": "stance_cm_s",
+        "jerk": "jerk",
+        "frames/s": "fps",
+    }
+    del keys
+    lines = [" | ".join(c for c, _ in cols), " | ".join("---" for _ in cols)]
+    for r in rows:
+        cells = []
+        for col, fmt in cols:
+            v = r.get(names[col], "")
+            cells.append(fmt.format(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v))
+        lines.append(" | ".join(cells))
+    return "\n".join(lines)
+
+
+def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> dict:
+    """One table row: means over motions (limits, self-collision frames: totals; floor: max;
+    validate: passed/total)."""
+    return {
+        "retargeter": retargeter,
+        "robot": robot,
+        "motions": f"{group} ({len(results)})",
+        "fit_cm": float(np.mean([r["fit_cm"] for r in results])),
+        "fit_p95_cm": float(np.mean([r["fit_p95_cm"] for r in results])),
+        "limits": int(sum(r["limits"] for r in results)),
+        "floor_mm": float(max(r["floor_mm"] for r in results)),
+        "self_frames": int(sum(r["self_frames"] for r in results)),
+        "validate": f"{sum(r['validate'] for r in results)}/{len(results)}",
+        "stance_cm_s": float(np.mean([r["stance_cm_s"] for r in results])),
+        "jerk": float(np.mean([r["jerk"] for r in results])),
+        "fps": float(sum(r["frames"] for r in results) / sum(r["frames"] / r["fps"] for r in results)),
+    }
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--robots", default="all", help="comma-separated packaged robots (default: all)")
+    p.add_argument("--corpus", type=Path, default=None, help="a controlmm corpus folder for more motions")
+    p.add_argument("--clips", type=int, default=10, help="corpus clips to use (default 10)")
+    p.add_argument("--repeats", type=int, default=3, help="timed runs of ours per motion (best is kept)")
+    p.add_argument("--holosoma-python", type=Path, default=ROOT / ".venv-holosoma" / "bin" / "python")
+    p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
+    args = p.parse_args()
+    robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
+    motions = human_motions(args.corpus, args.clips)
+    per: dict[str, dict[str, dict]] = {}
+    rows = []
+    print(
+        f"{platform.node()} {platform.processor() or platform.machine()}: {len(motions)} motions", flush=True
+    )
+    for robot in robots:
+        per[f"ours/{robot}"] = {}
+        for name, (motion, joints) in motions.items():
+            qpos, seconds = ours(robot, motion, args.repeats)
+            per[f"ours/{robot}"][name] = measure(robot, qpos, joints, seconds, len(joints))
+        results = list(per[f"ours/{robot}"].values())
+        rows.append(summarise("controlmm", robot, "real + corpus", results))
+        print(f"  {robot}: fit {rows[-1]['fit_cm']:.2f} cm, {rows[-1]['fps']:.0f} frames/s", flush=True)
+    print("\nEvery robot (ours):\n" + table(rows, []))
+    # The G1 side by side with the peers.
+    peer_rows: list[dict] = []
+    notes = {}
+    if "g1" in robots:
+        real = {k: v for k, v in motions.items() if k == "real 012314"}
+        corpus = {k: v for k, v in motions.items() if k.startswith("corpus")}
+        for group, subset in (("real 012314", real), ("corpus", corpus)):
+            if subset:
+                peer_rows.append(summarise("controlmm", "g1", group, [per["ours/g1"][k] for k in subset]))
+        if args.holosoma_python.is_file():
+            results, demo, note = holosoma(args.holosoma_python, motions)
+            notes["holosoma"] = note
+            if results:
+                per["holosoma/g1"] = {
+                    k: measure("g1", q, motions[k][1], s, len(motions[k][1])) for k, (q, s) in results.items()
+                }
+                for group, subset in (("real 012314", real), ("corpus", corpus)):
+                    if subset:
+                        peer_rows.append(
+                            summarise("holosoma", "g1", group, [per["holosoma/g1"][k] for k in subset])
+                        )
+                per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
+                for name, (joints, q_peer, s_peer) in demo.items():
+                    qpos, seconds = ours(
+                        "g1", Motion(joints=joints.astype(np.float32), fps=FPS), args.repeats
+                    )
+                    per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
+                    per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))
+                if demo:
+                    peer_rows.append(
+                        summarise("controlmm", "g1", "omomo", list(per["ours/g1 omomo"].values()))
+                    )
+                    peer_rows.append(
+                        summarise("holosoma", "g1", "omomo", list(per["holosoma/g1 omomo"].values()))
+                    )
+        else:
+            notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
+        notes["gmr"] = "unavailable here: " + GMR_RECORDED["note"]
+        peer_rows.append(
+            {
+                "retargeter": "GMR (recorded)",
+                "robot": "g1",
+                "motions": "real 012314 (1)",
+                "fit_cm": GMR_RECORDED["fit_cm"],
+                "jerk": GMR_RECORDED["jerk"],
+                "fps": GMR_RECORDED["fps"],
+                "validate": "0/1",
+            }
+        )
+        print("\nG1 side by side:\n" + table(peer_rows, []))
+        for peer, note in notes.items():
+            print(f"  {peer}: {note}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(
+            json.dumps({"robots": rows, "g1_peers": peer_rows, "notes": notes, "runs": per}, indent=1)
+        )
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,398 @@
+"""The anatomy of a humanoid MJCF, read from its kinematic tree and geometry (never its names).
+
+:func:`find_anatomy` finds the pelvis, torso, head, two legs and two arms of a floating-base
+model in its rest pose (``qpos0`` with the floating base at identity rotation), in MuJoCo's
+convention: +Z up, the robot facing +X, so its left is +Y.
+
+1. **Feet**: on each side of the sagittal plane (the root's y), the body owning the lowest
+   collision geom. **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
+   bodies from the pelvis down to a foot.
+2. **Arms**: the ends of the other jointed chains that lie clearly to one side (the head's
+   chain stays near the midline); per side, the common ancestor of those ends is the hand
+   (a hand with fingers has several ends). **Torso**: the hands' common ancestor. Robots whose
+   only chains are the legs have no arms (a legs-only robot retargets pelvis and legs).
+3. **Head**: the highest other jointed end near the midline (else the head is part of the torso).
+4. **Joints of a limb** (:func:`limb_anatomy`): the middle joint (knee / elbow) is the hinge
+   past the first quarter of the limb whose axis crosses the limb; the joints before it form the
+   hip / shoulder, the joints after it the ankle / wrist. Each group's centre is the point
+   nearest to its joint axes (a hip's three axes meet near one point).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import mujoco
+import numpy as np
+
+from controlmm.errors import ControlMMError
+from retarget.geoms import aabb_corners, geom_points
+from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND
+from retarget.robot_files import free_root
+
+MIDDLE_RANGE = (0.25, 0.85)
+"""Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
+ACROSS = 0.6
+"""A middle joint's axis crosses the limb: |cos| to the limb's direction below this."""
+SIDE_FRACTION = 0.3
+"""A chain end belongs to an arm when it lies further from the midline than this fraction of
+the furthest such end; nearer ends are the head's (or other midline parts)."""
+WRIST_SHARE = HUMAN_FOREARM / (HUMAN_FOREARM + HUMAN_HALF_HAND)
+"""Where the wrist of an arm without wrist joints sits between its elbow (0) and its tip (1):
+the human forearm against the forearm plus half a hand."""
+FEET_LEVEL = 0.05
+"""The two feet's lowest points lie within this fraction of the robot's height of each other."""
+
+_HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+
+
+@dataclass(frozen=True)
+class Limb:
+    """One leg or arm in the rest pose (world frame, metres).
+
+    Attributes:
+        side: ``"left"`` (+Y) or ``"right"``.
+        bodies: the chain's bodies from below its branch body to its end (foot / hand).
+        joints: its hinge and slide joints, root to end.
+        middle_joint: the knee / elbow joint, or None (a limb without one).
+        root_body, middle_body, end_body: the bodies carrying the hip / shoulder centre (the
+            body after the root group's joints), the knee / elbow and the foot / hand.
+        root, middle, end: (3,) the hip / shoulder centre, the knee / elbow centre and the
+            ankle / wrist centre.
+        tip: (3,) the limb's far end (the lowest sole point of a leg, a hand's farthest point).
+    """
+
+    side: str
+    bodies: tuple[int, ...]
+    joints: tuple[int, ...]
+    middle_joint: int | None
+    root_body: int
+    middle_body: int
+    end_body: int
+    root: np.ndarray
+    middle: np.ndarray
+    end: np.ndarray
+    tip: np.ndarray
+
+    @property
+    def end_joints(self) -> tuple[int, ...]:
+        """The ankle / wrist joints (after the middle joint)."""
+        if self.middle_joint is None:
+            return ()
+        return self.joints[self.joints.index(self.middle_joint) + 1 :]
+
+
+@dataclass(frozen=True)
+class Anatomy:
+    """What :func:`find_anatomy` found, in the rest pose.
+
+    Attributes:
+        model: the compiled model; root: the floating-base body.
+        pelvis: the legs' common ancestor; torso: the arms' (None without arms); head: the
+            head's end body (None: the head is part of the torso).
+        legs, arms: ``{"left": Limb, "right": Limb}`` (arms empty for a legs-only robot).
+        xpos: (nbody, 3), xmat: (nbody, 3, 3) rest body poses (root at its qpos0 position,
+            identity rotation).
+        floor_z: the lowest collision point (m); top_z: the highest point of any geom's
+            bounding box (m).
+    """
+
+    model: mujoco.MjModel
+    root: int
+    pelvis: int
+    torso: int | None
+    head: int | None
+    legs: dict[str, Limb]
+    arms: dict[str, Limb]
+    xpos: np.ndarray
+    xmat: np.ndarray
+    floor_z: float
+    top_z: float
+
+    @property
+    def height(self) -> float:
+        """Standing height (m): the highest geom point above the soles in the rest pose."""
+        return self.top_z - self.floor_z
+
+    def local(self, body: int, point: np.ndarray) -> np.ndarray:
+        """A rest-pose world point (3,) in the frame of ``body``."""
+        return self.xmat[body].T @ (np.asarray(point, dtype=float) - self.xpos[body])
+
+
+def axes_centre(anchors: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The point (3,) nearest (least squares) to the lines through ``anchors`` (J, 3) along ``axes``.
+
+    Among equally near points (parallel axes, one axis) the one nearest the anchors' mean.
+    """
+    anchors, axes = np.atleast_2d(anchors), np.atleast_2d(axes)
+    mean = anchors.mean(axis=0)
+    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]  # (J, 3, 3) onto the normal planes
+    a = proj.sum(axis=0)
+    b = np.einsum("jab,jb->a", proj, anchors - mean)
+    delta = np.linalg.lstsq(a, b, rcond=1e-6)[0]
+    return mean + delta
+
+
+def _rest_data(model: mujoco.MjModel, root: int) -> mujoco.MjData:
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
+    adr = int(model.jnt_qposadr[free])
+    data.qpos[adr + 3 : adr + 7] = (1.0, 0.0, 0.0, 0.0)
+    mujoco.mj_kinematics(model, data)
+    return data
+
+
+def _geom_world_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """Support points (P, 3) of geom ``g`` in the world and their radii (P,)."""
+    pts, rad = geom_points(model, g)
+    body = int(model.geom_bodyid[g])
+    return data.xpos[body] + pts @ data.xmat[body].reshape(3, 3).T, rad
+
+
+def ancestors(model: mujoco.MjModel, body: int) -> list[int]:
+    """``body`` and its ancestors up to (without) the world body."""
+    out = []
+    while body > 0:
+        out.append(body)
+        body = int(model.body_parentid[body])
+    return out
+
+
+def common_ancestor(model: mujoco.MjModel, bodies: list[int]) -> int:
+    """The deepest body that is an ancestor of (or equal to) every body of ``bodies``."""
+    chains = [ancestors(model, b)[::-1] for b in bodies]
+    out = 0
+    for level in zip(*chains, strict=False):
+        if len(set(level)) != 1:
+            break
+        out = level[0]
+    return out
+
+
+def chain(model: mujoco.MjModel, top: int, end: int) -> tuple[int, ...]:
+    """The bodies below ``top`` down to ``end`` (``end`` a descendant of ``top``), top first."""
+    return tuple(b for b in ancestors(model, end) if b != top and top in ancestors(model, b))[::-1]
+
+
+def _chain_joints(model: mujoco.MjModel, bodies: tuple[int, ...]) -> tuple[int, ...]:
+    return tuple(
+        j
+        for b in bodies
+        for j in range(model.njnt)
+        if model.jnt_bodyid[j] == b and model.jnt_type[j] in _HINGE_SLIDE
+    )
+
+
+def limb_anatomy(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    side: str,
+    bodies: tuple[int, ...],
+    tip: np.ndarray,
+) -> Limb:
+    """Hip / knee / ankle (or shoulder / elbow / wrist) of the chain ``bodies`` reaching ``tip`` (3,).
+
+    Without a joint after the middle one the ankle / wrist centre is the end body's origin.
+    """
+    joints = _chain_joints(model, bodies)
+    anchors = np.array([data.xanchor[j] for j in joints]).reshape(-1, 3)
+    axes = np.array([data.xaxis[j] for j in joints]).reshape(-1, 3)
+    start = anchors[0]
+    length = max(float(np.linalg.norm(tip - start)), 1e-6)
+    # The first hinge past the hip / shoulder whose axis crosses the limb (a twist joint's
+    # axis runs along it); else the hinge nearest the middle.
+    best, best_score = None, np.inf
+    for i in range(1, len(joints)):
+        if model.jnt_type[joints[i]] != mujoco.mjtJoint.mjJNT_HINGE:
+            continue
+        out = anchors[i] - start
+        frac = float(np.linalg.norm(out)) / length
+        if not MIDDLE_RANGE[0] <= frac <= MIDDLE_RANGE[1]:
+            continue
+        cos = abs(float(axes[i] @ out)) / max(float(np.linalg.norm(out)), 1e-9)
+        if cos < ACROSS:
+            best = i
+            break
+        if abs(frac - 0.5) < best_score:
+            best, best_score = i, abs(frac - 0.5)
+    end_body = bodies[-1]
+    if best is None:
+        middle_joint, middle_body = None, bodies[len(bodies) // 2]
+        middle = data.xpos[middle_body].copy()
+        root_idx = list(range(len(joints)))
+        end_idx: list[int] = []
+    else:
+        middle_joint = joints[best]
+        middle_body = int(model.jnt_bodyid[middle_joint])
+        middle = anchors[best].copy()
+        root_idx, end_idx = list(range(best)), list(range(best + 1, len(joints)))
+    root = axes_centre(anchors[root_idx], axes[root_idx]) if root_idx else data.xpos[bodies[0]].copy()
+    root_body = int(model.jnt_bodyid[joints[root_idx[-1]]]) if root_idx else bodies[0]
+    if best is not None and root_body == middle_body:  # hip and knee on one body: keep the thigh's
+        root_body = int(model.body_parentid[middle_body])
+    if end_idx:
+        centre = axes_centre(anchors[end_idx], axes[end_idx])
+    else:
+        centre = data.xpos[end_body].copy()
+    return Limb(
+        side, bodies, joints, middle_joint, root_body, middle_body, end_body, root, middle, centre, tip
+    )
+
+
+def _robot_bodies(model: mujoco.MjModel, root: int) -> list[int]:
+    return [b for b in range(1, model.nbody) if model.body_rootid[b] == root]
+
+
+def _jointed_ends(model: mujoco.MjModel, bodies: list[int]) -> list[int]:
+    """Bodies with a joint and no jointed body below them (the tips of the jointed chains)."""
+    has_joint = np.zeros(model.nbody, dtype=bool)
+    for j in range(model.njnt):
+        if model.jnt_type[j] in _HINGE_SLIDE:
+            has_joint[model.jnt_bodyid[j]] = True
+    below = np.zeros(model.nbody, dtype=bool)  # a jointed body somewhere below
+    for b in sorted(bodies, reverse=True):  # children have larger ids than their parents
+        p = int(model.body_parentid[b])
+        if has_joint[b] or below[b]:
+            below[p] = True
+    return [b for b in bodies if has_joint[b] and not below[b]]
+
+
+def _subtree(model: mujoco.MjModel, body: int, bodies: list[int]) -> list[int]:
+    return [b for b in bodies if body in ancestors(model, b)]
+
+
+def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
+    """The anatomy of a floating-base humanoid ``model`` (see the module docstring).
+
+    Raises:
+        ControlMMError: one line naming what is missing: no floating base, no collision
+            geometry, no two legs (two feet on either side of the midline).
+    """
+    root = free_root(model)
+    if root is None:
+        raise ControlMMError(
+            f"{name} has no free joint on a body of the world: a humanoid needs a floating base"
+        )
+    data = _rest_data(model, root)
+    bodies = _robot_bodies(model, root)
+    geoms = [
+        g
+        for g in range(model.ngeom)
+        if model.body_rootid[model.geom_bodyid[g]] == root
+        and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+    if not geoms:
+        raise ControlMMError(
+            f"{name} has no collision geometry (no geom with contype/conaffinity, none in group 3): "
+            "the feet must have some to stand on"
+        )
+    low = {}
+    for g in geoms:
+        pts, rad = _geom_world_points(model, data, g)
+        if len(pts):
+            low[g] = (float((pts[:, 2] - rad).min()), float(data.geom_xpos[g][1] - data.xpos[root][1]))
+    tops = []
+    for g in range(model.ngeom):
+        body = int(model.geom_bodyid[g])
+        if model.body_rootid[body] == root:
+            corners = data.xpos[body] + aabb_corners(model, g) @ data.xmat[body].reshape(3, 3).T
+            tops.append(float(corners[:, 2].max()))
+    floor_z = min(v[0] for v in low.values())
+    top_z = max(tops) if tops else floor_z
+    height = max(top_z - floor_z, 1e-3)
+    feet: dict[str, int] = {}
+    feet_z: dict[str, float] = {}
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        side_geoms = [g for g, (_, y) in low.items() if sign * y > 1e-3]
+        if side_geoms:
+            g = min(side_geoms, key=lambda g: low[g][0])
+            feet[side], feet_z[side] = int(model.geom_bodyid[g]), low[g][0]
+    if len(feet) < 2 or abs(feet_z["left"] - feet_z["right"]) > FEET_LEVEL * height:
+        raise ControlMMError(
+            f"{name} has no two legs: no pair of feet (collision geoms at the bottom of the robot, one "
+            "on each side of its midline, +Y left)"
+        )
+    pelvis = common_ancestor(model, [feet["left"], feet["right"]])
+    if pelvis in (feet["left"], feet["right"]) or pelvis == 0:
+        raise ControlMMError(f"{name} has no two legs: its feet are not on two separate chains")
+    legs = {}
+    for side in ("left", "right"):
+        leg_bodies = chain(model, pelvis, feet[side])
+        if len(_chain_joints(model, leg_bodies)) < 2:
+            raise ControlMMError(f"{name} has no two legs: the {side} leg has fewer than 2 joints")
+        tip = data.xpos[feet[side]].copy()
+        tip[2] = feet_z[side]
+        legs[side] = limb_anatomy(model, data, side, leg_bodies, tip)
+    # Arms and head: the other jointed chains.
+    leg_set = {b for limb in legs.values() for b in limb.bodies}
+    ends = [
+        e for e in _jointed_ends(model, bodies) if e not in leg_set and not leg_set & set(ancestors(model, e))
+    ]
+    lateral = {e: float(data.xpos[e][1] - data.xpos[root][1]) for e in ends}
+    reach = max((abs(v) for v in lateral.values()), default=0.0)
+    arms: dict[str, Limb] = {}
+    torso = None
+    sided = {
+        side: [e for e in ends if sign * lateral[e] > SIDE_FRACTION * reach and reach > 1e-3]
+        for side, sign in (("left", 1.0), ("right", -1.0))
+    }
+    if sided["left"] and sided["right"]:
+        hands = {side: common_ancestor(model, sided[side]) for side in sided}
+        torso = common_ancestor(model, list(hands.values()))
+        for side, hand in hands.items():
+            arm_bodies = chain(model, torso, hand)
+            if torso == 0 or len(_chain_joints(model, arm_bodies)) < 2:
+                arms, torso = {}, None
+                break
+            arms[side] = _arm(model, data, side, arm_bodies, _subtree(model, hand, bodies))
+    arm_set = {b for limb in arms.values() for b in limb.bodies}
+    shoulder_z = np.mean([a.root[2] for a in arms.values()]) if arms else -np.inf
+    heads = [e for e in ends if e not in arm_set and not arm_set & set(ancestors(model, e))]
+    heads = [
+        e
+        for e in heads
+        if data.xpos[e][2] > shoulder_z and abs(lateral[e]) <= SIDE_FRACTION * max(reach, 1e-3)
+    ]
+    head = max(heads, key=lambda e: data.xpos[e][2]) if heads and arms else None
+    return Anatomy(
+        model=model,
+        root=root,
+        pelvis=pelvis,
+        torso=torso,
+        head=head,
+        legs=legs,
+        arms=arms,
+        xpos=data.xpos.copy(),
+        xmat=data.xmat.reshape(-1, 3, 3).copy(),
+        floor_z=floor_z,
+        top_z=top_z,
+    )
+
+
+def _arm(
+    model: mujoco.MjModel, data: mujoco.MjData, side: str, bodies: tuple[int, ...], hand: list[int]
+) -> Limb:
+    """An arm: its tip is the point of the hand's geometry (visual or not) farthest from the
+    shoulder; without wrist joints the wrist lies on the elbow -> tip line (WRIST_SHARE)."""
+    joints = _chain_joints(model, bodies)
+    start = data.xanchor[joints[0]]
+    best, best_d = data.xpos[bodies[-1]].copy(), -1.0
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] not in hand:
+            continue
+        pts, rad = _geom_world_points(model, data, g)
+        if not len(pts):
+            continue
+        d = np.linalg.norm(pts - start, axis=1) + rad
+        i = int(np.argmax(d))
+        if d[i] > best_d:
+            best_d = float(d[i])
+            direction = (pts[i] - start) / max(float(np.linalg.norm(pts[i] - start)), 1e-9)
+            best = pts[i] + rad[i] * direction
+    limb = limb_anatomy(model, data, side, bodies, best)
+    if limb.end_joints or limb.middle_joint is None:
+        return limb
+    # No wrist joint: the wrist sits WRIST_SHARE of the way from the elbow to the hand's tip.
+    wrist = limb.middle + WRIST_SHARE * (best - limb.middle)
+    return replace(limb, end=wrist)

@@ -1,0 +1,172 @@
+"""Robot MJCF files: from a robot argument to its MJCF, its MjSpec and its compiled model.
+
+A robot argument (``--robot`` everywhere) is a packaged name (``g1``), the path of a humanoid
+MJCF (``robot.xml``, mapped automatically: :mod:`retarget.automap`) or a mapping ``.json``
+that names the MJCF. :func:`robot_mjcf_path` resolves any of them to the MJCF file,
+:func:`load_robot_spec` loads it as a ``mujoco.MjSpec`` ready to be attached to a scene and
+:func:`compile_robot` compiles it, with one-line errors for a missing or broken file.
+
+Collision geometry: every consumer (the retargeter's feet and clearance terms, the scene's
+collision checks) reads the geoms whose ``contype`` or ``conaffinity`` is set. Some MJCFs
+declare none and collide through explicit ``<pair>`` elements of their scene file instead
+(Menagerie's Apptronik Apollo). For those, :func:`declare_collisions` turns the geoms of
+Menagerie's collision group (3) into colliders that touch the floor and obstacles but not
+each other (``contype`` 1, ``conaffinity`` 0), and adds the robot-robot pairs that the
+packaged robot's own scene declares (thighs, shins, arms against the pelvis).
+
+Bodies whose collision geoms already overlap in the robot's rest pose (``qpos0``; for example
+convex hulls of meshes around a knee and the ankle two links below it) are a property of the
+model, not of a motion: :func:`exclude_rest_contacts` excludes those body pairs, as MuJoCo
+excludes a parent and its child, so that the checks see the contacts a motion makes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+
+from controlmm.errors import ControlMMError, InputFileError
+from retarget.mapping import load_mapping
+from retarget.robots import is_packaged, robot_mjcf, robot_scene
+
+COLLISION_GROUP = 3
+"""Geom group of collision geoms in MuJoCo Menagerie models (visual geoms: groups 1-2)."""
+
+
+def _resolve(robot: str | Path) -> tuple[Path, str | None]:
+    """(MJCF path, packaged robot name or None) of a robot argument."""
+    text = str(robot).strip()
+    if text.lower().endswith(".xml"):
+        path = Path(text).expanduser()
+        if not path.is_file():
+            raise InputFileError(f"robot MJCF '{text}' does not exist")
+        return path.resolve(), None
+    if text.lower().endswith(".json"):
+        mapping = load_mapping(text)
+        if mapping.robot.lower().endswith(".xml"):
+            return Path(mapping.robot), None
+        return robot_mjcf(mapping.robot), mapping.robot.lower()
+    if not is_packaged(text):
+        load_mapping(text)  # raises the one-line "unknown robot" error with the known names
+    return robot_mjcf(text), text.lower()
+
+
+def robot_mjcf_path(robot: str | Path) -> Path:
+    """The MJCF file of a robot argument: packaged name, MJCF path or mapping ``.json``."""
+    return _resolve(robot)[0]
+
+
+def _one_line(exc: Exception) -> str:
+    text = "; ".join(part.strip() for part in str(exc).splitlines() if part.strip())
+    return text or type(exc).__name__
+
+
+def free_root(model: mujoco.MjModel) -> int | None:
+    """The body holding the model's floating base (a free joint on a child of the world), or None.
+
+    With several, the one whose subtree holds the most joints (the robot, not a loose prop).
+    """
+    best, most = None, -1
+    for j in range(model.njnt):
+        body = int(model.jnt_bodyid[j])
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE or model.body_parentid[body] != 0:
+            continue
+        count = int(sum(model.body_rootid[model.jnt_bodyid[k]] == body for k in range(model.njnt)))
+        if count > most:
+            best, most = body, count
+    return best
+
+
+def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
+    """The robot's ``mujoco.MjSpec`` (its options, keyframes and names unchanged), colliders declared.
+
+    Raises:
+        ControlMMError: unknown robot, missing file, an MJCF that does not parse or compile.
+    """
+    path, packaged = _resolve(robot)
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:
+        raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
+    declare_collisions(spec, robot_scene(packaged) if packaged else None)
+    exclude_rest_contacts(spec)
+    return spec
+
+
+def exclude_rest_contacts(spec: mujoco.MjSpec) -> list[tuple[str, str]]:
+    """Exclude the body pairs whose collision geoms overlap in the rest pose (in place).
+
+    The spec is compiled and its contacts found in ``qpos0``; each pair of named bodies other
+    than the world in contact with negative distance gets an ``<exclude>``. A spec that does
+    not compile is left unchanged (:func:`compile_robot` reports it). Returns the pairs.
+    """
+    try:
+        model = spec.compile()
+    except ValueError:
+        return []
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pairs: set[tuple[str, str]] = set()
+    for contact in data.contact[: data.ncon]:
+        if contact.dist >= 0:
+            continue
+        b1, b2 = (int(model.geom_bodyid[g]) for g in (contact.geom1, contact.geom2))
+        names = (model.body(b1).name, model.body(b2).name)
+        if b1 and b2 and b1 != b2 and all(names):
+            pairs.add((min(names), max(names)))
+    for name1, name2 in sorted(pairs):
+        spec.add_exclude(bodyname1=name1, bodyname2=name2)
+    return sorted(pairs)
+
+
+def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
+    """Give an MJCF without colliders its collision group's geoms as colliders (in place).
+
+    Only when no geom has ``contype``/``conaffinity`` set: the geoms of group
+    ``COLLISION_GROUP`` get ``contype`` 1 and ``conaffinity`` 0 (they touch the floor and the
+    obstacles, whose ``conaffinity`` is set, but not each other), and the robot-robot
+    ``<pair>`` elements of ``scene`` (the robot's own scene MJCF) are added. Returns whether
+    anything changed.
+    """
+    geoms = list(spec.geoms)
+    if any(g.contype or g.conaffinity for g in geoms) or not geoms:
+        return False
+    group = [g for g in geoms if g.group == COLLISION_GROUP]
+    if not group:
+        return False
+    for g in group:
+        g.contype, g.conaffinity = 1, 0
+    if scene is not None and scene.is_file():
+        names = {g.name for g in group if g.name}
+        have = {(p.geomname1, p.geomname2) for p in spec.pairs}
+        try:
+            scene_spec = mujoco.MjSpec.from_file(str(scene))
+        except ValueError:  # the scene is optional: without its pairs the robot has no self-collision
+            return True
+        for pair in scene_spec.pairs:
+            key = (pair.geomname1, pair.geomname2)
+            if key[0] in names and key[1] in names and key not in have:
+                spec.add_pair(geomname1=key[0], geomname2=key[1], condim=pair.condim)
+    return True
+
+
+def compile_robot(robot: str | Path) -> mujoco.MjModel:
+    """Compile a robot argument's MJCF (colliders declared) with one-line errors.
+
+    Raises:
+        ControlMMError: unknown robot, a missing file, an MJCF that does not compile, or a
+            model without a free joint on a child of the world body (a floating base).
+    """
+    spec = load_robot_spec(robot)
+    path = robot_mjcf_path(robot)
+    try:
+        model = spec.compile()
+    except ValueError as exc:
+        raise InputFileError(f"robot MJCF '{path}' does not compile: {_one_line(exc)}") from None
+    if free_root(model) is None:
+        raise ControlMMError(
+            f"robot MJCF '{path.name}' has no free joint on a body of the world: a humanoid needs a "
+            "floating base (<freejoint/> in its root body)"
+        )
+    return model

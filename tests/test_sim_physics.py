@@ -1,0 +1,200 @@
+"""The physics execution check (``sim.track``): certificate replay, verdicts, bad input, feedback.
+
+Short clips and few samples keep these fast; what the controller achieves on real motion is
+measured in ``benchmarks/physics.py`` (docs/BENCHMARKS.md).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from functools import cache
+
+import mujoco
+import numpy as np
+import pytest
+from cli_helpers import one_line_error, run_cli
+from sim_motions import hold
+
+from controlmm.errors import ControlMMError, ShapeError
+from controlmm.frames import HumanToWorld
+from controlmm.pipeline.feedback import feedback_terms
+from retarget.exports import read_csv_qpos, read_export
+from sim import (
+    CheckConfig,
+    Failure,
+    PhysicsConfig,
+    check_trajectory,
+    load_report,
+    make_world,
+    replay_certificate,
+    track,
+)
+from sim.physics import save_certificate
+from sim.physics.certificate import CSV_FPS
+from sim.world import CheckWorld
+from sim.worlds import Obstacle, robot_spec, standing_qpos
+
+FPS = 50.0
+FAST = PhysicsConfig(samples=8, horizon_s=0.2, knots=3)
+
+
+@cache
+def g1() -> CheckWorld:
+    """G1 on a floor, built from its MjSpec (the physics check saves the model from it)."""
+    return make_world(robot_spec("g1"))
+
+
+def stand(frames: int) -> np.ndarray:
+    return hold(standing_qpos(g1().model), frames)
+
+
+@pytest.fixture(scope="module")
+def standing_run():
+    return track(stand(25), g1(), FAST, fps=FPS)
+
+
+def test_standing_stays_up_and_passes(standing_run):
+    r = standing_run
+    assert r.passed and not r.fell and r.failures == []
+    assert np.nanmax(r.root_error_m) < 0.02 and np.nanmax(r.joint_error_rad) < 0.05
+    assert r.foot_contact.all() and not r.other_contact.any()  # both feet down, nothing else
+    assert 0.0 < np.nanmax(r.torque_ratio) < 1.0  # the actuators carry the robot within their limits
+
+
+def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path):
+    paths = save_certificate(standing_run, tmp_path)
+    xml = paths["physics_model.xml"].read_text()
+    assert 'file="' not in xml  # self-contained: meshes inline, nothing beside it
+    # The documented replay, independently of the library: load, set the first state, step the ctrl.
+    model = mujoco.MjModel.from_xml_path(str(paths["physics_model.xml"]))
+    with np.load(paths["physics.npz"]) as npz:
+        qpos, qvel, ctrl, dt = npz["qpos"], npz["qvel"], npz["ctrl"], float(npz["timestep"])
+    assert dt == model.opt.timestep and ctrl.shape == (qpos.shape[0] - 1, model.nu)
+    lo, hi = model.actuator_ctrlrange.T
+    assert ((ctrl >= lo) & (ctrl <= hi)).all()  # within the actuators' control ranges
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = qpos[0], qvel[0]
+    for s in range(ctrl.shape[0]):
+        data.ctrl[:] = ctrl[s]
+        mujoco.mj_step(model, data)
+        assert np.array_equal(data.qpos, qpos[s + 1]), s
+    assert np.array_equal(replay_certificate(paths["physics_model.xml"], paths["physics.npz"]), qpos)
+    # Only the robot's own actuators acted: the MJCF's, on its hinges, never on the free joint;
+    # no external force was ever applied during the run.
+    robot = g1().model
+    assert [model.actuator(a).name for a in range(model.nu)] == [
+        robot.actuator(a).name for a in range(robot.nu)
+    ]
+    for field in ("actuator_ctrlrange", "actuator_forcerange", "actuator_gear", "actuator_trnid"):
+        assert np.allclose(getattr(model, field), getattr(robot, field), rtol=1e-9, atol=1e-12), field
+    assert (model.jnt_type[model.actuator_trnid[:, 0]] == mujoco.mjtJoint.mjJNT_HINGE).all()
+    assert standing_run.stats["max_external_force"] == 0.0
+    # robot_physics.csv: the simulated states at 50 fps (every 10th step of 2 ms), LAFAN1-G1 rows (xyzw)
+    stride = int(round(1.0 / CSV_FPS / dt))
+    assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
+
+
+def test_a_root_lifted_without_a_jump_fails_as_a_tracking_error():
+    q = stand(30)
+    q[5:, 2] += 0.4  # the reference floats 40 cm up from frame 5
+    r = track(q, g1(), FAST, fps=FPS)
+    assert not r.passed
+    errors = [f for f in r.failures if f.kind == "tracking_error" and f.robot_body == "pelvis"]
+    assert errors and errors[0].depth > 0.3
+
+
+def test_a_root_teleported_half_a_metre_fails():
+    q = stand(30)
+    q[8:, 0] += 0.5
+    r = track(q, g1(), FAST, fps=FPS)
+    assert not r.passed and {f.kind for f in r.failures} & {"tracking_error", "tracking_fall"}
+
+
+def test_bad_input_is_a_one_line_error():
+    q = stand(5)
+    with pytest.raises(ShapeError, match="nq=36"):
+        track(q[:, :30], g1(), FAST, fps=FPS)
+    bad = q.copy()
+    bad[2, 9] = np.nan
+    with pytest.raises(ShapeError, match="NaN"):
+        track(bad, g1(), FAST, fps=FPS)
+    sunk = q.copy()
+    sunk[:, 2] -= 0.05
+    with pytest.raises(ControlMMError, match="starts inside the scene") as err:
+        check_trajectory(g1(), sunk, FPS, CheckConfig(physics=True), physics=FAST)
+    assert "\n" not in str(err.value) and re.search(r"by \d+\.\d mm", str(err.value))
+    with pytest.raises(ControlMMError, match="MjSpec"):  # a bare MjModel cannot be saved as one MJCF file
+        track(q, make_world(robot_spec("g1").compile()), FAST, fps=FPS)
+    boxed = make_world(robot_spec("g1", [Obstacle("crate", "box", (0.2, 0.2, 0.2), (0.0, 0.0, 0.5))]))
+    with pytest.raises(ControlMMError, match="inside crate"):
+        track(hold(standing_qpos(boxed.model), 5), boxed, FAST, fps=FPS)
+
+
+def test_physics_failures_become_smoothness_terms(sample_joints):
+    failures = [
+        Failure("tracking_fall", 40, 99, "pelvis", None, 0.5),
+        Failure("tracking_error", 10, 30, "left_wrist_yaw_link", None, 0.3),
+    ]
+    body_joints = {"pelvis": ("pelvis", "left_hip", "right_hip"), "left_wrist_yaw_link": ("left_wrist",)}
+    terms = feedback_terms(
+        failures,
+        np.asarray(sample_joints[:60]),
+        body_joints=body_joints,
+        transform=HumanToWorld(scale=0.78),
+        robot_fps=FPS,
+        round_index=0,
+    )
+    names = sorted(t.name for t in terms)
+    assert names == ["feedback1:tracking_error:left_wrist_yaw_link", "feedback1:tracking_fall:pelvis"]
+
+
+def _write(path, qpos):
+    np.savez(path, qpos=qpos, fps=np.float64(FPS), robot=np.array("g1"))
+
+
+@pytest.mark.slow  # end to end: the scene's model is saved and compiled for this one call
+def test_validate_physics_writes_a_certificate_that_replays(tmp_path, capsys):
+    _write(tmp_path / "stand.npz", stand(20))
+    out = tmp_path / "out" / "report.json"
+    out.parent.mkdir()
+    args = ["validate", str(tmp_path / "stand.npz"), "--out", str(out), "--no-plot", "--no-progress"]
+    assert run_cli([*args, "--physics", "--physics-samples", "8"]) == 0
+    report = json.loads(out.read_text())
+    assert report["passed"] and report["physics"]["passed"] and not report["physics"]["fell"]
+    assert len(report["frames"]["physics_root_error_m"]) == 20
+    assert "physics: PASSED" in capsys.readouterr().out
+    qpos = replay_certificate(out.parent / "physics_model.xml", out.parent / "physics.npz")
+    with np.load(out.parent / "physics.npz") as npz:
+        assert np.array_equal(qpos, npz["qpos"])
+    rows, _ = read_export(out.parent / "robot_physics.csv", "lafan1", fps=CSV_FPS)
+    assert rows.tolist() == qpos[::10].tolist()  # 50 fps rows of the 2 ms simulation
+    assert run_cli([*args, "--physics"]) == 2  # the files exist: --force is needed
+
+
+@pytest.mark.parametrize("bad", ["nan", "width", "inside"])
+def test_validate_physics_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, bad):
+    q = stand(10)
+    if bad == "nan":
+        q[3, 12] = np.nan
+    elif bad == "width":
+        q = q[:, :35]
+    else:
+        q[:, 2] -= 0.05  # 5 cm into the floor from the first frame
+    _write(tmp_path / "bad.npz", q)
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["validate", str(tmp_path / "bad.npz"), "--physics", "--out", str(out / "r.json"), "--no-progress"]
+    err = one_line_error(capsys, argv)
+    assert {"nan": "NaN", "width": "(T, nq=36", "inside": "starts inside the scene"}[bad] in err
+    assert list(out.iterdir()) == []
+
+
+def test_report_carries_the_physics_verdict_and_reloads(tmp_path):
+    report = check_trajectory(g1(), stand(12), FPS, CheckConfig(physics=True), physics=FAST)
+    assert report.physics is not None and report.passed and report.stats["physics"]["passed"]
+    assert "physics: PASSED" in report.summary()
+    report.save(tmp_path / "report.json")
+    loaded = load_report(tmp_path / "report.json")
+    assert loaded.stats["physics"]["fell"] is False and "physics: PASSED" in loaded.summary()
+    assert loaded.frames["physics_root_error_m"].shape == (12,)
