@@ -46,6 +46,7 @@ class EditingConfig:
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
+    contact_hinge_weight: float = 100.0  # the foot-contact run's hinge weight (see foot_contact_run)
     contact_weight: float = 0.3  # weight of the foot-contact term in that run ((m/s)^2)
 
     def __post_init__(self) -> None:
@@ -58,8 +59,9 @@ class EditingConfig:
         for name in ("logits_patience", "logits_warm_patience"):
             if getattr(self, name) < 0:
                 raise ControlMMError(f"{name} must be >= 0; got {getattr(self, name)}")
-        if not self.difference_weight >= 0:
-            raise ControlMMError(f"difference_weight must be >= 0; got {self.difference_weight}")
+        for name in ("difference_weight", "contact_hinge_weight"):
+            if not getattr(self, name) >= 0:
+                raise ControlMMError(f"{name} must be >= 0; got {getattr(self, name)}")
         for name in ("lr", "logits_lr", "temperature", "contact_weight"):
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
