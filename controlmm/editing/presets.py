@@ -46,7 +46,7 @@ class EditingConfig:
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
-    contact_hinge_weight: float = 100.0  # the foot-contact run's hinge weight (see foot_contact_run)
+    contact_hinge_weight: float = 30.0  # the foot-contact run's hinge weight (see foot_contact_run)
     contact_weight: float = 0.3  # weight of the foot-contact term in that run ((m/s)^2)
 
     def __post_init__(self) -> None:
@@ -80,9 +80,16 @@ class EditingConfig:
 PRESETS: dict[str, EditingConfig] = {
     "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
     "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
-    # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding
+    # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding. Without
+    # the keyframe-difference term: with it (and logits editing's warm start), codebook editing ends
+    # on motions whose planted feet the run cannot free without breaking a constraint (docs/control.md)
     "accurate": EditingConfig(
-        name="accurate", control_model=True, logits_steps=100, codebook_steps=600, contact_steps=200
+        name="accurate",
+        control_model=True,
+        logits_steps=100,
+        codebook_steps=600,
+        contact_steps=200,
+        difference_weight=0.0,
     ),
 }
 """The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""
