@@ -14,6 +14,7 @@ fresh MuJoCo model of the scene, and every reported pass must have obstacle and 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -72,7 +73,7 @@ def _run(args: tuple[str, int, int, str | None, str, str]) -> dict:
     model = _MODELS.get(model_dir)
     if model is None:
         model = _MODELS[model_dir] = load_model(model_dir)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = plan(
         PlanConfig(
             scene=scene, seed=seed, rounds=rounds, preset=preset, model=model_dir, robot=robot, render=False
@@ -80,7 +81,7 @@ def _run(args: tuple[str, int, int, str | None, str, str]) -> dict:
         model=model,
         progress=False,
     )
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     report = result.report
     obstacle, floor, limits = _independent_check(scene, robot, result.trajectory.qpos, result.trajectory.fps)
     return {
@@ -93,7 +94,9 @@ def _run(args: tuple[str, int, int, str | None, str, str]) -> dict:
         "floor": report.floor_penetration_m,
         "constraint": max(result.final.constraint_errors_m, default=0.0),
         "seconds": seconds,
+        "cpu_s": cpu,
         "gen_s": [r.seconds["generate"] for r in result.rounds],
+        "constraints": list(result.final.constraint_errors_m),
         "verified": (not result.passed) or (obstacle <= 0.01 and floor <= 0.01 and limits == 0),
         "indep_obstacle": obstacle,
         "indep_floor": floor,
@@ -118,6 +121,7 @@ def main() -> None:
     parser.add_argument("--preset", default="accurate")
     parser.add_argument("--robot", default="g1")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2, one torch thread each)")
+    parser.add_argument("--json", default=None, help="also write every run's figures to this JSON file")
     args = parser.parse_args()
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     scenes = args.scenes or [s if isinstance(s, str) else s.name for s in list_scenes()]
@@ -176,6 +180,12 @@ def main() -> None:
         f"generation: round 0 mean {np.mean(gen0):.1f} s; feedback rounds (codebook editing) "
         f"mean {np.mean(fb) if fb else float('nan'):.1f} s over {len(fb)}"
     )
+    print(
+        f"CPU s per plan: mean {np.mean([r['cpu_s'] for r in rows]):.1f} "
+        f"(load average {os.getloadavg()[0]:.1f})"
+    )
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1, default=float) + "\n")
 
 
 if __name__ == "__main__":

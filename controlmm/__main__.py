@@ -1,5 +1,3 @@
-import sys
+from controlmm.cli.main import entry
 
-from controlmm.cli.main import main
-
-sys.exit(main())
+entry()

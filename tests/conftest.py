@@ -39,3 +39,15 @@ def sample_features(humanml3d_dir: Path) -> np.ndarray:
 def sample_joints(humanml3d_dir: Path) -> np.ndarray:
     """(170, 22, 3) float32 global joints of HumanML3D motion 012314."""
     return np.load(humanml3d_dir / "new_joints" / f"{SAMPLE_ID}.npy")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def embedding_cache(tmp_path_factory):
+    """Prompt embeddings go to a session directory, not the user's cache (``CONTROLMM_CACHE_DIR``)."""
+    previous = os.environ.get("CONTROLMM_CACHE_DIR")
+    os.environ["CONTROLMM_CACHE_DIR"] = str(tmp_path_factory.mktemp("controlmm-cache"))
+    yield Path(os.environ["CONTROLMM_CACHE_DIR"])
+    if previous is None:
+        os.environ.pop("CONTROLMM_CACHE_DIR", None)
+    else:
+        os.environ["CONTROLMM_CACHE_DIR"] = previous

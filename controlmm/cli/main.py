@@ -8,9 +8,11 @@ user can cause print one line on stderr and exit with code 2.
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
 import os
 import sys
+import threading
 import warnings
 
 from controlmm import __version__
@@ -107,5 +109,26 @@ def _run(args: argparse.Namespace) -> int:
         return 1
 
 
+def entry() -> None:
+    """The ``controlmm`` command: :func:`main`, then a quick exit.
+
+    Tearing down an interpreter that imported torch, MuJoCo and matplotlib takes about a second on
+    2 cores (module finalisation and the garbage of the models), after every output is written and
+    closed. Once the command returns, this flushes the streams, runs the exit handlers (temporary
+    folders, logging, multiprocessing) and ends the process without that teardown; a command that
+    left other (non-daemon) threads running exits the ordinary way, which waits for them.
+    """
+    code = main()
+    if any(not t.daemon and t is not threading.main_thread() for t in threading.enumerate()):
+        sys.exit(code)
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (BrokenPipeError, ValueError):  # a closed pipe: nothing left to say
+        pass
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

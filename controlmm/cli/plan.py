@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -13,6 +14,8 @@ from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
     from controlmm.pipeline import PlanResult
+
+_LOADED = time.perf_counter()  # start-up is timed from here where the process's own start is unknown
 
 HELP = """Plan a humanoid robot motion in a MuJoCo scene, check it in simulation and export it.
 
@@ -165,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from controlmm.pipeline import DEFAULT_SCENE, PlanConfig, plan, write_plan
+    from controlmm.pipeline.timing import process_age
 
     torch.set_num_threads(args.threads)
     config = PlanConfig(
@@ -190,7 +194,10 @@ def run(args: argparse.Namespace) -> int:
     )
     config = replace(config, check=replace(config.check, physics=args.physics))
     progress = not args.no_progress
+    age = process_age()
+    before = age if age is not None else time.perf_counter() - _LOADED  # the command's start-up
     result = plan(config, progress=progress)
+    result.timing.start_earlier(before)
     backend = write_plan(result, args.out, progress=progress, force=args.force)
     print(result.report.summary())
     moved = dict(result.displacements()).get(result.best)
@@ -206,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
     )
     for name, err in zip(_constraint_names(result), result.final.constraint_errors_m, strict=True):
         print(f"  constraint {name}: {err * 100:.2f} cm")
+    print(result.timing.summary())
     sys.stdout.flush()
     return 0 if result.passed else 1
 

@@ -24,6 +24,7 @@ def codebook_editing(
     decode: Callable[[torch.Tensor], torch.Tensor],
     objective: Objective,
     config: EditingConfig,
+    admissible: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> EditOutcome:
     """Edit the decoder latent (B, N, code_dim); returns the edited latent and the steps used.
 
@@ -32,7 +33,10 @@ def codebook_editing(
         decode: latent -> joints (B, T, 22, 3), differentiable.
         objective: loss terms and the stopping rule.
         config: ``codebook_steps`` and the optimiser.
+        admissible: joints -> (B,) bool, the states that may be kept (see :func:`optimize`).
     """
     if config.codebook_optimizer == "lbfgs":
-        return optimize_lbfgs(latent, decode, objective, config.codebook_steps, config)
-    return optimize(latent, decode, objective, config.codebook_steps, config, keep_best=True)
+        return optimize_lbfgs(latent, decode, objective, config.codebook_steps, config, admissible=admissible)
+    return optimize(
+        latent, decode, objective, config.codebook_steps, config, keep_best=True, admissible=admissible
+    )

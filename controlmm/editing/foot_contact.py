@@ -55,8 +55,13 @@ def foot_contact_run(
     """Re-edit a latent (B, N, code_dim) that codebook editing produced; returns (latent, kept (B,) bool).
 
     Runs ``config.contact_steps`` codebook-editing steps on ``objective`` plus
-    ``foot_contact_term(config.contact_weight)`` from ``latent``; sample i takes the new latent only
-    where it still meets ``objective`` (``kept[i]``), else keeps ``latent``. ``decode``: latent ->
+    ``foot_contact_term(config.contact_weight)`` from ``latent``, with the hinge on the constraints
+    over half the tolerance weighted ``config.contact_hinge_weight`` (codebook editing stops as soon as
+    every constraint is within the tolerance, often right at it: without a strong pull back, every step
+    that takes sliding out breaks a constraint), keeping the best state that still
+    meets ``objective`` (a step that trades a constraint for less sliding is never kept, so a motion
+    that met its constraints only just still gains from the run); sample i takes the new latent only
+    where it meets ``objective`` (``kept[i]``), else keeps ``latent``. ``decode``: latent ->
     joints (B, T, 22, 3), differentiable.
     """
     kept = torch.zeros(latent.shape[0], dtype=torch.bool, device=latent.device)
@@ -66,10 +71,18 @@ def foot_contact_run(
         _, done_before, _ = objective.evaluate(decode(latent))
     if not bool(done_before.any()):  # no sample could keep the run's result
         return latent, kept
-    contact = replace(objective, terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),))
+    contact = replace(
+        objective,
+        terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),),
+        hinge_weight=config.contact_hinge_weight,
+    )
+
+    def meets(joints: torch.Tensor) -> torch.Tensor:  # only states that still meet the objective count
+        return objective.evaluate(joints)[1]
+
     with torch.enable_grad():
         outcome = codebook_editing(
-            latent, decode, contact, replace(config, codebook_steps=config.contact_steps)
+            latent, decode, contact, replace(config, codebook_steps=config.contact_steps), admissible=meets
         )
     with torch.no_grad():
         _, done_after, _ = objective.evaluate(decode(outcome.param))

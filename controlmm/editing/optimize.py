@@ -38,6 +38,7 @@ def optimize(
     keep_best: bool = True,
     patience: int = 0,
     min_improvement: float = 0.02,
+    admissible: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> EditOutcome:
     """Minimise ``objective(forward(param))`` over ``param`` for at most ``steps`` AdamW steps.
 
@@ -51,6 +52,9 @@ def optimize(
             (codebook editing); otherwise the last state (logits editing, whose loss is noisy).
         patience: if > 0, a sample also stops (without counting as done) once its best loss has not
             improved by the fraction ``min_improvement`` for ``patience`` steps (a plateau).
+        admissible: joints -> (B,) bool; when given, only admissible states are kept (a sample with
+            none keeps ``param``), so a run that trades one term against another never returns a state
+            that breaks what the caller must keep (the foot-contact run keeps the constraints met).
     """
     b = param.shape[0]
     x = param.detach().clone().requires_grad_(True)
@@ -70,6 +74,9 @@ def optimize(
         value = loss.detach()
         finished = finished if config.early_stop else torch.zeros_like(finished)
         take = active & (finished | (value < kept_loss) | torch.tensor(not keep_best, device=x.device))
+        if admissible is not None:
+            with torch.no_grad():
+                take = take & admissible(joints)
         kept = torch.where(take.view(view), x.detach(), kept)
         kept_loss = torch.where(take, value, kept_loss)
         kept_err = torch.where(take, max_err, kept_err)
@@ -111,6 +118,7 @@ def optimize_lbfgs(
     evaluations: int,
     config: EditingConfig,
     chunk: int = 10,
+    admissible: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> EditOutcome:
     """Minimise ``objective(forward(param))`` with L-BFGS (strong Wolfe line search), at most
     ``evaluations`` evaluations.
@@ -121,8 +129,11 @@ def optimize_lbfgs(
     (line-search trials included) counts as one step and is checked per sample: the best evaluated
     state of each sample is kept, and a sample that meets the stopping rule is frozen there. The
     optimiser runs in chunks of ``chunk`` iterations; it restarts (fresh curvature history) whenever
-    samples drop out. Each sample's loss is divided by its initial value, so the first step's size
-    does not depend on the units of the loss.
+    samples drop out. A chunk that did not lower a sample's best loss (stalled: its line searches found
+    no decrease) restarts the optimiser from the best state with a fresh curvature history; a sample
+    that stalls again right after such a restart drops out (further chunks would repeat the same
+    evaluations). Each sample's loss is divided by its initial value, so the first step's size does
+    not depend on the units of the loss. ``admissible``: as in :func:`optimize`.
     """
     b = param.shape[0]
     view = (b,) + (1,) * (param.ndim - 1)
@@ -152,7 +163,8 @@ def optimize_lbfgs(
 
     def closure() -> torch.Tensor:
         optimizer.zero_grad(set_to_none=True)
-        loss, finished, max_err = objective.evaluate(forward(x))
+        joints = forward(x)
+        loss, finished, max_err = objective.evaluate(joints)
         value = loss.detach()
         finished = finished if config.early_stop else torch.zeros_like(finished)
         ok = torch.isfinite(value)
@@ -162,6 +174,9 @@ def optimize_lbfgs(
         else:  # the first evaluation is the starting point, not a step
             state.used = state.used + moving.long()
         take = moving & ok & (finished | (value < state.kept_loss))
+        if admissible is not None:
+            with torch.no_grad():
+                take = take & admissible(joints)
         state.kept = torch.where(take.view(view), x.detach(), state.kept)
         state.kept_loss = torch.where(take, value, state.kept_loss)
         state.kept_err = torch.where(take, max_err, state.kept_err)
@@ -175,6 +190,7 @@ def optimize_lbfgs(
 
     # Nothing is done yet, so the first pass of the loop keeps this optimiser and x.
     optimizer = new_optimizer()
+    restarted = torch.zeros(b, dtype=torch.bool, device=device)  # restarted after a stall, last chunk
     while True:
         if bool((active & state.done).any()):
             active = active & ~state.done
@@ -187,11 +203,24 @@ def optimize_lbfgs(
             active = active & ~state.done
         if state.count > evaluations or not bool(active.any()):
             break
-        before = state.count
+        before, best_before = state.count, state.kept_loss.clone()
         optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state.count))
         optimizer.step(closure)
         if state.count == before:  # converged to machine precision
             break
+        # A sample whose best loss did not improve over a whole chunk has stalled: its line searches
+        # found no decrease, and the next chunks would evaluate the same points again.
+        stalled = active & ~state.done & ~(state.kept_loss < best_before)
+        if bool(stalled.any()) and state.count <= evaluations:
+            active = active & ~(stalled & restarted)  # stalled twice in a row: drop out
+            restarted = stalled & active
+            if not bool(active.any()):
+                break
+            optimizer = new_optimizer()
+            with torch.no_grad():  # every active sample restarts from its best state
+                x.copy_(state.kept)
+        else:
+            restarted = torch.zeros_like(active)
     return EditOutcome(
         param=state.kept,
         steps=state.used,

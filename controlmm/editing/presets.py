@@ -31,6 +31,8 @@ class EditingConfig:
     lr: float = 0.06  # AdamW learning rate of codebook editing with codebook_optimizer="adam"
     logits_lr: float = 0.3  # AdamW learning rate of logits editing
     logits_patience: int = 10  # logits editing stops on a plateau of this many steps (0: never)
+    logits_warm_start: bool = True  # each decoding iteration's editing starts from the last one's edit
+    logits_warm_patience: int = 5  # logits_patience of a warm-started iteration (it starts on the plateau)
     codebook_optimizer: str = (
         "lbfgs"  # "adam" (the paper's AdamW) or "lbfgs" (quasi-Newton, steps = evaluations)
     )
@@ -40,9 +42,11 @@ class EditingConfig:
     tolerance: float = 0.01  # metres: stop when every constraint is this close
     logits_tolerance: float = 0.03  # metres: logits editing stops when its motion estimate is this close
     hinge_weight: float = 10.0  # codebook editing: weight of the hinge on lagging constraints (Objective)
+    difference_weight: float = 30.0  # codebook editing: weight of the keyframe-difference term (Objective)
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
+    contact_hinge_weight: float = 30.0  # the foot-contact run's hinge weight (see foot_contact_run)
     contact_weight: float = 0.3  # weight of the foot-contact term in that run ((m/s)^2)
 
     def __post_init__(self) -> None:
@@ -52,8 +56,12 @@ class EditingConfig:
                 raise ControlMMError(f"{name} must be a whole number >= 0; got {value!r}")
         if self.codebook_optimizer not in ("adam", "lbfgs"):
             raise ControlMMError(f"codebook_optimizer must be adam or lbfgs; got '{self.codebook_optimizer}'")
-        if self.logits_patience < 0:
-            raise ControlMMError(f"logits_patience must be >= 0; got {self.logits_patience}")
+        for name in ("logits_patience", "logits_warm_patience"):
+            if getattr(self, name) < 0:
+                raise ControlMMError(f"{name} must be >= 0; got {getattr(self, name)}")
+        for name in ("difference_weight", "contact_hinge_weight"):
+            if not getattr(self, name) >= 0:
+                raise ControlMMError(f"{name} must be >= 0; got {getattr(self, name)}")
         for name in ("lr", "logits_lr", "temperature", "contact_weight"):
             if not getattr(self, name) > 0:
                 raise ControlMMError(f"{name} must be positive; got {getattr(self, name)}")
@@ -72,9 +80,16 @@ class EditingConfig:
 PRESETS: dict[str, EditingConfig] = {
     "fast": EditingConfig(name="fast", control_model=True, logits_steps=0, codebook_steps=100),
     "medium": EditingConfig(name="medium", control_model=True, logits_steps=0, codebook_steps=600),
-    # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding
+    # + the foot-contact run (not in the paper): 200 more steps that stop planted feet sliding. Without
+    # the keyframe-difference term: with it (and logits editing's warm start), codebook editing ends
+    # on motions whose planted feet the run cannot free without breaking a constraint (docs/control.md)
     "accurate": EditingConfig(
-        name="accurate", control_model=True, logits_steps=100, codebook_steps=600, contact_steps=200
+        name="accurate",
+        control_model=True,
+        logits_steps=100,
+        codebook_steps=600,
+        contact_steps=200,
+        difference_weight=0.0,
     ),
 }
 """The paper's presets (Table 5): ControlMM-Fast, -Medium, -Accurate."""

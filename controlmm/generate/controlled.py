@@ -83,6 +83,7 @@ class EditingRecord:
     losses: dict[str, float] = field(default_factory=dict)  # final value of every loss term
     seconds: float = 0.0  # wall time of the batch this motion was generated in, divided by its size
     cpu_seconds: float = 0.0  # CPU time of this process (all threads) for the batch, divided by its size
+    phases: dict[str, float] = field(default_factory=dict)  # wall s per stage (text, decoding, editors)
 
     @property
     def total_steps(self) -> int:
@@ -101,6 +102,7 @@ class EditingRecord:
             "losses": dict(self.losses),
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
+            "phases_s": {k: round(v, 3) for k, v in self.phases.items()},
         }
 
 
@@ -307,8 +309,18 @@ def _generate_chunk(
         tolerance=config.tolerance,
         loss_tolerance=config.loss_tolerance,
         hinge_weight=config.hinge_weight,
+        difference_weight=config.difference_weight,
     )
+    phase = {
+        "text": 0.0,
+        "decoding": 0.0,
+        "logits_editing": 0.0,
+        "codebook_editing": 0.0,
+        "foot_contact": 0.0,
+    }
+    mark = time.perf_counter()
     cond = model.encode_text(texts)
+    phase["text"] = time.perf_counter() - mark
     tokenizer, transformer = model.tokenizer, model.transformer
     codebook = tokenizer.codebooks[0]
     control = model.parts.get("control") if config.control_model else None
@@ -335,20 +347,36 @@ def _generate_chunk(
     use_control = control_logits is not None
 
     logits_objective = replace(
-        objective, tolerance=max(config.logits_tolerance, config.tolerance), stop_on="mean", hinge_weight=0.0
+        objective,
+        tolerance=max(config.logits_tolerance, config.tolerance),
+        stop_on="mean",
+        hinge_weight=0.0,
+        difference_weight=0.0,
     )
+    warm_config = replace(config, logits_patience=config.logits_warm_patience)
+
+    carried: list[torch.Tensor] = []  # the previous iteration's edit (edited - predicted logits)
 
     def edit_logits(logits: torch.Tensor, state: DecodeState) -> torch.Tensor:
+        started = time.perf_counter()
         known = ~state.is_mask & ~state.padding_mask
         fixed = torch.where(known[..., None], codebook[torch.where(known, state.ids, 0)], 0.0)
+        start, settings = logits, config
+        if carried:  # warm start: the positions still masked keep the edit the last iteration found
+            start = logits + torch.where(state.is_mask[..., None], carried[-1], 0.0)
+            settings = warm_config
         with torch.enable_grad():
             outcome = logits_editing(
-                logits, state.is_mask, fixed, codebook, decode, logits_objective, config, generator
+                start, state.is_mask, fixed, codebook, decode, logits_objective, settings, generator
             )
+        if config.logits_warm_start:
+            carried[:] = [outcome.param - logits]
         logit_steps.append(outcome.steps)
+        phase["logits_editing"] += time.perf_counter() - started
         return outcome.param
 
     editing = objective.active
+    mark = time.perf_counter()
     base = masked_decode(
         transformer,
         cond,
@@ -372,19 +400,26 @@ def _generate_chunk(
         )
     with torch.no_grad():
         latent = tokenizer.ids_to_latent(ids)
+    phase["decoding"] += time.perf_counter() - mark - phase["logits_editing"]
     codebook_steps = torch.zeros(b, dtype=torch.long)
     contact_kept = torch.zeros(b, dtype=torch.bool)
     if editing and config.codebook_steps > 0:
+        mark = time.perf_counter()
         with torch.enable_grad():
             outcome = codebook_editing(latent, decode, objective, config)
         latent, codebook_steps = outcome.param, outcome.steps.cpu()
+        phase["codebook_editing"] = time.perf_counter() - mark
+        mark = time.perf_counter()
         latent, kept = foot_contact_run(latent, decode, objective, config)
         contact_kept = kept.cpu()
+        phase["foot_contact"] = time.perf_counter() - mark
+    mark = time.perf_counter()
     with torch.no_grad():
         features = latent_to_features(model, latent)
         joints = features_to_joints(features)
         values = {k: v.cpu() for k, v in objective.term_values(joints[:, :t_max]).items()}
         _, done, max_err = objective.evaluate(joints[:, :t_max])
+    phase["decoding"] += time.perf_counter() - mark
     seconds = (time.perf_counter() - started) / b
     cpu_seconds = (time.process_time() - cpu_started) / b
     budget = {
@@ -410,6 +445,7 @@ def _generate_chunk(
                 losses={k: float(v[i]) for k, v in values.items()},
                 seconds=seconds,
                 cpu_seconds=cpu_seconds,
+                phases={k: v / b for k, v in phase.items() if v > 0},
             )
         )
     joints_np = joints.cpu().numpy()
@@ -462,28 +498,33 @@ def edit_latent(
     frames meet ``objective``, outside the decoding loop (the plan's feedback rounds, timeline passes).
 
     Returns the edited latent and a record: ``steps``, ``converged``, ``max_error_m``, ``contact_kept``
-    (the foot-contact run's latent was kept, :mod:`controlmm.editing.foot_contact`) and the final value
-    of every loss term (``losses``).
+    (the foot-contact run's latent was kept, :mod:`controlmm.editing.foot_contact`), the final value
+    of every loss term (``losses``) and the wall seconds of each run (``seconds``: ``codebook_editing``,
+    ``foot_contact``).
     """
     if not objective.active or config.codebook_steps == 0:
-        return latent, {"steps": 0, "converged": True, "max_error_m": 0.0, "losses": {}}
+        return latent, {"steps": 0, "converged": True, "max_error_m": 0.0, "losses": {}, "seconds": {}}
 
     def decode(z: torch.Tensor) -> torch.Tensor:
         return latent_to_positions(model, z)[:, :frames]
 
+    started = time.perf_counter()
     with torch.enable_grad():
         outcome = codebook_editing(latent, decode, objective, config)
+    middle = time.perf_counter()
     edited, kept = foot_contact_run(outcome.param.detach(), decode, objective, config)
     with torch.no_grad():
         joints = decode(edited)
         values = objective.term_values(joints)
         _, done, max_err = objective.evaluate(joints)
+    seconds = {"codebook_editing": middle - started, "foot_contact": time.perf_counter() - middle}
     return edited, {
         "steps": int(outcome.steps[0]),
         "converged": bool(done[0]),
         "max_error_m": float(max_err[0]),
         "contact_kept": bool(kept[0]),
         "losses": {k: float(v[0]) for k, v in values.items()},
+        "seconds": seconds,
     }
 
 

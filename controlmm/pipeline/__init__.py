@@ -12,13 +12,15 @@ write_plan(result, "out/plan")
 - :class:`PlanConfig`: what to plan (scene, prompt, control, robot, seed, rounds, preset...);
 - :func:`plan`: the generate/retarget/check loop with simulation feedback, -> :class:`PlanResult`;
 - :func:`write_plan`: every output file, atomically;
-- :func:`feedback_terms`, :class:`FeedbackConfig`: failures -> editing loss terms.
+- :func:`feedback_terms`, :class:`FeedbackConfig`: failures -> editing loss terms;
+- :class:`StageTimes`: where a plan's time went (``result.timing``, ``report.json``'s ``timing``).
 """
 
 from controlmm.pipeline.config import DEFAULT_SCENE, PlanConfig
 from controlmm.pipeline.feedback import FeedbackConfig, feedback_terms
 from controlmm.pipeline.outputs import write_plan
 from controlmm.pipeline.plan import PlanResult, PlanRound, plan
+from controlmm.pipeline.timing import StageTimes
 
 __all__ = [
     "DEFAULT_SCENE",
@@ -26,6 +28,7 @@ __all__ = [
     "PlanConfig",
     "PlanResult",
     "PlanRound",
+    "StageTimes",
     "feedback_terms",
     "plan",
     "write_plan",

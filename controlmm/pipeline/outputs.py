@@ -15,7 +15,8 @@ robot.csv               one row per frame: root xyz, root quaternion xyzw, joint
 robot.npz               qpos (wxyz), qvel, body poses, fps, joint names (``retarget`` format)
 robot.json              the trajectory's sidecar: robot, scale, placement, CSV columns, metrics
 report.json             the chosen round's simulation report (``passed``, penetrations, failures...)
-                        plus ``plan`` (inputs, chosen round) and ``rounds`` (every round's figures)
+                        plus ``plan`` (inputs, chosen round), ``rounds`` (every round's figures) and
+                        ``timing`` (wall seconds per stage, :mod:`controlmm.pipeline.timing`)
 render.mp4              the robot in the scene (MuJoCo; a matplotlib stick figure without OpenGL)
 plots/top_view.png      obstacles, paths, control targets and achieved positions from above
 plots/clearance.png     per-frame obstacle clearance and floor height of every round
@@ -32,11 +33,13 @@ robot_physics.csv       the executed motion at 50 fps (Unitree LAFAN1-G1 / Beyon
 ======================  =======================================================================
 
 ``plots/`` is left out with ``PlanConfig(plots=False)`` and ``render.mp4`` with ``render=False``.
+Writing them is the ``outputs`` stage of ``result.timing`` (``report.json``'s ``timing``, written last).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 from controlmm.atomic import atomic_dir, write_text
@@ -71,12 +74,12 @@ def write_plan(
     config = result.config
     render = config.render if render is None else render
     backend = None
+    started = time.perf_counter()
     with atomic_dir(out, kind=PLAN_OUTPUT, force=force, make_parents=True) as tmp:
         save_motion(result.motion, tmp / "motion.npz")
         save_trajectory(result.trajectory, tmp / "robot", config.formats)
         if result.clip is not None:
             save_motion(result.clip, tmp / "source_motion.npz")
-        write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
         if result.report.physics is not None:
             save_certificate(result.report.physics, tmp)
@@ -103,4 +106,8 @@ def write_plan(
                 progress=progress,
                 scene=result.scene,
             )
+        # last, so that its timing holds the outputs above
+        result.timing.seconds["outputs"] = time.perf_counter() - started
+        result.timing.stop()
+        write_text(tmp / "report.json", json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n")
     return backend

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
@@ -44,6 +44,7 @@ from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from controlmm.pipeline.refine import edit_motion
+from controlmm.pipeline.timing import StageTimes
 from controlmm.timeline import as_timeline, generate_timeline
 from retarget import RobotTrajectory, load_robot, retarget_motion, robot_scale
 from scenes import Scene, load_scene, scene_loss_terms
@@ -67,7 +68,7 @@ class PlanRound:
     terms: list[str]  # names of the loss terms this round was generated with
     constraint_errors_m: list[float]
     editing: dict[str, Any]
-    seconds: dict[str, float]
+    seconds: dict[str, float]  # generate, retarget, check, and generate's stages (text, decoding, ...)
 
     @property
     def passed(self) -> bool:
@@ -118,6 +119,7 @@ class PlanResult:
     seconds: float = 0.0
     clip: Motion | None = None  # the recorded clip a --motion plan edited
     reconstructed: Displacement | None = None  # the clip's tokens alone against the clip
+    timing: StageTimes = field(default_factory=StageTimes)
 
     @property
     def final(self) -> PlanRound:
@@ -168,6 +170,7 @@ class PlanResult:
             "seconds": round(self.seconds, 3),
         }
         out["rounds"] = [r.to_dict() for r in self.rounds]
+        out["timing"] = self.timing.to_dict()
         if self.clip is not None:
             moved = dict(self.displacements())
             out["clip"] = {
@@ -222,8 +225,11 @@ def plan(
         model: a loaded :class:`controlmm.models.MotionModel` (default: load ``config.model``).
         progress: progress bars and one line per stage on stderr.
         log: where stage lines go (default stderr); None with ``progress=False`` silences them.
+
+    ``result.timing`` holds the wall seconds of every stage (:mod:`controlmm.pipeline.timing`).
     """
     start = time.perf_counter()
+    timing = StageTimes(origin=start)
     say = _logger(progress, log)
     scene, text, spec, transform = resolve_inputs(config)
     clip = (
@@ -243,7 +249,7 @@ def plan(
     if model is None:
         say("loading the model")
         model = load_model(config.model)
-    body_joints = load_robot(config.robot).body_joints
+    body_joints: dict[str, Sequence[str]] = dict(load_robot(config.robot).body_joints)
     base_terms = scene_loss_terms(scene, transform, safe_distance=config.safe_distance_m)
     editor = ClipEditor(model, clip) if clip is not None else None
     if clip is not None:
@@ -254,6 +260,7 @@ def plan(
     history: dict = {}  # feedback margins per robot body, across rounds
     rounds: list[PlanRound] = []
     latent: torch.Tensor | None = None  # the edited decoder latent of the last round (not with a timeline)
+    timing.add("startup", time.perf_counter() - start)
     for index in range(config.rounds + 1):
         terms = base_terms + extra
         timer: dict[str, float] = {}
@@ -261,6 +268,7 @@ def plan(
         if config.timeline is not None:  # a timeline is regenerated whole, its passes minimising every term
             say(f"round {index}: generating the timeline ({len(terms)} loss terms, preset {editing.name})")
             motion, errors, record = _timeline(model, config.timeline, config.seed, terms, transform, editing)
+            phases = {"timeline": time.perf_counter() - t0}
         elif editor is not None:
             what = "the clip's tokens" if index == 0 else f"the clip with {len(extra)} feedback terms"
             say(f"round {index}: codebook editing {what} ({len(terms)} loss terms, preset {editing.name})")
@@ -270,9 +278,12 @@ def plan(
                 start_latent, spec, transform, terms, editing, text, metadata=editor.clip.metadata
             )
             motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
+            phases = edited.seconds or {"codebook_editing": time.perf_counter() - t0}
         elif index == 0:
             say(f"round 0: generating ({len(terms)} loss terms, preset {editing.name})")
-            motion, errors, record, latent = _generate(model, config, text, spec, terms, transform, editing)
+            motion, errors, record, latent, phases = _generate(
+                model, config, text, spec, terms, transform, editing
+            )
         else:
             say(f"round {index}: codebook editing with {len(extra)} feedback terms")
             assert latent is not None  # round 0 set it (rounds without a timeline)
@@ -288,7 +299,9 @@ def plan(
                 metadata=motion.metadata,
             )
             motion, errors, record, latent = edited.motion, edited.errors, edited.record, edited.latent
+            phases = edited.seconds
         timer["generate"] = time.perf_counter() - t0
+        timer.update(phases)
         t0 = time.perf_counter()
         # check_scale off: a wrongly sized motion is the generator's failure, which the checks report
         traj = retarget_motion(
@@ -299,6 +312,12 @@ def plan(
         report = _check(world, traj, config, index, say, progress)
         timer["check"] = time.perf_counter() - t0
         rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
+        if index == 0:
+            timing.add_all(phases)
+            timing.add("retarget", timer["retarget"])
+            timing.add("checks", timer["check"])
+        else:
+            timing.add("feedback_rounds", timer["generate"] + timer["retarget"] + timer["check"])
         blocking = report.errors  # warnings (brief dynamic spikes) do not fail a round
         worst = f", worst constraint {max(errors) * 100:.1f} cm" if errors else ""
         if clip is not None:
@@ -306,13 +325,14 @@ def plan(
             worst += f", joints {moved.mean_m * 100:.1f} cm from the clip (max {moved.max_m * 100:.1f})"
         say(
             f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
-            f"in {sum(timer.values()):.1f} s"
+            f"in {timer['generate'] + timer['retarget'] + timer['check']:.1f} s"
         )
         # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
         # editing round (more codebook steps toward the targets), not more.
         settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
         if (report.passed and settled) or index == config.rounds:
             break
+        mark = time.perf_counter()
         extra = extra + feedback_terms(
             blocking,
             motion.joints,
@@ -324,6 +344,7 @@ def plan(
             config=config.feedback,
             history=history,
         )
+        timing.add("feedback_rounds", time.perf_counter() - mark)
     best = min(
         rounds,
         key=lambda r: (
@@ -333,6 +354,7 @@ def plan(
             max(r.constraint_errors_m, default=0.0),
         ),
     ).index
+    timing.stop()
     return PlanResult(
         config=config,
         scene=scene,
@@ -345,6 +367,7 @@ def plan(
         seconds=time.perf_counter() - start,
         clip=clip,
         reconstructed=editor.tokens_only() if editor is not None else None,
+        timing=timing,
     )
 
 
@@ -356,10 +379,11 @@ def _generate(
     terms: list[LossTerm],
     transform: HumanToWorld,
     editing: EditingConfig,
-) -> tuple[Motion, list[float], dict[str, Any], torch.Tensor]:
+) -> tuple[Motion, list[float], dict[str, Any], torch.Tensor, dict[str, float]]:
     """Round 0: tokens by masked decoding (control model + logits editing), then codebook editing.
 
-    Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim)).
+    Returns (motion, constraint errors (m), editing record, edited latent (1, N, code_dim), wall seconds
+    per stage: text, decoding, logits_editing, codebook_editing, foot_contact).
     """
     out = generate_controlled(
         model,
@@ -372,18 +396,25 @@ def _generate(
         transform=transform,
         progress=False,
     )
+    phases = dict(out.records[0].phases)
+    mark = time.perf_counter()
     ids = out.ids[0].to(model.device)
     with torch.no_grad():
         latent = model.tokenizer.ids_to_latent(ids.reshape(1, ids.shape[0], -1))
     edited = edit_motion(
         model, latent, out.frames[0], spec, transform, terms, editing, text, metadata=out.motion.metadata
     )
+    phases["decoding"] = (
+        phases.get("decoding", 0.0) + time.perf_counter() - mark - sum(edited.seconds.values())
+    )
+    for stage, seconds in edited.seconds.items():
+        phases[stage] = phases.get(stage, 0.0) + seconds
     record = {
         "logits_steps": out.records[0].logits_steps,
         "control_model": out.records[0].control_model,
         **edited.record,
     }
-    return edited.motion, edited.errors, record, edited.latent
+    return edited.motion, edited.errors, record, edited.latent, phases
 
 
 def _timeline(

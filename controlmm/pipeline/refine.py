@@ -9,7 +9,8 @@ keeps what earlier rounds fixed, and costs a codebook-editing run instead of a w
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ class EditedMotion:
     motion: Motion
     errors: list[float]  # metres, one per constraint of the spec (spec order)
     record: dict[str, Any]
+    seconds: dict[str, float] = field(default_factory=dict)  # codebook_editing, foot_contact, decoding
 
 
 def control_targets(
@@ -67,6 +69,7 @@ def edit_motion(
         loss_tolerance=config.loss_tolerance,
     )
     latent, edit = edit_latent(model, latent, frames, objective, config)
+    started = time.perf_counter()
     joints, features = decode_latent(model, latent, frames)
     errors: list[float] = []
     extras: dict[str, np.ndarray] = {}
@@ -95,4 +98,5 @@ def edit_motion(
         metadata=dict(metadata or {}),
         extras=extras,
     )
-    return EditedMotion(latent=latent, motion=motion, errors=errors, record=record)
+    seconds = {**edit.get("seconds", {}), "decoding": time.perf_counter() - started}
+    return EditedMotion(latent=latent, motion=motion, errors=errors, record=record, seconds=seconds)

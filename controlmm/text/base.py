@@ -58,12 +58,17 @@ def check_texts(texts: Sequence[str]) -> list[str]:
 
 
 def offline() -> None:
-    """Forbid Hugging Face downloads in this process and quieten its progress bars."""
+    """Forbid Hugging Face downloads in this process (environment only: nothing is imported)."""
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+
+
+def quiet_transformers() -> None:
+    """Quieten ``transformers``' warnings and progress bars; call after importing it (an encoder
+    loading its weights), never before: importing it costs about a second."""
     try:
-        from transformers.utils import logging as hf_logging  # heavy (about 1 s): only when an encoder loads
+        from transformers.utils import logging as hf_logging  # already imported by the caller
 
         hf_logging.set_verbosity_error()
         hf_logging.disable_progress_bar()

@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 
 from controlmm.errors import ControlMMError
-from controlmm.text.base import check_texts, offline
+from controlmm.text.base import check_texts, offline, quiet_transformers
 from controlmm.text.config import CLIP_MODEL_ID
 from controlmm.text.truncation import warn_truncated
 
@@ -79,6 +79,7 @@ class CLIPTextEncoder:
         try:
             from transformers import AutoTokenizer, CLIPModel  # heavy: only when CLIP is used
 
+            quiet_transformers()
             model = CLIPModel.from_pretrained(str(path) if path.exists() else source, local_files_only=True)
             self.tokenizer = AutoTokenizer.from_pretrained(
                 str(path) if path.exists() else source, local_files_only=True

@@ -37,14 +37,16 @@ import hashlib
 import math
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-import trimesh
-from scipy.spatial import cKDTree
 
 from scenes.sdf.topology import edge_neighbour_table, pseudonormals, ring_table
 from scenes.sdf.triangles import closest_point_on_triangle, triangle_data, triangle_sq_distance
+
+if TYPE_CHECKING:
+    import trimesh
 
 Tensor = torch.Tensor
 
@@ -99,6 +101,8 @@ def closed_mesh(
     watertight with consistent winding (no inside exists) or ``convex_hull`` is asked, the
     convex hull is returned instead.
     """
+    import trimesh  # heavy (about 1 s with networkx): only scenes with meshes or height fields need it
+
     mesh = trimesh.Trimesh(
         np.asarray(vertices, dtype=np.float64),
         np.asarray(faces, dtype=np.int64),
@@ -258,6 +262,8 @@ def _build_grid(
 ) -> _Grid:
     """Nested grids and the nearest triangle of their nodes (see the module docstring); ``ring``
     from :func:`scenes.sdf.topology.ring_table`."""
+    from scipy.spatial import cKDTree  # with trimesh: only scenes with meshes build these grids
+
     lo, hi = triangles.reshape(-1, 3).min(0), triangles.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
     half = (hi - lo) / 2 + pad

@@ -163,6 +163,18 @@ class SceneSDF:
                 return geom.mesh
         raise ControlMMError(f"geom {geom_id} is not a mesh or height-field obstacle of this SDF")
 
+    @property
+    def has_costly_geoms(self) -> bool:
+        """Whether some obstacle is a mesh, height field or ellipsoid (the kinds evaluated
+        iteratively, at several microseconds per point; the others are closed forms)."""
+        return any(self._slices[k].stop > self._slices[k].start for k in (ELLIPSOID, MESH))
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(2, 3) world box (min, max corners, m) holding the obstacles (every key pose of moving
+        ones), the start pose and a 1 m margin: where the scene's motions happen."""
+        return self._extent.copy()
+
     def __call__(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Scene SDF (..., N) of world points (..., N, 3) at frame times ``t`` (see module doc)."""
         points = check_points(points)
@@ -170,14 +182,29 @@ class SceneSDF:
         times = None if t is None else check_times(t, lead, points)
         if not self._geoms:
             return torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
-        c = self._tensors(points)
         grad = points.requires_grad and torch.is_grad_enabled()
+        value, gradient = self.value_and_gradient(points.detach(), times, grad)
+        if gradient is None:
+            return value
+        return kernels.WithGradient.apply(points, value, gradient)
+
+    def value_and_gradient(
+        self, points: Tensor, times: Tensor | None, gradient: bool
+    ) -> tuple[Tensor, Tensor | None]:
+        """The SDF (..., N) of checked world points (..., N, 3) at checked frame times (None or
+        broadcast to ``points.shape[:-2]``) and, when ``gradient``, its exact gradient (..., N, 3);
+        no autograd (what :meth:`__call__` attaches)."""
+        lead, n = points.shape[:-2], points.shape[-2]
+        if not self._geoms:
+            value = torch.full((*lead, n), float("inf"), dtype=points.dtype, device=points.device)
+            return value, torch.zeros_like(points) if gradient else None
+        c = self._tensors(points)
         with torch.no_grad():
-            p, poses, frames = self._posed(points.detach(), times, c)  # p (L, N', 3)
+            p, poses, frames = self._posed(points, times, c)  # p (L, N', 3)
             local = kernels.to_local(p, frames)  # (L, 3, G, N')
-            value, winner, closest = self._nearest(local, c, need_winner=grad)
+            value, winner, closest = self._nearest(local, c, need_winner=gradient)
             if winner is None:  # no gradient wanted (need_winner False)
-                return value.reshape(*lead, n)
+                return value.reshape(*lead, n), None
             if poses is None:
                 table = c["table"]
             else:
@@ -191,8 +218,8 @@ class SceneSDF:
                     ],
                     dim=1,
                 ).T.contiguous()
-            gradient = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
-        return kernels.WithGradient.apply(points, value.reshape(*lead, n), gradient.reshape(points.shape))
+            grad = self._winner_gradient(local, value, winner, table, closest, c)  # (L, N', 3)
+        return value.reshape(*lead, n), grad.reshape(points.shape)
 
     def per_geom(self, points: Tensor, t: Tensor | np.ndarray | float | None = None) -> Tensor:
         """Signed distance to each obstacle geom, (..., N, G), columns in ``geom_ids`` order, every

@@ -8,8 +8,12 @@ share a vertex with it (:func:`ring_table`, for the nearest-triangle search of
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:  # trimesh (about 1 s to import) loads only with a mesh scene: closed_mesh imports it
+    import trimesh
 
 FAN_MAX = 16
 """Triangles kept per vertex fan in the neighbour rings (see :func:`ring_table`)."""

@@ -292,3 +292,28 @@ def test_bad_control_input_is_one_line(model, spec):
     ]:
         with pytest.raises(ControlMMError, match=needle.replace("(", r"\(").replace(")", r"\)")):
             generate_controlled(model, "a person squats", **kwargs)
+
+
+def test_editors_keep_only_admissible_states(model, reference):
+    """A term that pulls the pelvis 10 cm sideways while only states within 2 cm of the start may be
+    kept (the foot-contact run's rule: never trade a constraint away): both optimisers return the best
+    admissible state, and without the rule they go past it."""
+    latent, joints = reference
+    decode = _decode(model, 64)
+    start = joints[:, :, 0, 0].clone()  # (1, 64) the pelvis x of the start (m)
+    pull = LossTerm("pull", lambda j: (j[:, :, 0, 0] - (start + 0.10)).square().mean(-1))
+
+    def moved(j: torch.Tensor) -> torch.Tensor:  # (B,) the pelvis' largest x displacement (m)
+        return (j[:, :, 0, 0] - start).abs().amax(-1)
+
+    def admissible(j: torch.Tensor) -> torch.Tensor:
+        return moved(j) <= 0.02
+
+    for optimizer in ("lbfgs", "adam"):
+        config = EditingConfig(codebook_steps=30, codebook_optimizer=optimizer)
+        free = codebook_editing(latent, decode, Objective(terms=[pull]), config)
+        held = codebook_editing(latent, decode, Objective(terms=[pull]), config, admissible=admissible)
+        with torch.no_grad():
+            assert float(moved(decode(free.param))[0]) > 0.02
+            kept = float(moved(decode(held.param))[0])
+        assert 0.0 < kept <= 0.02

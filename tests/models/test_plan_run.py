@@ -92,6 +92,31 @@ def test_outputs_are_complete_and_consistent(strict_plan, tmp_path):
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no temporary directory left
 
 
+def test_stage_timing_adds_up_in_the_report(strict_plan, tmp_path):
+    """``report.json``'s ``timing``: every stage that ran, in order, summing to the total with ``other``."""
+    write_plan(strict_plan, tmp_path / "plan", render=False, progress=False)
+    timing = json.loads((tmp_path / "plan" / "report.json").read_text())["timing"]
+    stages = timing["stages_s"]
+    ran = [
+        "startup",
+        "text",
+        "decoding",
+        "codebook_editing",
+        "retarget",
+        "checks",
+        "feedback_rounds",
+        "outputs",
+    ]
+    assert [s for s in stages if s in ran] == ran  # the fast preset: no logits editing
+    assert all(v >= 0 for v in stages.values()) and stages["decoding"] > 0 and stages["checks"] > 0
+    assert sum(stages.values()) == pytest.approx(timing["total_s"], abs=0.01)
+    assert timing["total_s"] >= strict_plan.seconds  # the plan, then writing its files
+    r1 = strict_plan.rounds[1].seconds
+    assert stages["feedback_rounds"] >= r1["generate"] + r1["retarget"] + r1["check"]
+    line = strict_plan.timing.summary()
+    assert line.startswith("timing: start-up ") and "feedback rounds" in line and "total" in line
+
+
 def test_same_seed_same_plan(strict_plan, tiny_model_dir):
     again = plan(
         PlanConfig(scene="table", rounds=0, preset="fast", model=str(tiny_model_dir), seed=3, check=STRICT),
