@@ -65,7 +65,7 @@ GMR_RECORDED = {
     "fit_cm": 5.3,
     "jerk": 2631.0,
     "fps": 118.0,
-    "note": "recorded (reference-peers): feet hover 2.5-11 cm in 177 of 254 frames; validate fails",
+    "note": "recorded earlier (GMR in its own environment): feet hover 2.5-11 cm in 177 of 254 frames",
 }
 
 
