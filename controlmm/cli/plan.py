@@ -9,13 +9,13 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_dir
+from controlmm.cli import STARTED
 from controlmm.cli.args import add_force, add_motion_input, add_robot, add_threads, motion_options, number
 from controlmm.cli.gl import import_mujoco
 
 if TYPE_CHECKING:
     from controlmm.pipeline import PlanResult
 
-_LOADED = time.perf_counter()  # start-up is timed from here where the process's own start is unknown
 
 HELP = """Plan a humanoid robot motion in a MuJoCo scene, check it in simulation and export it.
 
@@ -168,7 +168,6 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from controlmm.pipeline import DEFAULT_SCENE, PlanConfig, plan, write_plan
-    from controlmm.pipeline.timing import process_age
 
     torch.set_num_threads(args.threads)
     config = PlanConfig(
@@ -194,8 +193,7 @@ def run(args: argparse.Namespace) -> int:
     )
     config = replace(config, check=replace(config.check, physics=args.physics))
     progress = not args.no_progress
-    age = process_age()
-    before = age if age is not None else time.perf_counter() - _LOADED  # the command's start-up
+    before = time.perf_counter() - STARTED  # the command's start-up
     result = plan(config, progress=progress)
     result.timing.start_earlier(before)
     backend = write_plan(result, args.out, progress=progress, force=args.force)

@@ -20,7 +20,8 @@ Stages, in order (:data:`STAGES`; a stage that did not run is left out):
 ``other``                 what the stages above do not cover (bookkeeping between them)
 ========================  ================================================================================
 
-``total`` is the wall time from the start (of the process for the CLI, of :func:`plan` in Python) to
+``total`` is the wall time from the start (of the command for the CLI: its first import of
+:mod:`controlmm.cli`; of :func:`plan` in Python) to
 the end of the last stage; the stages and ``other`` add up to it.
 """
 
@@ -31,7 +32,6 @@ import time
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from pathlib import Path
 
 STAGES: tuple[str, ...] = (
     "startup",
@@ -55,18 +55,6 @@ LABELS: dict[str, str] = {
     "foot_contact": "foot contact",
     "feedback_rounds": "feedback rounds",
 }
-
-
-def process_age() -> float | None:
-    """Seconds since this process started (Linux ``/proc``), or None where that is not known."""
-    try:
-        stat = Path("/proc/self/stat").read_text()
-        uptime = float(Path("/proc/uptime").read_text().split()[0])
-        ticks = os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError):
-        return None
-    start = float(stat.rsplit(")", 1)[1].split()[19]) / ticks  # field 22: starttime, after "pid (comm)"
-    return max(0.0, uptime - start)
 
 
 @dataclass
@@ -98,7 +86,7 @@ class StageTimes:
             self.add(name, time.perf_counter() - start)
 
     def start_earlier(self, seconds: float) -> None:
-        """Count ``seconds`` before ``origin`` as start-up (the process's time before the plan)."""
+        """Count ``seconds`` before ``origin`` as start-up (the command's time before the plan)."""
         self.origin -= seconds
         self.add("startup", seconds)
 
