@@ -22,6 +22,9 @@ INPUT_FILES = {"retarget": ("motion", "motion file"), "validate": ("trajectory",
 
 PATHS = ("scene", "robot", "model", "timeline")
 
+WORLD_CACHE = 8
+"""Scenes (with their check worlds) a worker keeps (the most recently used)."""
+
 
 def plan_models(jobs: Sequence[Job]) -> list[str | None]:
     """The model directories the plan jobs use (None: the embedded default), as workers receive them."""
@@ -33,7 +36,7 @@ def plan_models(jobs: Sequence[Job]) -> list[str | None]:
     return sorted(models, key=str)
 
 
-def check_worlds(jobs: Sequence[Job], most: int = 8) -> list[tuple[str, str]]:
+def check_worlds(jobs: Sequence[Job], most: int = WORLD_CACHE) -> list[tuple[str, str]]:
     """The (scene, robot) pairs the retarget and validate jobs check in, as the workers' tasks name
     them (files as absolute paths): at most ``most`` (the worlds a worker keeps), the most used first."""
     counts: Counter[tuple[str, str]] = Counter()

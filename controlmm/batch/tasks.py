@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from controlmm.batch.payload import WORLD_CACHE
 from controlmm.batch.variations import jitter_scene
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
@@ -34,9 +35,6 @@ HUMAN_CSV_COLUMNS = 22 * 3
 
 PLAN_OPTIONS = ("text", "control", "timeline", "robot", "seconds", "seed", "rounds", "preset", "model", "fps")
 """Arguments of a plan job passed to :class:`controlmm.pipeline.PlanConfig` as they are."""
-
-WORLD_CACHE = 8
-"""Scenes (with their check worlds) a worker keeps (the most recently used)."""
 
 
 @dataclass
