@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+WALL_PLANE_XML = """      <geom name="wall_plane" type="plane" size="1 1 0.1" pos="5 0 0" euler="0 90 0"/>
+"""
+"""The one plane among the obstacles of :data:`PRIMITIVES_XML` (a vertical wall)."""
+
 PRIMITIVES_XML = """<mujoco>
   <worldbody>
     <geom name="floor" type="plane" size="0 0 0.05"/>

@@ -15,20 +15,9 @@ from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from scenes import body_obstacle_loss, load_scene, obstacle_loss
 from scenes.sdf.grid import DistanceGrid, GridSDF, banded_sdf, distance_grid
+from tests.scene_helpers import PRIMITIVES_XML, WALL_PLANE_XML
 
-PRIMITIVES = """<mujoco>
-  <worldbody>
-    <geom name="floor" type="plane" size="0 0 0.05"/>
-    <body name="obstacles" pos="0.1 0.2 0.3" euler="10 20 30">
-      <geom name="sphere" type="sphere" size="0.3"/>
-      <geom name="capsule" type="capsule" size="0.2 0.4" pos="1 0 0" euler="0 40 0"/>
-      <geom name="cylinder" type="cylinder" size="0.25 0.5" pos="2 0 0" euler="30 0 10"/>
-      <geom name="box" type="box" size="0.3 0.2 0.5" pos="3 0 0" euler="0 0 25"/>
-      <geom name="ellipsoid" type="ellipsoid" size="0.5 0.2 0.3" pos="4 0 0" euler="15 -20 5"/>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+PRIMITIVES = PRIMITIVES_XML.replace(WALL_PLANE_XML, "")  # the five solids, without the wall plane
 
 
 @pytest.fixture(scope="module")
