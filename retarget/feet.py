@@ -124,7 +124,8 @@ def lift_swing_feet(
     millimetres lower, and a foot that lands or takes off may still be moving horizontally
     while it is within a centimetre of the floor. Per output frame a foot needs its
     clearance (where that asks for more than standing height) and, wherever its slowest
-    sole point moves faster than :data:`SKIM_SPEED`, :data:`SKIM_HEIGHT`. Where it is more
+    sole point below :data:`SKIM_HEIGHT` (in two frames) moves faster than :data:`SKIM_SPEED`,
+    :data:`SKIM_HEIGHT`. Where it is more
     than :data:`SWING_TOLERANCE` below that, the rise is max-filtered and smoothed over
     ~0.2 s (never below the need) and the leg's joints translate the foot straight up by it,
     its orientation and horizontal place unchanged (one damped least-squares step per frame,
@@ -149,11 +150,13 @@ def lift_swing_feet(
         lo, hi = robot.lower[leg], robot.upper[leg]
         h, _ = _lowest(poses, f)
         pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
-        step = (
-            np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps
-            if t_len > 1
-            else np.zeros(0)
-        )
+        # Like the simulation check, a foot moves when every sole point low in both frames
+        # does: a point high above the floor that stays put (a heel strike's lifted toe) does
+        # not make the landing heel slow.
+        low = pts[..., 2] - f.radius < SKIM_HEIGHT  # (T, P)
+        step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2) * fps  # (T-1, P)
+        step = np.where(low[1:] & low[:-1], step, np.inf).min(axis=1, initial=np.inf)
+        step = np.where(np.isfinite(step), step, 0.0)
         moving = np.zeros(t_len, dtype=bool)
         moving[1:] |= step > SKIM_SPEED
         moving[:-1] |= step > SKIM_SPEED

@@ -13,6 +13,8 @@ import mujoco
 import numpy as np
 import pytest
 
+import scenes
+import sim
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget import RobotTrajectory, retarget_motion, robot_mjcf, robot_scale
@@ -325,3 +327,16 @@ def test_transform_places_the_robot(motion):
     )
     assert np.linalg.norm(moved.qpos[0, :2] - human[0, 0, :2]) < 0.06
     assert moved.transform.yaw == pytest.approx(np.pi / 2)
+
+
+@pytest.mark.parametrize("start", [0, 20, 40])
+def test_landing_feet_do_not_skim_the_floor(sample_joints, start):
+    """6 s windows of the clip (the batch benchmark's jobs) at 50 fps: the simulation check
+    finds no stance foot sliding. The window from frame 40 lands its right heel while the
+    lifted toe hangs still (the slowest sole point is high): the landing heel, 4 mm above the
+    floor and moving 0.29 m/s, must be lifted until it slows down."""
+    joints = sample_joints[start : start + 120].astype(float)
+    traj = retarget_motion(Motion(joints=joints, fps=20), "g1", fps=50.0, metrics=False)
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, 50.0)
+    slides = [f for f in report.failures if f.kind == "foot_sliding"]
+    assert not slides, slides
