@@ -1,6 +1,7 @@
 """The optimisation loop shared by logits editing and codebook editing.
 
-A per-sample tensor ``param`` (B, ...) is optimised with a fresh AdamW against an
+A per-sample tensor ``param`` (B, ...) is optimised with a fresh AdamW (or L-BFGS;
+:mod:`controlmm.editing.optimizers`) against an
 :class:`~controlmm.editing.objective.Objective` on the joints ``forward(param)`` decodes. Samples stop
 one by one: once a sample is done (every constraint within tolerance, other terms ~0) its row is
 frozen at that state (restored after every later optimiser step) and it no longer counts in the
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import torch
 
 from controlmm.editing.objective import Objective
+from controlmm.editing.optimizers import LBFGS, AdamW
 from controlmm.editing.presets import EditingConfig
 
 
@@ -58,7 +60,7 @@ def optimize(
     """
     b = param.shape[0]
     x = param.detach().clone().requires_grad_(True)
-    optimizer = torch.optim.AdamW([x], lr=config.lr, betas=config.betas, weight_decay=config.weight_decay)
+    optimizer = AdamW(x, lr=config.lr, betas=config.betas, weight_decay=config.weight_decay)
     kept = x.detach().clone()
     kept_loss = torch.full((b,), float("inf"), device=param.device)
     kept_err = torch.zeros(b, device=param.device)
@@ -89,7 +91,7 @@ def optimize(
             active = active & (stale < patience)
         if step == steps or not bool(active.any()):
             break
-        optimizer.zero_grad(set_to_none=True)
+        optimizer.zero_grad()
         (loss * active).sum().backward()
         optimizer.step()
         used = used + active.long()
@@ -149,20 +151,11 @@ def optimize_lbfgs(
         used=torch.zeros(b, dtype=torch.long, device=device),
     )
 
-    def new_optimizer() -> torch.optim.LBFGS:
-        return torch.optim.LBFGS(
-            [x],
-            lr=1.0,
-            max_iter=chunk,
-            max_eval=chunk * 2,
-            history_size=50,
-            tolerance_grad=0.0,
-            tolerance_change=0.0,
-            line_search_fn="strong_wolfe",
-        )
+    def new_optimizer() -> LBFGS:
+        return LBFGS(x, lr=1.0, max_iter=chunk, max_eval=chunk * 2, history_size=50)
 
     def closure() -> torch.Tensor:
-        optimizer.zero_grad(set_to_none=True)
+        x.grad = None
         joints = forward(x)
         loss, finished, max_err = objective.evaluate(joints)
         value = loss.detach()
@@ -204,7 +197,7 @@ def optimize_lbfgs(
         if state.count > evaluations or not bool(active.any()):
             break
         before, best_before = state.count, state.kept_loss.clone()
-        optimizer.param_groups[0]["max_eval"] = max(1, min(chunk * 2, evaluations + 1 - state.count))
+        optimizer.max_eval = max(1, min(chunk * 2, evaluations + 1 - state.count))
         optimizer.step(closure)
         if state.count == before:  # converged to machine precision
             break
