@@ -196,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     before = time.perf_counter() - STARTED  # the command's start-up
     result = plan(config, progress=progress)
     result.timing.start_earlier(before)
-    backend = write_plan(result, args.out, progress=progress, force=args.force)
+    backend = write_plan(result, args.out, progress=progress, force=args.force, parallel=True)
     print(result.report.summary())
     moved = dict(result.displacements()).get(result.best)
     if moved is not None:

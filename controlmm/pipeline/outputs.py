@@ -39,10 +39,15 @@ Writing them is the ``outputs`` stage of ``result.timing`` (``report.json``'s ``
 from __future__ import annotations
 
 import json
+import multiprocessing
+import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from controlmm.atomic import atomic_dir, write_text
+from controlmm.errors import ControlMMError
 from controlmm.motion.io import save_motion
 from controlmm.motion.plot import plot_motion
 from controlmm.pipeline.clip import plot_displacement
@@ -53,6 +58,72 @@ from retarget.render import render_trajectory
 from sim import plot_report, save_certificate
 
 PLAN_OUTPUT = "plan"
+
+
+def plot_jobs(result: PlanResult, plots: Path) -> list[Callable[[], None]]:
+    """The plots of ``plots/``, one call each (slowest first: the top view draws the scene)."""
+    title = f"{result.scene.name}: {result.text[:80]}"
+    jobs: list[Callable[[], None]] = [
+        partial(plot_top_view, result, plots / "top_view.png"),
+        partial(plot_report, result.report, plots / "report.png", title=title),
+        partial(plot_clearance, result, plots / "clearance.png"),
+        partial(plot_motion, result.motion, plots / "motion.png"),
+    ]
+    if result.clip is not None:
+        jobs.append(
+            partial(
+                plot_displacement,
+                result.displacements(),
+                result.best,
+                str(plots / "displacement.png"),
+                result.reconstructed,
+            )
+        )
+    return jobs
+
+
+def can_fork() -> bool:
+    """Whether :func:`draw_in_child` can fork this process (Linux; elsewhere fork is unsafe)."""
+    return sys.platform == "linux" and "fork" in multiprocessing.get_all_start_methods()
+
+
+def draw_in_child(jobs: list[Callable[[], None]]) -> Callable[[bool], None]:
+    """Run ``jobs`` in a forked child (it shares what this process has loaded: nothing to import
+    or pickle); returns ``wait(cancel)``: wait for it and raise its error as one line, or, with
+    ``cancel`` (this process failed first), stop it."""
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+
+    def target() -> None:
+        try:
+            for job in jobs:
+                job()
+            send.send("")
+        except BaseException as error:  # reported by the parent, one line, no traceback
+            send.send(" ".join(f"{type(error).__name__}: {error}".split()))
+
+    child = context.Process(target=target, daemon=True)
+    child.start()
+    send.close()
+
+    def wait(cancel: bool = False) -> None:
+        if cancel:
+            child.terminate()
+            child.join()
+            receive.close()
+            return
+        try:
+            message = receive.recv()
+        except EOFError:  # died without a word (killed, out of memory)
+            message = "the plotting process ended without writing its plots"
+        child.join()
+        receive.close()
+        if message or child.exitcode != 0:
+            raise ControlMMError(f"drawing the plots failed: {message or f'exit code {child.exitcode}'}")
+
+    return wait
+
+
 """The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
 
 
@@ -63,11 +134,16 @@ def write_plan(
     render: bool | None = None,
     progress: bool = True,
     force: bool = False,
+    parallel: bool = False,
 ) -> str | None:
     """Write every output of ``result`` into the directory ``out`` (replaced atomically).
 
     ``out`` may be new, empty or a previous plan output; anything else needs ``force``
     (:func:`controlmm.atomic.check_output_dir`).
+
+    ``parallel``: without a video, draw half of the plots in a forked process beside the other
+    half, on Linux; for a single-threaded caller such as the CLI (forking a process that runs
+    other threads, a server's, may copy a lock another thread holds).
 
     Returns the render backend used (``"mujoco"`` or ``"stick"``), or None without a video.
     """
@@ -83,18 +159,23 @@ def write_plan(
         write_text(tmp / "plan.json", json.dumps(config.to_dict(), indent=1, default=str) + "\n")
         if result.report.physics is not None:
             save_certificate(result.report.physics, tmp)
-        if config.plots:
-            plots = tmp / "plots"
-            plots.mkdir()
-            plot_top_view(result, plots / "top_view.png")
-            plot_clearance(result, plots / "clearance.png")
-            title = f"{result.scene.name}: {result.text[:80]}"
-            plot_report(result.report, plots / "report.png", title=title)
-            plot_motion(result.motion, plots / "motion.png")
-            if result.clip is not None:
-                plot_displacement(
-                    result.displacements(), result.best, str(plots / "displacement.png"), result.reconstructed
-                )
+        jobs = plot_jobs(result, tmp / "plots") if config.plots else []
+        if jobs:
+            (tmp / "plots").mkdir()
+        # Both cores: without a video, a forked child draws half of the plots (see
+        # :func:`draw_in_child`). Not beside the video: its encoder already runs in a second
+        # process, and a fork beside the renderer's GL context is not safe.
+        fork = parallel and not render and len(jobs) > 1 and can_fork()
+        child = draw_in_child(jobs[1::2]) if fork else None
+        try:
+            for job in jobs[::2] if child is not None else jobs:
+                job()
+        except BaseException:
+            if child is not None:
+                child(True)
+            raise
+        if child is not None:
+            child(False)
         if render:
             width, height = config.render_size
             backend = render_trajectory(

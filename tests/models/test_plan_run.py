@@ -7,8 +7,10 @@ import json
 import numpy as np
 import pytest
 
+from controlmm.errors import ControlMMError
 from controlmm.motion.io import load_motion
 from controlmm.pipeline import PlanConfig, plan, write_plan
+from controlmm.pipeline.outputs import draw_in_child
 from sim import CheckConfig
 
 # Any real motion needs some non-physical root force averaged over 0.5 s; a limit of 0 makes every
@@ -150,3 +152,26 @@ def test_plan_with_a_timeline(tiny_model_dir, tmp_path):
     assert result.spec is None and "right_arm 1-2 s" in result.text
     assert result.motion.num_frames == 60 and "timeline" in result.final.editing
     assert result.trajectory.qpos.shape[0] == result.report.num_frames
+
+
+def test_parallel_plots_are_the_same_files(strict_plan, tmp_path):
+    """``write_plan(parallel=True)`` (the CLI's) without a video draws half of the plots in a forked
+    process: the same plot files, byte for byte, as drawn in one process."""
+    one, two = tmp_path / "one", tmp_path / "two"
+    write_plan(strict_plan, one, render=False, progress=False)
+    write_plan(strict_plan, two, render=False, progress=False, parallel=True)
+    plots = sorted(p.name for p in (one / "plots").iterdir())
+    assert plots == sorted(p.name for p in (two / "plots").iterdir()) and len(plots) == 4
+    for name in plots:
+        assert (one / "plots" / name).read_bytes() == (two / "plots" / name).read_bytes(), name
+
+
+def test_a_failing_plot_in_the_child_is_one_line_and_nothing_is_written(strict_plan, tmp_path):
+    out = tmp_path / "plan"
+    jobs = [lambda: None, lambda: 1 / 0]
+    wait = draw_in_child(jobs)
+    with pytest.raises(
+        ControlMMError, match=r"^drawing the plots failed: ZeroDivisionError: division by zero$"
+    ):
+        wait(False)
+    assert not out.exists()
