@@ -11,7 +11,9 @@ robot's collision geoms (:class:`SelfClearance`):
 * the *arm* geoms (the bodies from below the shoulder keypoint's body down to the wrist
   keypoint's body and its descendants) are paired with every geom of the other bodies
   (trunk, legs, the other arm) except the arm's own shoulder chain and the feet (the foot
-  and ankle bodies: out of reach but for touching the toes); each pair keeps
+  and ankle bodies: out of reach but for touching the toes), and the hand (the wrist body and
+  below) with that shoulder chain where the two are apart at rest (a hand brought to its own
+  shoulder); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
@@ -179,6 +181,8 @@ def build_self_clearance(
         return out
 
     arm: dict[int, int] = {}  # body -> side (0 left, 1 right)
+    hands: dict[int, int] = {}  # the wrist body and its descendants -> side
+    shoulders: dict[int, set[int]] = {}  # side -> the shoulder body and the chain above it
     trunk: set[int] | None = None  # ancestors shared by both arms (torso, waist, pelvis)
     for side_i, side in enumerate(("left", "right")):
         if f"{side}_wrist" not in keypoint_nodes or f"{side}_shoulder" not in keypoint_nodes:
@@ -192,9 +196,11 @@ def build_self_clearance(
             arm[b] = side_i
         above = set(chain[chain.index(shoulder) + 1 :])
         trunk = above if trunk is None else trunk & above
+        shoulders[side_i] = set(chain[chain.index(shoulder) :])
         for b in range(1, m.nbody):  # the wrist body's descendants (hands)
             if wrist in ancestors(b):
                 arm[b] = side_i
+                hands[b] = side_i
     # Legs: the bodies from below the trunk down to each foot and the foot's own (toes):
     # the feet follow the human's, which may stand closer together than the robot's allow.
     leg: dict[int, int] = {}
@@ -239,6 +245,18 @@ def build_self_clearance(
                 continue  # same arm, or an arm-arm pair already listed
             first.append(i)
             second.append(j)
+    # A hand against its own shoulder (a hand brought to the shoulder, a folded arm): the
+    # shoulder chain above the upper arm, which the pairs above leave out as the arm's own.
+    # Kept only where they are apart at rest (a short arm's hand hangs next to its upper link).
+    hand_pairs: list[int] = []  # indices into first/second
+    for i, bi in enumerate(body_of):
+        if bi not in hands:
+            continue
+        for j, bj in enumerate(body_of):
+            if bj in shoulders[hands[bi]] - (trunk or set()):
+                hand_pairs.append(len(first))
+                first.append(i)
+                second.append(j)
     for i, bi in enumerate(body_of):  # left leg against right leg (crossing steps, turned-out hips)
         if leg.get(bi) != 0:
             continue
@@ -295,6 +313,7 @@ def build_self_clearance(
     # The rest pose is collision free: pairs closer than the margin there may come that close.
     margin = np.minimum(SELF_MARGIN, rest_dist[0] - REST_SLACK)
     keep = np.ones(len(first), dtype=bool)
+    keep[hand_pairs] = rest_dist[0, hand_pairs] >= SELF_MARGIN + REST_SLACK
     for k in trunk_pairs:
         margin[k] = min(margin[k], TRUNK_MARGIN)
         if (

@@ -340,3 +340,14 @@ def test_landing_feet_do_not_skim_the_floor(sample_joints, start):
     report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, 50.0)
     slides = [f for f in report.failures if f.kind == "foot_sliding"]
     assert not slides, slides
+
+
+def test_a_hand_near_its_own_shoulder_keeps_clear(sample_joints):
+    """The window from frame 19 starts with the right hand by the right shoulder: the hand keeps
+    clear of its own shoulder links (they met by 7.7 mm before the hand-shoulder pairs)."""
+    joints = sample_joints[19:139].astype(float)
+    traj = retarget_motion(Motion(joints=joints, fps=20), "g1", fps=50.0, metrics=False)
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, 50.0)
+    assert report.stats["self_collision_frames"] == 0, [
+        f for f in report.failures if f.kind == "self_collision"
+    ]
