@@ -128,8 +128,9 @@ def lift_swing_feet(
     :data:`SKIM_HEIGHT`. Where it is more
     than :data:`SWING_TOLERANCE` below that, the rise is max-filtered and smoothed over
     ~0.2 s (never below the need) and the leg's joints translate the foot straight up by it,
-    its orientation and horizontal place unchanged (one damped least-squares step per frame,
-    smoothed over time like the rise: a smooth correction adds no jerk), limits kept.
+    its orientation and horizontal place unchanged (one damped least-squares step per frame
+    without the joints it would push past their limits, smoothed over time like the rise: a
+    smooth correction adds no jerk), limits kept.
 
     Args:
         robot: the robot; root_pos (T, 3), root_rot (T, 3, 3), q (T, nj) at ``fps``.
@@ -179,12 +180,38 @@ def lift_swing_feet(
         jac = np.concatenate([jp, jr], axis=1)  # (F, 6, nl)
         goal = np.zeros((len(idx), 6))
         goal[:, 2] = rise[idx]
-        jt = np.swapaxes(jac, 1, 2)
         dq = np.zeros((t_len, len(leg)))
-        dq[idx] = np.linalg.solve(jt @ jac + 1e-6 * np.eye(len(leg)), (jt @ goal[..., None]))[..., 0]
+        dq[idx] = _limited_step(jac, goal, q[np.ix_(idx, leg)], lo, hi)
         dq = gaussian_filter1d(dq, sigma=r / 2.0, axis=0, mode="nearest")
         q[:, leg] = np.clip(q[:, leg] + dq, lo, hi)
     return q, worst
+
+
+LIMITED_ROTATION_WEIGHT = 0.05
+"""Metres per radian of a lifted foot's orientation change once a leg joint is at its limit."""
+
+
+def _limited_step(
+    jac: np.ndarray, goal: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray, passes: int = 3
+) -> np.ndarray:
+    """Damped least-squares joint step (F, n) towards ``goal`` (F, 6) through ``jac`` (F, 6, n)
+    from ``q`` (F, n) within [lo, hi]: a joint the step would push past its limit (a hip pitch
+    already at its stop) is taken out of that frame's solve and the others make up for it."""
+    free = np.ones(q.shape, dtype=bool)
+    step = np.zeros(q.shape)
+    rows = np.ones(jac.shape[:2])  # (F, 6) row weights
+    for _ in range(passes):
+        masked = jac * free[:, None, :] * rows[..., None]
+        jt = np.swapaxes(masked, 1, 2)
+        target = (goal * rows)[..., None]
+        step = np.linalg.solve(jt @ masked + 1e-6 * np.eye(q.shape[1]), jt @ target)[..., 0]
+        past = ((q + step < lo) | (q + step > hi)) & free
+        if not past.any():
+            break
+        free &= ~past
+        # Short of a joint, the rise comes first: the foot's orientation gives way (0.05 m/rad).
+        rows[past.any(axis=1), 3:] = LIMITED_ROTATION_WEIGHT
+    return step
 
 
 def _lowest(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
