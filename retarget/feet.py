@@ -198,7 +198,7 @@ def _limited_step(
     from ``q`` (F, n) within [lo, hi]: a joint the step would push past its limit (a hip pitch
     already at its stop) is taken out of that frame's solve and the others make up for it."""
     free = np.ones(q.shape, dtype=bool)
-    step = np.zeros(q.shape)
+    step: np.ndarray = np.zeros(q.shape)
     rows = np.ones(jac.shape[:2])  # (F, 6) row weights
     for _ in range(passes):
         masked = jac * free[:, None, :] * rows[..., None]

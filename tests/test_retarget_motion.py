@@ -219,19 +219,7 @@ def _foot_geoms(model, body_name):
     ]
 
 
-@pytest.mark.parametrize(
-    "robot",
-    [
-        "g1",
-        pytest.param(
-            "h1",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="known limitation: one H1 touchdown skids 15 mm in its first contact frame",
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("robot", ["g1", "h1"])
 def test_stance_feet_stay_in_place(exported, robot):
     """The contact does not slip: the feet roll (heel strike, toe-off), so the ankle body may
     move over a planted toe; what must stay put is the collision geom that is on the floor."""
