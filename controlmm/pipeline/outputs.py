@@ -58,6 +58,7 @@ from retarget.render import render_trajectory
 from sim import plot_report, save_certificate
 
 PLAN_OUTPUT = "plan"
+"""The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
 
 
 def plot_jobs(result: PlanResult, plots: Path) -> list[Callable[[], None]]:
@@ -122,9 +123,6 @@ def draw_in_child(jobs: list[Callable[[], None]]) -> Callable[[bool], None]:
             raise ControlMMError(f"drawing the plots failed: {message or f'exit code {child.exitcode}'}")
 
     return wait
-
-
-"""The output kind of a plan directory (:data:`controlmm.atomic.OUTPUT_MARKER`)."""
 
 
 def write_plan(
