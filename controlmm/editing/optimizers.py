@@ -293,7 +293,9 @@ class LBFGS:
                 x.copy_(start)
                 return value, grad
 
-            loss, g, t, used = strong_wolfe(evaluate, t, d, float(loss), g, gtd, max_ls=self.max_eval - evals)
+            loss, g, t, used = strong_wolfe(
+                evaluate, t, d, float(loss), g, gtd, max_ls=max(0, self.max_eval - evals)
+            )
             x.add_(d, alpha=float(t))
             h.step_size = t
             evals += used
