@@ -84,7 +84,16 @@ class HumanToWorld:
     def to_world(self, points: torch.Tensor) -> torch.Tensor: ...
 
     def to_world(self, points: Array) -> Array:
-        """Human points (..., 3) -> world points (..., 3)."""
+        """Human points (..., 3) -> world points (..., 3).
+
+        Tensors (the editing losses call this at every step) take one fused multiply-add,
+        p @ (s R)^T + t."""
+        torch = sys.modules.get("torch")
+        if torch is not None and isinstance(points, torch.Tensor):
+            like = {"dtype": points.dtype, "device": points.device}
+            matrix = torch.as_tensor((self.scale * self.rotation).T, **like)
+            trans = torch.as_tensor(np.asarray(self.translation), **like)
+            return torch.addmm(trans, points.reshape(-1, 3), matrix).reshape(points.shape)
         rot, trans = self._consts(points)
         return self.scale * points @ rot.T + trans
 

@@ -121,26 +121,6 @@ def _check_distance(name: str, value: float) -> float:
     return float(value)
 
 
-class _ToWorld:
-    """``transform.to_world`` on tensors with its constants built once per dtype and device:
-    p_world = p_human @ (s R)^T + t."""
-
-    def __init__(self, transform: HumanToWorld) -> None:
-        self.matrix = (transform.scale * transform.rotation).T  # (3, 3), applied on the right
-        self.translation = np.asarray(transform.translation, dtype=np.float64)
-        self._consts: dict[tuple[torch.dtype, torch.device], tuple[Tensor, Tensor]] = {}
-
-    def __call__(self, points: Tensor) -> Tensor:
-        key = (points.dtype, points.device)
-        if key not in self._consts:
-            self._consts[key] = (
-                torch.as_tensor(self.matrix, dtype=points.dtype, device=points.device),
-                torch.as_tensor(self.translation, dtype=points.dtype, device=points.device),
-            )
-        matrix, translation = self._consts[key]
-        return torch.addmm(translation, points.reshape(-1, 3), matrix).reshape(points.shape)
-
-
 def _sdf_at(sdf: SceneSDF | GridSDF, world: Tensor, frames: Tensor, fps: float, time_offset: float) -> Tensor:
     """SDF (B, F, P) of world points (B, F, P, 3) at the given frames."""
     times = frames.to(world.dtype) / fps + time_offset
@@ -170,7 +150,6 @@ def obstacle_loss(
     """
     d = _check_distance("safe_distance", safe_distance)
     ids = _joint_ids(joints)
-    to_world = _ToWorld(transform)
     field = banded_sdf(sdf, d) if isinstance(sdf, SceneSDF) else sdf  # exact within d (module doc)
 
     def fn(motion: Tensor) -> Tensor:
@@ -178,7 +157,7 @@ def obstacle_loss(
         f = _frames(frames, motion.shape[1], motion.device)
         if len(f) == 0:
             return motion.new_zeros(motion.shape[0])
-        world = to_world(motion[:, f][:, :, ids])
+        world = transform.to_world(motion[:, f][:, :, ids])
         return torch.relu(d - _sdf_at(field, world, f, fps, time_offset)).mean(dim=(1, 2))
 
     return LossTerm(name, fn, weight)
@@ -204,7 +183,6 @@ def body_obstacle_loss(
     d = _check_distance("safe_distance", safe_distance)
     weights_np, radii_np = body_points(bones, spacing)
     cache: dict[tuple[torch.dtype, torch.device], tuple[Tensor, Tensor]] = {}
-    to_world = _ToWorld(transform)
     reach = float(radii_np.max(initial=0.0)) * transform.scale + d  # the largest clearance
     field = banded_sdf(sdf, reach) if isinstance(sdf, SceneSDF) else sdf
 
@@ -221,7 +199,7 @@ def body_obstacle_loss(
         if len(f) == 0:
             return motion.new_zeros(motion.shape[0])
         # the weights of a point sum to 1, so the (affine) world transform goes first, on 22 joints
-        pts = torch.einsum("pj,bfjc->bfpc", w, to_world(motion[:, f]))
+        pts = torch.einsum("pj,bfjc->bfpc", w, transform.to_world(motion[:, f]))
         return torch.relu(clearance - _sdf_at(field, pts, f, fps, time_offset)).mean(dim=(1, 2))
 
     return LossTerm(name, fn, weight)
@@ -242,14 +220,13 @@ def floor_loss(
     """
     floor = _check_distance("floor_height", floor_height) + _check_distance("clearance", clearance)
     ids = _joint_ids(joints)
-    to_world = _ToWorld(transform)
 
     def fn(motion: Tensor) -> Tensor:
         _check_joints(motion)
         f = _frames(frames, motion.shape[1], motion.device)
         if len(f) == 0:
             return motion.new_zeros(motion.shape[0])
-        z = to_world(motion[:, f][:, :, ids])[..., 2]
+        z = transform.to_world(motion[:, f][:, :, ids])[..., 2]
         return torch.relu(floor - z).mean(dim=(1, 2))
 
     return LossTerm(name, fn, weight)

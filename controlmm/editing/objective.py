@@ -144,9 +144,9 @@ class Objective:
         of ||(x_{k+s} - x_k) - (y_{k+s} - y_k)||^2 / 3 (x the joints, y the targets; per coordinate like
         L_ctrl). Zero without pairs."""
         targets, _ = self._control()
+        y = targets.to(joints)
         total = joints.new_zeros(joints.shape[0])
         for b, first, second, j, per_sample in self._keyframe_pairs(joints.shape[1]):
-            y = targets.to(joints)
             d = (joints[b, second, j] - joints[b, first, j]) - (y[b, second, j] - y[b, first, j])
             total = total + torch.zeros_like(total).index_add(0, b, d.square().sum(-1)) / (3 * per_sample)
         return total

@@ -29,8 +29,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 STAGES: tuple[str, ...] = (
@@ -75,15 +74,6 @@ class StageTimes:
     def add_all(self, phases: Mapping[str, float]) -> None:
         for stage, seconds in phases.items():
             self.add(stage, seconds)
-
-    @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
-        """Time the block as ``name``."""
-        start = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.add(name, time.perf_counter() - start)
 
     def start_earlier(self, seconds: float) -> None:
         """Count ``seconds`` before ``origin`` as start-up (the command's time before the plan)."""
