@@ -2,7 +2,8 @@
 
     python benchmarks/retarget_peers.py                                  # every packaged robot, ours
     python benchmarks/retarget_peers.py --corpus data/corpus-default --clips 10 \
-        --holosoma-python .venv-holosoma/bin/python --json out/peers.json
+        --holosoma-python .venv-holosoma/bin/python --gmr-python .venv-gmr/bin/python \
+        --json out/peers.json
 
 Motions: the real HumanML3D clip 012314 resampled to 30 fps (the rate both peers assume),
 the first ``--clips`` clips of ``--corpus`` (a ``controlmm corpus`` folder), and, when
@@ -19,16 +20,28 @@ simulation check of ``controlmm validate`` on the ``empty`` scene):
 * stance: mean horizontal speed of the foot bodies while the human's foot is in contact
   (cm/s); jerk: joint jerk RMS (rad/s^3);
 * frames/s: output frames (30 fps) per second of wall time (ours: best of ``--repeats`` runs
-  once loaded; holosoma: one run of its script, loading included).
+  once loaded; holosoma: one run of its script, loading included; GMR: one run of its
+  per-frame retargeting once the BVH and the robot are loaded).
 
 Peers run in their own virtual environments, never imported here:
-holosoma-retargeting 0.1.0 (PyPI) needs mujoco <= 3.11, so ``--holosoma-python`` names the
-Python of an environment made with ``python3 -m venv .venv-holosoma && .venv-holosoma/bin/pip
-install torch==2.13.0 && .venv-holosoma/bin/pip install holosoma-retargeting==0.1.0
-mujoco==3.3.7`` (``benchmarks/peers/holosoma_driver.py`` runs there). GMR (github.com/YanjieZe/GMR,
-not on PyPI) takes LAFAN1-named BVH bones with LAFAN1's bone frames; no converter to those
-frames exists here, so it is listed as unavailable with the figures measured on 012314 in an
-earlier session (docs/BENCHMARKS.md). A peer that cannot run is reported, never faked.
+
+* holosoma-retargeting 0.1.0 (PyPI) needs mujoco <= 3.11, so ``--holosoma-python`` names the
+  Python of an environment made with ``python3 -m venv .venv-holosoma && .venv-holosoma/bin/pip
+  install torch==2.13.0 && .venv-holosoma/bin/pip install holosoma-retargeting==0.1.0
+  mujoco==3.3.7`` (``benchmarks/peers/holosoma_driver.py`` runs there).
+* GMR (github.com/YanjieZe/GMR, MIT, not on PyPI) runs from a checkout of its repository:
+  ``git clone https://github.com/YanjieZe/GMR gmr && python3 -m venv .venv-gmr &&
+  .venv-gmr/bin/pip install torch==2.13.0 && .venv-gmr/bin/pip install mink mujoco daqp qpsolvers
+  numpy scipy rich loop_rate_limiters imageio tqdm natsort psutil && .venv-gmr/bin/pip install
+  --no-deps -e gmr`` (torch first: a CPU wheel; ``--no-deps``: its setup pulls smplx from a git
+  URL; daqp is its default QP solver, not declared), then ``--gmr-python .venv-gmr/bin/python``.
+  Each motion is written as a LAFAN1 BVH (``benchmarks/peers/lafan1_bvh.py``: LAFAN1 names,
+  centimetres, Y up, LAFAN1's bone frames, which its orientation targets assume) and retargeted
+  to the G1 by its library, headless (``benchmarks/peers/gmr_driver.py``), also on the OMOMO
+  clips when holosoma exported them. Without that Python the figures it gave on 012314 in an
+  earlier session (docs/BENCHMARKS.md) are listed, labelled recorded.
+
+A peer that cannot run is reported, never faked.
 """
 
 from __future__ import annotations
@@ -47,6 +60,8 @@ from data_dirs import ROOT, real_clip
 
 sys.path.insert(0, str(ROOT))
 
+from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
+
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
 from retarget import load_robot, retarget_motion  # noqa: E402
@@ -60,7 +75,7 @@ FPS = 30.0
 """Output rate of every retargeter (holosoma and GMR label their output 30 fps)."""
 HUMAN_HEIGHT_ABOVE_HEAD = 0.12
 """Metres from the HumanML3D head joint to the crown: the human height holosoma scales by."""
-GMR_RECORDED = {
+GMR_RECORDED = {  # listed when GMR cannot run here
     "motion": "real 012314",
     "fit_cm": 5.3,
     "jerk": 2631.0,
@@ -180,6 +195,41 @@ def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tup
     return results, demo, "holosoma-retargeting 0.1.0 (own environment, mujoco 3.3.7)"
 
 
+def gmr(python: Path, motions: dict[str, np.ndarray]) -> tuple[dict, str]:
+    """Run GMR on ``motions`` (name -> HumanML3D joints (T, 22, 3) at FPS, Y up) fed as LAFAN1
+    BVH files; (qpos (T, 36) and seconds per motion, a note)."""
+    driver = ROOT / "benchmarks" / "peers" / "gmr_driver.py"
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp_dir = Path(tmp)
+        keys = {f"m{i}": name for i, name in enumerate(motions)}
+        files = []
+        for key, name in keys.items():
+            files.append(tmp_dir / f"{key}.bvh")
+            write_lafan1_bvh(files[-1], motions[name], FPS)
+        cmd = [str(python), str(driver), "--output", str(tmp_dir / "out.npz"), *map(str, files)]
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode != 0:
+            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
+            return {}, f"GMR failed: {tail[0][:200]}"
+        with np.load(tmp_dir / "out.npz") as out:
+            results = {
+                name: (np.asarray(out[key]), float(out[f"{key}__seconds"])) for key, name in keys.items()
+            }
+            note = (
+                f"GMR {out['version']} (github.com/YanjieZe/GMR, own environment, mujoco {out['mujoco']}), "
+                "fed LAFAN1 BVH (benchmarks/peers/lafan1_bvh.py)"
+            )
+    return results, note
+
+
+def _by_group(results: dict[str, dict]) -> dict[str, dict[str, dict]]:
+    """Figures per motion -> the same split into the groups ``real 012314``, ``corpus``, ``omomo``."""
+    return {
+        group: {k: v for k, v in results.items() if k == group or k.startswith(f"{group} ")}
+        for group in ("real 012314", "corpus", "omomo")
+    }
+
+
 def table(rows: list[dict], keys: list[str]) -> str:
     cols = [
         ("retargeter", "{}"),
@@ -246,6 +296,12 @@ def main() -> int:
     p.add_argument("--clips", type=int, default=10, help="corpus clips to use (default 10)")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of ours per motion (best is kept)")
     p.add_argument("--holosoma-python", type=Path, default=ROOT / ".venv-holosoma" / "bin" / "python")
+    p.add_argument(
+        "--gmr-python",
+        type=Path,
+        default=ROOT / ".venv-gmr" / "bin" / "python",
+        help="Python of GMR's environment (see above); without it GMR's recorded figures are listed",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
     args = p.parse_args()
     robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
@@ -264,27 +320,20 @@ def main() -> int:
         rows.append(summarise("controlmm", robot, "real + corpus", results))
         print(f"  {robot}: fit {rows[-1]['fit_cm']:.2f} cm, {rows[-1]['fps']:.0f} frames/s", flush=True)
     print("\nEvery robot (ours):\n" + table(rows, []))
-    # The G1 side by side with the peers.
+    # The G1 side by side with the peers: per retargeter, per motion group, the figures per motion.
     peer_rows: list[dict] = []
     notes = {}
     if "g1" in robots:
-        real = {k: v for k, v in motions.items() if k == "real 012314"}
-        corpus = {k: v for k, v in motions.items() if k.startswith("corpus")}
-        for group, subset in (("real 012314", real), ("corpus", corpus)):
-            if subset:
-                peer_rows.append(summarise("controlmm", "g1", group, [per["ours/g1"][k] for k in subset]))
+        groups: dict[str, dict[str, dict[str, dict]]] = {"controlmm": {}, "holosoma": {}, "GMR": {}}
+        groups["controlmm"]["real 012314"] = {k: v for k, v in per["ours/g1"].items() if k == "real 012314"}
+        groups["controlmm"]["corpus"] = {k: v for k, v in per["ours/g1"].items() if k.startswith("corpus")}
+        demo: dict = {}
         if args.holosoma_python.is_file():
-            results, demo, note = holosoma(args.holosoma_python, motions)
-            notes["holosoma"] = note
+            results, demo, notes["holosoma"] = holosoma(args.holosoma_python, motions)
             if results:
                 per["holosoma/g1"] = {
                     k: measure("g1", q, motions[k][1], s, len(motions[k][1])) for k, (q, s) in results.items()
                 }
-                for group, subset in (("real 012314", real), ("corpus", corpus)):
-                    if subset:
-                        peer_rows.append(
-                            summarise("holosoma", "g1", group, [per["holosoma/g1"][k] for k in subset])
-                        )
                 per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
                 for name, (joints, q_peer, s_peer) in demo.items():
                     qpos, seconds = ours(
@@ -292,27 +341,39 @@ def main() -> int:
                     )
                     per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
                     per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))
-                if demo:
-                    peer_rows.append(
-                        summarise("controlmm", "g1", "omomo", list(per["ours/g1 omomo"].values()))
-                    )
-                    peer_rows.append(
-                        summarise("holosoma", "g1", "omomo", list(per["holosoma/g1 omomo"].values()))
-                    )
+                groups["controlmm"]["omomo"] = per["ours/g1 omomo"]
+                groups["holosoma"] = _by_group(per["holosoma/g1"]) | {"omomo": per["holosoma/g1 omomo"]}
         else:
             notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
-        notes["gmr"] = "unavailable here: " + GMR_RECORDED["note"]
-        peer_rows.append(
-            {
-                "retargeter": "GMR (recorded)",
-                "robot": "g1",
-                "motions": "real 012314 (1)",
-                "fit_cm": GMR_RECORDED["fit_cm"],
-                "jerk": GMR_RECORDED["jerk"],
-                "fps": GMR_RECORDED["fps"],
-                "validate": "0/1",
-            }
-        )
+        if args.gmr_python.is_file():
+            feed = {k: joints for k, (_, joints) in motions.items()} | {k: v[0] for k, v in demo.items()}
+            results, notes["gmr"] = gmr(args.gmr_python, feed)
+            if results:
+                per["gmr/g1"] = {
+                    k: measure("g1", q, feed[k], s, len(feed[k])) for k, (q, s) in results.items()
+                }
+                groups["GMR"] = _by_group(per["gmr/g1"])
+        else:
+            notes["gmr"] = (
+                f"unavailable: no Python at {args.gmr_python} (see the module docstring); "
+                + GMR_RECORDED["note"]
+            )
+        for group in ("real 012314", "corpus", "omomo"):
+            for retargeter, by_group in groups.items():
+                if by_group.get(group):
+                    peer_rows.append(summarise(retargeter, "g1", group, list(by_group[group].values())))
+        if not groups["GMR"]:
+            peer_rows.append(
+                {
+                    "retargeter": "GMR (recorded)",
+                    "robot": "g1",
+                    "motions": "real 012314 (1)",
+                    "fit_cm": GMR_RECORDED["fit_cm"],
+                    "jerk": GMR_RECORDED["jerk"],
+                    "fps": GMR_RECORDED["fps"],
+                    "validate": "0/1",
+                }
+            )
         print("\nG1 side by side:\n" + table(peer_rows, []))
         for peer, note in notes.items():
             print(f"  {peer}: {note}")
