@@ -4,7 +4,7 @@ GMR (github.com/YanjieZe/GMR) reads a BVH as Ubisoft LAFAN1: LAFAN1 joint names,
 Y up, and LAFAN1's bone frames. Its G1 targets are the positions of some joints and the global
 orientations of some bones times a constant per-bone rotation that assumes LAFAN1's local axes,
 so renaming an SMPL-22 file's joints is not enough (its rest frames are a T-pose's and its limb
-twist is arbitrary: a 29 cm fit). Here each bone's global rotation is built from the positions:
+twist is arbitrary: a 29-32 cm fit on 012314). Here each bone's global rotation is built from the positions:
 
 * the pelvis and the chest: a frame from their left-right axis (hip joints; collars) and their
   upward bone (pelvis -> spine1; spine3 -> neck), relative to the same frame standing upright;
@@ -21,6 +21,11 @@ pose - in which LAFAN1's bone frames are :data:`REFERENCE_FRAMES` (bones along t
 Spine, Spine1, Neck, Head, the collars and the ankles carry the rotation of the pelvis, the chest
 or the toe. Every joint has position channels, so the file reproduces the input positions exactly
 whatever the frames (any bone lengths, also a generated clip's).
+
+Checked through GMR itself (commit 4f9e8b7, real clip 012314 at 30 fps): a 5.1 cm G1 fit
+(:func:`retarget.compare.similarity_fit`) and orientation targets its IK meets within 0-15 degrees
+on average per bone, against 32 cm and 28-103 degrees for the same joints renamed only; the
+constants below moved the fit by at most 0.3 cm (5.1-5.4 cm).
 """
 
 from __future__ import annotations
