@@ -1,6 +1,19 @@
 """Stage ``tokenizer``: the RVQ-VAE on random 64-frame windows (MoMask ``train_vq.py``).
 
-Loss = SmoothL1(x_hat, x) + 0.5 SmoothL1 on the RIC positions (dims 4:67) + 0.02 commitment.
+Loss = SmoothL1(x_hat, x) + 0.5 SmoothL1 on the RIC positions (dims 4:67) + 0.02 commitment (MoMask's),
+plus two terms of ours that keep what the probes and users look at:
+
+* limb ends: SmoothL1 on the RIC positions of the ankles, feet and wrists, weighted so that each of those
+  dims counts about 30 times more than in MoMask's terms (punches, claps and waves are wrist swings of a
+  few centimetres at 2-3 Hz, kicks are brief ankle peaks; without the term the tokenizer smoothed them:
+  claps passed 13 % of their probes after encode-decode);
+* head direction: a nearly-L1 SmoothL1 (beta 0.02) on the neck -> head vector. A head turned against the
+  shoulders moves the head joint only 6-7 cm; under MoMask's terms the tokenizer averaged such turns away
+  (the look-around family's 36-55 degree turns came back as 2-6 degrees, 0 % of its probes), and a
+  quadratic term on the head's position alone traded them against the wrists.
+
+The weights were chosen with ``controlmm eval probes --tokenizer-only`` on the 49-family corpus
+(docs/BENCHMARKS.md, "Tokenizer loss").
 Validation on fixed windows of the val split: the same loss; MPJPE in mm as MoMask computes it
 (joints recovered from the features, each frame aligned at the pelvis; ``val_mpjpe_mm``, the metric that
 selects the exported weights); the error of the unaligned global joints (``val_global_mpjpe_mm``, windows
@@ -26,11 +39,36 @@ from controlmm.training.stage import VALIDATION_SEED
 RIC = slice(4, 67)
 
 
+def ric_dims(*joints: int) -> list[int]:
+    """Feature dims of the RIC positions of joints >= 1 (joint j: dims 4 + 3 (j - 1) to 6 + 3 (j - 1))."""
+    return [4 + 3 * (j - 1) + k for j in joints for k in range(3)]
+
+
+LIMB_ENDS = ric_dims(7, 8, 10, 11, 20, 21)
+"""RIC dims of the ankles (7, 8), feet (10, 11) and wrists (20, 21)."""
+LIMB_END_WEIGHT = 6.0
+"""Weight of the mean SmoothL1 over the 18 limb-end dims (1/3 per dim)."""
+NECK, HEAD = ric_dims(12), ric_dims(15)
+HEAD_WEIGHT = 2.0
+HEAD_BETA = 0.02
+"""Weight and SmoothL1 beta (normalised units) of the neck -> head vector term."""
+
+
+def head_direction_loss(recon: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Nearly-L1 error of the neck -> head vector in RIC, (..., 263) normalised features -> scalar."""
+    r = recon[..., HEAD] - recon[..., NECK]
+    t = target[..., HEAD] - target[..., NECK]
+    return F.smooth_l1_loss(r, t, beta=HEAD_BETA)
+
+
 def reconstruction_loss(recon: torch.Tensor, target: torch.Tensor, commit: torch.Tensor) -> torch.Tensor:
+    """The tokenizer's loss (see the module) of (B, T, 263) normalised features and the commitment."""
     recon = recon.float()
     return (
         F.smooth_l1_loss(recon, target)
         + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
+        + LIMB_END_WEIGHT * F.smooth_l1_loss(recon[..., LIMB_ENDS], target[..., LIMB_ENDS])
+        + HEAD_WEIGHT * head_direction_loss(recon, target)
         + 0.02 * commit
     )
 
