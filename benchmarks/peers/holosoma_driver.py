@@ -30,6 +30,15 @@ import numpy as np
 PACKAGE = Path(holosoma_retargeting.__file__).resolve().parent
 SCRIPT = "examples/robot_retarget.py"
 
+SMPL22_IN_SMPLH_DEMO = (
+    "Pelvis", "L_Hip", "R_Hip", "Torso", "L_Knee", "R_Knee", "Spine", "L_Ankle", "R_Ankle", "Chest", "L_Toe",
+    "R_Toe", "Neck", "L_Thorax", "R_Thorax", "Head", "L_Shoulder", "R_Shoulder", "L_Elbow", "R_Elbow",
+    "L_Wrist", "R_Wrist",
+)  # fmt: skip
+"""holosoma's name (``SMPLH_DEMO_JOINTS``) of each SMPL-22 joint, in SMPL/HumanML3D order. Its OMOMO
+clips store the 52 SMPL-H joints depth first (a leg, the other leg, the spine, an arm with its hand, the
+other arm), not in SMPL's order: their first 22 rows are not the body joints."""
+
 
 def _run(args: list[str], log: Path) -> float:
     start = time.perf_counter()
@@ -62,13 +71,17 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         if args.export_demo:
-            from holosoma_retargeting.src.utils import load_intermimic_data  # their loader, their environment
+            # their loader and joint names, their environment
+            from holosoma_retargeting.config_types.data_type import SMPLH_DEMO_JOINTS
+            from holosoma_retargeting.src.utils import load_intermimic_data
+
+            body = [SMPLH_DEMO_JOINTS.index(n) for n in SMPL22_IN_SMPLH_DEMO]
 
             demo = PACKAGE / "demo_data" / "OMOMO_new"
             names = sorted(f.stem for f in demo.glob("*.pt"))
             for name in names:
                 joints, _ = load_intermimic_data(str(demo / f"{name}.pt"))
-                out[name] = np.asarray(joints[:, :22], dtype=np.float64)
+                out[name] = np.asarray(joints[:, body], dtype=np.float64)
                 args_run = ["--data_path", str(demo), "--task-type", "robot_only", "--task-name", name]
                 args_run += ["--data_format", "smplh", "--save_dir", str(work / "demo")]
                 out[f"{name}__seconds"] = np.array(_run(args_run, work / f"{name}.log"))
