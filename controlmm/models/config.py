@@ -193,6 +193,8 @@ class StageSchedule:
     gamma: float = 0.1
     checkpoint_every: int = 500
     window: int = 64  # tokenizer only: training window in frames
+    limb_end_weight: float = 0.0  # tokenizer only: extra loss on ankles, feet, wrists (training.tokenizer)
+    head_weight: float = 0.0  # tokenizer only: extra loss on the neck -> head direction (0, 0: MoMask's loss)
     bucket: int = 0  # transformer/residual: length bucketing over this many batches (0 = random batches)
 
 
@@ -448,6 +450,8 @@ def _demo() -> ModelConfig:
     # all (docs/model-card.md). Both masked transformers use a relative position bias of 16 tokens
     # (docs/benchmarks-history.md, "Relative positions"); the residual transformer does not.
     schedules = {
+        # The extra loss terms keep head turns, claps, punches and kicks through the tokenizer
+        # (docs/BENCHMARKS.md, "Tokenizer loss"); the shipped default's tokenizer predates them.
         "tokenizer": StageSchedule(
             iters=3500,
             batch_size=64,
@@ -456,6 +460,8 @@ def _demo() -> ModelConfig:
             milestones=(2300,),
             gamma=0.2,
             checkpoint_every=250,
+            limb_end_weight=6.0,
+            head_weight=2.0,
         ),
         "transformer": StageSchedule(
             iters=6400,

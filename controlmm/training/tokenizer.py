@@ -3,17 +3,19 @@
 Loss = SmoothL1(x_hat, x) + 0.5 SmoothL1 on the RIC positions (dims 4:67) + 0.02 commitment (MoMask's),
 plus two terms of ours that keep what the probes and users look at:
 
-* limb ends: SmoothL1 on the RIC positions of the ankles, feet and wrists, weighted so that each of those
-  dims counts about 30 times more than in MoMask's terms (punches, claps and waves are wrist swings of a
-  few centimetres at 2-3 Hz, kicks are brief ankle peaks; without the term the tokenizer smoothed them:
-  claps passed 13 % of their probes after encode-decode);
+* limb ends: SmoothL1 on the RIC positions of the ankles, feet and wrists; at the ``demo`` preset's
+  weight (6 over 18 dims) each of those dims counts about 30 times more than in MoMask's terms.
+  Punches, claps and waves are wrist swings of a few centimetres at 2-3 Hz and kicks brief ankle
+  peaks: under MoMask's loss punches passed 73 % of their probes after encode-decode, and a head term
+  alone took the rest (claps 13 %, waves 0 %);
 * head direction: a nearly-L1 SmoothL1 (beta 0.02) on the neck -> head vector. A head turned against the
   shoulders moves the head joint only 6-7 cm; under MoMask's terms the tokenizer averaged such turns away
   (the look-around family's 36-55 degree turns came back as 2-6 degrees, 0 % of its probes), and a
   quadratic term on the head's position alone traded them against the wrists.
 
-The weights were chosen with ``controlmm eval probes --tokenizer-only`` on the 49-family corpus
-(docs/BENCHMARKS.md, "Tokenizer loss").
+Their weights are the tokenizer schedule's ``limb_end_weight`` and ``head_weight`` (0 and 0, MoMask's
+loss, unless the preset sets them: ``demo`` has 6 and 2, chosen with ``controlmm eval probes
+--tokenizer-only`` on the 49-family corpus; docs/BENCHMARKS.md, "Tokenizer loss").
 Validation on fixed windows of the val split: the same loss; MPJPE in mm as MoMask computes it
 (joints recovered from the features, each frame aligned at the pelvis; ``val_mpjpe_mm``, the metric that
 selects the exported weights); the error of the unaligned global joints (``val_global_mpjpe_mm``, windows
@@ -46,12 +48,9 @@ def ric_dims(*joints: int) -> list[int]:
 
 LIMB_ENDS = ric_dims(7, 8, 10, 11, 20, 21)
 """RIC dims of the ankles (7, 8), feet (10, 11) and wrists (20, 21)."""
-LIMB_END_WEIGHT = 6.0
-"""Weight of the mean SmoothL1 over the 18 limb-end dims (1/3 per dim)."""
 NECK, HEAD = ric_dims(12), ric_dims(15)
-HEAD_WEIGHT = 2.0
 HEAD_BETA = 0.02
-"""Weight and SmoothL1 beta (normalised units) of the neck -> head vector term."""
+"""SmoothL1 beta (normalised units) of the neck -> head vector term: nearly L1."""
 
 
 def head_direction_loss(recon: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -61,16 +60,26 @@ def head_direction_loss(recon: torch.Tensor, target: torch.Tensor) -> torch.Tens
     return F.smooth_l1_loss(r, t, beta=HEAD_BETA)
 
 
-def reconstruction_loss(recon: torch.Tensor, target: torch.Tensor, commit: torch.Tensor) -> torch.Tensor:
-    """The tokenizer's loss (see the module) of (B, T, 263) normalised features and the commitment."""
+def reconstruction_loss(
+    recon: torch.Tensor,
+    target: torch.Tensor,
+    commit: torch.Tensor,
+    limb_end_weight: float = 0.0,
+    head_weight: float = 0.0,
+) -> torch.Tensor:
+    """The tokenizer's loss (see the module) of (B, T, 263) normalised features and the commitment;
+    the two extra terms' weights (0, 0: MoMask's loss)."""
     recon = recon.float()
-    return (
+    loss = (
         F.smooth_l1_loss(recon, target)
         + 0.5 * F.smooth_l1_loss(recon[..., RIC], target[..., RIC])
-        + LIMB_END_WEIGHT * F.smooth_l1_loss(recon[..., LIMB_ENDS], target[..., LIMB_ENDS])
-        + HEAD_WEIGHT * head_direction_loss(recon, target)
         + 0.02 * commit
     )
+    if limb_end_weight:
+        loss = loss + limb_end_weight * F.smooth_l1_loss(recon[..., LIMB_ENDS], target[..., LIMB_ENDS])
+    if head_weight:
+        loss = loss + head_weight * head_direction_loss(recon, target)
+    return loss
 
 
 def mpjpe(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -81,14 +90,15 @@ def mpjpe(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 class TokenizerLoss(nn.Module):
-    def __init__(self, model: RVQVAE) -> None:
+    def __init__(self, model: RVQVAE, limb_end_weight: float = 0.0, head_weight: float = 0.0) -> None:
         super().__init__()
         self.model = model
+        self.limb_end_weight, self.head_weight = limb_end_weight, head_weight
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Reconstruction loss of (B, T, 263) normalised windows; (loss, metrics)."""
         recon, commit, perplexity, _ = self.model(x)
-        loss = reconstruction_loss(recon, x, commit)
+        loss = reconstruction_loss(recon, x, commit, self.limb_end_weight, self.head_weight)
         return loss, {"loss": loss.detach(), "commit": commit.detach(), "perplexity": perplexity.detach()}
 
 
@@ -99,7 +109,10 @@ class TokenizerStage(ModelStage):
 
     def __init__(self, ctx: StageContext) -> None:
         super().__init__(ctx)
-        window = ctx.config.schedules["tokenizer"].window if "tokenizer" in ctx.config.schedules else 64
+        schedule = ctx.config.schedules.get("tokenizer")
+        window = schedule.window if schedule is not None else 64
+        self.limb_end_weight = schedule.limb_end_weight if schedule is not None else 0.0
+        self.head_weight = schedule.head_weight if schedule is not None else 0.0
         step = ctx.config.tokenizer.downsample
         self.window = window - window % step
         data = ctx.data
@@ -113,7 +126,7 @@ class TokenizerStage(ModelStage):
         return WindowDataset(self.train_motions, self.ctx.normalizer, self.window, seed=self.ctx.seed)
 
     def loss_module(self, model: nn.Module) -> nn.Module:
-        return TokenizerLoss(cast(RVQVAE, model))
+        return TokenizerLoss(cast(RVQVAE, model), self.limb_end_weight, self.head_weight)
 
     def prepare(self, batch: Any) -> tuple:
         return (batch.to(self.ctx.device, non_blocking=True),)
@@ -127,7 +140,8 @@ class TokenizerStage(ModelStage):
         for start in range(0, len(val), 64):
             x = torch.stack([val[(i, 0)] for i in range(start, min(len(val), start + 64))]).to(device)
             recon, commit, _, ids = model(x)
-            losses.append(float(reconstruction_loss(recon, x, commit)) * len(x))
+            loss = reconstruction_loss(recon, x, commit, self.limb_end_weight, self.head_weight)
+            losses.append(float(loss) * len(x))
             joints_hat = features_to_joints(self.ctx.normalizer.denormalize(recon))
             joints = features_to_joints(self.ctx.normalizer.denormalize(x))
             errors.append(float(mpjpe(joints_hat, joints)) * len(x))
