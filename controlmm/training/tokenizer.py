@@ -7,7 +7,7 @@ plus two terms of ours that keep what the probes and users look at:
   weight (6 over 18 dims) each of those dims counts about 30 times more than in MoMask's terms.
   Punches, claps and waves are wrist swings of a few centimetres at 2-3 Hz and kicks brief ankle
   peaks: under MoMask's loss punches passed 73 % of their probes after encode-decode, and a head term
-  alone took the rest (claps 13 %, waves 0 %);
+  alone cost them more (claps 13 %, waves 0 %);
 * head direction: a nearly-L1 SmoothL1 (beta 0.02) on the neck -> head vector. A head turned against the
   shoulders moves the head joint only 6-7 cm; under MoMask's terms the tokenizer averaged such turns away
   (the look-around family's 36-55 degree turns came back as 2-6 degrees, 0 % of its probes), and a
