@@ -72,3 +72,18 @@ def test_bad_inputs(tmp_path):
         load_motion(tmp_path / "corrupt.npz")
     with pytest.raises(ShapeError, match="NaN"):
         Motion(np.full((3, 22, 3), np.nan))
+
+
+def test_bvh_with_given_bone_frames_reproduces_joints(tmp_path, sample_joints):
+    from scipy.spatial.transform import Rotation
+
+    joints = sample_joints[:40]
+    frames = Rotation.random(40 * 22, random_state=0).as_matrix().reshape(40, 22, 3, 3)
+    path = tmp_path / "frames.bvh"
+    write_bvh(path, joints, fps=20.0, units_per_metre=100.0, rotations=frames)
+    assert path.read_text().count("CHANNELS 6") == 22  # every joint carries its position
+    back, fps = read_bvh(path)
+    assert fps == pytest.approx(20.0)
+    assert np.abs(back / 100.0 - joints).max() < 1e-4  # read in the file's unit (cm)
+    with pytest.raises(InputFileError, match="rotations must be"):
+        write_bvh(tmp_path / "bad.bvh", joints, rotations=frames[:10])

@@ -33,10 +33,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from controlmm.motion.bvh import write_bvh
 from controlmm.motion.quaternion import qbetween, quat_to_matrix
-from controlmm.motion.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+from controlmm.motion.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 
 LAFAN1_NAMES: tuple[str, ...] = (
     "Hips",
@@ -94,8 +94,6 @@ HINGE_BLEND = 0.25
 sin(knee bend)): equal at about 14.5 degrees of bend, the hinge dominates above."""
 UNITS_PER_METRE = 100.0
 """LAFAN1 files are in centimetres."""
-EULER = "ZYX"
-"""LAFAN1's rotation channel order (Zrotation Yrotation Xrotation, intrinsic)."""
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -200,54 +198,11 @@ def lafan1_rotations(joints: np.ndarray) -> np.ndarray:
 
 
 def write_lafan1_bvh(path: str | Path, joints: np.ndarray, fps: float) -> None:
-    """Write HumanML3D joints (T, 22, 3) (metres, Y up) at ``fps`` as a LAFAN1 BVH.
-
-    Every joint has six channels (``Xposition Yposition Zposition Zrotation Yrotation Xrotation``,
-    centimetres and degrees): its position in its parent's bone frame and its rotation
-    relative to it (:func:`lafan1_rotations`); ``OFFSET`` holds the mean position. Leaves
-    (head, toes, hands) end in an End Site 5 cm along their local x.
-    """
+    """Write HumanML3D joints (T, 22, 3) (metres, Y up) at ``fps`` as a LAFAN1 BVH: the project's
+    BVH writer with LAFAN1's names, centimetres and the bone frames of :func:`lafan1_rotations`
+    (every joint with position channels, so the positions come back exactly)."""
     pos = np.asarray(joints, dtype=np.float64)
     if pos.ndim != 3 or pos.shape[1:] != (NUM_JOINTS, 3) or len(pos) == 0:
         raise ValueError(f"joints must be (T, {NUM_JOINTS}, 3); got {pos.shape}")
-    glob = lafan1_rotations(pos)
-    t = len(pos)
-    local_rot = glob.copy()
-    local_pos = pos * UNITS_PER_METRE
-    for k in range(1, NUM_JOINTS):
-        p = PARENTS[k]
-        local_rot[:, k] = np.einsum("tji,tjk->tik", glob[:, p], glob[:, k])
-        local_pos[:, k] = np.einsum("tji,tj->ti", glob[:, p], pos[:, k] - pos[:, p]) * UNITS_PER_METRE
-    euler = Rotation.from_matrix(local_rot.reshape(-1, 3, 3)).as_euler(EULER, degrees=True)
-    euler = np.unwrap(euler.reshape(t, NUM_JOINTS, 3), period=360.0, axis=0)
-    children = {k: [c for c in range(NUM_JOINTS) if PARENTS[c] == k] for k in range(NUM_JOINTS)}
-    offsets = local_pos.mean(axis=0)
-    offsets[0] = 0.0
-    lines = ["HIERARCHY"]
-    order: list[int] = []  # joints in the file's (depth-first) order: the order of the motion's columns
-
-    def emit(k: int, depth: int) -> None:
-        pad = "\t" * depth
-        order.append(k)
-        lines.append(f"{pad}{'ROOT' if k == 0 else 'JOINT'} {LAFAN1_NAMES[k]}")
-        lines.append(pad + "{")
-        lines.append(f"{pad}\tOFFSET {offsets[k, 0]:.6f} {offsets[k, 1]:.6f} {offsets[k, 2]:.6f}")
-        lines.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation")
-        for c in children[k]:
-            emit(c, depth + 1)
-        if not children[k]:
-            lines.extend(
-                [
-                    f"{pad}\tEnd Site",
-                    pad + "\t{",
-                    f"{pad}\t\tOFFSET 5.000000 0.000000 0.000000",
-                    pad + "\t}",
-                ]
-            )
-        lines.append(pad + "}")
-
-    emit(0, 0)
-    lines += ["MOTION", f"Frames: {t}", f"Frame Time: {1.0 / fps:.8f}"]
-    frames = np.concatenate([local_pos, euler], axis=-1)[:, order].reshape(t, -1)
-    lines += [" ".join(f"{v:.6f}" for v in row) for row in frames]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
+    names = dict(zip(JOINT_NAMES, LAFAN1_NAMES, strict=True))
+    write_bvh(path, pos, fps, names=names, units_per_metre=UNITS_PER_METRE, rotations=lafan1_rotations(pos))

@@ -88,6 +88,7 @@ def write_bvh(
     names: Mapping[str, str] | None = None,
     units_per_metre: float = 1.0,
     insert: Mapping[str, str] | None = None,
+    rotations: np.ndarray | None = None,
 ) -> None:
     """Write positions (T, 22, 3) (metres, Y up) as a BVH file (atomic).
 
@@ -97,6 +98,10 @@ def write_bvh(
         insert: new joint name -> the SMPL joint it becomes the parent of: a pass-through joint with
             zero offset and zero rotation (CMU-style ``LHipJoint`` above ``LeftUpLeg``); forward
             kinematics is unchanged.
+        rotations: global rotations (T, 22, 3, 3) of the joints' bone frames (another skeleton's
+            conventions, e.g. LAFAN1's) instead of the rotations fitted to the SMPL rest pose; every
+            joint then also gets position channels (in its parent's frame), so the file reproduces
+            ``joints`` exactly whatever the frames.
     """
     joints = check_joints(joints, min_frames=1)
     if not (np.isfinite(units_per_metre) and units_per_metre > 0):
@@ -104,8 +109,17 @@ def write_bvh(
     label = {n: (names or {}).get(n, n) for n in JOINT_NAMES}
     above = {child: new for new, child in (insert or {}).items()}
     glob, offsets = _fit_global_rotations(joints)
-    offsets = offsets * units_per_metre
     t = joints.shape[0]
+    moving = np.zeros((t, NUM_JOINTS, 3))  # per-joint position channels (only with ``rotations``)
+    if rotations is not None:
+        glob = np.asarray(rotations, dtype=np.float64)
+        if glob.shape != (t, NUM_JOINTS, 3, 3):
+            raise InputFileError(f"rotations must be ({t}, {NUM_JOINTS}, 3, 3); got {glob.shape}")
+        for j in range(1, NUM_JOINTS):
+            bone = joints[:, j] - joints[:, PARENTS[j]]
+            moving[:, j] = np.einsum("tji,tj->ti", glob[:, PARENTS[j]], bone) * units_per_metre
+        offsets = moving.mean(axis=0) / units_per_metre
+    offsets = offsets * units_per_metre
     local = np.empty_like(glob)
     local[:, 0] = glob[:, 0]
     for j in range(1, NUM_JOINTS):
@@ -137,7 +151,7 @@ def write_bvh(
         lines.append(f"{pad}{{")
         off = np.zeros(3) if j == 0 else offsets[j]
         lines.append(f"{pad}  OFFSET {off[0]:.6f} {off[1]:.6f} {off[2]:.6f}")
-        if j == 0:
+        if j == 0 or rotations is not None:
             lines.append(f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
         else:
             lines.append(f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation")
@@ -161,9 +175,11 @@ def write_bvh(
     zero = np.zeros(3)
     lines += ["MOTION", f"Frames: {t}", f"Frame Time: {1.0 / fps:.8f}"]
     for f in range(t):
-        vals = list(joints[f, 0] * units_per_metre) + [
-            v for j in order for v in (zero if j is None else euler[f, j])
-        ]
+        vals = list(joints[f, 0] * units_per_metre)
+        for col in order:
+            if col is not None and col > 0 and rotations is not None:
+                vals += list(moving[f, col])
+            vals += list(zero if col is None else euler[f, col])
         lines.append(" ".join(f"{v:.6f}" for v in vals))
     with atomic_open(path, "w", encoding="ascii") as fh:
         fh.write("\n".join(lines) + "\n")
