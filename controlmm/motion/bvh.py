@@ -108,18 +108,19 @@ def write_bvh(
         raise InputFileError(f"units per metre must be a positive number; got {units_per_metre}")
     label = {n: (names or {}).get(n, n) for n in JOINT_NAMES}
     above = {child: new for new, child in (insert or {}).items()}
-    glob, offsets = _fit_global_rotations(joints)
     t = joints.shape[0]
     moving = np.zeros((t, NUM_JOINTS, 3))  # per-joint position channels (only with ``rotations``)
-    if rotations is not None:
+    if rotations is None:
+        glob, offsets = _fit_global_rotations(joints)
+        offsets = offsets * units_per_metre
+    else:
         glob = np.asarray(rotations, dtype=np.float64)
         if glob.shape != (t, NUM_JOINTS, 3, 3):
             raise InputFileError(f"rotations must be ({t}, {NUM_JOINTS}, 3, 3); got {glob.shape}")
         for j in range(1, NUM_JOINTS):
             bone = joints[:, j] - joints[:, PARENTS[j]]
             moving[:, j] = np.einsum("tji,tj->ti", glob[:, PARENTS[j]], bone) * units_per_metre
-        offsets = moving.mean(axis=0) / units_per_metre
-    offsets = offsets * units_per_metre
+        offsets = moving.mean(axis=0)
     local = np.empty_like(glob)
     local[:, 0] = glob[:, 0]
     for j in range(1, NUM_JOINTS):
