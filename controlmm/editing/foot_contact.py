@@ -57,8 +57,8 @@ def foot_contact_run(
     Runs ``config.contact_steps`` codebook-editing steps on ``objective`` plus
     ``foot_contact_term(config.contact_weight)`` from ``latent``, with the hinge on the constraints
     over half the tolerance weighted ``config.contact_hinge_weight`` (codebook editing stops as soon as
-    every constraint is within the tolerance, often right at it: without a strong pull back, every step
-    that takes sliding out breaks a constraint), keeping the best state that still
+    every constraint is within the tolerance, often right at it; how hard to pull back depends on the
+    model, docs/control.md), keeping the best state that still
     meets ``objective`` (a step that trades a constraint for less sliding is never kept, so a motion
     that met its constraints only just still gains from the run); sample i takes the new latent only
     where it meets ``objective`` (``kept[i]``), else keeps ``latent``. ``decode``: latent ->

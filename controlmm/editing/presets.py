@@ -46,7 +46,7 @@ class EditingConfig:
     loss_tolerance: float = 1e-6  # stop when every other loss term is at most this
     early_stop: bool = True
     contact_steps: int = 0  # codebook-editing steps of the foot-contact run after codebook editing (0: off)
-    contact_hinge_weight: float = 30.0  # the foot-contact run's hinge weight (see foot_contact_run)
+    contact_hinge_weight: float = 3.0  # the foot-contact run's hinge weight (see foot_contact_run)
     contact_weight: float = 0.3  # weight of the foot-contact term in that run ((m/s)^2)
 
     def __post_init__(self) -> None:

@@ -209,7 +209,7 @@ def test_embedded_checkpoints_fit_the_size_budget():
 
 def test_embedded_default_has_the_demo_preset_architecture():
     """The shipped model is what `controlmm train ... --preset demo` builds (its schedules included)."""
-    from dataclasses import fields, replace
+    from dataclasses import fields
 
     from controlmm.assets import default_model_dir
     from controlmm.models.config import ModelConfig, preset_config
@@ -220,8 +220,5 @@ def test_embedded_default_has_the_demo_preset_architecture():
         if f.name != "schedules":
             assert getattr(shipped, f.name) == getattr(demo, f.name), f.name
     for stage, schedule in shipped.schedules.items():
-        expected = demo.schedules[stage]
-        if stage == "tokenizer":  # the shipped tokenizer predates the extra loss terms: MoMask's loss
-            expected = replace(expected, limb_end_weight=0.0, head_weight=0.0)
-        assert schedule == expected, stage
+        assert schedule == demo.schedules[stage], stage
     assert set(manifest["parts"]) == {"tokenizer", "transformer", "token_transformer", "residual", "control"}
