@@ -18,7 +18,8 @@ simulation check of ``controlmm validate`` on the ``empty`` scene):
 * limits: frames with a joint outside its MJCF range; floor: deepest point of any
   collision geom below the floor (mm); self: frames with a self-collision deeper than 5 mm;
 * stance: mean horizontal speed of the foot bodies while the human's foot is in contact
-  (cm/s); jerk: joint jerk RMS (rad/s^3);
+  (cm/s); sole: the same for each foot's slowest sole point (a foot rolling over its toe
+  moves its body, not its sole: this is the sliding); jerk: joint jerk RMS (rad/s^3);
 * frames/s: output frames (30 fps) per second of wall time (ours: best of ``--repeats`` runs
   once loaded; holosoma: one run of its script, loading included; GMR: one run of its
   per-frame retargeting once the BVH and the robot are loaded).
@@ -65,7 +66,13 @@ from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
 from retarget import load_robot, retarget_motion  # noqa: E402
-from retarget.compare import joint_jerk_rms, resample_human, similarity_fit, stance_foot_speed  # noqa: E402
+from retarget.compare import (  # noqa: E402
+    joint_jerk_rms,
+    resample_human,
+    similarity_fit,
+    stance_foot_speed,
+    stance_sole_speed,
+)
 from retarget.metrics import geom_lowest_z, replay  # noqa: E402
 from retarget.robots import PACKAGED_ROBOTS  # noqa: E402
 from scenes import load_scene  # noqa: E402
@@ -128,6 +135,7 @@ def measure(robot_name: str, qpos: np.ndarray, human: np.ndarray, seconds: float
         "validate": bool(report.passed),
         "errors": report.stats["error_kinds"],
         "stance_cm_s": 100 * stance_foot_speed(robot, qpos, FPS, human, FPS),
+        "sole_cm_s": 100 * stance_sole_speed(robot, qpos, FPS, human, FPS),
         "jerk": joint_jerk_rms(qpos, FPS),
         "fps": frames_in / seconds if seconds > 0 else float("nan"),
         "frames": int(len(qpos)),
@@ -242,6 +250,7 @@ def table(rows: list[dict], keys: list[str]) -> str:
         ("self frames", "{}"),
         ("validate", "{}"),
         ("stance cm/s", "{:.2f}"),
+        ("sole cm/s", "{:.2f}"),
         ("jerk", "{:.0f}"),
         ("frames/s", "{:.0f}"),
     ]
@@ -256,6 +265,7 @@ def table(rows: list[dict], keys: list[str]) -> str:
         "self frames": "self_frames",
         "validate": "validate",
         "stance cm/s": "stance_cm_s",
+        "sole cm/s": "sole_cm_s",
         "jerk": "jerk",
         "frames/s": "fps",
     }
@@ -284,6 +294,7 @@ def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> d
         "self_frames": int(sum(r["self_frames"] for r in results)),
         "validate": f"{sum(r['validate'] for r in results)}/{len(results)}",
         "stance_cm_s": float(np.mean([r["stance_cm_s"] for r in results])),
+        "sole_cm_s": float(np.mean([r["sole_cm_s"] for r in results])),
         "jerk": float(np.mean([r["jerk"] for r in results])),
         "fps": float(sum(r["frames"] for r in results) / sum(r["frames"] / r["fps"] for r in results)),
     }

@@ -10,7 +10,10 @@ trajectories written by other retargeters are measured exactly like ours:
   chose.
 * :func:`stance_foot_speed`: the mean horizontal speed of each foot body between two frames
   in which the human's foot is in contact (:func:`retarget.stance.detect_contacts`): a
-  planted foot should not move.
+  planted foot should not move. A foot that rolls over its toe or heel moves its body
+  while the sole stays put, so
+* :func:`stance_sole_speed`: the same for the foot's slowest sole point (the collision
+  points it stands on): how fast the part of the foot on the floor slides.
 * :func:`joint_jerk_rms`: the RMS of the joints' third differences.
 """
 
@@ -133,6 +136,25 @@ def stance_foot_speed(
         step = np.linalg.norm(np.diff(rep.xpos[:, body, :2], axis=0), axis=1) * fps
         both = contact[1:, i] & contact[:-1, i]
         speeds.append(step[both])
+    all_speeds = np.concatenate(speeds)
+    return float(all_speeds.mean()) if all_speeds.size else 0.0
+
+
+def stance_sole_speed(
+    robot: RobotModel, qpos: np.ndarray, fps: float, human: np.ndarray, human_fps: float
+) -> float:
+    """Mean horizontal speed (m/s), between consecutive frames in which the human's foot is in
+    contact, of each foot's slowest sole point (its floor points: heel and toe corners); a
+    foot pivoting on its toe or heel does not count as moving (0 without such frames)."""
+    rep = replay(robot.model, qpos)
+    contact = human_contacts(human, human_fps, len(qpos), fps)
+    speeds = []
+    for i, side in enumerate(("left", "right")):
+        foot = robot.feet[side]
+        body = int(robot.tree.node_body[foot.node])
+        pts = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], foot.points)
+        step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps
+        speeds.append(step[contact[1:, i] & contact[:-1, i]])
     all_speeds = np.concatenate(speeds)
     return float(all_speeds.mean()) if all_speeds.size else 0.0
 

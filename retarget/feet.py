@@ -18,7 +18,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from retarget.geoms import FloorPoints
-from retarget.kinematics import Poses, so3_log
+from retarget.kinematics import Poses, quat_to_mat, so3_exp, so3_log
 from retarget.robot_model import RobotModel
 from retarget.targets import Targets
 
@@ -37,45 +37,27 @@ def pin_stance_feet(
     iterations: int = 2,
 ) -> np.ndarray:
     """Joint angles (T, nj) with stance feet moved onto their locked targets."""
-    tree = robot.tree
     q = q.copy()
-    other = {"left": "right", "right": "left"}
     for side in ("left", "right"):
         lock = targets.lock[side]
         frames = np.flatnonzero(targets.stance[side] & (lock >= 1.0))
         if len(frames) == 0:
             continue
         k = robot.keypoint_index(f"{side}_ankle")
-        node = int(robot.nodes[k])
-        leg = np.flatnonzero(tree.ancestor[node] & ~tree.ancestor[int(robot.feet[other[side]].node)])
+        leg = leg_joints(robot, side)
         o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= 6) else None
-        goal = targets.kp_pos[frames, k]
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
-        lo, hi = robot.lower[leg], robot.upper[leg]
         start = q[np.ix_(frames, leg)].copy()
-        cur, best = start.copy(), start.copy()
-        best_cost = np.full(len(frames), np.inf)
-        base = q[frames].copy()
-        for it in range(iterations + 1):
-            base[:, leg] = cur
-            poses = tree.forward(root_pos[frames], root_rot[frames], base)
-            pt = tree.points(poses, np.array([node]), robot.offsets[k][None])
-            res = pt[:, 0] - goal
-            if goal_rot is not None:
-                err = so3_log(poses.rot[:, node] @ np.swapaxes(goal_rot, -1, -2)) * PIN_L_ROT
-                res = np.concatenate([res, err], axis=1)
-            cost = np.sum(res * res, axis=1)
-            better = cost < best_cost
-            best[better], best_cost[better] = cur[better], cost[better]
-            if it == iterations:
-                break
-            jac = tree.point_jacobian(poses, np.array([node]), pt)[:, 0][..., 6 + leg]  # (F, 3, nl)
-            if goal_rot is not None:
-                jr = tree.rotation_jacobian(poses, np.array([node]))[:, 0][..., 6 + leg] * PIN_L_ROT
-                jac = np.concatenate([jac, jr], axis=1)
-            jt = np.swapaxes(jac, 1, 2)
-            step = np.linalg.solve(jt @ jac + 1e-5 * np.eye(len(leg)), -(jt @ res[..., None]))[..., 0]
-            cur = np.clip(np.where(better[:, None], cur, best) + step, lo, hi)
+        best = _pin_leg(
+            robot,
+            side,
+            root_pos[frames],
+            root_rot[frames],
+            q[frames],
+            targets.kp_pos[frames, k],
+            goal_rot,
+            iterations,
+        )
         # Correction over all frames: exact in stance, faded by the lock weight around it, smoothed.
         # A frame whose leg would have to swing far (an unreachable lock: another IK branch)
         # keeps the solver's pose: pinning fixes millimetres, it does not re-pose a leg.
@@ -87,7 +69,126 @@ def pin_stance_feet(
             nearest = frames[np.abs(near[:, None] - frames[None, :]).argmin(axis=1)]
             delta[near] = lock[near, None] * delta[nearest]
         delta = gaussian_filter1d(delta, sigma=1.0, axis=0, mode="nearest")
-        q[:, leg] = np.clip(q[:, leg] + delta, lo, hi)
+        q[:, leg] = np.clip(q[:, leg] + delta, robot.lower[leg], robot.upper[leg])
+    return q
+
+
+def _pin_leg(
+    robot: RobotModel,
+    side: str,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    q: np.ndarray,
+    goal: np.ndarray,
+    goal_rot: np.ndarray | None,
+    iterations: int,
+) -> np.ndarray:
+    """One leg's joints (F, nl) that bring its ankle keypoint to ``goal`` (F, 3) (and the foot
+    to ``goal_rot`` (F, 3, 3) at PIN_L_ROT m/rad when given) for F frames of root_pos (F, 3),
+    root_rot (F, 3, 3), q (F, nj): damped Gauss-Newton, a step that does not lower a frame's
+    error undone, limits kept."""
+    tree = robot.tree
+    k = robot.keypoint_index(f"{side}_ankle")
+    node = int(robot.nodes[k])
+    leg = leg_joints(robot, side)
+    lo, hi = robot.lower[leg], robot.upper[leg]
+    cur = q[:, leg].copy()
+    best = cur.copy()
+    best_cost = np.full(len(q), np.inf)
+    base = q.copy()
+    for it in range(iterations + 1):
+        base[:, leg] = cur
+        poses = tree.forward(root_pos, root_rot, base)
+        pt = tree.points(poses, np.array([node]), robot.offsets[k][None])
+        res = pt[:, 0] - goal
+        if goal_rot is not None:
+            err = so3_log(poses.rot[:, node] @ np.swapaxes(goal_rot, -1, -2)) * PIN_L_ROT
+            res = np.concatenate([res, err], axis=1)
+        cost = np.sum(res * res, axis=1)
+        better = cost < best_cost
+        best[better], best_cost[better] = cur[better], cost[better]
+        if it == iterations:
+            break
+        jac = tree.point_jacobian(poses, np.array([node]), pt)[:, 0][..., 6 + leg]  # (F, 3, nl)
+        if goal_rot is not None:
+            jr = tree.rotation_jacobian(poses, np.array([node]))[:, 0][..., 6 + leg] * PIN_L_ROT
+            jac = np.concatenate([jac, jr], axis=1)
+        jt = np.swapaxes(jac, 1, 2)
+        step = np.linalg.solve(jt @ jac + 1e-5 * np.eye(len(leg)), -(jt @ res[..., None]))[..., 0]
+        cur = np.clip(np.where(better[:, None], cur, best) + step, lo, hi)
+    return best
+
+
+HOLD_STILL = 0.002
+HOLD_TURN = 0.02
+"""A pinned foot is held between two solver frames where it moves less than this there (m, rad):
+a planted foot, not one rolling onto its toes (whose spline path is its motion)."""
+HOLD_MAX_CHANGE = 0.005
+"""Largest joint change (rad) holding may make in a frame (the spline's wobble takes a few
+milliradians; a larger change would add more joint jerk than it removes foot motion)."""
+
+
+def hold_feet_between_frames(
+    robot: RobotModel,
+    targets: Targets,
+    src_fps: float,
+    src_qpos: np.ndarray,
+    qpos: np.ndarray,
+    fps: float,
+    iterations: int = 1,
+) -> np.ndarray:
+    """Joint angles (N, nj) of a resampled trajectory with pinned feet held between the solver's frames.
+
+    The resampling splines the joints; the foot is a nonlinear function of them, so a foot
+    pinned at two consecutive solver frames wobbles by ~0.1-0.3 mm in between (a few mm/s at
+    30 fps). At every output frame between two solver frames where a foot is pinned (stance,
+    lock 1) its ankle keypoint goes back onto the line between its two pinned places, and
+    the foot onto the rotation between their orientations (legs of six or more joints).
+
+    Args:
+        targets: the solve's targets at ``src_fps``; src_qpos (T, 7 + nj) the solve's qpos there.
+        qpos: (N, 7 + nj) the resampled trajectory at ``fps`` (output frame n at n / fps s).
+    """
+    tree = robot.tree
+    q = qpos[:, 7:].copy()
+    root_pos = qpos[:, :3]
+    root_rot = quat_to_mat(qpos[:, 3:7])
+    src = tree.forward(src_qpos[:, :3], quat_to_mat(src_qpos[:, 3:7]), src_qpos[:, 7:])
+    pos = np.arange(len(qpos)) * src_fps / fps
+    i0 = np.clip(np.floor(pos + 1e-9).astype(int), 0, len(src_qpos) - 1)
+    i1 = np.minimum(i0 + 1, len(src_qpos) - 1)
+    w = np.clip(pos - i0, 0.0, 1.0)
+    between = w > 1e-6
+    for side in ("left", "right"):
+        pinned = targets.stance[side] & (targets.lock[side] >= 1.0)
+        frames = np.flatnonzero(between & pinned[i0] & pinned[i1])
+        if len(frames) == 0:
+            continue
+        k = robot.keypoint_index(f"{side}_ankle")
+        node = int(robot.nodes[k])
+        leg = leg_joints(robot, side)
+        place = tree.points(src, np.array([node]), robot.offsets[k][None])[:, 0]
+        turn = np.linalg.norm(
+            so3_log(np.swapaxes(src.rot[i0[frames], node], -1, -2) @ src.rot[i1[frames], node]), axis=-1
+        )
+        still = (np.linalg.norm(place[i1[frames]] - place[i0[frames]], axis=-1) < HOLD_STILL) & (
+            turn < HOLD_TURN
+        )
+        frames = frames[still]
+        if len(frames) == 0:
+            continue
+        a, b, t = i0[frames], i1[frames], w[frames, None]
+        goal = (1 - t) * place[a] + t * place[b]
+        goal_rot = None
+        if len(leg) >= 6:
+            ra, rb = src.rot[a, node], src.rot[b, node]
+            goal_rot = ra @ so3_exp(t * so3_log(np.swapaxes(ra, -1, -2) @ rb))
+        best = _pin_leg(
+            robot, side, root_pos[frames], root_rot[frames], q[frames], goal, goal_rot, iterations
+        )
+        change = best - q[np.ix_(frames, leg)]
+        ok = np.abs(change).max(axis=1) <= HOLD_MAX_CHANGE
+        q[frames[ok, None], leg] = best[ok]
     return q
 
 

@@ -3,8 +3,10 @@
 Pipeline: place the human in the world with :class:`controlmm.frames.HumanToWorld` (uniform
 scale :func:`robot_scale`), build targets (:mod:`retarget.targets`), solve all frames at the
 motion's rate (:mod:`retarget.solver`), resample to the requested rate
-(:mod:`retarget.resample`), lift frames whose feet would touch below the floor, and measure
-the result with MuJoCo (:mod:`retarget.metrics`).
+(:mod:`retarget.resample`) with pinned feet held between the solver's frames, lift frames
+whose feet would touch below the floor, check the arms' self-clearance on the real geoms and
+solve again with safe margins where they touch (:mod:`retarget.selfcheck`), and measure the
+result with MuJoCo (:mod:`retarget.metrics`).
 """
 
 from __future__ import annotations
@@ -24,15 +26,16 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion import load_motion
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
-from retarget.feet import lift_swing_feet
+from retarget.feet import hold_feet_between_frames, lift_swing_feet
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
-from retarget.solver import solve
+from retarget.selfcheck import CHECK_DEPTH, OTHER_DEPTH, RELAX_FRACTION, RELAXED_SOLVES, penetration_depths
+from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
-from retarget.targets import build_targets
+from retarget.targets import Targets, build_targets
 from retarget.trajectory import RobotTrajectory
 
 SOLVERS = ("batched", "mink")
@@ -132,6 +135,61 @@ def lift_above_floor(robot: RobotModel, qpos: np.ndarray, fps: float) -> tuple[n
     return out, rep, float(lift.max())
 
 
+def _solve_and_resample(
+    rm: RobotModel,
+    targets: Targets,
+    config: SolverConfig,
+    solver: str,
+    src_fps: float,
+    fps: float,
+) -> tuple[Solution, np.ndarray, np.ndarray, Replay, float, float]:
+    """Solve at the motion's rate, resample to ``fps`` with pinned feet held, lift swing feet
+    and anything below the floor: (solution, its qpos, output qpos, its replay, floor lift,
+    swing lift)."""
+    sol = solve_mink(rm, targets) if solver == "mink" else solve(rm, targets, config)
+    quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
+    qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
+    qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)
+    if fps != src_fps:
+        qpos[:, 7:] = hold_feet_between_frames(rm, targets, src_fps, qpos_in, qpos, fps)
+    times = np.arange(len(qpos)) / fps
+    src_times = np.arange(len(qpos_in)) / src_fps
+    clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
+    root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
+    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps)
+    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
+    return sol, qpos_in, qpos, rep, lift, swing_lift
+
+
+def _solve_clear_of_self(
+    rm: RobotModel, targets: Targets, config: SolverConfig, solver: str, src_fps: float, fps: float
+) -> tuple[Solution, np.ndarray, Replay, float, float, int]:
+    """:func:`_solve_and_resample` with the arms' self-clearance relaxed where the robot's
+    enclosures are loose (:mod:`retarget.selfcheck`): a first solve lets them come closer,
+    MuJoCo checks the real geoms, pairs that overlap get more room for another solve (from
+    scratch: one from the last poses can jump where a pair's margin changed); still
+    overlapping after RELAXED_SOLVES solves, the safe margins everywhere (a
+    solve from scratch). Returns (solution, output qpos, its replay, floor lift, swing lift,
+    solves)."""
+    clearance = rm.self_clearance if config.self_clearance and solver != "mink" else None
+    if clearance is None or clearance.looseness is None or not np.any(clearance.looseness > 0):
+        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
+        return sol, qpos, rep, lift, swing_lift, 1
+    first = clearance.relaxed(RELAX_FRACTION)
+    # Pairs brought closer may overlap CHECK_DEPTH; the others as much as with the safe margins.
+    tolerance = np.where(first.margin < clearance.margin, CHECK_DEPTH, OTHER_DEPTH)
+    for solves in range(1, RELAXED_SOLVES + 1):
+        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
+            rm.with_self_clearance(first), targets, config, solver, src_fps, fps
+        )
+        depth = penetration_depths(rm.model, rm.tree, qpos, first)
+        if not np.any(depth > tolerance):
+            return sol, qpos, rep, lift, swing_lift, solves
+        first = first.tightened(depth, tolerance)
+    sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
+    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1
+
+
 def retarget_motion(
     motion: Motion | np.ndarray | str | Path,
     robot: RobotSpec = "g1",
@@ -181,19 +239,8 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
-    if solver == "mink":
-        sol = solve_mink(rm, targets)
-    else:
-        sol = solve(rm, targets, config)
-    quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
-    qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
-    qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)
+    sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)
     times = np.arange(len(qpos)) / fps
-    src_times = np.arange(len(joints)) / src_fps
-    clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
-    root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
-    qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps)
-    qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
     method = {
@@ -207,6 +254,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         "solve_seconds": round(sol.seconds, 4),
         "floor_lift_max_mm": round(lift * 1000, 3),
         "swing_lift_max_mm": round(swing_lift * 1000, 3),
+        "self_clearance_solves": solves,
     }
     traj = RobotTrajectory(
         robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:") else rm.mapping.source),

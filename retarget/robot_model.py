@@ -8,6 +8,7 @@ feet's collision geometry (the points that touch the floor), evaluates the rest 
 
 from __future__ import annotations
 
+import copy
 import functools
 from pathlib import Path
 
@@ -158,6 +159,13 @@ class RobotModel:
         """Arm self-clearance capsules and pairs (:func:`retarget.selfcollision.build_self_clearance`)."""
         nodes = {name: int(node) for name, node in zip(self.keypoint_names, self.nodes, strict=True)}
         return build_self_clearance(self.model, self.tree, nodes, self.feet, self.capsules, self.rest)
+
+    def with_self_clearance(self, clearance: SelfClearance | None) -> RobotModel:
+        """A shallow copy whose solver keeps ``clearance`` (other margins, same pairs) instead
+        (the collision geometry built first, so that the copy shares it)."""
+        other = copy.copy(self.prepare())
+        other.__dict__["self_clearance"] = clearance
+        return other
 
     def prepare(self) -> RobotModel:
         """Build now the collision geometry the solver otherwise builds on first use (capsules,

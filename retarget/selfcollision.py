@@ -25,7 +25,11 @@ robot's collision geoms (:class:`SelfClearance`):
   and the hip link hanging below it) the rest pose says nothing about contact: the margin is
   calibrated on the real geoms by a sweep of the joints between them
   (:func:`swept_margin`); a pair whose geoms never touch in the sweep, or that cannot be swept
-  (the trunk body not above the leg link, too many joints between them), is dropped.
+  (the trunk body not above the leg link, too many joints between them), is dropped;
+* on robots with meshes, also the trunk against each arm's shoulder links (the chain from
+  the trunk down to the shoulder keypoint), calibrated the same way: the first solve of
+  :mod:`retarget.selfcheck` lets the arms closer to the trunk, and they roll those links
+  into it.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -35,7 +39,7 @@ where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -67,6 +71,12 @@ class SelfClearance:
         geom: (C,) MuJoCo geom id each capsule encloses.
         margin: (P,) distance kept free per pair: ``SELF_MARGIN``, or less for pairs whose
             capsules are closer in the rest pose (their enclosures overlap by construction).
+        looseness: (P,) how loosely the pair's capsules may enclose its geoms (m): the radii of
+            its capsules around meshes, summed (0: exact or close enclosures, capsules,
+            cylinders, boxes; a hand against its own shoulder and the trunk-shoulder pairs 0).
+        safe_margin: (P,) the margin each pair goes back to where its real geoms touch
+            (:mod:`retarget.selfcheck`); ``margin`` may be smaller (a first solve that lets the
+            loose enclosures overlap). None: the same as ``margin``.
     """
 
     node: np.ndarray
@@ -77,6 +87,26 @@ class SelfClearance:
     second: np.ndarray
     geom: np.ndarray
     margin: np.ndarray
+    safe_margin: np.ndarray | None = None
+    looseness: np.ndarray | None = None
+
+    def relaxed(self, fraction: float) -> SelfClearance:
+        """A copy in which each pair with a margin of at least 0 may come closer by
+        ``fraction`` of its ``looseness`` (pairs whose enclosures overlap at rest keep theirs);
+        ``safe_margin`` remembers the margins of this one."""
+        safe = self.margin if self.safe_margin is None else self.safe_margin
+        loose = np.zeros_like(safe) if self.looseness is None else self.looseness
+        margin = np.where(safe >= 0.0, safe - fraction * loose, self.margin)
+        return replace(self, margin=margin, safe_margin=safe)
+
+    def tightened(self, depth: np.ndarray, tolerance: float | np.ndarray) -> SelfClearance:
+        """A copy in which the pairs whose real geoms overlap deeper than ``tolerance``
+        (m, one or (P,); ``depth`` (P,), m) keep more room: their safe margin when below it, else their
+        margin plus that depth (the margin is a soft penalty that other terms can overcome)."""
+        safe = self.margin if self.safe_margin is None else self.safe_margin
+        bad = depth > tolerance
+        more = np.where(self.margin < safe, np.maximum(safe, self.margin + depth), self.margin + depth)
+        return replace(self, margin=np.where(bad, more, self.margin))
 
     @property
     def bound(self) -> np.ndarray:
@@ -248,6 +278,7 @@ def build_self_clearance(
     # A hand against its own shoulder (a hand brought to the shoulder, a folded arm): the
     # shoulder chain above the upper arm, which the pairs above leave out as the arm's own.
     # Kept only where they are apart at rest (a short arm's hand hangs next to its upper link).
+    arm_pairs = len(first)  # the pairs so far: an arm against the trunk, the legs, the other arm
     hand_pairs: list[int] = []  # indices into first/second
     for i, bi in enumerate(body_of):
         if bi not in hands:
@@ -297,6 +328,25 @@ def build_self_clearance(
                     trunk_pairs.append(len(first))
                     first.append(i)
                     second.append(j)
+    # Enclosing capsules are loose around meshes (exact around capsules, close around
+    # cylinders): pairs with a mesh may let their enclosures overlap in a first solve
+    # (SelfClearance.relaxed). Arms brought that close to the trunk roll their shoulder links
+    # (the chain from the trunk to the shoulder keypoint) into it: then those are kept from the
+    # trunk too, calibrated like the thighs.
+    mesh = m.geom_type[np.asarray(geom)] == mujoco.mjtGeom.mjGEOM_MESH
+    loose = any(mesh[first[k]] or mesh[second[k]] for k in range(arm_pairs))
+    shoulder_pairs: list[int] = []
+    for shoulder_chain in shoulders.values() if loose else ():
+        links = shoulder_chain - trunk_bodies
+        for i, bi in enumerate(body_of):
+            if bi not in trunk_bodies:
+                continue
+            for j, bj in enumerate(body_of):
+                if bj in links and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
+                    shoulder_pairs.append(len(first))
+                    first.append(i)
+                    second.append(j)
+    trunk_pairs += shoulder_pairs
     if not first:
         return None
     sc = SelfClearance(
@@ -324,8 +374,20 @@ def build_self_clearance(
                 keep[k] = False  # never touching in the sweep, or not sweepable
             else:
                 margin[k] = min(swept, margin[k])
+    loose_radius = np.where(mesh, np.asarray(radius), 0.0)
+    looseness = loose_radius[np.asarray(first)] + loose_radius[np.asarray(second)]
+    looseness[arm_pairs : arm_pairs + len(hand_pairs)] = 0.0
+    looseness[shoulder_pairs] = 0.0
     return SelfClearance(
-        sc.node, sc.p0, sc.p1, sc.radius, sc.first[keep], sc.second[keep], sc.geom, margin[keep]
+        sc.node,
+        sc.p0,
+        sc.p1,
+        sc.radius,
+        sc.first[keep],
+        sc.second[keep],
+        sc.geom,
+        margin[keep],
+        looseness=looseness[keep],
     )
 
 

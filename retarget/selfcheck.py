@@ -1,0 +1,108 @@
+"""The solver's self-clearance checked on the robot's real collision geometry.
+
+The solver keeps capsules apart (:mod:`retarget.selfcollision`); the capsules *enclose* the
+collision geoms, loosely around meshes (G1's forearm and thigh meshes by 1-3 cm), so a margin
+that is safe in every pose keeps the arms further from the thighs and trunk than the robot
+needs, and the fit to the human pays for it (a deep stoop, corpus clip 000000: 3.9 cm mean
+keypoint error with the safe margins, 3.0 cm after this check).
+
+So where a robot has mesh geoms the first solve lets each pair's capsules come closer than
+their safe margin by ``RELAX_FRACTION`` of their looseness (:meth:`SelfClearance.relaxed`);
+then the output is replayed in MuJoCo (:func:`penetration_depths`: ``mj_collision`` on the
+MJCF's own geoms, its exclusions honoured, as ``controlmm validate`` measures it), and the
+pairs whose geoms overlap deeper than their tolerance (``CHECK_DEPTH`` for the relaxed ones,
+``OTHER_DEPTH`` for the others) get their safe margin back or, already there (the margin is
+a soft penalty), a margin larger by the overlap found (:meth:`SelfClearance.tightened`), for
+another solve; after ``RELAXED_SOLVES`` relaxed solves that still overlap, the safe margins
+everywhere (the solve of a robot without meshes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+
+from retarget.kinematics import KinematicTree, quat_to_mat
+from retarget.selfcollision import SelfClearance, close_pairs
+
+RELAX_FRACTION = 0.3
+"""In the first solve a pair's capsules may come closer than their safe margin by this
+fraction of their looseness (the radii of its capsules around meshes; G1's forearm against
+a thigh: 0.3 x (0.04 + 0.06) m = 3 cm, so a 2 cm margin becomes a 1 cm overlap; OP3, a third
+of G1's size, about 1.5 cm). Chosen on 40 corpus clips (G1) and 30 (OP3): 0.5 fitted no
+closer and failed more often."""
+CHECK_DEPTH = 0.002
+"""Real geoms of a relaxed pair overlapping deeper than this (m) send it back to its safe
+margin (``controlmm validate`` fails a self-collision deeper than 5 mm)."""
+OTHER_DEPTH = 0.004
+"""The other pairs (kept at their safe margins; a pelvis and a hip link overlap 2-3 mm with
+the safe margins too) and geoms the solver does not keep apart may overlap this much (m)."""
+RELAXED_SOLVES = 3
+"""Relaxed solves at most (the first one, then more room where it overlapped); still
+overlapping after them, the safe margins everywhere (one more solve)."""
+
+
+def penetration_depths(
+    model: mujoco.MjModel,
+    tree: KinematicTree,
+    qpos: np.ndarray,
+    sc: SelfClearance,
+    other_depth: float = OTHER_DEPTH,
+) -> np.ndarray:
+    """(P,) deepest overlap (m, 0 where none) of each pair's real geoms over the frames of
+    ``qpos`` (T, nq), by MuJoCo's own collision detection of the robot's model (its exclusions
+    honoured). Only the frames where some pair's capsules come closer than its safe margin
+    are replayed (elsewhere the safe margins hold). Two other geoms of the robot overlapping
+    deeper than ``other_depth`` there (bodies the solver does not keep apart, pushed together
+    by the closer pairs) count against the relaxed pairs of the subtree below the deeper of
+    the two bodies (that arm)."""
+    qpos = np.asarray(qpos, dtype=np.float64)
+    found = np.zeros(sc.num_pairs)
+    safe = sc.margin if sc.safe_margin is None else sc.safe_margin
+    relaxed = sc.margin < safe
+    poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
+    frames = np.unique(close_pairs(poses, replace(sc, margin=safe)).frame)
+    pair_of = {
+        (int(a), int(b)): k
+        for k, (a, b) in enumerate(zip(sc.geom[sc.first], sc.geom[sc.second], strict=True))
+    }
+    pair_of.update({(b, a): k for (a, b), k in list(pair_of.items())})
+    root = model.body_rootid[model.geom_bodyid]
+    data = mujoco.MjData(model)
+    for frame in qpos[frames]:
+        data.qpos[:] = frame
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_collision(model, data)
+        n = data.ncon
+        deep = np.flatnonzero(data.contact.dist[:n] < 0.0)
+        for (g1, g2), dist in zip(data.contact.geom[:n][deep], data.contact.dist[:n][deep], strict=True):
+            k = pair_of.get((int(g1), int(g2)))
+            if k is not None:
+                found[k] = max(found[k], -dist)
+            elif dist < -other_depth and root[g1] == root[g2]:
+                b1, b2 = int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])
+                arm = relaxed & _in_subtree(model, sc, b1 if _depth(model, b1) >= _depth(model, b2) else b2)
+                found[arm] = np.maximum(found[arm], -dist)
+    return found
+
+
+def _depth(model: mujoco.MjModel, body: int) -> int:
+    """Bodies between ``body`` and the world."""
+    n = 0
+    while body > 0:
+        body, n = int(model.body_parentid[body]), n + 1
+    return n
+
+
+def _in_subtree(model: mujoco.MjModel, sc: SelfClearance, body: int) -> np.ndarray:
+    """(P,) bool: pairs with a capsule on ``body`` or a body below it."""
+    geom_body = model.geom_bodyid[sc.geom]
+    below = np.zeros(len(geom_body), dtype=bool)
+    for c, b in enumerate(geom_body):
+        b = int(b)
+        while b > 0 and b != body:
+            b = int(model.body_parentid[b])
+        below[c] = b == body
+    return below[sc.first] | below[sc.second]

@@ -1,0 +1,40 @@
+"""The side-by-side figures of retarget.compare on real trajectories (G1, the real clip)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controlmm.motion import Motion
+from retarget import load_robot, retarget_motion
+from retarget.compare import stance_foot_speed, stance_sole_speed
+
+
+@pytest.fixture(scope="module")
+def clip(sample_joints):
+    motion = Motion(joints=sample_joints.astype(np.float64), fps=20.0)
+    return motion, retarget_motion(motion, "g1", fps=30.0, metrics=False).qpos
+
+
+def test_a_sliding_robot_slides_at_its_speed_by_both_measures(clip):
+    """The whole robot carried sideways at 0.3 m/s: the foot bodies and their soles move
+    exactly that fast while the human's feet are down."""
+    motion, qpos = clip
+    robot = load_robot("g1")
+    still = np.repeat(qpos[:1], len(qpos), axis=0)
+    carried = still.copy()
+    carried[:, 1] += 0.01 * np.arange(len(qpos))  # 1 cm per frame at 30 fps
+    assert stance_foot_speed(robot, still, 30.0, motion.joints, 20.0) == pytest.approx(0.0, abs=1e-9)
+    assert stance_sole_speed(robot, still, 30.0, motion.joints, 20.0) == pytest.approx(0.0, abs=1e-9)
+    assert stance_foot_speed(robot, carried, 30.0, motion.joints, 20.0) == pytest.approx(0.3)
+    assert stance_sole_speed(robot, carried, 30.0, motion.joints, 20.0) == pytest.approx(0.3)
+
+
+def test_rolling_feet_move_their_bodies_not_their_soles(clip):
+    """On the real clip the feet rise onto their toes before the hops while the human's toes are
+    still down: the ankle bodies move over the planted toes, the soles much less."""
+    motion, qpos = clip
+    robot = load_robot("g1")
+    body = stance_foot_speed(robot, qpos, 30.0, motion.joints, 20.0)
+    sole = stance_sole_speed(robot, qpos, 30.0, motion.joints, 20.0)
+    assert 0 < sole < 0.6 * body, (sole, body)
