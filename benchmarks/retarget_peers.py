@@ -65,6 +65,7 @@ from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
 
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
+from controlmm.motion.skeleton import JOINT_INDEX  # noqa: E402
 from retarget import load_robot, retarget_motion  # noqa: E402
 from retarget.compare import (  # noqa: E402
     joint_jerk_rms,
@@ -201,6 +202,15 @@ def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tup
                     float(out[f"{name}__seconds"]),
                 )
     return results, demo, "holosoma-retargeting 0.1.0 (own environment, mujoco 3.3.7)"
+
+
+def on_floor(joints: np.ndarray) -> np.ndarray:
+    """HumanML3D joints (T, 22, 3), Y up, with the lowest toe of the clip at height 0, as
+    HumanML3D's preprocessing puts its clips (OMOMO's SMPL-H joints float 4-6 cm: the toe
+    joint sits inside the foot, the mesh's sole is the floor)."""
+    out = np.array(joints, dtype=np.float64)
+    out[..., 1] -= out[:, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min()
+    return out
 
 
 def gmr(python: Path, motions: dict[str, np.ndarray]) -> tuple[dict, str]:
@@ -348,7 +358,7 @@ def main() -> int:
                 per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
                 for name, (joints, q_peer, s_peer) in demo.items():
                     qpos, seconds = ours(
-                        "g1", Motion(joints=joints.astype(np.float32), fps=FPS), args.repeats
+                        "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), args.repeats
                     )
                     per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
                     per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))
@@ -357,7 +367,9 @@ def main() -> int:
         else:
             notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
         if args.gmr_python.is_file():
-            feed = {k: joints for k, (_, joints) in motions.items()} | {k: v[0] for k, v in demo.items()}
+            feed = {k: joints for k, (_, joints) in motions.items()} | {
+                k: on_floor(v[0]) for k, v in demo.items()
+            }
             results, notes["gmr"] = gmr(args.gmr_python, feed)
             if results:
                 per["gmr/g1"] = {

@@ -7,6 +7,8 @@ places the pelvis, chest, head and toe points with ``HUMAN_OFFSETS`` times that 
 
 from __future__ import annotations
 
+import numpy as np
+
 from controlmm.motion.skeleton import BONE_LENGTHS, JOINT_INDEX
 
 HUMAN_ANKLE_HEIGHT = 0.055
@@ -37,3 +39,34 @@ HUMAN_FOREARM = float(BONE_LENGTHS[JOINT_INDEX["left_wrist"]])
 """Elbow -> wrist length (m)."""
 HUMAN_HALF_HAND = 0.06
 """Wrist -> palm centre (m): where a robot's hand without wrist joints holds what the wrist follows."""
+
+
+SIZE_TOLERANCE = 0.02
+"""A clip whose legs are within this fraction of the reference skeleton's is scaled as the
+reference (HumanML3D and the corpus are on it exactly; generated motions within 0.3 %)."""
+
+
+def size_ratio(joints: np.ndarray) -> float:
+    """How much smaller (< 1) or larger the clip's human is than the reference skeleton, from
+    its legs: ``HUMAN_HIP_HEIGHT`` over its own standing hip height (mean thigh + shank
+    lengths over the clip + ``HUMAN_ANKLE_HEIGHT``), 1 within ``SIZE_TOLERANCE``. A robot
+    retargets a recorded subject (OMOMO's, 5 % taller or 12 % shorter) at its scale times this,
+    as holosoma-retargeting scales by the subject's height. joints: (T, 22, 3) metres."""
+    j = np.asarray(joints, dtype=np.float64)
+    legs = [
+        ("left_hip", "left_knee"),
+        ("left_knee", "left_ankle"),
+        ("right_hip", "right_knee"),
+        ("right_knee", "right_ankle"),
+    ]
+    length = (
+        sum(
+            float(np.linalg.norm(j[:, JOINT_INDEX[a]] - j[:, JOINT_INDEX[b]], axis=-1).mean())
+            for a, b in legs
+        )
+        / 2
+    )
+    if not np.isfinite(length) or length <= 0:
+        return 1.0
+    ratio = HUMAN_HIP_HEIGHT / (length + HUMAN_ANKLE_HEIGHT)
+    return 1.0 if abs(ratio - 1.0) <= SIZE_TOLERANCE else float(ratio)

@@ -27,6 +27,7 @@ from controlmm.motion import load_motion
 from controlmm.motion.container import Motion
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import hold_feet_between_frames, lift_swing_feet
+from retarget.human import size_ratio
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.mink_ik import solve_mink
@@ -207,7 +208,9 @@ def retarget_motion(
         robot: packaged robot name (``g1``, ``h1``), a mapping ``.json`` path or a Mapping.
         fps: output frame rate (Hz), 1 to 1000.
         transform: where the human is placed in the world; default
-            ``HumanToWorld(scale=robot_scale(robot))`` (start at the origin facing +X).
+            ``HumanToWorld(scale=robot_scale(robot) * size_ratio(joints))`` (start at the origin
+            facing +X; :func:`retarget.human.size_ratio`: 1 for a human on the HumanML3D
+            skeleton, the ratio of the leg lengths for a recorded subject).
         config: solver settings (default: ``SolverConfig`` with the mapping's ``solver`` overrides).
         metrics: measure the result with MuJoCo (see :mod:`retarget.metrics`).
         check_scale: refuse joints that do not look like a person in metres (a centimetre file,
@@ -236,7 +239,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         raise ControlMMError(f"unknown solver '{solver}'; allowed: {', '.join(SOLVERS)}")
     rm = load_robot(robot)
     joints, src_fps, info = _motion_arrays(motion, check_scale)
-    transform = transform if transform is not None else HumanToWorld(scale=rm.scale)
+    transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
     sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)

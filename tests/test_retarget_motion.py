@@ -349,3 +349,23 @@ def test_a_landing_foot_is_lifted_with_the_hip_at_its_limit(sample_joints):
     report = sim.check_trajectory(scenes.load_scene("empty", robot="t1"), traj.qpos, 30.0)
     slides = [f for f in report.failures if f.kind == "foot_sliding"]
     assert not slides, slides
+
+
+def test_a_recorded_subject_is_scaled_by_its_own_legs(sample_joints):
+    """A clip on the HumanML3D skeleton keeps the robot's scale; the same clip 12 % larger (a
+    taller subject, its floor kept) is retargeted at a proportionally smaller scale, so the
+    robot crouches as deep as for the original."""
+    from retarget.human import HUMAN_ANKLE_HEIGHT, HUMAN_HIP_HEIGHT, size_ratio
+
+    joints = sample_joints.astype(np.float64)
+    assert size_ratio(joints) == 1.0
+    assert size_ratio(joints * 1.01) == 1.0  # within the tolerance: the reference skeleton
+    big = joints * 1.12
+    leg = HUMAN_HIP_HEIGHT - HUMAN_ANKLE_HEIGHT
+    assert size_ratio(big) == pytest.approx(HUMAN_HIP_HEIGHT / (1.12 * leg + HUMAN_ANKLE_HEIGHT), rel=1e-3)
+    base = retarget_motion(Motion(joints=joints, fps=20), "g1", fps=20.0, metrics=False)
+    tall = retarget_motion(Motion(joints=big, fps=20), "g1", fps=20.0, metrics=False)
+    assert base.scale == pytest.approx(robot_scale("g1"))
+    assert tall.scale == pytest.approx(robot_scale("g1") * size_ratio(big))
+    # The pelvis height over the clip follows the same crouches at the robot's size.
+    np.testing.assert_allclose(tall.qpos[:, 2], base.qpos[:, 2], atol=0.03)
