@@ -87,9 +87,6 @@ def _pin_leg(
     to ``goal_rot`` (F, 3, 3) at PIN_L_ROT m/rad when given) for F frames of root_pos (F, 3),
     root_rot (F, 3, 3), q (F, nj): damped Gauss-Newton, a step that does not lower a frame's
     error undone, limits kept."""
-    tree = robot.tree
-    k = robot.keypoint_index(f"{side}_ankle")
-    node = int(robot.nodes[k])
     leg = leg_joints(robot, side)
     lo, hi = robot.lower[leg], robot.upper[leg]
     cur = q[:, leg].copy()
@@ -98,25 +95,41 @@ def _pin_leg(
     base = q.copy()
     for it in range(iterations + 1):
         base[:, leg] = cur
-        poses = tree.forward(root_pos, root_rot, base)
-        pt = tree.points(poses, np.array([node]), robot.offsets[k][None])
-        res = pt[:, 0] - goal
-        if goal_rot is not None:
-            err = so3_log(poses.rot[:, node] @ np.swapaxes(goal_rot, -1, -2)) * PIN_L_ROT
-            res = np.concatenate([res, err], axis=1)
+        poses = robot.tree.forward(root_pos, root_rot, base)
+        res, jac = _leg_residual(robot, side, poses, goal, goal_rot)
         cost = np.sum(res * res, axis=1)
         better = cost < best_cost
         best[better], best_cost[better] = cur[better], cost[better]
         if it == iterations:
             break
-        jac = tree.point_jacobian(poses, np.array([node]), pt)[:, 0][..., 6 + leg]  # (F, 3, nl)
-        if goal_rot is not None:
-            jr = tree.rotation_jacobian(poses, np.array([node]))[:, 0][..., 6 + leg] * PIN_L_ROT
-            jac = np.concatenate([jac, jr], axis=1)
-        jt = np.swapaxes(jac, 1, 2)
-        step = np.linalg.solve(jt @ jac + 1e-5 * np.eye(len(leg)), -(jt @ res[..., None]))[..., 0]
-        cur = np.clip(np.where(better[:, None], cur, best) + step, lo, hi)
+        cur = np.clip(np.where(better[:, None], cur, best) + _gauss_newton(res, jac), lo, hi)
     return best
+
+
+def _leg_residual(
+    robot: RobotModel, side: str, poses: Poses, goal: np.ndarray, goal_rot: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ankle keypoint's residual (F, 3 or 6: position, then orientation at PIN_L_ROT m/rad)
+    to ``goal`` / ``goal_rot`` and its Jacobian (F, 3 or 6, nl) in the leg's joints."""
+    tree = robot.tree
+    k = robot.keypoint_index(f"{side}_ankle")
+    node = np.array([int(robot.nodes[k])])
+    leg = leg_joints(robot, side)
+    pt = tree.points(poses, node, robot.offsets[k][None])
+    res = pt[:, 0] - goal
+    jac = tree.point_jacobian(poses, node, pt)[:, 0][..., 6 + leg]  # (F, 3, nl)
+    if goal_rot is not None:
+        err = so3_log(poses.rot[:, node[0]] @ np.swapaxes(goal_rot, -1, -2)) * PIN_L_ROT
+        res = np.concatenate([res, err], axis=1)
+        jr = tree.rotation_jacobian(poses, node)[:, 0][..., 6 + leg] * PIN_L_ROT
+        jac = np.concatenate([jac, jr], axis=1)
+    return res, jac
+
+
+def _gauss_newton(res: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """Damped Gauss-Newton steps (F, n) for residuals (F, m) with Jacobians (F, m, n)."""
+    jt = np.swapaxes(jac, 1, 2)
+    return np.linalg.solve(jt @ jac + 1e-5 * np.eye(jac.shape[2]), -(jt @ res[..., None]))[..., 0]
 
 
 HOLD_STILL = 0.002
@@ -135,7 +148,6 @@ def hold_feet_between_frames(
     src_qpos: np.ndarray,
     qpos: np.ndarray,
     fps: float,
-    iterations: int = 1,
 ) -> np.ndarray:
     """Joint angles (N, nj) of a resampled trajectory with pinned feet held between the solver's frames.
 
@@ -143,7 +155,8 @@ def hold_feet_between_frames(
     pinned at two consecutive solver frames wobbles by ~0.1-0.3 mm in between (a few mm/s at
     30 fps). At every output frame between two solver frames where a foot is pinned (stance,
     lock 1) its ankle keypoint goes back onto the line between its two pinned places, and
-    the foot onto the rotation between their orientations (legs of six or more joints).
+    the foot onto the rotation between their orientations (legs of six or more joints): one
+    Gauss-Newton step of the leg's joints, kept where no joint turns more than HOLD_MAX_CHANGE.
 
     Args:
         targets: the solve's targets at ``src_fps``; src_qpos (T, 7 + nj) the solve's qpos there.
@@ -151,44 +164,45 @@ def hold_feet_between_frames(
     """
     tree = robot.tree
     q = qpos[:, 7:].copy()
-    root_pos = qpos[:, :3]
-    root_rot = quat_to_mat(qpos[:, 3:7])
     src = tree.forward(src_qpos[:, :3], quat_to_mat(src_qpos[:, 3:7]), src_qpos[:, 7:])
     pos = np.arange(len(qpos)) * src_fps / fps
     i0 = np.clip(np.floor(pos + 1e-9).astype(int), 0, len(src_qpos) - 1)
     i1 = np.minimum(i0 + 1, len(src_qpos) - 1)
     w = np.clip(pos - i0, 0.0, 1.0)
     between = w > 1e-6
+    held: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
     for side in ("left", "right"):
         pinned = targets.stance[side] & (targets.lock[side] >= 1.0)
         frames = np.flatnonzero(between & pinned[i0] & pinned[i1])
-        if len(frames) == 0:
-            continue
         k = robot.keypoint_index(f"{side}_ankle")
         node = int(robot.nodes[k])
-        leg = leg_joints(robot, side)
         place = tree.points(src, np.array([node]), robot.offsets[k][None])[:, 0]
-        turn = np.linalg.norm(
-            so3_log(np.swapaxes(src.rot[i0[frames], node], -1, -2) @ src.rot[i1[frames], node]), axis=-1
-        )
-        still = (np.linalg.norm(place[i1[frames]] - place[i0[frames]], axis=-1) < HOLD_STILL) & (
-            turn < HOLD_TURN
-        )
-        frames = frames[still]
+        a, b = i0[frames], i1[frames]
+        turn = np.linalg.norm(so3_log(np.swapaxes(src.rot[a, node], -1, -2) @ src.rot[b, node]), axis=-1)
+        still = (np.linalg.norm(place[b] - place[a], axis=-1) < HOLD_STILL) & (turn < HOLD_TURN)
+        frames, a, b = frames[still], a[still], b[still]
         if len(frames) == 0:
             continue
-        a, b, t = i0[frames], i1[frames], w[frames, None]
-        goal = (1 - t) * place[a] + t * place[b]
+        t = w[frames, None]
         goal_rot = None
-        if len(leg) >= 6:
+        if len(leg_joints(robot, side)) >= 6:
             ra, rb = src.rot[a, node], src.rot[b, node]
             goal_rot = ra @ so3_exp(t * so3_log(np.swapaxes(ra, -1, -2) @ rb))
-        best = _pin_leg(
-            robot, side, root_pos[frames], root_rot[frames], q[frames], goal, goal_rot, iterations
+        held[side] = (frames, (1 - t) * place[a] + t * place[b], goal_rot)
+    if not held:
+        return q
+    # One forward pass for both legs (a leg's joints move only its own foot), one step each.
+    union = np.unique(np.concatenate([f for f, _, _ in held.values()]))
+    poses = tree.forward(qpos[union, :3], quat_to_mat(qpos[union, 3:7]), q[union])
+    for side, (frames, goal, goal_rot) in held.items():
+        rows = np.searchsorted(union, frames)
+        sub = type(poses)(*(getattr(poses, f)[rows] for f in ("rot", "pos", "axis", "anchor", "root_pos")))
+        leg = leg_joints(robot, side)
+        step = _gauss_newton(*_leg_residual(robot, side, sub, goal, goal_rot))
+        ok = np.abs(step).max(axis=1) <= HOLD_MAX_CHANGE
+        q[frames[ok, None], leg] = np.clip(
+            q[frames[ok, None], leg] + step[ok], robot.lower[leg], robot.upper[leg]
         )
-        change = best - q[np.ix_(frames, leg)]
-        ok = np.abs(change).max(axis=1) <= HOLD_MAX_CHANGE
-        q[frames[ok, None], leg] = best[ok]
     return q
 
 

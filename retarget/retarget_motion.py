@@ -33,7 +33,15 @@ from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
 from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
-from retarget.selfcheck import CHECK_DEPTH, OTHER_DEPTH, RELAX_FRACTION, RELAXED_SOLVES, penetration_depths
+from retarget.selfcheck import (
+    CHECK_DEPTH,
+    OTHER_DEPTH,
+    RELAX_FRACTION,
+    RELAX_MOST,
+    RELAXED_SOLVES,
+    RETRY_DEPTH,
+    penetration_depths,
+)
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
 from retarget.targets import Targets, build_targets
@@ -169,23 +177,26 @@ def _solve_clear_of_self(
     enclosures are loose (:mod:`retarget.selfcheck`): a first solve lets them come closer,
     MuJoCo checks the real geoms, pairs that overlap get more room for another solve (from
     scratch: one from the last poses can jump where a pair's margin changed); still
-    overlapping after RELAXED_SOLVES solves, the safe margins everywhere (a
-    solve from scratch). Returns (solution, output qpos, its replay, floor lift, swing lift,
-    solves)."""
+    overlapping after RELAXED_SOLVES solves, or deeper than RETRY_DEPTH anywhere, the safe
+    margins everywhere (a solve from scratch). Returns (solution, output qpos, its replay,
+    floor lift, swing lift, solves)."""
     clearance = rm.self_clearance if config.self_clearance and solver != "mink" else None
     if clearance is None or clearance.looseness is None or not np.any(clearance.looseness > 0):
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
         return sol, qpos, rep, lift, swing_lift, 1
-    first = clearance.relaxed(RELAX_FRACTION)
+    first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
     # Pairs brought closer may overlap CHECK_DEPTH; the others as much as with the safe margins.
     tolerance = np.where(first.margin < clearance.margin, CHECK_DEPTH, OTHER_DEPTH)
     for solves in range(1, RELAXED_SOLVES + 1):
-        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
+        sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
             rm.with_self_clearance(first), targets, config, solver, src_fps, fps
         )
-        depth = penetration_depths(rm.model, rm.tree, qpos, first)
+        # Checked at the solver's frames (the output's in-between frames move a few mrad).
+        depth = penetration_depths(rm.model, rm.tree, qpos_in, first)
         if not np.any(depth > tolerance):
             return sol, qpos, rep, lift, swing_lift, solves
+        if depth.max() > RETRY_DEPTH:
+            break  # arms pressed into the body (hands on the knees): the safe margins at once
         first = first.tightened(depth, tolerance)
     sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
     return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1

@@ -90,13 +90,14 @@ class SelfClearance:
     safe_margin: np.ndarray | None = None
     looseness: np.ndarray | None = None
 
-    def relaxed(self, fraction: float) -> SelfClearance:
+    def relaxed(self, fraction: float, most: float) -> SelfClearance:
         """A copy in which each pair with a margin of at least 0 may come closer by
-        ``fraction`` of its ``looseness`` (pairs whose enclosures overlap at rest keep theirs);
+        ``fraction`` of its ``looseness``, at most ``most`` metres (pairs whose enclosures
+        overlap at rest keep theirs);
         ``safe_margin`` remembers the margins of this one."""
         safe = self.margin if self.safe_margin is None else self.safe_margin
         loose = np.zeros_like(safe) if self.looseness is None else self.looseness
-        margin = np.where(safe >= 0.0, safe - fraction * loose, self.margin)
+        margin = np.where(safe >= 0.0, safe - np.minimum(fraction * loose, most), self.margin)
         return replace(self, margin=margin, safe_margin=safe)
 
     def tightened(self, depth: np.ndarray, tolerance: float | np.ndarray) -> SelfClearance:

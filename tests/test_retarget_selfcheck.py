@@ -20,7 +20,7 @@ from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from retarget import load_robot, retarget_motion
 from retarget.compare import similarity_fit, stance_foot_speed
-from retarget.selfcheck import CHECK_DEPTH, OTHER_DEPTH, RELAX_FRACTION, penetration_depths
+from retarget.selfcheck import CHECK_DEPTH, OTHER_DEPTH, RELAX_FRACTION, RELAX_MOST, penetration_depths
 from retarget.solver_config import SolverConfig
 
 
@@ -48,18 +48,19 @@ def _contact_depths(model: mujoco.MjModel, qpos: np.ndarray) -> dict[tuple[int, 
 
 def test_relaxed_margins_follow_the_looseness_of_the_enclosures():
     g1 = load_robot("g1").self_clearance
-    relaxed = g1.relaxed(RELAX_FRACTION)
+    relaxed = g1.relaxed(RELAX_FRACTION, RELAX_MOST)
     assert np.array_equal(relaxed.safe_margin, g1.margin)
     bigger = g1.margin >= 0
     np.testing.assert_allclose(
-        relaxed.margin[bigger], g1.margin[bigger] - RELAX_FRACTION * g1.looseness[bigger]
+        relaxed.margin[bigger],
+        g1.margin[bigger] - np.minimum(RELAX_FRACTION * g1.looseness[bigger], RELAX_MOST),
     )
     np.testing.assert_array_equal(relaxed.margin[~bigger], g1.margin[~bigger])
     assert (relaxed.margin < g1.margin).sum() > 100  # G1's links are meshes: most pairs relax
     # H1's collision geoms are capsules, cylinders and boxes: nothing to relax.
     h1 = load_robot("h1").self_clearance
     assert not np.any(h1.looseness > 0)
-    np.testing.assert_array_equal(h1.relaxed(RELAX_FRACTION).margin, h1.margin)
+    np.testing.assert_array_equal(h1.relaxed(RELAX_FRACTION, RELAX_MOST).margin, h1.margin)
     # More room only where the real geoms overlap beyond the tolerance.
     depth = np.zeros(g1.num_pairs)
     depth[[0, 1]] = [0.004, 0.001]
@@ -79,7 +80,7 @@ def test_penetration_depths_are_mujocos(stoop):
         metrics=False,
         config=replace(SolverConfig(**rm.mapping.solver), self_clearance=False),
     )
-    sc = rm.self_clearance.relaxed(RELAX_FRACTION)
+    sc = rm.self_clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
     depth = penetration_depths(rm.model, rm.tree, loose.qpos, sc, other_depth=np.inf)
     assert depth.max() > 0.02  # centimetres into the thighs
     truth = _contact_depths(rm.model, loose.qpos)
