@@ -186,7 +186,8 @@ def _solve_clear_of_self(
         return sol, qpos, rep, lift, swing_lift, 1
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
     # Pairs brought closer may overlap CHECK_DEPTH; the others as much as with the safe margins.
-    tolerance = np.where(first.margin < clearance.margin, CHECK_DEPTH, OTHER_DEPTH)
+    assert first.safe_margin is not None
+    tolerance = np.where(first.margin < first.safe_margin, CHECK_DEPTH, OTHER_DEPTH)
     for solves in range(1, RELAXED_SOLVES + 1):
         sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
             rm.with_self_clearance(first), targets, config, solver, src_fps, fps

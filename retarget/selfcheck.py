@@ -4,7 +4,7 @@ The solver keeps capsules apart (:mod:`retarget.selfcollision`); the capsules *e
 collision geoms, loosely around meshes (G1's forearm and thigh meshes by 1-3 cm), so a margin
 that is safe in every pose keeps the arms further from the thighs and trunk than the robot
 needs, and the fit to the human pays for it (a deep stoop, corpus clip 000000: 3.9 cm mean
-keypoint error with the safe margins, 3.0 cm after this check).
+keypoint error with the safe margins, 2.8 cm after this check).
 
 So where a robot has mesh geoms the first solve lets each pair's capsules come closer than
 their safe margin by ``RELAX_FRACTION`` of their looseness, at most ``RELAX_MOST``
@@ -37,8 +37,9 @@ of G1's size, about 1.5 cm). Chosen on 40 corpus clips (G1) and 30 (OP3): 0.5 fi
 closer and failed more often."""
 RELAX_MOST = 0.04
 """...but by at most this (m): the trunk's and a thigh's big meshes (0.3 x their radii: 6 cm)
-would otherwise overlap in the first solve and cost a second; capped, 1.08 solves per G1
-clip instead of 1.15 at the same fit (3 cm: 1.03 solves, 0.1 cm less close on the stoop)."""
+would otherwise overlap in the first solve and cost another; capped, fewer G1 clips need a
+second solve (40 corpus clips: 1.08 solves instead of 1.15) at the same fit (3 cm: 1.03
+solves, but the stoop 000000 at 3.0 cm instead of 2.8)."""
 CHECK_DEPTH = 0.002
 """Real geoms of a relaxed pair overlapping deeper than this (m) send it back to its safe
 margin (``controlmm validate`` fails a self-collision deeper than 5 mm)."""

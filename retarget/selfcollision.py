@@ -74,6 +74,8 @@ class SelfClearance:
         looseness: (P,) how loosely the pair's capsules may enclose its geoms (m): the radii of
             its capsules around meshes, summed (0: exact or close enclosures, capsules,
             cylinders, boxes; a hand against its own shoulder and the trunk-shoulder pairs 0).
+        relaxed_pairs: the same with the pairs a relaxed solve keeps besides (the trunk
+            against the shoulder links), or None.
         safe_margin: (P,) the margin each pair goes back to where its real geoms touch
             (:mod:`retarget.selfcheck`); ``margin`` may be smaller (a first solve that lets the
             loose enclosures overlap). None: the same as ``margin``.
@@ -89,16 +91,18 @@ class SelfClearance:
     margin: np.ndarray
     safe_margin: np.ndarray | None = None
     looseness: np.ndarray | None = None
+    relaxed_pairs: SelfClearance | None = None
 
     def relaxed(self, fraction: float, most: float) -> SelfClearance:
         """A copy in which each pair with a margin of at least 0 may come closer by
         ``fraction`` of its ``looseness``, at most ``most`` metres (pairs whose enclosures
-        overlap at rest keep theirs);
+        overlap at rest keep theirs), with the pairs of ``relaxed_pairs`` when given;
         ``safe_margin`` remembers the margins of this one."""
-        safe = self.margin if self.safe_margin is None else self.safe_margin
-        loose = np.zeros_like(safe) if self.looseness is None else self.looseness
-        margin = np.where(safe >= 0.0, safe - np.minimum(fraction * loose, most), self.margin)
-        return replace(self, margin=margin, safe_margin=safe)
+        base = self if self.relaxed_pairs is None else self.relaxed_pairs
+        safe = base.margin if base.safe_margin is None else base.safe_margin
+        loose = np.zeros_like(safe) if base.looseness is None else base.looseness
+        margin = np.where(safe >= 0.0, safe - np.minimum(fraction * loose, most), base.margin)
+        return replace(base, margin=margin, safe_margin=safe, relaxed_pairs=None)
 
     def tightened(self, depth: np.ndarray, tolerance: float | np.ndarray) -> SelfClearance:
         """A copy in which the pairs whose real geoms overlap deeper than ``tolerance``
@@ -379,7 +383,7 @@ def build_self_clearance(
     looseness = loose_radius[np.asarray(first)] + loose_radius[np.asarray(second)]
     looseness[arm_pairs : arm_pairs + len(hand_pairs)] = 0.0
     looseness[shoulder_pairs] = 0.0
-    return SelfClearance(
+    full = SelfClearance(
         sc.node,
         sc.p0,
         sc.p1,
@@ -389,6 +393,21 @@ def build_self_clearance(
         sc.geom,
         margin[keep],
         looseness=looseness[keep],
+    )
+    # The trunk-shoulder pairs belong to the relaxed solve only: the safe margins keep the arms
+    # away without them (and the safe solve stays what it was before the relaxed one existed).
+    is_shoulder = np.zeros(len(first), dtype=bool)
+    is_shoulder[shoulder_pairs] = True
+    safe = ~is_shoulder[keep]
+    if safe.all():
+        return full
+    return replace(
+        full,
+        first=full.first[safe],
+        second=full.second[safe],
+        margin=full.margin[safe],
+        looseness=looseness[keep][safe],
+        relaxed_pairs=full,
     )
 
 

@@ -49,23 +49,26 @@ def _contact_depths(model: mujoco.MjModel, qpos: np.ndarray) -> dict[tuple[int, 
 def test_relaxed_margins_follow_the_looseness_of_the_enclosures():
     g1 = load_robot("g1").self_clearance
     relaxed = g1.relaxed(RELAX_FRACTION, RELAX_MOST)
-    assert np.array_equal(relaxed.safe_margin, g1.margin)
-    bigger = g1.margin >= 0
+    # The relaxed solve also keeps the trunk from the shoulder links (G1's meshes: 10 pairs).
+    base = g1.relaxed_pairs
+    assert base is not None and relaxed.num_pairs == base.num_pairs == g1.num_pairs + 10
+    np.testing.assert_array_equal(relaxed.safe_margin, base.margin)
+    bigger = base.margin >= 0
     np.testing.assert_allclose(
         relaxed.margin[bigger],
-        g1.margin[bigger] - np.minimum(RELAX_FRACTION * g1.looseness[bigger], RELAX_MOST),
+        base.margin[bigger] - np.minimum(RELAX_FRACTION * base.looseness[bigger], RELAX_MOST),
     )
-    np.testing.assert_array_equal(relaxed.margin[~bigger], g1.margin[~bigger])
-    assert (relaxed.margin < g1.margin).sum() > 100  # G1's links are meshes: most pairs relax
-    # H1's collision geoms are capsules, cylinders and boxes: nothing to relax.
+    np.testing.assert_array_equal(relaxed.margin[~bigger], base.margin[~bigger])
+    assert (relaxed.margin < base.margin).sum() > 100  # G1's links are meshes: most pairs relax
+    # H1's collision geoms are capsules, cylinders and boxes: nothing to relax, no extra pairs.
     h1 = load_robot("h1").self_clearance
-    assert not np.any(h1.looseness > 0)
+    assert not np.any(h1.looseness > 0) and h1.relaxed_pairs is None
     np.testing.assert_array_equal(h1.relaxed(RELAX_FRACTION, RELAX_MOST).margin, h1.margin)
     # More room only where the real geoms overlap beyond the tolerance.
-    depth = np.zeros(g1.num_pairs)
+    depth = np.zeros(relaxed.num_pairs)
     depth[[0, 1]] = [0.004, 0.001]
     tight = relaxed.tightened(depth, CHECK_DEPTH)
-    assert tight.margin[0] == pytest.approx(max(g1.margin[0], relaxed.margin[0] + 0.004))
+    assert tight.margin[0] == pytest.approx(max(base.margin[0], relaxed.margin[0] + 0.004))
     np.testing.assert_array_equal(tight.margin[1:], relaxed.margin[1:])
 
 
