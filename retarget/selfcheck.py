@@ -65,17 +65,21 @@ def penetration_depths(
 ) -> np.ndarray:
     """(P,) deepest overlap (m, 0 where none) of each pair's real geoms over the frames of
     ``qpos`` (T, nq), by MuJoCo's own collision detection of the robot's model (its exclusions
-    honoured). Only the frames where some pair's capsules come closer than its safe margin
-    are replayed (elsewhere the safe margins hold). Two other geoms of the robot overlapping
-    deeper than ``other_depth`` there (bodies the solver does not keep apart, pushed together
-    by the closer pairs) count against the relaxed pairs of the subtree below the deeper of
-    the two bodies (that arm)."""
+    honoured). Only the frames where some pair's capsules overlap (or, for pairs that overlap
+    at rest, come inside their margin) are replayed: elsewhere their geoms cannot. Two other
+    geoms of the robot overlapping deeper than ``other_depth`` there (bodies the solver does
+    not keep apart, pushed together by the closer pairs) count against the relaxed pairs of
+    the subtree below the deeper of the two bodies (that arm)."""
     qpos = np.asarray(qpos, dtype=np.float64)
     found = np.zeros(sc.num_pairs)
     safe = sc.margin if sc.safe_margin is None else sc.safe_margin
     relaxed = sc.margin < safe
     poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
-    frames = np.unique(close_pairs(poses, replace(sc, margin=safe)).frame)
+    # Capsules enclose their geoms: two geoms overlap only where their capsules do. Pairs whose
+    # enclosures overlap at rest (negative safe margins, calibrated on the real geoms) may
+    # overlap inside their margin.
+    maybe = np.where(safe >= 0.0, 0.0, np.maximum(sc.margin, safe))
+    frames = np.unique(close_pairs(poses, replace(sc, margin=maybe)).frame)
     pair_of = {
         (int(a), int(b)): k
         for k, (a, b) in enumerate(zip(sc.geom[sc.first], sc.geom[sc.second], strict=True))

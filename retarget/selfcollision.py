@@ -319,20 +319,25 @@ def build_self_clearance(
     # parent and its child and body pairs the model excludes (as MuJoCo does).
     excluded = {frozenset((int(s_ >> 16), int(s_ & 0xFFFF))) for s_ in m.exclude_signature}
     trunk_bodies = (trunk or set()) | shared
-    trunk_pairs: list[int] = []  # indices into first/second
-    for side in ("left", "right"):
-        if f"{side}_knee" not in keypoint_nodes:
-            continue
-        knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
-        thigh = {b for b in ancestors(knee)[1:] if b in leg}
+
+    def against_trunk(links: set[int]) -> list[int]:
+        """Appends the pairs of the trunk's capsules with those on ``links`` (bodies); their indices."""
+        added: list[int] = []
         for i, bi in enumerate(body_of):
             if bi not in trunk_bodies:
                 continue
             for j, bj in enumerate(body_of):
-                if bj in thigh and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
-                    trunk_pairs.append(len(first))
+                if bj in links and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
+                    added.append(len(first))
                     first.append(i)
                     second.append(j)
+        return added
+
+    trunk_pairs: list[int] = []  # indices into first/second
+    for side in ("left", "right"):
+        if f"{side}_knee" in keypoint_nodes:
+            knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
+            trunk_pairs += against_trunk({b for b in ancestors(knee)[1:] if b in leg})
     # Enclosing capsules are loose around meshes (exact around capsules, close around
     # cylinders): pairs with a mesh may let their enclosures overlap in a first solve
     # (SelfClearance.relaxed). Arms brought that close to the trunk roll their shoulder links
@@ -342,15 +347,7 @@ def build_self_clearance(
     loose = any(mesh[first[k]] or mesh[second[k]] for k in range(arm_pairs))
     shoulder_pairs: list[int] = []
     for shoulder_chain in shoulders.values() if loose else ():
-        links = shoulder_chain - trunk_bodies
-        for i, bi in enumerate(body_of):
-            if bi not in trunk_bodies:
-                continue
-            for j, bj in enumerate(body_of):
-                if bj in links and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
-                    shoulder_pairs.append(len(first))
-                    first.append(i)
-                    second.append(j)
+        shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies)
     trunk_pairs += shoulder_pairs
     if not first:
         return None

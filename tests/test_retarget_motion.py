@@ -18,6 +18,7 @@ import sim
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget import RobotTrajectory, retarget_motion, robot_mjcf, robot_scale
+from retarget.human import HUMAN_ANKLE_HEIGHT, HUMAN_HIP_HEIGHT, size_ratio
 
 # Robot bodies that sit on human joints (HumanML3D index), per robot.
 BODIES = {
@@ -355,8 +356,6 @@ def test_a_recorded_subject_is_scaled_by_its_own_legs(sample_joints):
     """A clip on the HumanML3D skeleton keeps the robot's scale; the same clip 12 % larger (a
     taller subject, its floor kept) is retargeted at a proportionally smaller scale, so the
     robot crouches as deep as for the original."""
-    from retarget.human import HUMAN_ANKLE_HEIGHT, HUMAN_HIP_HEIGHT, size_ratio
-
     joints = sample_joints.astype(np.float64)
     assert size_ratio(joints) == 1.0
     assert size_ratio(joints * 1.01) == 1.0  # within the tolerance: the reference skeleton
