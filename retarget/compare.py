@@ -128,16 +128,7 @@ def stance_foot_speed(
 ) -> float:
     """Mean horizontal speed (m/s) of the foot bodies between consecutive frames in which the
     human's foot is in contact (0 without such frames)."""
-    rep = replay(robot.model, qpos)
-    contact = human_contacts(human, human_fps, len(qpos), fps)
-    speeds = []
-    for i, side in enumerate(("left", "right")):
-        body = int(robot.tree.node_body[robot.feet[side].node])
-        step = np.linalg.norm(np.diff(rep.xpos[:, body, :2], axis=0), axis=1) * fps
-        both = contact[1:, i] & contact[:-1, i]
-        speeds.append(step[both])
-    all_speeds = np.concatenate(speeds)
-    return float(all_speeds.mean()) if all_speeds.size else 0.0
+    return _stance_speed(robot, qpos, fps, human, human_fps, sole=False)
 
 
 def stance_sole_speed(
@@ -146,13 +137,21 @@ def stance_sole_speed(
     """Mean horizontal speed (m/s), between consecutive frames in which the human's foot is in
     contact, of each foot's slowest sole point (its floor points: heel and toe corners); a
     foot pivoting on its toe or heel does not count as moving (0 without such frames)."""
+    return _stance_speed(robot, qpos, fps, human, human_fps, sole=True)
+
+
+def _stance_speed(
+    robot: RobotModel, qpos: np.ndarray, fps: float, human: np.ndarray, human_fps: float, sole: bool
+) -> float:
+    """The stance speeds above: of the foot body's origin, or of its slowest floor point."""
     rep = replay(robot.model, qpos)
     contact = human_contacts(human, human_fps, len(qpos), fps)
     speeds = []
     for i, side in enumerate(("left", "right")):
         foot = robot.feet[side]
         body = int(robot.tree.node_body[foot.node])
-        pts = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], foot.points)
+        local = foot.points if sole else np.zeros((1, 3))
+        pts = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], local)
         step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps
         speeds.append(step[contact[1:, i] & contact[:-1, i]])
     all_speeds = np.concatenate(speeds)

@@ -196,9 +196,8 @@ def hold_feet_between_frames(
     poses = tree.forward(qpos[union, :3], quat_to_mat(qpos[union, 3:7]), q[union])
     for side, (frames, goal, goal_rot) in held.items():
         rows = np.searchsorted(union, frames)
-        sub = type(poses)(*(getattr(poses, f)[rows] for f in ("rot", "pos", "axis", "anchor", "root_pos")))
         leg = leg_joints(robot, side)
-        step = _gauss_newton(*_leg_residual(robot, side, sub, goal, goal_rot))
+        step = _gauss_newton(*_leg_residual(robot, side, poses.take(rows), goal, goal_rot))
         ok = np.abs(step).max(axis=1) <= HOLD_MAX_CHANGE
         q[frames[ok, None], leg] = np.clip(
             q[frames[ok, None], leg] + step[ok], robot.lower[leg], robot.upper[leg]
@@ -288,7 +287,7 @@ def lift_swing_feet(
         idx = np.flatnonzero(rise > 1e-5)
         # Translate the foot straight up by the rise, its orientation and place unchanged:
         # the leg's joints solve [d position; d rotation] = [0, 0, rise; 0] (damped least squares).
-        sub = type(poses)(*(getattr(poses, k)[idx] for k in ("rot", "pos", "axis", "anchor", "root_pos")))
+        sub = poses.take(idx)
         node = np.array([f.node])
         jp = tree.point_jacobian(sub, node, sub.pos[:, node])[:, 0][..., 6 + leg]  # (F, 3, nl)
         jr = tree.rotation_jacobian(sub, node)[:, 0][..., 6 + leg]

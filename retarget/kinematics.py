@@ -120,6 +120,12 @@ class Poses:
     anchor: np.ndarray
     root_pos: np.ndarray
 
+    def take(self, frames: np.ndarray) -> Poses:
+        """The poses of some frames (indices (F,) into the T frames)."""
+        return Poses(
+            self.rot[frames], self.pos[frames], self.axis[frames], self.anchor[frames], self.root_pos[frames]
+        )
+
 
 class KinematicTree:
     """The body tree of a MuJoCo model with a floating base, as arrays for batched FK."""
