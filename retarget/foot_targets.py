@@ -22,13 +22,55 @@ PITCH_SMOOTH_SECONDS = 0.05
 LOCK_GAIN = 30.0
 """Weight multiplier of the foot targets during stance (locked feet)."""
 FOOT_GAP = 0.02
-"""Metres kept between the two feet's soles sideways where they are side by side."""
-OVERLAP_RAMP = 0.05
-"""Lengthwise distance (m) between the footprints over which the sideways gap fades out."""
+"""Metres kept between the two feet's footprints (each grown by half of it on every side)."""
+KNEE_TWIST_DEG = 10.0
+"""Largest angle (degrees) between a foot's heading and the human's knee direction that the
+foot keeps (:func:`knee_turn`)."""
+KNEE_TURN_MOST_DEG = 8.0
+"""The most (degrees) a foot turns towards the knee (:func:`knee_turn`): a landing foot turned
+further than the human's toes point twists on the floor as it lands."""
+TURN_SMOOTH_SECONDS = 0.1
+"""Gaussian sigma (s) with which a foot's knee turn passes from one contact run's to the next."""
+KNEE_BEND_FULL = 0.16
+"""Distance of the human's knee from its hip-ankle line, as a fraction of the leg's length,
+from which the knee's direction counts fully (less bent: proportionally less)."""
+
+
+def knee_direction(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """Heading (rad, about +Z) of the human's knee as seen from its hip-ankle line, and how
+    bent the knee is: its distance from that line over the leg's length (thigh + shank), (T,)
+    each (a straight leg: 0, and its heading is meaningless)."""
+    hip, knee, ankle = (world[:, JOINT_INDEX[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
+    axis = ankle - hip
+    axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-9)
+    out = knee - hip
+    out = out - np.sum(out * axis, axis=1, keepdims=True) * axis
+    leg = np.linalg.norm(knee - hip, axis=1) + np.linalg.norm(ankle - knee, axis=1)
+    return np.arctan2(out[:, 1], out[:, 0]), np.linalg.norm(out, axis=1) / np.maximum(leg, 1e-9)
+
+
+def knee_turn(world: np.ndarray, side: str) -> np.ndarray:
+    """(T,) how far (rad, about +Z) the robot's foot turns from the human's toe heading
+    towards the human's knee.
+
+    Where the human's toes point more than KNEE_TWIST_DEG away from its bent knee (toes turned
+    out in a squat), the robot's foot cannot follow both: a human shank twists under the knee
+    (tibial torsion, the ankle's own turn), a robot's does not (its knee axis is its ankle's
+    pitch axis), so a robot foot turned with the toes takes the knee out with it. The foot
+    turns towards the knee's direction (:func:`knee_direction`) by the twist beyond
+    KNEE_TWIST_DEG, at most KNEE_TURN_MOST_DEG, in proportion to how bent the knee is (fully
+    from KNEE_BEND_FULL); 0 elsewhere.
+    """
+    toe = foot_heading_pitch(world, side)[0]
+    knee, bend = knee_direction(world, side)
+    twist = np.angle(np.exp(1j * (knee - toe)))  # wrapped to (-pi, pi]
+    limit, most = np.radians(KNEE_TWIST_DEG), np.radians(KNEE_TURN_MOST_DEG)
+    excess = np.clip(twist - np.clip(twist, -limit, limit), -most, most)
+    return np.clip(bend / KNEE_BEND_FULL, 0.0, 1.0) * excess
 
 
 def foot_heading_pitch(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """Heading (yaw about +Z) and elevation (rad) of the ankle -> toe vector, (T,) each."""
+    """Heading (yaw about +Z) and elevation (rad) of the human's ankle -> toe vector, (T,) each."""
     v = world[:, JOINT_INDEX[f"{side}_foot"]] - world[:, JOINT_INDEX[f"{side}_ankle"]]
     heading = np.arctan2(v[:, 1], v[:, 0])
     elevation = np.arctan2(v[:, 2], np.linalg.norm(v[:, :2], axis=1))
@@ -84,40 +126,59 @@ def _heading_axes(pelvis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return x, y, np.arctan2(x[:, 1], x[:, 0])
 
 
+def _footprint_corners(robot: RobotModel, side: str, turn: np.ndarray) -> np.ndarray:
+    """(T, 4, 2) corners of a foot's footprint grown by FOOT_GAP / 2 on every side, turned by
+    ``turn`` (T,) rad about +Z, around its ankle keypoint (m; x forward, y left)."""
+    box = footprint(robot, side) + np.array([-1.0, 1.0, -1.0, 1.0]) * FOOT_GAP / 2
+    corners = np.array([[box[i], box[j]] for i in (0, 1) for j in (2, 3)])  # (4, 2)
+    c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
+    return np.stack([c * corners[:, 0] - s * corners[:, 1], s * corners[:, 0] + c * corners[:, 1]], axis=-1)
+
+
+def sideways_overlap(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shifts along y of the convex polygon ``left`` (T, N, 2) at which it meets ``right``
+    (T, M, 2): the interval (lo, hi) (T,) each, (inf, -inf) where no shift along y makes them
+    meet. They overlap where lo < 0 < hi.
+
+    A shift d meets where d * y lies in the Minkowski difference right - left, the convex hull
+    of every corner difference; its section by the y axis is spanned by where the segments
+    between pairs of those points cross x = 0 (every hull edge is one of them, every such
+    segment lies inside the hull).
+    """
+    diff = (right[:, :, None] - left[:, None, :]).reshape(len(left), -1, 2)
+    i, j = np.triu_indices(diff.shape[1], 1)
+    a, b = diff[:, i], diff[:, j]
+    cross = (a[..., 0] <= 0) != (b[..., 0] <= 0)
+    run = np.where(cross, b[..., 0] - a[..., 0], 1.0)
+    y = a[..., 1] - a[..., 0] * (b[..., 1] - a[..., 1]) / run
+    return np.where(cross, y, np.inf).min(axis=1), np.where(cross, y, -np.inf).max(axis=1)
+
+
 def feet_shortfall(
     robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """How far (m, (T,), signed) the left ankle target must move relative to the right one along
     the pelvis heading's left axis (T, 3) for the robot's feet not to overlap.
 
-    Each foot's footprint (:func:`footprint`) is turned by the human foot's heading (``world``:
-    the scaled human (T, 22, 3)); where the two overlap lengthwise the left one must lie
-    FOOT_GAP left of the right one (or, feet crossed, right of it: whichever is nearer), the
-    need fading out over OVERLAP_RAMP of lengthwise gap.
+    Each foot's footprint (:func:`footprint`, grown by FOOT_GAP / 2 on every side) is turned
+    by the robot foot's heading (the human's toes' turned by :func:`knee_turn`, per frame;
+    ``world``: the scaled human (T, 22, 3)). Where the two overlap, the shortest move that
+    parts them: the left foot to the left (> 0) or, feet crossed, to the right (< 0); 0
+    elsewhere.
     """
     kl, kr = robot.keypoint_index("left_ankle"), robot.keypoint_index("right_ankle")
     x, y, pelvis_heading = _heading_axes(pelvis)
-    extent = {}
-    for side in ("left", "right"):
-        box = footprint(robot, side)
-        corners = np.array([[box[i], box[j]] for i in (0, 1) for j in (2, 3)])  # (4, 2)
-        turn = foot_heading_pitch(world, side)[0] - pelvis_heading  # (T,)
-        c, s_ = np.cos(turn)[:, None], np.sin(turn)[:, None]
-        cx = c * corners[:, 0] - s_ * corners[:, 1]  # (T, 4) in the pelvis heading frame
-        cy = s_ * corners[:, 0] + c * corners[:, 1]
-        extent[side] = (cx.min(axis=1), cx.max(axis=1), cy.min(axis=1), cy.max(axis=1))
-    fl, fr = extent["left"], extent["right"]
     d = kp_pos[:, kl] - kp_pos[:, kr]
-    dx, dy = np.sum(d * x, axis=1), np.sum(d * y, axis=1)
-    overlap = np.minimum(dx + fl[1], fr[1]) - np.maximum(dx + fl[0], fr[0])  # > 0: side by side
-    share = np.clip(1.0 + overlap / OVERLAP_RAMP, 0.0, 1.0)
-    # Apart: the left foot left of the right one (dy >= beside) or, crossed, right of it
-    # (dy <= -crossed); short of both, the nearer of the two.
-    beside = (fr[3] - fl[2] + FOOT_GAP) * share
-    crossed = (fl[3] - fr[2] + FOOT_GAP) * share
-    left = np.maximum(beside - dy, 0.0)
-    right = np.maximum(dy + crossed, 0.0)
-    return np.where(left <= right, left, -right), y
+    heading = {
+        side: foot_heading_pitch(world, side)[0] + knee_turn(world, side) - pelvis_heading
+        for side in ("left", "right")
+    }
+    left = _footprint_corners(robot, "left", heading["left"])
+    left = left + np.stack([np.sum(d * x, axis=1), np.sum(d * y, axis=1)], axis=-1)[:, None]
+    right = _footprint_corners(robot, "right", heading["right"])
+    lo, hi = sideways_overlap(left, right)
+    overlap = (lo < 0) & (hi > 0)
+    return np.where(overlap, np.where(hi <= -lo, hi, lo), 0.0), y
 
 
 def _move_foot(robot: RobotModel, kp_pos: np.ndarray, side: str, delta: np.ndarray) -> None:
@@ -149,26 +210,30 @@ def separate_locks(
     alpha_xy: dict[str, np.ndarray],
     passes: int = 2,
 ) -> None:
-    """Move whole foot locks apart where the two locked feet would overlap (in place).
+    """Move whole foot locks apart where the two locked feet would overlap, and a foot passing
+    a locked one around it (in place).
 
     A lock is one place per contact run, the mean of the run's targets, so two locks may
     overlap although every frame's targets were spaced (:func:`space_feet`). Each run of
     each foot (``runs[side]``: (T,) run index per frame, -1 outside) moves by one constant
-    vector, half the largest :func:`feet_shortfall` over its frames along their mean left
-    axis, weighted by the run's horizontal lock weight ``alpha_xy[side]`` (T,): the locked
-    foot stays still.
+    vector, half the largest :func:`feet_shortfall` over its frames where the other foot is
+    locked too, along their mean left axis, weighted by the run's horizontal lock weight
+    ``alpha_xy[side]`` (T,): the locked foot stays still. Then, where only the other foot is
+    locked, the unlocked one takes the whole remaining shortfall: a planted foot keeps the
+    human's place and the swinging foot goes around it.
     """
     if not all(robot.has_keypoint(n) for n in ("left_ankle", "right_ankle")):
         return
+    sides = (("left", "right", 0.5), ("right", "left", -0.5))
     for _ in range(passes):
         short, y = feet_shortfall(robot, kp_pos, world, pelvis)
         if not np.any(np.abs(short) > 1e-6):
             return
-        for side, sign in (("left", 0.5), ("right", -0.5)):
+        for side, other, sign in sides:
             owner = runs[side]
             for run in np.unique(owner[owner >= 0]):
                 frames = owner == run
-                need = frames & (np.abs(short) > 1e-6)
+                need = frames & (np.abs(short) > 1e-6) & (alpha_xy[other] > 0)
                 if not need.any():
                     continue
                 axis = y[need].mean(axis=0)
@@ -176,6 +241,22 @@ def separate_locks(
                 worst = short[need][np.argmax(np.abs(short[need]))]
                 shift = sign * float(worst) * axis
                 _move_foot(robot, kp_pos, side, np.where(frames, alpha_xy[side], 0.0)[:, None] * shift)
+    short, y = feet_shortfall(robot, kp_pos, world, pelvis)
+    for side, other, sign in sides:
+        passing = (1.0 - alpha_xy[side]) * (alpha_xy[other] > 0)
+        _move_foot(robot, kp_pos, side, (2 * sign * passing * short)[:, None] * y)
+
+
+def _run_turn(turn: np.ndarray, runs: list[tuple[int, int]], owner: np.ndarray, fps: float) -> np.ndarray:
+    """The foot's :func:`knee_turn` (T,) held at its mean over each contact run for the frames
+    the run owns (``owner``: (T,) nearest run), then smoothed over TURN_SMOOTH_SECONDS: a
+    foot lands already turned as it stands and does not twist while it bends its knee
+    (per frame where there is no contact)."""
+    if runs:
+        turn = np.array([turn[s:e].mean() for s, e in runs])[owner]
+    if len(turn) > 2:
+        turn = gaussian_filter1d(turn, TURN_SMOOTH_SECONDS * fps, mode="nearest")
+    return turn
 
 
 def feet_targets(
@@ -213,6 +294,17 @@ def feet_targets(
     rest_rot = robot.foot_flat_rot[side]  # the foot flat on the floor, facing +X
     flat_height = robot.foot_flat_height[side]  # its node's height then
     heading, elevation = foot_heading_pitch(world, side)
+    runs = true_runs(contact)
+    frames = np.arange(len(world))
+    owner = np.zeros(len(world), dtype=int)
+    if runs:
+        starts = np.array([s for s, _ in runs])
+        ends = np.array([e - 1 for _, e in runs])
+        gap = np.maximum(starts[None, :] - frames[:, None], 0) + np.maximum(
+            frames[:, None] - ends[None, :], 0
+        )
+        owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
+    heading = heading + _run_turn(knee_turn(world, side), runs, owner, fps)
     ref = flat_stance if flat_stance.any() else contact
     flat = np.median(elevation[ref]) if ref.any() else np.median(elevation)
     # Swing: shift the foot keypoints vertically so the human stance height is the robot's.
@@ -225,7 +317,6 @@ def feet_targets(
     swing_rot = rot_z(heading) @ rot_y(pitch) @ rest_rot
     lock_rot = swing_rot.copy()
     lock_node = kp_pos[:, ka] - np.einsum("tij,j->ti", swing_rot, robot.offsets[ka])
-    runs = true_runs(contact)
     owner_out = np.full(len(world), -1)
     if runs:
         # In contact: flat when both heel and toe are down, else rolling on the pivot that
@@ -240,13 +331,6 @@ def feet_targets(
             theta = gaussian_filter1d(theta, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
         c_heel, c_toe = foot_pivots(robot, side)
         pivot = np.where((theta > 0)[:, None], c_toe, c_heel)  # (T, 3) node frame
-        frames = np.arange(len(world))
-        starts = np.array([s for s, _ in runs])
-        ends = np.array([e - 1 for _, e in runs])
-        gap = np.maximum(starts[None, :] - frames[:, None], 0) + np.maximum(
-            frames[:, None] - ends[None, :], 0
-        )
-        owner = np.argmin(gap, axis=1)  # every frame belongs to its nearest contact run
         height = flat_height + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
             sel = (owner == i) & (alpha_xy > 0)

@@ -178,8 +178,9 @@ def _solve_clear_of_self(
     MuJoCo checks the real geoms, pairs that overlap get more room for another solve (from
     scratch: one from the last poses can jump where a pair's margin changed); still
     overlapping after RELAXED_SOLVES solves, or deeper than RETRY_DEPTH anywhere, the safe
-    margins everywhere (a solve from scratch). Returns (solution, output qpos, its replay,
-    floor lift, swing lift, solves)."""
+    margins everywhere (a solve from scratch), checked in turn: pairs still overlapping more
+    than OTHER_DEPTH get that much more room for a last solve. Returns (solution, output
+    qpos, its replay, floor lift, swing lift, solves)."""
     clearance = rm.self_clearance if config.self_clearance and solver != "mink" else None
     if clearance is None or clearance.looseness is None or not np.any(clearance.looseness > 0):
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
@@ -199,8 +200,15 @@ def _solve_clear_of_self(
         if depth.max() > RETRY_DEPTH:
             break  # arms pressed into the body (hands on the knees): the safe margins at once
         first = first.tightened(depth, tolerance)
-    sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
-    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1
+    sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
+    # The safe margins are soft too: pairs whose geoms still overlap get that much more room.
+    depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
+    if not np.any(depth > OTHER_DEPTH):
+        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1
+    sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
+        rm.with_self_clearance(clearance.tightened(depth, OTHER_DEPTH)), targets, config, solver, src_fps, fps
+    )
+    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
 
 
 def retarget_motion(

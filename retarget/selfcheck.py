@@ -16,7 +16,9 @@ pairs whose geoms overlap deeper than their tolerance (``CHECK_DEPTH`` for the r
 a soft penalty), a margin larger by the overlap found (:meth:`SelfClearance.tightened`), for
 another solve; after ``RELAXED_SOLVES`` relaxed solves that still overlap, or one that
 overlaps deeper than ``RETRY_DEPTH``, the safe margins everywhere (the solve of a robot
-without meshes).
+without meshes), checked the same way: pairs still deeper than ``OTHER_DEPTH`` (an enclosure
+pair that overlaps at rest has a negative margin, a soft one) get that much more room for a
+last solve.
 """
 
 from __future__ import annotations

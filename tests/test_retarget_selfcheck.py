@@ -135,3 +135,20 @@ def test_planted_feet_hold_between_the_solver_frames(stoop):
     speed30 = stance_foot_speed(rm, at30.qpos, 30.0, stoop.joints, 20.0)
     assert speed30 < 0.002
     assert speed30 < 1.5 * speed20 + 0.0005, (speed30, speed20)
+
+
+def test_the_safe_solve_is_checked_too():
+    """Corpus clip 000703 (``kneel`` on the right knee, the right arm against the torso): the
+    relaxed solve presses the right shoulder into the torso (2.3 cm), and the safe margins
+    alone still leave them 8.8 mm deep (an enclosure pair that overlaps at rest: its margin is
+    negative). The safe solve is checked as well, and the pair gets that much more room for a
+    last solve: no self-collision, and the motion passes the simulation check."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[703]
+    assert spec.family == "kneel"
+    _, joints, _, _ = make_clip(spec)
+    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "g1", fps=30.0, metrics=False)
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, 30.0)
+    assert report.stats["self_collision_frames"] == 0, [
+        f for f in report.failures if f.kind == "self_collision"
+    ]
+    assert report.passed, report.stats["error_kinds"]
