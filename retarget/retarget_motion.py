@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from threadpoolctl import ThreadpoolController
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.motion import load_motion
-from controlmm.motion.container import Motion
+from controlmm.motion.container import Motion, resample
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import hold_feet_between_frames, lift_swing_feet
 from retarget.human import size_ratio
@@ -40,6 +41,7 @@ from retarget.selfcheck import (
     RELAX_MOST,
     RELAXED_SOLVES,
     RETRY_DEPTH,
+    STIFF_SELF,
     penetration_depths,
 )
 from retarget.solver import Solution, solve
@@ -211,6 +213,15 @@ def _solve_clear_of_self(
     return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
 
 
+def _output_overlaps(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> bool:
+    """Whether two of the robot's real geoms that the self-clearance keeps apart overlap
+    deeper than OTHER_DEPTH in an output frame (``qpos`` (T, nq))."""
+    clearance = rm.self_clearance
+    if clearance is None or not config.self_clearance or solver == "mink":
+        return False
+    return bool(np.any(penetration_depths(rm.model, rm.tree, qpos, clearance) > OTHER_DEPTH))
+
+
 def retarget_motion(
     motion: Motion | np.ndarray | str | Path,
     robot: RobotSpec = "g1",
@@ -263,6 +274,13 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
     sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)
+    if _output_overlaps(rm, qpos, config, solver):
+        # At the output rate with a stiffer self-clearance (selfcheck.STIFF_SELF).
+        joints, src_fps = resample(joints, src_fps, fps), fps
+        config = replace(config, w_self=config.w_self * STIFF_SELF)
+        targets = build_targets(rm, joints, src_fps, transform, config)
+        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
+        solves += 1
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)

@@ -18,7 +18,7 @@ another solve; after ``RELAXED_SOLVES`` relaxed solves that still overlap, or on
 overlaps deeper than ``RETRY_DEPTH``, the safe margins everywhere (the solve of a robot
 without meshes), checked the same way: pairs still deeper than ``OTHER_DEPTH`` (an enclosure
 pair that overlaps at rest has a negative margin, a soft one) get that much more room for a
-last solve.
+last solve. Every robot's output frames are checked at the end (``STIFF_SELF``).
 """
 
 from __future__ import annotations
@@ -51,6 +51,11 @@ the safe margins too) and geoms the solver does not keep apart may overlap this 
 RELAXED_SOLVES = 2
 """Relaxed solves at most (the first one, then more room where it overlapped); still
 overlapping after them, the safe margins everywhere (one more solve)."""
+STIFF_SELF = 10.0
+"""Where the output frames still overlap deeper than ``OTHER_DEPTH`` after all that (the solver's
+frames clear but an arm sweeping through a hip between two of them, or a hand target deep in
+the body that a soft margin gives way to), the motion is solved once more at the output rate
+(nothing in between frames) with the self-clearance weight this many times its own."""
 RETRY_DEPTH = 0.01
 """A relaxed solve whose real geoms overlap deeper than this (m) somewhere (arms pressed into
 the body: hands on the knees, a crouch) goes to the safe margins at once: more room for a few

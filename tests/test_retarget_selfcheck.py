@@ -20,7 +20,14 @@ from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from retarget import load_robot, retarget_motion
 from retarget.compare import similarity_fit, stance_foot_speed
-from retarget.selfcheck import CHECK_DEPTH, OTHER_DEPTH, RELAX_FRACTION, RELAX_MOST, penetration_depths
+from retarget.selfcheck import (
+    CHECK_DEPTH,
+    OTHER_DEPTH,
+    RELAX_FRACTION,
+    RELAX_MOST,
+    RELAXED_SOLVES,
+    penetration_depths,
+)
 from retarget.solver_config import SolverConfig
 
 
@@ -152,3 +159,19 @@ def test_the_safe_solve_is_checked_too():
         f for f in report.failures if f.kind == "self_collision"
     ]
     assert report.passed, report.stats["error_kinds"]
+
+
+def test_the_output_frames_are_checked_at_the_end():
+    """Corpus clip 000012 (``sit_down``, the hands on the lap): G1's solver frames are clear of
+    itself, but between two of them (20 fps) the right hand sweeps 2-4 cm through the right
+    hip links. The output frames are checked too, and the clip is solved again at the output
+    rate with a stiffer self-clearance: no self-collision left."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[12]
+    assert spec.family == "sit_down"
+    _, joints, _, _ = make_clip(spec)
+    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "g1", fps=50.0, metrics=False)
+    assert traj.solver["self_clearance_solves"] == RELAXED_SOLVES + 3  # the chain, then the output-rate solve
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, 50.0)
+    assert report.stats["self_collision_frames"] == 0, [
+        f for f in report.failures if f.kind == "self_collision"
+    ]
