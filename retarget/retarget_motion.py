@@ -213,13 +213,13 @@ def _solve_clear_of_self(
     return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
 
 
-def _output_overlaps(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> bool:
-    """Whether two of the robot's real geoms that the self-clearance keeps apart overlap
-    deeper than OTHER_DEPTH in an output frame (``qpos`` (T, nq))."""
+def _output_overlap(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> float:
+    """The deepest overlap (m, 0 for none) of two of the robot's real geoms that the
+    self-clearance keeps apart, over the output frames ``qpos`` (T, nq)."""
     clearance = rm.self_clearance
     if clearance is None or not config.self_clearance or solver == "mink":
-        return False
-    return bool(np.any(penetration_depths(rm.model, rm.tree, qpos, clearance) > OTHER_DEPTH))
+        return 0.0
+    return float(penetration_depths(rm.model, rm.tree, qpos, clearance).max(initial=0.0))
 
 
 def retarget_motion(
@@ -274,13 +274,18 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
     sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)
-    if _output_overlaps(rm, qpos, config, solver):
-        # At the output rate with a stiffer self-clearance (selfcheck.STIFF_SELF).
-        joints, src_fps = resample(joints, src_fps, fps), fps
-        config = replace(config, w_self=config.w_self * STIFF_SELF)
-        targets = build_targets(rm, joints, src_fps, transform, config)
-        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
+    worst = _output_overlap(rm, qpos, config, solver)
+    if worst > OTHER_DEPTH:
+        # At the output rate with a stiffer self-clearance (selfcheck.STIFF_SELF), kept if it
+        # overlaps less.
+        dense = resample(joints, src_fps, fps)
+        stiff = replace(config, w_self=config.w_self * STIFF_SELF)
+        dense_targets = build_targets(rm, dense, fps, transform, stiff)
+        again = _solve_and_resample(rm, dense_targets, stiff, solver, fps, fps)
         solves += 1
+        if _output_overlap(rm, again[2], config, solver) < worst:
+            joints, src_fps, targets = dense, fps, dense_targets
+            sol, _, qpos, rep, lift, swing_lift = again
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
