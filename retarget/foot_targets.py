@@ -250,8 +250,8 @@ def separate_locks(
 def _run_turn(turn: np.ndarray, runs: list[tuple[int, int]], owner: np.ndarray, fps: float) -> np.ndarray:
     """The foot's :func:`knee_turn` (T,) held at its mean over each contact run for the frames
     the run owns (``owner``: (T,) nearest run), then smoothed over TURN_SMOOTH_SECONDS: a
-    foot lands already turned as it stands and does not twist while it bends its knee
-    (per frame where there is no contact)."""
+    foot lands already turned as it stands and does not twist while it bends its knee (with
+    no contact run at all, the per-frame turn, smoothed)."""
     if runs:
         turn = np.array([turn[s:e].mean() for s, e in runs])[owner]
     if len(turn) > 2:
