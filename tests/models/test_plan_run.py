@@ -114,7 +114,8 @@ def test_stage_timing_adds_up_in_the_report(strict_plan, tmp_path):
     assert sum(stages.values()) == pytest.approx(timing["total_s"], abs=0.01)
     assert timing["total_s"] >= strict_plan.seconds  # the plan, then writing its files
     r1 = strict_plan.rounds[1].seconds
-    assert stages["feedback_rounds"] >= r1["generate"] + r1["retarget"] + r1["check"]
+    # report.json rounds each stage to 1 ms; the round's own seconds are not rounded
+    assert stages["feedback_rounds"] >= r1["generate"] + r1["retarget"] + r1["check"] - 0.001
     line = strict_plan.timing.summary()
     assert line.startswith("timing: start-up ") and "feedback rounds" in line and "total" in line
 
