@@ -44,6 +44,7 @@ from retarget.selfcheck import (
     STIFF_SELF,
     penetration_depths,
 )
+from retarget.selfcollision import SelfClearance
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
 from retarget.targets import Targets, build_targets
@@ -183,7 +184,7 @@ def _solve_clear_of_self(
     margins everywhere (a solve from scratch), checked in turn: pairs still overlapping more
     than OTHER_DEPTH get that much more room for a last solve. Returns (solution, output
     qpos, its replay, floor lift, swing lift, solves)."""
-    clearance = rm.self_clearance if config.self_clearance and solver != "mink" else None
+    clearance = _clearance_in_use(rm, config, solver)
     if clearance is None or clearance.looseness is None or not np.any(clearance.looseness > 0):
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
         return sol, qpos, rep, lift, swing_lift, 1
@@ -213,11 +214,16 @@ def _solve_clear_of_self(
     return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
 
 
+def _clearance_in_use(rm: RobotModel, config: SolverConfig, solver: str) -> SelfClearance | None:
+    """The robot's self-clearance where the solve keeps it (None: none, switched off, mink)."""
+    return rm.self_clearance if config.self_clearance and solver != "mink" else None
+
+
 def _output_overlap(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> float:
     """The deepest overlap (m, 0 for none) of two of the robot's real geoms that the
     self-clearance keeps apart, over the output frames ``qpos`` (T, nq)."""
-    clearance = rm.self_clearance
-    if clearance is None or not config.self_clearance or solver == "mink":
+    clearance = _clearance_in_use(rm, config, solver)
+    if clearance is None:
         return 0.0
     return float(penetration_depths(rm.model, rm.tree, qpos, clearance).max(initial=0.0))
 
@@ -281,11 +287,13 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         dense = resample(joints, src_fps, fps)
         stiff = replace(config, w_self=config.w_self * STIFF_SELF)
         dense_targets = build_targets(rm, dense, fps, transform, stiff)
-        again = _solve_and_resample(rm, dense_targets, stiff, solver, fps, fps)
+        sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
+            rm, dense_targets, stiff, solver, fps, fps
+        )
         solves += 1
-        if _output_overlap(rm, again[2], config, solver) < worst:
+        if _output_overlap(rm, qpos2, config, solver) < worst:
             joints, src_fps, targets = dense, fps, dense_targets
-            sol, _, qpos, rep, lift, swing_lift = again
+            sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
