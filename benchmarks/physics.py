@@ -77,10 +77,10 @@ def _retarget(corpus: Path, cid: str) -> np.ndarray:
     return retarget_motion(Motion(joints=joints, fps=20.0), "g1", fps=FPS, metrics=False).qpos
 
 
-def _physics(q: np.ndarray, threads: int, samples: int | None) -> dict:
+def _physics(q: np.ndarray, threads: int, options: dict) -> dict:
     from sim import PhysicsConfig, track
 
-    config = PhysicsConfig(threads=threads, **({} if samples is None else {"samples": samples}))
+    config = PhysicsConfig(threads=threads, **options)
     start = time.perf_counter()
     r = track(q, _world(), config, fps=FPS)
     s = r.stats
@@ -96,24 +96,25 @@ def _physics(q: np.ndarray, threads: int, samples: int | None) -> dict:
         "wall_s": time.perf_counter() - start,
         "seconds": (q.shape[0] - 1) / FPS,
         "simulated_s": s["simulated_s"],
+        "retries": s["retries"],
     }
 
 
-def _executability_job(job: tuple[str, str, str, int, int | None]) -> dict:
+def _executability_job(job: tuple[str, str, str, int, dict]) -> dict:
     from sim import check_trajectory
 
-    family, cid, corpus, threads, samples = job
+    family, cid, corpus, threads, options = job
     q = _retarget(Path(corpus), cid)
     report = check_trajectory(_world(), q, FPS)
     out = {"family": family, "id": cid, "kinematic_passed": report.passed}
     if report.passed:
-        out.update(_physics(q, threads, samples))
+        out.update(_physics(q, threads, options))
     return out
 
 
-def executability(corpus: Path, per_family: int, families, workers: int, samples: int | None) -> list[dict]:
+def executability(corpus: Path, per_family: int, families, workers: int, options: dict) -> list[dict]:
     threads = max(1, 2 // workers)
-    jobs = [(f, c, str(corpus), threads, samples) for f, c in _clips(corpus, per_family, families)]
+    jobs = [(f, c, str(corpus), threads, options) for f, c in _clips(corpus, per_family, families)]
     if workers > 1:
         with Pool(workers) as pool:
             rows = pool.map(_executability_job, jobs, chunksize=1)
@@ -124,11 +125,12 @@ def executability(corpus: Path, per_family: int, families, workers: int, samples
         by_family[r["family"]].append(r)
     print("\n(a) executability of kinematically passing test clips (G1, empty scene)")
     header = (
-        "| family | clips | kin. pass | stayed up | up and root <= 10 cm | physics passed | root err cm |"
+        "| family | clips | kin. pass | stayed up | up and root <= 10 cm | physics passed | root err cm "
+        "| retries |"
     )
     print(header)
     print("|" + "|".join("-" * (len(c)) for c in header.split("|")[1:-1]) + "|")
-    totals = np.zeros(5)
+    totals = np.zeros(6)
     for family in sorted(by_family):
         fam = by_family[family]
         run = [r for r in fam if r["kinematic_passed"]]
@@ -136,13 +138,14 @@ def executability(corpus: Path, per_family: int, families, workers: int, samples
         good = [r for r in up if r["mean_root_error_m"] <= ROOT_TARGET_M]
         ok = [r for r in run if r["passed"]]
         err = np.mean([r["mean_root_error_m"] for r in run]) * 100 if run else float("nan")
-        totals += (len(fam), len(run), len(up), len(good), len(ok))
+        retries = sum(r["retries"] for r in run)
+        totals += (len(fam), len(run), len(up), len(good), len(ok), retries)
         print(
             f"| {family} | {len(fam)} | {len(run)} | {_pct(len(up), len(run))} | "
-            f"{_pct(len(good), len(run))} | {_pct(len(ok), len(run))} | {err:.1f} |"
+            f"{_pct(len(good), len(run))} | {_pct(len(ok), len(run))} | {err:.1f} | {retries} |"
         )
-    n, k, u, g, p = totals.astype(int)
-    print(f"| **all** | {n} | {k} | {_pct(u, k)} | {_pct(g, k)} | {_pct(p, k)} | |")
+    n, k, u, g, p, tries = totals.astype(int)
+    print(f"| **all** | {n} | {k} | {_pct(u, k)} | {_pct(g, k)} | {_pct(p, k)} | | {tries} |")
     return rows
 
 
@@ -163,7 +166,7 @@ def _infeasible(q: np.ndarray) -> dict[str, np.ndarray]:
     return {"root lifted 0.4 m for 2 s": lifted, "walk 3x faster": fast, "feet teleported 0.5 m": teleport}
 
 
-def discrimination(corpus: Path, bases: int, samples: int | None) -> list[dict]:
+def discrimination(corpus: Path, bases: int, options: dict) -> list[dict]:
     from sim import check_trajectory
 
     walks = [c for f, c in _clips(corpus, bases, ["walk"])]
@@ -172,7 +175,7 @@ def discrimination(corpus: Path, bases: int, samples: int | None) -> list[dict]:
         base = _retarget(corpus, cid)
         for what, q in _infeasible(base).items():
             kin = check_trajectory(_world(), q, FPS)
-            phys = _physics(q, 2, samples)
+            phys = _physics(q, 2, options)
             rows.append({"base": cid, "what": what, "kinematic_failed": not kin.passed, **phys})
     print("\n(b) discrimination: motions made infeasible on purpose must fail the physics check")
     print("| base clip | infeasible motion | physics verdict | failure kinds | fell at s | kinematic check |")
@@ -198,12 +201,12 @@ def _six_seconds(corpus: Path) -> tuple[str, np.ndarray]:
     return cid, q[:n]
 
 
-def speed(corpus: Path, samples: int | None) -> list[dict]:
+def speed(corpus: Path, options: dict) -> list[dict]:
     from sim import CheckConfig, check_trajectory
 
     cid, q = _six_seconds(corpus)
     rows = []
-    phys = _physics(q, 2, samples)
+    phys = _physics(q, 2, options)
     rows.append(
         {
             "method": "physics check (predictive sampling, 2 threads)",
@@ -279,8 +282,12 @@ def main() -> int:
     parser.add_argument(
         "--samples", type=int, default=None, help="rollouts per planning step (default: PhysicsConfig)"
     )
+    parser.add_argument(
+        "--retries", type=int, default=None, help="backups after a fall per clip (default: PhysicsConfig)"
+    )
     parser.add_argument("--json", default=None, help="also write every row to this JSON file")
     args = parser.parse_args()
+    options = {k: v for k, v in (("samples", args.samples), ("retries", args.retries)) if v is not None}
     parts = [p.strip() for p in args.parts.split(",") if p.strip()]
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
@@ -295,11 +302,11 @@ def main() -> int:
     )
     out: dict = {}
     if "executability" in parts:
-        out["executability"] = executability(corpus, args.per_family, families, args.workers, args.samples)
+        out["executability"] = executability(corpus, args.per_family, families, args.workers, options)
     if "discrimination" in parts:
-        out["discrimination"] = discrimination(corpus, args.bases, args.samples)
+        out["discrimination"] = discrimination(corpus, args.bases, options)
     if "speed" in parts:
-        out["speed"] = speed(corpus, args.samples)
+        out["speed"] = speed(corpus, options)
     print(f"\ntotal {time.perf_counter() - start:.0f} s; load average now {os.getloadavg()[0]:.1f}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)

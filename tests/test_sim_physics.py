@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 from functools import cache
 
 import mujoco
@@ -93,6 +94,23 @@ def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path
     # robot_physics.csv: the simulated states at 50 fps (every 10th step of 2 ms), LAFAN1-G1 rows (xyzw)
     stride = int(round(1.0 / CSV_FPS / dt))
     assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
+
+
+def test_a_fall_is_retried_from_an_earlier_state_and_the_run_still_replays(tmp_path):
+    # A reference turned upside down at frame 12 (0.24 s): no controller follows it, so every
+    # try falls there; the controller backs up twice (0.1 s, then 0.2 s before the fall), then the
+    # fall stands. The exported ctrl, the final tries' included, replays the exported states.
+    q = stand(25)
+    q[12:, 3:7] = [0.0, 0.0, 1.0, 0.0]
+    config = replace(FAST, retries=2, retry_back_s=0.1)
+    r = track(q, g1(), config, fps=FPS)
+    assert r.fell and r.fall_frame == 12 and r.stats["retries"] == 2
+    assert np.isfinite(r.root_error_m[: r.fall_frame + 1]).all() and r.simulated[: r.fall_frame + 1].all()
+    paths = save_certificate(r, tmp_path)
+    assert np.array_equal(replay_certificate(paths["physics_model.xml"], paths["physics.npz"]), r.qpos)
+    no_retry = track(q, g1(), replace(config, retries=0), fps=FPS)
+    assert no_retry.fell and no_retry.stats["retries"] == 0
+    assert no_retry.stats["rollout_steps"] < r.stats["rollout_steps"]  # the retries planned again
 
 
 def test_a_root_lifted_without_a_jump_fails_as_a_tracking_error():

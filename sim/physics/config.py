@@ -14,7 +14,7 @@ from typing import Any
 
 from controlmm.errors import ControlMMError
 
-_INTEGERS = ("samples", "flight_samples", "knots", "plan_substeps", "threads", "seed")
+_INTEGERS = ("samples", "flight_samples", "knots", "plan_substeps", "threads", "seed", "retries")
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,11 @@ class PhysicsConfig:
         sigma_joint_rad: noise of the other actuators' targets (waist, arms), per knot (rad).
         wrist_noise: also perturb actuators whose joint name contains "wrist" (off: a hand's
             orientation does not help balance, and their 5 N m motors are the weakest).
+        retries: times the controller may back up after a fall: it restores the simulation to
+            the planning step ``retry_back_s`` x (the retry's number) before the fall and plans
+            on from there with a fresh noise stream and ``flight_samples`` rollouts per step
+            until ``flight_margin_s`` after the fall's step (0: a fall is final).
+        retry_back_s: see ``retries``.
 
     Cost weights (per rollout step, summed over the horizon, ``sim.physics.cost``):
 
@@ -88,6 +93,8 @@ class PhysicsConfig:
     sigma_foot_rad: float = 0.08
     sigma_joint_rad: float = 0.03
     wrist_noise: bool = False
+    retries: int = 3
+    retry_back_s: float = 1.0
     w_root_height: float = 100.0
     w_root_xy: float = 10.0
     w_root_rot: float = 30.0
@@ -122,6 +129,7 @@ class PhysicsConfig:
             ("plan_substeps", 1),
             ("threads", 1),
             ("seed", 0),
+            ("retries", 0),
         ):
             if getattr(self, name) < low:
                 raise ControlMMError(

@@ -61,6 +61,7 @@ class PredictiveSampler:
         self.best = np.zeros((config.knots, self.z_dim))
         self.plan_step = 0
         self.rng = np.random.default_rng(config.seed)
+        self.wide_until = -1  # steps before this one roll out flight_samples plans (a retry)
         self.pool = rollout.Rollout(nthread=config.threads)
         self.datas = [mujoco.MjData(model) for _ in range(config.threads)]
         self.nstate = mujoco.mj_stateSize(model, FULL_STATE)
@@ -96,7 +97,8 @@ class PredictiveSampler:
         Returns the chosen plan's cost.
         """
         cfg, ref, H = self.config, self.ref, self.horizon
-        B = max(cfg.samples, cfg.flight_samples) if ref.flight[min(step, ref.steps)] else cfg.samples
+        wide = ref.flight[min(step, ref.steps)] or step < self.wide_until
+        B = max(cfg.samples, cfg.flight_samples) if wide else cfg.samples
         states, sensordata = self.states[:B], self.sensordata[:B]
         warm = self._shifted(step - self.plan_step)
         knots = warm[None] + self.rng.standard_normal((B, cfg.knots, self.z_dim)) * ref.sigma
@@ -134,6 +136,14 @@ class PredictiveSampler:
         self.best = knots[best]
         self.plan_step = step
         return float(cost[best])
+
+    def restart(self, best: np.ndarray, plan_step: int, retry: int, wide_until: int) -> None:
+        """Go back to an earlier plan (``best`` (knots, Z) chosen at ``plan_step``) for retry
+        number ``retry``: a noise stream of its own, ``flight_samples`` plans per step until
+        ``wide_until`` (a simulation step)."""
+        self.best, self.plan_step = best.copy(), plan_step
+        self.rng = np.random.default_rng((self.config.seed, retry))
+        self.wide_until = wide_until
 
     def offset(self, step: int) -> np.ndarray:
         """Target offsets (nu,) of the current plan at simulation ``step``."""

@@ -261,12 +261,39 @@ def _simulate(
         torque[t] = peak / limit
         peak[:] = 0.0
 
+    # Every planning step's state and plan, to back up to after a fall (config.retries).
+    snap_kind = mujoco.mjtState.mjSTATE_INTEGRATION  # everything mj_step reads: replays exactly
+    snaps = np.empty((S // replan + 1, mujoco.mj_stateSize(m, snap_kind)))
+    plans = np.empty((S // replan + 1, *sampler.best.shape))
+    plan_steps = np.zeros(S // replan + 1, dtype=np.int64)
+    retries = 0
+
+    def back_up(fall_step: int) -> int:
+        """Restore the planning step ``retries * retry_back_s`` before ``fall_step``; its step."""
+        k = max(0, fall_step - int(round(retries * config.retry_back_s / dt))) // replan
+        s0 = k * replan
+        mujoco.mj_setState(m, d, snaps[k], snap_kind)
+        margin = int(round(config.flight_margin_s / dt))
+        sampler.restart(plans[k], int(plan_steps[k]), retries, fall_step + margin)
+        later = frame_step > s0
+        for per_frame in (root_error, root_height, tilt, joint_error, eff_error, torque):
+            per_frame[later] = np.nan
+        simulated[later], foot_contact[later], other_contact[later] = False, False, False
+        qpos[s0 + 1 :], qvel[s0 + 1 :] = np.nan, np.nan
+        peak[:] = 0.0
+        bar.n = round(s0 * dt, 2)
+        bar.refresh()
+        return s0
+
     wall, cpu = time.perf_counter(), time.process_time()
     bar = tqdm(total=round(S * dt, 2), unit="s", desc="physics", disable=not progress, leave=False)
     measure(0)
     s = 0
-    for s in range(S):
+    while s < S:
         if s % replan == 0:
+            k = s // replan
+            mujoco.mj_getState(m, d, snaps[k], snap_kind)
+            plans[k], plan_steps[k] = sampler.best, sampler.plan_step
             mujoco.mj_getState(m, d, state, FULL_STATE)
             sampler.plan(state, s)
         target = ref.nominal[s] + sampler.offset(s)
@@ -285,11 +312,16 @@ def _simulate(
             reference_height = np.minimum(ref.frame_qpos[t : t + 1, adr + 2], ref.frame_qpos[0, adr + 2])
             down = fall_frame(root_height[t : t + 1], reference_height, tilt[t : t + 1], config)
             if fell_at is None and down is not None:
+                if retries < config.retries:
+                    retries += 1
+                    s = back_up(s + 1)
+                    continue
                 fell_at = t
                 stop = min(S, s + 1 + int(round(config.after_fall_s / dt)))
-        if (s + 1) % replan == 0:
+        s += 1
+        if s % replan == 0:
             bar.update(round(replan * dt, 4))
-        if s + 1 >= stop:
+        if s >= stop:
             break
     bar.close()
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
@@ -323,6 +355,7 @@ def _simulate(
         "timestep": dt,
         "steps": taken,
         "rollout_steps": sampler.rollouts,
+        "retries": retries,
         "wall_s": wall,
         "realtime_factor": sim_seconds / wall if wall > 0 else 0.0,
         "cpu_s": cpu,
