@@ -73,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--physics-samples",
         type=integer(2, 4096),
         default=None,
-        help="rollouts per planning step of the physics controller (default 32; more: slower, steadier)",
+        help="rollouts per planning step of the physics controller (default 64; more: slower, steadier)",
     )
     p.add_argument(
         "--physics-threads",

@@ -50,6 +50,8 @@ class PhysicsConfig:
             on from there with a fresh noise stream and ``flight_samples`` rollouts per step
             until ``flight_margin_s`` after the fall's step (0: a fall is final).
         retry_back_s: see ``retries``.
+        retry_lost: also back up where the root is more than ``max_root_error_m`` from its
+            reference (the start of a ``tracking_error`` span), not only after a fall.
 
     Cost weights (per rollout step, summed over the horizon, ``sim.physics.cost``):
 
@@ -79,7 +81,7 @@ class PhysicsConfig:
         after_fall_s: the simulation stops this long after a fall.
     """
 
-    samples: int = 32
+    samples: int = 64
     flight_samples: int = 128
     flight_margin_s: float = 0.5
     horizon_s: float = 0.5
@@ -95,6 +97,7 @@ class PhysicsConfig:
     wrist_noise: bool = False
     retries: int = 3
     retry_back_s: float = 1.0
+    retry_lost: bool = True
     w_root_height: float = 100.0
     w_root_xy: float = 10.0
     w_root_rot: float = 30.0

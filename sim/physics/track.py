@@ -311,11 +311,12 @@ def _simulate(
             measure(t)
             reference_height = np.minimum(ref.frame_qpos[t : t + 1, adr + 2], ref.frame_qpos[0, adr + 2])
             down = fall_frame(root_height[t : t + 1], reference_height, tilt[t : t + 1], config)
+            lost = down is not None or (config.retry_lost and root_error[t] > config.max_root_error_m)
+            if fell_at is None and lost and retries < config.retries:
+                retries += 1
+                s = back_up(s + 1)
+                continue
             if fell_at is None and down is not None:
-                if retries < config.retries:
-                    retries += 1
-                    s = back_up(s + 1)
-                    continue
                 fell_at = t
                 stop = min(S, s + 1 + int(round(config.after_fall_s / dt)))
         s += 1
