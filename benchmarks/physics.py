@@ -3,6 +3,7 @@
     python benchmarks/physics.py                              # all three parts, 2 clips per family
     python benchmarks/physics.py --per-family 1 --parts speed,discrimination
     python benchmarks/physics.py --data data/corpus-1280 --json out/physics.json
+    python benchmarks/physics.py --parts executability --samples 32 --config '{"retries": 0}'
 
 (a) *Executability*: the first ``--per-family`` clips of every family of the corpus ``test``
 split (default ``data/corpus-default``; docs/corpus.md) are retargeted to G1 at 50 fps and
@@ -236,10 +237,11 @@ def speed(corpus: Path, options: dict) -> list[dict]:
     )
     try:
         from holosoma_peer import run_dance_policy
-    except ImportError as exc:  # the optional peer: only with the ``peers`` extra installed
+
+        peer = run_dance_policy(SPEED_SECONDS)
+    except ImportError as exc:  # the optional peer: only with the whole ``peers`` extra installed
         print(f"# holosoma peer skipped: {exc}", file=sys.stderr)
     else:
-        peer = run_dance_policy(SPEED_SECONDS)
         rows.append(
             {
                 "method": "holosoma G1 WBT policy (ONNX, PPO)",
@@ -285,9 +287,18 @@ def main() -> int:
     parser.add_argument(
         "--retries", type=int, default=None, help="backups after a fall per clip (default: PhysicsConfig)"
     )
+    parser.add_argument(
+        "--config",
+        default="{}",
+        help='other PhysicsConfig fields as JSON, e.g. \'{"retry_lost": false, "horizon_s": 0.8}\'',
+    )
     parser.add_argument("--json", default=None, help="also write every row to this JSON file")
     args = parser.parse_args()
-    options = {k: v for k, v in (("samples", args.samples), ("retries", args.retries)) if v is not None}
+    try:
+        options = dict(json.loads(args.config))
+    except (ValueError, TypeError) as exc:
+        sys.exit(f"--config must be a JSON object of PhysicsConfig fields; got {args.config!r} ({exc})")
+    options.update({k: v for k, v in (("samples", args.samples), ("retries", args.retries)) if v is not None})
     parts = [p.strip() for p in args.parts.split(",") if p.strip()]
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
