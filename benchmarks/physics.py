@@ -60,14 +60,14 @@ def _world():
     return _WORLD["g1"]
 
 
-def _clips(corpus: Path, per_family: int, families: list[str] | None) -> list[tuple[str, str]]:
-    """(family, id) of the first ``per_family`` test clips of each family, in id order."""
+def _clips(corpus: Path, per_family: int, families: list[str] | None, skip: int = 0) -> list[tuple[str, str]]:
+    """(family, id) of ``per_family`` test clips of each family after its first ``skip``, in id order."""
     chosen: dict[str, list[str]] = defaultdict(list)
     for cid in sorted((corpus / "test.txt").read_text().split()):
         family = json.loads((corpus / "meta" / f"{cid}.json").read_text())["family"]
-        if (not families or family in families) and len(chosen[family]) < per_family:
+        if (not families or family in families) and len(chosen[family]) < skip + per_family:
             chosen[family].append(cid)
-    return [(f, c) for f in sorted(chosen) for c in chosen[f]]
+    return [(f, c) for f in sorted(chosen) for c in chosen[f][skip:]]
 
 
 def _retarget(corpus: Path, cid: str) -> np.ndarray:
@@ -113,9 +113,12 @@ def _executability_job(job: tuple[str, str, str, int, dict]) -> dict:
     return out
 
 
-def executability(corpus: Path, per_family: int, families, workers: int, options: dict) -> list[dict]:
+def executability(
+    corpus: Path, per_family: int, families, workers: int, options: dict, skip: int = 0
+) -> list[dict]:
     threads = max(1, 2 // workers)
-    jobs = [(f, c, str(corpus), threads, options) for f, c in _clips(corpus, per_family, families)]
+    clips = _clips(corpus, per_family, families, skip)
+    jobs = [(f, c, str(corpus), threads, options) for f, c in clips]
     if workers > 1:
         with Pool(workers) as pool:
             rows = pool.map(_executability_job, jobs, chunksize=1)
@@ -274,6 +277,12 @@ def main() -> int:
     parser.add_argument("--data", default=None, help="corpus directory (default data/corpus-default)")
     parser.add_argument("--per-family", type=int, default=2, help="test clips per family for (a) (default 2)")
     parser.add_argument("--families", default=None, help="comma-separated families for (a) (default: all)")
+    parser.add_argument(
+        "--skip",
+        type=int,
+        default=0,
+        help="for (a), leave out the first N test clips of each family (default 0)",
+    )
     parser.add_argument("--bases", type=int, default=2, help="walk clips made infeasible for (b) (default 2)")
     parser.add_argument(
         "--parts", default=",".join(PARTS), help=f"comma-separated parts (default {','.join(PARTS)})"
@@ -313,7 +322,9 @@ def main() -> int:
     )
     out: dict = {}
     if "executability" in parts:
-        out["executability"] = executability(corpus, args.per_family, families, args.workers, options)
+        out["executability"] = executability(
+            corpus, args.per_family, families, args.workers, options, args.skip
+        )
     if "discrimination" in parts:
         out["discrimination"] = discrimination(corpus, args.bases, options)
     if "speed" in parts:
