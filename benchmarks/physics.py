@@ -294,12 +294,9 @@ def main() -> int:
         "--samples", type=int, default=None, help="rollouts per planning step (default: PhysicsConfig)"
     )
     parser.add_argument(
-        "--retries", type=int, default=None, help="backups after a fall per clip (default: PhysicsConfig)"
-    )
-    parser.add_argument(
         "--config",
         default="{}",
-        help='other PhysicsConfig fields as JSON, e.g. \'{"retry_lost": false, "horizon_s": 0.8}\'',
+        help='other PhysicsConfig fields as JSON, e.g. \'{"retries": 0, "retry_lost": false}\'',
     )
     parser.add_argument("--json", default=None, help="also write every row to this JSON file")
     args = parser.parse_args()
@@ -307,7 +304,15 @@ def main() -> int:
         options = dict(json.loads(args.config))
     except (ValueError, TypeError) as exc:
         sys.exit(f"--config must be a JSON object of PhysicsConfig fields; got {args.config!r} ({exc})")
-    options.update({k: v for k, v in (("samples", args.samples), ("retries", args.retries)) if v is not None})
+    if args.samples is not None:
+        options["samples"] = args.samples
+    from controlmm.errors import ControlMMError
+    from sim import PhysicsConfig
+
+    try:
+        PhysicsConfig(**options)
+    except (ControlMMError, TypeError) as exc:
+        sys.exit(f"bad PhysicsConfig options {options}: {exc}")
     parts = [p.strip() for p in args.parts.split(",") if p.strip()]
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
