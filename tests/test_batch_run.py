@@ -193,12 +193,16 @@ def test_a_killed_batch_resumes(motions, tmp_path):
     cmd = [sys.executable, "-m", "controlmm", "batch", str(folder), "--out", str(out), "--workers", "1",
            "--no-progress"]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+    def finished() -> int:  # job folders in place (pathlib's * also matches the hidden temporaries)
+        return sum(not p.parent.name.startswith(".") for p in out.glob("jobs/*/result.json"))
+
     deadline = time.monotonic() + 300
-    while not list(out.glob("jobs/*/result.json")) and time.monotonic() < deadline and proc.poll() is None:
+    while not finished() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    done = len(list(out.glob("jobs/*/result.json")))
+    done = finished()
     assert 1 <= done < len(names), proc.stderr.read().decode() if proc.stderr else ""
     for job in (out / "jobs").iterdir():  # what is there is complete (or a temporary, swept later)
         assert job.name.startswith(".") or (job / "result.json").is_file()
