@@ -17,12 +17,13 @@ from sim_motions import (
     h1_stand,
     h1_world,
     hold,
+    rotate_about,
     smooth_blend,
     with_joints,
 )
 
 from sim import CheckConfig, check_trajectory, make_world
-from sim.worlds import Obstacle, robot_world
+from sim.worlds import Obstacle, robot_world, standing_qpos
 
 KIN = CheckConfig(dynamics=False)
 
@@ -287,6 +288,40 @@ def test_stance_feet_sliding():
     q[20:41, 0] = 0.1 * np.arange(21) / FPS
     q[41:, 0] = q[40, 0]
     assert not check_trajectory(w, q, FPS, KIN).failures_of("foot_sliding")
+
+
+def test_a_box_foot_rolling_over_its_toe_edge_does_not_slide():
+    """The T1's feet are one box each: leaning forward over their toe edges moves the boxes'
+    centres at over 0.3 m/s while the edges on the floor stay put (no slide); gliding slides."""
+    w = make_world(robot_world("t1"))
+    m, d = w.model, mujoco.MjData(w.model)
+    q0 = standing_qpos(m)
+    d.qpos[:] = q0
+    mujoco.mj_kinematics(m, d)
+    geoms = np.concatenate([f.geoms for f in w.feet])
+    assert all(m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX for g in geoms)
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+    corners = np.concatenate(
+        [d.geom_xpos[g] + (signs * m.geom_size[g]) @ d.geom_xmat[g].reshape(3, 3).T for g in geoms]
+    )
+    toe = corners[np.argmax(corners[:, 0] - 10 * corners[:, 2])]  # the front edge on the floor
+    s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, 10))
+    lean = np.stack([rotate_about(q0, toe * [1, 0, 1], np.deg2rad(40.0) * a, w.root_qpos_adr) for a in s])
+    q = np.concatenate([hold(q0, 10), lean, hold(lean[-1], 10)])
+    centre = []
+    for frame in q:
+        d.qpos[:] = frame
+        mujoco.mj_kinematics(m, d)
+        centre.append(d.geom_xpos[geoms[0], :2].copy())
+    assert np.linalg.norm(np.diff(centre, axis=0), axis=1).max() * FPS > 0.3  # centres: 0.2 m/s fails
+    report = check_trajectory(w, q, FPS, KIN)
+    assert report.frames["foot_stance:" + w.feet[0].name][1:20].all()  # (from the second frame)
+    assert not report.failures_of("foot_sliding") and report.foot_sliding_m < 1e-6
+    glide = hold(q0, 30)
+    glide[10:, 0] += 0.5 * np.arange(20) / FPS
+    hits = check_trajectory(w, glide, FPS, KIN).failures_of("foot_sliding")
+    assert {f.robot_body for f in hits} == {f.name for f in w.feet}
+    assert all(f.depth == pytest.approx(19 * 0.5 / FPS, abs=1e-6) for f in hits)  # metres over the range
 
 
 def test_floating_robot_and_ballistic_flight():
