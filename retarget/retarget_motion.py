@@ -36,6 +36,8 @@ from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
 from retarget.selfcheck import (
     CHECK_DEPTH,
+    EXACT_SELF,
+    EXACT_TIGHTENINGS,
     OTHER_DEPTH,
     RELAX_FRACTION,
     RELAX_MOST,
@@ -182,12 +184,27 @@ def _solve_clear_of_self(
     scratch: one from the last poses can jump where a pair's margin changed); still
     overlapping after RELAXED_SOLVES solves, or deeper than RETRY_DEPTH anywhere, the safe
     margins everywhere (a solve from scratch), checked in turn: pairs still overlapping more
-    than OTHER_DEPTH get that much more room for a last solve. Returns (solution, output
-    qpos, its replay, floor lift, swing lift, solves)."""
+    than OTHER_DEPTH get that much more room for a last solve. A robot without loose
+    enclosures starts from the safe margins (selfcheck.EXACT_TIGHTENINGS). Returns (solution,
+    output qpos, its replay, floor lift, swing lift, solves)."""
     clearance = _clearance_in_use(rm, config, solver)
-    if clearance is None or clearance.looseness is None or not np.any(clearance.looseness > 0):
+    if clearance is None:
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
         return sol, qpos, rep, lift, swing_lift, 1
+    if clearance.looseness is None or not np.any(clearance.looseness > 0):
+        # Exact enclosures (capsules, boxes): the safe margins at once; pairs whose geoms still
+        # overlap (Apollo's thick thighs in a turn) get that much more room and the clearance
+        # a stiffer weight for another solve, EXACT_TIGHTENINGS times at most.
+        tight, solves, cfg = clearance, 1, config
+        while True:
+            sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
+                rm.with_self_clearance(tight), targets, cfg, solver, src_fps, fps
+            )
+            depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
+            if solves > EXACT_TIGHTENINGS or not np.any(depth > OTHER_DEPTH):
+                return sol, qpos, rep, lift, swing_lift, solves
+            tight, solves = tight.tightened(depth, OTHER_DEPTH), solves + 1
+            cfg = replace(config, w_self=config.w_self * EXACT_SELF)
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
     # Pairs brought closer may overlap CHECK_DEPTH; the others as much as with the safe margins.
     assert first.safe_margin is not None

@@ -18,7 +18,9 @@ another solve; after ``RELAXED_SOLVES`` relaxed solves that still overlap, or on
 overlaps deeper than ``RETRY_DEPTH``, the safe margins everywhere (the solve of a robot
 without meshes), checked the same way: pairs still deeper than ``OTHER_DEPTH`` (an enclosure
 pair that overlaps at rest has a negative margin, a soft one) get that much more room for a
-last solve. Every robot's output frames are checked at the end (``STIFF_SELF``).
+last solve. A robot whose capsules are its geoms (no meshes) starts from the safe margins,
+checked the same way, with more room and a stiffer weight where they still overlap
+(``EXACT_TIGHTENINGS``). Every robot's output frames are checked at the end (``STIFF_SELF``).
 """
 
 from __future__ import annotations
@@ -56,6 +58,14 @@ STIFF_SELF = 10.0
 frames clear but an arm sweeping through a hip between two of them, or a hand target deep in
 the body that a soft margin gives way to), the motion is solved once more at the output rate
 (nothing in between frames) with the self-clearance weight this many times its own."""
+EXACT_TIGHTENINGS = 2
+"""A robot whose capsules are its geoms (no loose enclosures: Apollo) is solved with the safe
+margins; pairs whose geoms still overlap deeper than ``OTHER_DEPTH`` (Apollo's thighs, 10.5 cm
+capsules 2 cm apart at rest, in a turn: 3-4 cm) get that much more room for another solve, at
+most this many times, with the self-clearance weight ``EXACT_SELF`` times its own."""
+EXACT_SELF = 3.0
+"""Chosen on Apollo's turns (corpus clips 000006, 000009, 000013): 1 left 7-8 mm overlaps after
+two more solves, 10 cleared them with knees snapping faster than their velocity limits."""
 RETRY_DEPTH = 0.01
 """A relaxed solve whose real geoms overlap deeper than this (m) somewhere (arms pressed into
 the body: hands on the knees, a crouch) goes to the safe margins at once: more room for a few

@@ -175,3 +175,35 @@ def test_the_output_frames_are_checked_at_the_end():
     assert report.stats["self_collision_frames"] == 0, [
         f for f in report.failures if f.kind == "self_collision"
     ]
+
+
+def test_apollos_thighs_stay_apart_in_a_turn():
+    """Corpus clip 000006 (``turn_right``): Apollo's thighs, capsules of 10.5 cm radius 2 cm apart
+    at rest, meet when its hips flex and turn in. Its capsules are its geoms (no loose
+    enclosures): one solve with the safe margins left them 3 cm into each other and the
+    swing-foot lift after it 1 cm more. Those pairs get more room and a stiffer weight for
+    another solve, and the lift may not push exact capsules into each other: no
+    self-collision, by the simulation check and by MuJoCo on the thigh geoms."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[6]
+    assert spec.family == "turn_right"
+    _, joints, _, _ = make_clip(spec)
+    traj = retarget_motion(
+        Motion(joints=joints.astype(np.float64), fps=20.0), "apollo", fps=50.0, metrics=False
+    )
+    assert traj.solver["self_clearance_solves"] >= 2  # the first solve overlapped
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="apollo"), traj.qpos, 50.0)
+    assert report.stats["self_collision_frames"] == 0, [
+        f for f in report.failures if f.kind == "self_collision"
+    ]
+    rm = load_robot("apollo")
+    model, data = rm.model, mujoco.MjData(rm.model)
+    left, right = (
+        model.geom("collision_capsule_body_l_thigh").id,
+        model.geom("collision_capsule_body_r_thigh").id,
+    )
+    gap = []
+    for frame in traj.qpos:
+        data.qpos[:] = frame
+        mujoco.mj_kinematics(model, data)
+        gap.append(mujoco.mj_geomDistance(model, data, left, right, 1.0, None))
+    assert min(gap) > -0.005
