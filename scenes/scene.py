@@ -281,11 +281,30 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
         scene_value, default_value = getattr(scene_opt, attr), getattr(default_opt, attr)
         if np.array_equal(np.asarray(scene_value), np.asarray(default_value)):
             setattr(scene_opt, attr, getattr(robot_opt, attr))
+    _drop_shared_assets(robot_spec, spec)
     root = robot_spec.worldbody.first_body()
     frame = spec.worldbody.add_frame()
     with _quiet_mujoco():
         frame.attach_body(root, prefix="", suffix="")
     return root.name
+
+
+def _drop_shared_assets(robot_spec: mujoco.MjSpec, scene_spec: mujoco.MjSpec) -> None:
+    """Delete from ``robot_spec`` the materials and textures that the scene names too (in place).
+
+    A robot given by its Menagerie ``scene.xml`` (the robot with a floor and a sky) carries a
+    ``groundplane`` texture and material, as the packaged scenes do; attaching would repeat
+    the names. Only the robot's body tree is attached, so its floor's assets are not needed,
+    and a robot geom naming one of them gets the scene's.
+    """
+    for ours, theirs in (
+        (robot_spec.materials, scene_spec.materials),
+        (robot_spec.textures, scene_spec.textures),
+    ):
+        names = {element.name for element in theirs if element.name}
+        for element in list(ours):
+            if element.name in names:
+                robot_spec.delete(element)
 
 
 class _quiet_mujoco:

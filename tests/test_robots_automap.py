@@ -29,7 +29,7 @@ from retarget import (
 )
 from retarget.compare import similarity_fit, stance_foot_speed
 from retarget.robot_files import exclude_rest_contacts
-from retarget.robots import PACKAGED_ROBOTS
+from retarget.robots import PACKAGED_ROBOTS, robot_scene
 from scenes import load_scene
 from sim import check_trajectory
 
@@ -347,3 +347,16 @@ def test_packaged_robots_have_no_contacts_in_their_rest_pose(robot):
     """Loading a packaged robot skips the rest-contact search (a compile per load): that is right
     only while none of them has overlapping colliders in ``qpos0``."""
     assert exclude_rest_contacts(load_robot_spec(robot)) == []
+
+
+def test_a_robot_given_by_its_scene_file_joins_any_scene():
+    """Menagerie's ``scene.xml`` (the G1 with a floor, a sky and a ``groundplane`` texture and
+    material, as the packaged scenes have) given as the robot: its body tree joins the scene,
+    whose own floor assets it no longer repeats (this was an internal error in validate)."""
+    path = robot_scene("g1")
+    names = {t.name for t in mujoco.MjSpec.from_file(str(path)).textures}
+    assert "groundplane" in names
+    for name in ("empty", "table"):
+        by_file, by_name = load_scene(name, robot=str(path)), load_scene(name, robot="g1")
+        assert len(by_file.robot_geom_ids) == len(by_name.robot_geom_ids) > 0
+        assert by_file.model.nq == by_name.model.nq and by_file.model.nu == by_name.model.nu
