@@ -14,6 +14,9 @@ frame), so that pinning adds no jerk.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
@@ -307,9 +310,9 @@ def lift_swing_feet(
 
 LIFT_SELF_TOLERANCE = 0.002
 """How much closer (m) than before a lift may bring two of the robot's capsules that the solver
-keeps apart, where that takes them within half their margin (only pairs whose capsules are the
-geoms themselves). Half: the whole margin held back T1's landing foot on the real clip at 30 fps
-(skimming in at 0.21 m/s), none let Apollo's lifted knees snap past their velocity limits."""
+keeps apart, where that takes them inside their margin (only pairs whose capsules are the geoms
+themselves). Checking only for overlap (no margin) let Apollo's lifted knees snap past their
+velocity limits in its turns."""
 
 
 def _lift_clear_of_self(
@@ -323,19 +326,26 @@ def _lift_clear_of_self(
     passes: int = 4,
 ) -> np.ndarray:
     """The lift ``q - q_in`` (T, nj) scaled down in the frames where it would bring two capsules
-    of the self-clearance closer than before and within half their margin (a thigh lifted into the
+    of the self-clearance closer than before and inside their margin (a thigh lifted into the
     other in a turn, Apollo's: the solver kept them apart, the lift knows nothing of them):
     halved there, ``passes`` times at most, the scale smoothed over time (``r`` frames). Only
-    pairs whose capsules are their geoms count (a loose enclosure around a mesh may overlap
-    where the geoms do not: the output check of :mod:`retarget.selfcheck` sees those)."""
+    pairs whose capsules are their geoms (capsules and spheres) and apart at rest count: a
+    capsule around a box or a mesh may overlap where the geoms do not (Apollo's hand against
+    its thigh on 012314: 2.8 cm as capsules, clear as geoms); the output check of
+    :mod:`retarget.selfcheck` sees those."""
     sc = robot.self_clearance
-    exact = np.ones(0 if sc is None else sc.num_pairs, dtype=bool)
-    if sc is not None and sc.looseness is not None:
-        exact = sc.looseness == 0.0
-    if sc is None or not exact.any():
+    if sc is None:
         return q
+    kind = robot.model.geom_type[sc.geom]
+    own = (kind == int(mujoco.mjtGeom.mjGEOM_CAPSULE)) | (kind == int(mujoco.mjtGeom.mjGEOM_SPHERE))
+    exact = own[sc.first] & own[sc.second] & (sc.margin >= 0.0)
+    if sc.looseness is not None:
+        exact &= sc.looseness == 0.0
+    if not exact.any():
+        return q
+    sc = replace(sc, first=sc.first[exact], second=sc.second[exact], margin=sc.margin[exact])
     before, _, _ = capsule_distances(poses, sc)
-    allowed = np.where(exact, np.minimum(before, 0.5 * sc.margin) - LIFT_SELF_TOLERANCE, -np.inf)  # (T, P)
+    allowed = np.minimum(before, sc.margin) - LIFT_SELF_TOLERANCE  # (T, P)
     scale = np.ones(len(q))
     out = q
     for _ in range(passes):
