@@ -344,16 +344,17 @@ def _lift_clear_of_self(
     if not exact.any():
         return q
     sc = replace(sc, first=sc.first[exact], second=sc.second[exact], margin=sc.margin[exact])
-    before, _, _ = capsule_distances(poses, sc)
-    allowed = np.minimum(before, sc.margin) - LIFT_SELF_TOLERANCE  # (T, P)
+    moved = np.flatnonzero(np.abs(q - q_in).max(axis=1) > 0.0)  # the lifted frames
+    before, _, _ = capsule_distances(poses.take(moved), sc)
+    allowed = np.minimum(before, sc.margin) - LIFT_SELF_TOLERANCE  # (F, P)
     scale = np.ones(len(q))
     out = q
     for _ in range(passes):
-        after, _, _ = capsule_distances(robot.tree.forward(root_pos, root_rot, out), sc)
+        after, _, _ = capsule_distances(robot.tree.forward(root_pos[moved], root_rot[moved], out[moved]), sc)
         bad = (after < allowed).any(axis=1)
         if not bad.any():
             break
-        scale[bad] *= 0.5
+        scale[moved[bad]] *= 0.5
         scale = np.minimum(scale, gaussian_filter1d(scale, sigma=r / 2.0, mode="nearest"))
         out = q_in + scale[:, None] * (q - q_in)
     return out
