@@ -170,7 +170,8 @@ def foot_measures(
             moved = np.linalg.norm(points[1:, :, :2] - points[:-1, :, :2], axis=2)
             stayed = np.where(on[1:] & on[:-1], moved, np.inf).min(axis=1)
             either = np.where(on[1:] | on[:-1], moved, np.inf).min(axis=1)  # it rocked over in one step
-            step = np.fmin(step, np.where(np.isfinite(stayed), stayed, either))
+            both = down[1:, k] & down[:-1, k]  # only a geom down in both frames counts
+            step = np.fmin(step, np.where(both, np.where(np.isfinite(stayed), stayed, either), np.inf))
         # the point that stayed on the floor moved least: a foot rolling over its toe or heel
         # edge keeps that edge still, however far its body and its geoms' centres travel
         slide[1:, f] = np.where(stance[1:, f], step, 0.0)
