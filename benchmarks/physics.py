@@ -43,6 +43,12 @@ from data_dirs import ROOT, corpus_dir
 
 sys.path.insert(0, str(ROOT))
 
+from controlmm.errors import ControlMMError  # noqa: E402
+from controlmm.motion import Motion  # noqa: E402
+from retarget import retarget_motion  # noqa: E402
+from scenes import load_scene  # noqa: E402
+from sim import CheckConfig, PhysicsConfig, check_trajectory, make_world, track  # noqa: E402
+
 FPS = 50.0
 PARTS = ("executability", "discrimination", "speed")
 SPEED_SECONDS = 6.0
@@ -52,9 +58,6 @@ _WORLD: dict = {}
 
 
 def _world():
-    from scenes import load_scene
-    from sim import make_world
-
     if "g1" not in _WORLD:
         _WORLD["g1"] = make_world(load_scene("empty", robot="g1"))
     return _WORLD["g1"]
@@ -71,16 +74,11 @@ def _clips(corpus: Path, per_family: int, families: list[str] | None, skip: int 
 
 
 def _retarget(corpus: Path, cid: str) -> np.ndarray:
-    from controlmm.motion import Motion
-    from retarget import retarget_motion
-
     joints = np.load(corpus / "new_joints" / f"{cid}.npy").astype(np.float32)
     return retarget_motion(Motion(joints=joints, fps=20.0), "g1", fps=FPS, metrics=False).qpos
 
 
 def _physics(q: np.ndarray, threads: int, options: dict) -> dict:
-    from sim import PhysicsConfig, track
-
     config = PhysicsConfig(threads=threads, **options)
     start = time.perf_counter()
     r = track(q, _world(), config, fps=FPS)
@@ -102,8 +100,6 @@ def _physics(q: np.ndarray, threads: int, options: dict) -> dict:
 
 
 def _executability_job(job: tuple[str, str, str, int, dict]) -> dict:
-    from sim import check_trajectory
-
     family, cid, corpus, threads, options = job
     q = _retarget(Path(corpus), cid)
     report = check_trajectory(_world(), q, FPS)
@@ -171,8 +167,6 @@ def _infeasible(q: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def discrimination(corpus: Path, bases: int, options: dict) -> list[dict]:
-    from sim import check_trajectory
-
     walks = [c for f, c in _clips(corpus, bases, ["walk"])]
     rows = []
     for cid in walks:
@@ -206,8 +200,6 @@ def _six_seconds(corpus: Path) -> tuple[str, np.ndarray]:
 
 
 def speed(corpus: Path, options: dict) -> list[dict]:
-    from sim import CheckConfig, check_trajectory
-
     cid, q = _six_seconds(corpus)
     rows = []
     phys = _physics(q, 2, options)
@@ -306,9 +298,6 @@ def main() -> int:
         sys.exit(f"--config must be a JSON object of PhysicsConfig fields; got {args.config!r} ({exc})")
     if args.samples is not None:
         options["samples"] = args.samples
-    from controlmm.errors import ControlMMError
-    from sim import PhysicsConfig
-
     try:
         PhysicsConfig(**options)
     except (ControlMMError, TypeError) as exc:
