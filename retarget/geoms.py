@@ -32,10 +32,15 @@ class FloorPoints:
 
 def geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
     """Support points (P, 3) in the body frame and radii (P,) of collision geom ``g``."""
+    local, rad = geom_local_points(model, g)
+    return model.geom_pos[g] + local @ quat_to_mat(model.geom_quat[g]).T, rad
+
+
+def geom_local_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """Support points (P, 3) in the geom's own frame and radii (P,) of collision geom ``g``
+    (see :class:`FloorPoints`; none for planes and height fields)."""
     gtype = int(model.geom_type[g])
     size = model.geom_size[g]
-    rot = quat_to_mat(model.geom_quat[g])
-    pos = model.geom_pos[g]
     t = mujoco.mjtGeom
     if gtype == int(t.mjGEOM_SPHERE):
         local, rad = np.zeros((1, 3)), np.full(1, size[0])
@@ -62,7 +67,7 @@ def geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
         local, rad = np.asarray(verts, dtype=float), np.zeros(len(verts))
     else:
         return np.zeros((0, 3)), np.zeros(0)
-    return pos + local @ rot.T, rad
+    return local, rad
 
 
 def collision_geoms(model: mujoco.MjModel, body: int) -> list[int]:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from retarget.geoms import geom_local_points
 from sim.config import CheckConfig
 from sim.failures import Failure, from_mask, runs
 from sim.geometry import support_heights
@@ -112,25 +113,6 @@ def _lowest_body(world: CheckWorld, heights: np.ndarray) -> list[str]:
     return [names[i] for i in np.argmin(filled, axis=1)]
 
 
-def floor_points(model: mujoco.MjModel, geom: int, hull_vertices: dict[int, np.ndarray]) -> np.ndarray:
-    """(n, 3) the points of a foot geom that can rest on the floor, in the geom frame (m): a
-    sphere's or ellipsoid's centre (what lies under it moves with it), a capsule's two end
-    centres, a box's 8 corners, a cylinder's rims (8 points each), a mesh's hull vertices."""
-    kind, size = int(model.geom_type[geom]), model.geom_size[geom]
-    if kind == int(mujoco.mjtGeom.mjGEOM_CAPSULE):
-        return np.array([[0.0, 0.0, -size[1]], [0.0, 0.0, size[1]]])
-    if kind == int(mujoco.mjtGeom.mjGEOM_BOX):
-        signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-        return signs * size
-    if kind == int(mujoco.mjtGeom.mjGEOM_CYLINDER):
-        a = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-        ring = np.stack([size[0] * np.cos(a), size[0] * np.sin(a), np.zeros(8)], axis=1)
-        return np.concatenate([ring - [0, 0, size[1]], ring + [0, 0, size[1]]])
-    if geom in hull_vertices:
-        return hull_vertices[geom]
-    return np.zeros((1, 3))
-
-
 def _world_points(rep: Replay, col: int, local: np.ndarray) -> np.ndarray:
     """(T, n, 3) world positions of a geom's ``local`` points (n, 3) in every replayed frame."""
     rot = rep.geom_xmat[:, col].reshape(-1, 3, 3)
@@ -163,7 +145,11 @@ def foot_measures(
         stance[1:, f] = (down[1:] & down[:-1]).any(axis=1)
         step = np.full(T - 1, np.inf)
         for k, (g, col) in enumerate(zip(foot.geoms, cols, strict=True)):
-            points = _world_points(rep, col, floor_points(world.model, int(g), world.hull_vertices))
+            # corners, rims, end centres; a mesh's hull vertices as the world keeps them
+            local = world.hull_vertices.get(int(g))
+            if local is None:
+                local = geom_local_points(world.model, int(g))[0]
+            points = _world_points(rep, col, local if len(local) else np.zeros((1, 3)))
             # a point is on the floor when its geom is and it is as low as the geom's lowest point
             low = points[:, :, 2] - points[:, :, 2].min(axis=1, keepdims=True) < config.stance_height_m
             on = down[:, [k]] & low  # (T, n)
