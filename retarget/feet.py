@@ -14,15 +14,17 @@ frame), so that pinning adds no jerk.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.spatial.transform import Rotation
 
 from retarget.geoms import FloorPoints
 from retarget.kinematics import Poses, quat_to_mat, so3_exp, so3_log
 from retarget.robot_model import RobotModel
+from retarget.selfcheck import pair_depths
 from retarget.selfcollision import capsule_distances
 from retarget.targets import Targets
 
@@ -304,60 +306,106 @@ def lift_swing_feet(
         dq = gaussian_filter1d(dq, sigma=r / 2.0, axis=0, mode="nearest")
         q[:, leg] = np.clip(q[:, leg] + dq, lo, hi)
     if worst > 0.0:
-        q = _lift_clear_of_self(robot, root_pos, root_rot, q_in, q, poses, r)
+        q = _guarded_lift(robot, root_pos, root_rot, q_in, q, poses, fps)
     return q, worst
 
 
 LIFT_SELF_TOLERANCE = 0.002
 """How much closer (m) than before a lift may bring two of the robot's capsules that the solver
-keeps apart, where that takes them inside their margin (only pairs whose capsules are the geoms
-themselves). Checking only for overlap (no margin) let Apollo's lifted knees snap past their
-velocity limits in its turns."""
+keeps apart, where that takes them inside their margin (pairs whose capsules are the geoms
+themselves), or the others' real geoms deeper into each other than before. Checking the
+capsules only for overlap (no margin) let Apollo's lifted knees snap past their velocity
+limits in its turns."""
 
 
-def _lift_clear_of_self(
+LIFT_SPEED = 2.0 * np.pi
+"""rad/s: a lift may make a joint turn faster than before only up to this. Lifting a foot whose
+knee is nearly straight bends the knee by the square root of the height: G1's right foot
+lifted 2.4 cm as it slid in a stoop (corpus clip 000005) bent the knee 0.4 rad and straightened
+it again at 23 rad/s, past its 20 rad/s limit."""
+
+
+def _guarded_lift(
     robot: RobotModel,
     root_pos: np.ndarray,
     root_rot: np.ndarray,
     q_in: np.ndarray,
     q: np.ndarray,
     poses: Poses,
-    r: int,
+    fps: float,
     passes: int = 4,
 ) -> np.ndarray:
-    """The lift ``q - q_in`` (T, nj) scaled down in the frames where it would bring two capsules
-    of the self-clearance closer than before and inside their margin (a thigh lifted into the
-    other in a turn, Apollo's: the solver kept them apart, the lift knows nothing of them):
-    halved there, ``passes`` times at most, the scale smoothed over time (``r`` frames). Only
-    pairs whose capsules are their geoms (capsules and spheres) and apart at rest count: a
-    capsule around a box or a mesh may overlap where the geoms do not (Apollo's hand against
-    its thigh on 012314: 2.8 cm as capsules, clear as geoms); the output check of
-    :mod:`retarget.selfcheck` sees those."""
+    """The lift ``q - q_in`` (T, nj) at ``fps`` scaled down in the frames where it would turn a
+    joint faster than before and than :data:`LIFT_SPEED`, or bring two geoms that the
+    self-clearance keeps apart closer than before (:func:`_self_closer`): halved there,
+    ``passes`` times at most, the scale smoothed over ~0.05 s. ``poses``: those of ``q_in``."""
+    r = max(1, int(round(0.05 * fps)))
+    moved = np.flatnonzero(np.abs(q - q_in).max(axis=1) > 0.0)  # the lifted frames
+    speed_in = np.abs(np.diff(q_in, axis=0)) * fps
+    closer = _self_closer(robot, root_pos, root_rot, poses, q_in, moved)
+    scale = np.ones(len(q))
+    out = q
+    for _ in range(passes):
+        speed = np.abs(np.diff(out, axis=0)) * fps
+        faster = ((speed > speed_in) & (speed > LIFT_SPEED)).any(axis=1)  # (T - 1,)
+        bad = np.zeros(len(q), dtype=bool)
+        bad[:-1] |= faster
+        bad[1:] |= faster
+        if closer is not None:
+            bad[moved] |= closer(out)
+        if not bad.any():
+            break
+        scale[bad] *= 0.5
+        scale = np.minimum(scale, gaussian_filter1d(scale, sigma=r / 2.0, mode="nearest"))
+        out = q_in + scale[:, None] * (q - q_in)
+    return out
+
+
+def _self_closer(
+    robot: RobotModel,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    poses: Poses,
+    q_in: np.ndarray,
+    moved: np.ndarray,
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """A test of lifted joint angles (T, nj): (F,) whether each of the ``moved`` frames brings
+    two geoms that the self-clearance keeps apart closer than ``q_in`` (``poses``) did (the
+    solver kept them apart, the lift knows nothing of them); None without a self-clearance.
+    Pairs whose capsules are their geoms (capsules and spheres) and apart at rest count where
+    their capsules come :data:`LIFT_SELF_TOLERANCE` closer inside their margin (Apollo's thigh
+    lifted into the other in a turn); the others (meshes, boxes: a capsule around them may
+    overlap where the geoms do not) where their real geoms overlap that much deeper, measured
+    by MuJoCo (:func:`retarget.selfcheck.pair_depths`: G1's hip lifted into its hand in a
+    stoop, corpus clip 000005, 2.7 cm)."""
     sc = robot.self_clearance
-    if sc is None:
-        return q
+    if sc is None or not moved.size:
+        return None
     kind = robot.model.geom_type[sc.geom]
     own = (kind == int(mujoco.mjtGeom.mjGEOM_CAPSULE)) | (kind == int(mujoco.mjtGeom.mjGEOM_SPHERE))
     exact = own[sc.first] & own[sc.second] & (sc.margin >= 0.0)
     if sc.looseness is not None:
         exact &= sc.looseness == 0.0
-    if not exact.any():
-        return q
-    sc = replace(sc, first=sc.first[exact], second=sc.second[exact], margin=sc.margin[exact])
-    moved = np.flatnonzero(np.abs(q - q_in).max(axis=1) > 0.0)  # the lifted frames
-    before, _, _ = capsule_distances(poses.take(moved), sc)
-    allowed = np.minimum(before, sc.margin) - LIFT_SELF_TOLERANCE  # (F, P)
-    scale = np.ones(len(q))
-    out = q
-    for _ in range(passes):
-        after, _, _ = capsule_distances(robot.tree.forward(root_pos[moved], root_rot[moved], out[moved]), sc)
-        bad = (after < allowed).any(axis=1)
-        if not bad.any():
-            break
-        scale[moved[bad]] *= 0.5
-        scale = np.minimum(scale, gaussian_filter1d(scale, sigma=r / 2.0, mode="nearest"))
-        out = q_in + scale[:, None] * (q - q_in)
-    return out
+    capsules, geoms = sc.select_pairs(exact), sc.select_pairs(~exact)
+    quat = Rotation.from_matrix(root_rot[moved]).as_quat()[:, [3, 0, 1, 2]]
+    root = np.concatenate([root_pos[moved], quat], axis=1)
+
+    def real(q: np.ndarray) -> np.ndarray:  # (F, P') overlaps of the other pairs' geoms
+        return pair_depths(robot.model, robot.tree, np.concatenate([root, q[moved]], axis=1), geoms)
+
+    before, _, _ = capsule_distances(poses.take(moved), capsules)
+    allowed = np.minimum(before, capsules.margin) - LIFT_SELF_TOLERANCE  # (F, P)
+    deepest = real(q_in) + LIFT_SELF_TOLERANCE if geoms.num_pairs else None
+
+    def closer(q: np.ndarray) -> np.ndarray:
+        lifted = robot.tree.forward(root_pos[moved], root_rot[moved], q[moved])
+        after, _, _ = capsule_distances(lifted, capsules)
+        bad: np.ndarray = (after < allowed).any(axis=1)
+        if deepest is not None:
+            bad |= (real(q) > deepest).any(axis=1)
+        return bad
+
+    return closer
 
 
 LIMITED_ROTATION_WEIGHT = 0.05

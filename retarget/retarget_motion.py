@@ -39,11 +39,11 @@ from retarget.selfcheck import (
     EXACT_SELF,
     EXACT_TIGHTENINGS,
     OTHER_DEPTH,
+    OUTPUT_SELF,
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
     RETRY_DEPTH,
-    STIFF_SELF,
     penetration_depths,
 )
 from retarget.selfcollision import SelfClearance
@@ -236,13 +236,14 @@ def _clearance_in_use(rm: RobotModel, config: SolverConfig, solver: str) -> Self
     return rm.self_clearance if config.self_clearance and solver != "mink" else None
 
 
-def _output_overlap(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> float:
-    """The deepest overlap (m, 0 for none) of two of the robot's real geoms that the
-    self-clearance keeps apart, over the output frames ``qpos`` (T, nq)."""
+def _output_overlap(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> np.ndarray:
+    """(P,) deepest overlap (m, 0 for none) of each pair of the robot's real geoms that the
+    self-clearance keeps apart, over the output frames ``qpos`` (T, nq); empty where the solve
+    keeps no self-clearance."""
     clearance = _clearance_in_use(rm, config, solver)
     if clearance is None:
-        return 0.0
-    return float(penetration_depths(rm.model, rm.tree, qpos, clearance).max(initial=0.0))
+        return np.zeros(0)
+    return penetration_depths(rm.model, rm.tree, qpos, clearance)
 
 
 def retarget_motion(
@@ -297,20 +298,28 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
     sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)
-    worst = _output_overlap(rm, qpos, config, solver)
-    if worst > OTHER_DEPTH:
-        # At the output rate with a stiffer self-clearance (selfcheck.STIFF_SELF), kept if it
-        # overlaps less.
+    depth = _output_overlap(rm, qpos, config, solver)
+    if depth.max(initial=0.0) > OTHER_DEPTH:
+        # At the output rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve
+        # kept if it overlaps less; pairs that still overlap get that much more room and the
+        # next weight for another.
         dense = resample(joints, src_fps, fps)
-        stiff = replace(config, w_self=config.w_self * STIFF_SELF)
-        dense_targets = build_targets(rm, dense, fps, transform, stiff)
-        sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-            rm, dense_targets, stiff, solver, fps, fps
-        )
-        solves += 1
-        if _output_overlap(rm, qpos2, config, solver) < worst:
-            joints, src_fps, targets = dense, fps, dense_targets
-            sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
+        clearance = _clearance_in_use(rm, config, solver)
+        assert clearance is not None  # the overlaps were measured on it
+        for stiffness in OUTPUT_SELF:
+            stiff = replace(config, w_self=config.w_self * stiffness)
+            dense_targets = build_targets(rm, dense, fps, transform, stiff)
+            sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
+                rm.with_self_clearance(clearance), dense_targets, stiff, solver, fps, fps
+            )
+            solves += 1
+            depth2 = _output_overlap(rm, qpos2, config, solver)
+            if depth2.max() < depth.max():
+                joints, src_fps, targets, depth = dense, fps, dense_targets, depth2
+                sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
+            if depth2.max() <= OTHER_DEPTH:
+                break
+            clearance = clearance.tightened(depth2, OTHER_DEPTH)
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)

@@ -113,6 +113,22 @@ class SelfClearance:
         more = np.where(self.margin < safe, np.maximum(safe, self.margin + depth), self.margin + depth)
         return replace(self, margin=np.where(bad, more, self.margin))
 
+    def select_pairs(self, keep: np.ndarray) -> SelfClearance:
+        """A copy with the pairs where ``keep`` (P,) bool is true (their margins and looseness)."""
+
+        def take(values: np.ndarray | None) -> np.ndarray | None:
+            return None if values is None else values[keep]
+
+        return replace(
+            self,
+            first=self.first[keep],
+            second=self.second[keep],
+            margin=self.margin[keep],
+            safe_margin=take(self.safe_margin),
+            looseness=take(self.looseness),
+            relaxed_pairs=None,
+        )
+
     @property
     def bound(self) -> np.ndarray:
         """(C,) radius of a sphere around each capsule's segment midpoint that encloses it."""

@@ -177,6 +177,28 @@ def test_the_output_frames_are_checked_at_the_end():
     ]
 
 
+@pytest.mark.parametrize("fps", [30.0, 50.0])
+def test_a_stoop_keeps_g1s_hand_and_hips_apart_at_every_output_rate(fps):
+    """Corpus clip 000005 (``pick_up``, a stoop with the left hand): at 50 fps the swing-foot
+    lift after the solve bent G1's left hip into its left hand (2.7 cm, the solver's frames
+    clear) and straightened the right knee at 23 rad/s (limit 20); at 30 fps the output-rate
+    solve left the pelvis 5.9 mm into the right hip-roll link. The lift may not bring real
+    geoms deeper into each other nor turn a joint faster than ``LIFT_SPEED``, and pairs the
+    output-rate solve leaves overlapping get more room for one more: no self-collision, no
+    joint past its speed limit."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[5]
+    assert spec.family == "pick_up"
+    _, joints, _, _ = make_clip(spec)
+    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "g1", fps=fps, metrics=False)
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="g1"), traj.qpos, fps)
+    assert report.stats["self_collision_frames"] == 0, [
+        f for f in report.failures if f.kind == "self_collision"
+    ]
+    assert not [f for f in report.failures if f.kind == "joint_velocity" and f.severity == "error"]
+    speed = np.abs(np.diff(traj.qpos[:, 7:], axis=0)) * fps
+    assert speed.max() <= 20.0
+
+
 def test_apollos_thighs_stay_apart_in_a_turn():
     """Corpus clip 000006 (``turn_right``): Apollo's thighs, capsules of 10.5 cm radius 2 cm apart
     at rest, meet when its hips flex and turn in. Its capsules are its geoms (no loose
