@@ -374,10 +374,12 @@ def _self_closer(
     solver kept them apart, the lift knows nothing of them); None without a self-clearance.
     Pairs whose capsules are their geoms (capsules and spheres) and apart at rest count where
     their capsules come :data:`LIFT_SELF_TOLERANCE` closer inside their margin (Apollo's thigh
-    lifted into the other in a turn); the others (meshes, boxes: a capsule around them may
-    overlap where the geoms do not) where their real geoms overlap that much deeper, measured
-    by MuJoCo (:func:`retarget.selfcheck.pair_depths`: G1's hip lifted into its hand in a
-    stoop, corpus clip 000005, 2.7 cm)."""
+    lifted into the other in a turn); the others apart at rest (meshes, boxes: a capsule
+    around them may overlap where the geoms do not) where their real geoms overlap that much
+    deeper, measured by MuJoCo (:func:`retarget.selfcheck.pair_depths`: G1's hip lifted into
+    its hand in a stoop, corpus clip 000005, 2.7 cm). Pairs whose enclosures overlap at rest
+    (a trunk and a hip link) do not count: OP3's hip-pitch links press 2-4 mm further into its
+    trunk mesh whenever a crouching walk lifts a foot, and its feet skimmed the floor."""
     sc = robot.self_clearance
     if sc is None or not moved.size:
         return None
@@ -386,7 +388,8 @@ def _self_closer(
     exact = own[sc.first] & own[sc.second] & (sc.margin >= 0.0)
     if sc.looseness is not None:
         exact &= sc.looseness == 0.0
-    capsules, geoms = sc.select_pairs(exact), sc.select_pairs(~exact)
+    apart = (sc.margin if sc.safe_margin is None else sc.safe_margin) >= 0.0  # apart at rest
+    capsules, geoms = sc.select_pairs(exact), sc.select_pairs(~exact & apart)
     quat = Rotation.from_matrix(root_rot[moved]).as_quat()[:, [3, 0, 1, 2]]
     root = np.concatenate([root_pos[moved], quat], axis=1)
 
