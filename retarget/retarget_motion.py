@@ -40,6 +40,7 @@ from retarget.selfcheck import (
     EXACT_TIGHTENINGS,
     OTHER_DEPTH,
     OUTPUT_SELF,
+    OUTPUT_SLIP,
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
@@ -231,6 +232,27 @@ def _solve_clear_of_self(
     return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
 
 
+def _stance_slip(rm: RobotModel, rep: Replay, targets: Targets, fps: float) -> float:
+    """Largest horizontal step (m) of a foot's slowest floor point between two output frames
+    (``rep``, at ``fps``) in both of which the human stands on that foot (``targets.stance``):
+    a foot that stays down may pivot on its heel or toe, not slide."""
+    frames = len(rep.xpos)
+    near = np.clip(
+        np.rint(np.arange(frames) / fps * targets.fps).astype(int), 0, len(targets.stance["left"]) - 1
+    )
+    worst = 0.0
+    for side in ("left", "right"):
+        foot = rm.feet[side]
+        body = int(rm.tree.node_body[foot.node])
+        points = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], foot.points)
+        step = np.linalg.norm(np.diff(points[..., :2], axis=0), axis=2).min(axis=1)  # (T - 1,)
+        down = targets.stance[side][near]
+        both = down[1:] & down[:-1]
+        if both.any():
+            worst = max(worst, float(step[both].max()))
+    return worst
+
+
 def _clearance_in_use(rm: RobotModel, config: SolverConfig, solver: str) -> SelfClearance | None:
     """The robot's self-clearance where the solve keeps it (None: none, switched off, mink)."""
     return rm.self_clearance if config.self_clearance and solver != "mink" else None
@@ -301,11 +323,12 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     depth = _output_overlap(rm, qpos, config, solver)
     if depth.max(initial=0.0) > OTHER_DEPTH:
         # At the output rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve
-        # kept if it overlaps less; pairs that still overlap get that much more room and the
-        # next weight for another.
+        # kept if it overlaps less and slips no more (selfcheck.OUTPUT_SLIP); pairs that still
+        # overlap get that much more room and the next weight for another.
         dense = resample(joints, src_fps, fps)
         clearance = _clearance_in_use(rm, config, solver)
         assert clearance is not None  # the overlaps were measured on it
+        slip = _stance_slip(rm, rep, targets, fps)
         for stiffness in OUTPUT_SELF:
             stiff = replace(config, w_self=config.w_self * stiffness)
             dense_targets = build_targets(rm, dense, fps, transform, stiff)
@@ -314,10 +337,12 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
             )
             solves += 1
             depth2 = _output_overlap(rm, qpos2, config, solver)
-            if depth2.max() < depth.max():
-                joints, src_fps, targets, depth = dense, fps, dense_targets, depth2
+            slip2 = _stance_slip(rm, rep2, dense_targets, fps)
+            kept = depth2.max() < depth.max() and slip2 <= max(slip, OUTPUT_SLIP)
+            if kept:
+                joints, src_fps, targets, depth, slip = dense, fps, dense_targets, depth2, slip2
                 sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
-            if depth2.max() <= OTHER_DEPTH:
+            if kept and depth2.max() <= OTHER_DEPTH:
                 break
             clearance = clearance.tightened(depth2, OTHER_DEPTH)
     times = np.arange(len(qpos)) / fps

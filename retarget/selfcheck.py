@@ -63,6 +63,13 @@ each while the overlap lasts, the pairs still overlapping getting that much more
 next (G1's pelvis and a hip link in a stoop, corpus clip 000005 at 30 fps: 8 mm after the
 first); each kept if it overlaps less. x10 at once lifted a seated G1's planted foot 15 cm
 (clip 000012 at 30 fps: the solve stopped in a poor minimum)."""
+OUTPUT_SLIP = 0.015
+"""...and only if no foot that the human keeps down slides further between two output frames
+than before and than this (m): a solve with another weight may settle elsewhere (x3 slid
+H1's planted feet 2 cm a frame in a sit-down, corpus clip 000012 at 50 fps; x10 did not).
+Solves at the output rate hold planted feet less tightly than the resampled ones (no
+pinning between frames: 0.8-1.3 cm a frame against 0.1-0.3 on G1's stoop 000005 and H1's
+000012), so "no more than before" alone would keep their overlaps."""
 EXACT_TIGHTENINGS = 2
 """A robot whose capsules are its geoms (no loose enclosures: Apollo) is solved with the safe
 margins; pairs whose geoms still overlap deeper than ``OTHER_DEPTH`` (Apollo's thighs, 10.5 cm

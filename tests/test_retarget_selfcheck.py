@@ -199,6 +199,21 @@ def test_a_stoop_keeps_g1s_hand_and_hips_apart_at_every_output_rate(fps):
     assert speed.max() <= 20.0
 
 
+def test_an_output_rate_solve_that_slides_a_planted_foot_is_not_kept():
+    """Corpus clip 000012 (``sit_down``) on H1 at 50 fps: the hands on the lap sweep 3 cm into
+    the hips between the solver's frames, and the first output-rate solve (x3) clears them but
+    slides both planted feet 2-4 cm in three frames. It is not kept (``OUTPUT_SLIP``); the
+    next (x10) clears them with the feet down: no self-collision, no sliding."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[12]
+    assert spec.family == "sit_down"
+    _, joints, _, _ = make_clip(spec)
+    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "h1", fps=50.0, metrics=False)
+    assert traj.solver["self_clearance_solves"] >= 3  # the chain, then two output-rate solves
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="h1"), traj.qpos, 50.0)
+    assert report.stats["self_collision_frames"] == 0
+    assert not [f for f in report.failures if f.kind == "foot_sliding" and f.severity == "error"]
+
+
 def test_apollos_thighs_stay_apart_in_a_turn():
     """Corpus clip 000006 (``turn_right``): Apollo's thighs, capsules of 10.5 cm radius 2 cm apart
     at rest, meet when its hips flex and turn in. Its capsules are its geoms (no loose
