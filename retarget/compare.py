@@ -25,7 +25,7 @@ import numpy as np
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.metrics import replay
+from retarget.metrics import foot_steps, replay
 from retarget.robot_model import RobotModel
 from retarget.stance import detect_contacts
 
@@ -148,11 +148,7 @@ def _stance_speed(
     contact = human_contacts(human, human_fps, len(qpos), fps)
     speeds = []
     for i, side in enumerate(("left", "right")):
-        foot = robot.feet[side]
-        body = int(robot.tree.node_body[foot.node])
-        local = foot.points if sole else np.zeros((1, 3))
-        pts = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], local)
-        step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2).min(axis=1) * fps
+        step = foot_steps(robot, rep, side, sole) * fps
         speeds.append(step[contact[1:, i] & contact[:-1, i]])
     all_speeds = np.concatenate(speeds)
     return float(all_speeds.mean()) if all_speeds.size else 0.0

@@ -75,6 +75,17 @@ def replay(model: mujoco.MjModel, qpos: np.ndarray) -> Replay:
 _HULLS: dict[bytes, np.ndarray] = {}
 
 
+def foot_steps(robot: RobotModel, rep: Replay, side: str, sole: bool = True) -> np.ndarray:
+    """(T - 1,) horizontal step (m) between consecutive frames of ``rep`` of the ``side``
+    foot's slowest sole point (its floor points: a foot pivoting on its heel or toe does not
+    move there), or of its body origin (``sole=False``)."""
+    foot = robot.feet[side]
+    body = int(robot.tree.node_body[foot.node])
+    local = foot.points if sole else np.zeros((1, 3))
+    points = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], local)
+    return np.linalg.norm(np.diff(points[..., :2], axis=0), axis=2).min(axis=1)
+
+
 def hull_vertices(verts: np.ndarray) -> np.ndarray:
     """The vertices (H, 3) of the convex hull of a mesh's vertices (V, 3), cached by content.
 

@@ -30,7 +30,7 @@ from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import hold_feet_between_frames, lift_swing_feet
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
-from retarget.metrics import Replay, geom_lowest_z, replay, trajectory_metrics
+from retarget.metrics import Replay, foot_steps, geom_lowest_z, replay, trajectory_metrics
 from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
@@ -242,10 +242,7 @@ def _stance_slip(rm: RobotModel, rep: Replay, targets: Targets, fps: float) -> f
     )
     worst = 0.0
     for side in ("left", "right"):
-        foot = rm.feet[side]
-        body = int(rm.tree.node_body[foot.node])
-        points = rep.xpos[:, body, None, :] + np.einsum("tij,pj->tpi", rep.xmat[:, body], foot.points)
-        step = np.linalg.norm(np.diff(points[..., :2], axis=0), axis=2).min(axis=1)  # (T - 1,)
+        step = foot_steps(rm, rep, side)  # (T - 1,)
         down = targets.stance[side][near]
         both = down[1:] & down[:-1]
         if both.any():
