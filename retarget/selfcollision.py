@@ -468,7 +468,8 @@ def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, 
     q[:, col] = grid
     n = len(q)
     root_pos, root_rot = np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1))
-    capsule, _, _ = capsule_distances(tree.forward(root_pos, root_rot, q), _one_pair(sc, k))
+    one = sc.select_pairs(np.arange(sc.num_pairs) == k)
+    capsule, _, _ = capsule_distances(tree.forward(root_pos, root_rot, q), one)
     data = mujoco.MjData(model)
     adr = model.jnt_qposadr[joints]
     g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
@@ -481,9 +482,3 @@ def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, 
     if not touching.any():
         return None
     return float(capsule[touching, 0].max()) + SWEEP_SLACK
-
-
-def _one_pair(sc: SelfClearance, k: int) -> SelfClearance:
-    return SelfClearance(
-        sc.node, sc.p0, sc.p1, sc.radius, sc.first[k : k + 1], sc.second[k : k + 1], sc.geom, sc.margin[:1]
-    )
