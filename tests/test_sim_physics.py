@@ -33,6 +33,7 @@ from sim import (
 )
 from sim.physics import save_certificate
 from sim.physics.certificate import CSV_FPS
+from sim.physics.model import PLAN_SENSOR_PREFIX, inline_meshes, planning_spec
 from sim.world import CheckWorld
 from sim.worlds import Obstacle, robot_spec, standing_qpos
 
@@ -94,6 +95,25 @@ def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path
     # robot_physics.csv: the simulated states at 50 fps (every 10th step of 2 ms), LAFAN1-G1 rows (xyzw)
     stride = int(round(1.0 / CSV_FPS / dt))
     assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
+
+
+def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction():
+    # The rollouts run on a copy: 5x the timestep, no dry joint friction (one constraint row per
+    # joint, ~1.4x the cost of a G1 rollout step); the executed model keeps it.
+    world = g1()
+    inline = inline_meshes(world.spec, world.model)
+    executed = inline.compile()
+    root = world.body_name(world.root_body)
+    plan = planning_spec(inline, 5 * executed.opt.timestep, root, [f.name for f in world.feet]).compile()
+    assert (executed.dof_frictionloss > 0).sum() == executed.nu  # G1: 0.3 N m on every actuated joint
+    assert (plan.dof_frictionloss == 0).all()
+    assert (plan.nq, plan.nv, plan.nu) == (executed.nq, executed.nv, executed.nu)
+    assert np.allclose(plan.body_mass, executed.body_mass)
+    assert np.allclose(plan.dof_armature, executed.dof_armature)
+    assert plan.opt.timestep == pytest.approx(5 * executed.opt.timestep)
+    assert np.array_equal(plan.geom_size, executed.geom_size)  # the same geoms and meshes
+    assert plan.sensor_adr[-1] + 3 == plan.nsensordata  # the cost's sensors, last: com, com velocity, feet
+    assert mujoco.mj_name2id(plan, mujoco.mjtObj.mjOBJ_SENSOR, PLAN_SENSOR_PREFIX + "com") >= 0
 
 
 def test_a_fall_is_retried_from_an_earlier_state_and_the_run_still_replays(tmp_path):

@@ -8,18 +8,20 @@ exactly (same MuJoCo version). Vertices are taken from the compiled model and mo
 the mesh file's frame (``mesh_pos``, ``mesh_quat``), so that the compiler derives the same mesh
 frames and geom poses as for the original files.
 
-*Planning model.* The rollouts use a copy with a longer timestep (``plan_substeps`` x the
-model's), sensors for the centre of mass, its velocity and the feet, motor actuators turned
-into the position servos the controller emulates (:mod:`sim.physics.actuation`), and every
-mesh reduced to its convex hull: MuJoCo collides meshes as their hulls, so contacts are the
-same, and the copy compiles several times faster.
+*Planning model.* The rollouts use a copy of the same inline spec with a longer timestep
+(``plan_substeps`` x the model's), sensors for the centre of mass, its velocity and the feet,
+motor actuators turned into the position servos the controller emulates
+(:mod:`sim.physics.actuation`), and no dry friction in the joints and tendons
+(``frictionloss``: one constraint row per joint that made each rollout step about 1.4x as
+expensive on G1, for 0.3 N m against servo torques of tens of N m and their damping). It is
+compiled while the executed model's MJCF is saved and compiled on another thread
+(``sim.physics.track``).
 """
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 from controlmm.errors import ControlMMError
 
@@ -56,11 +58,6 @@ def inline_meshes(spec: mujoco.MjSpec, model: mujoco.MjModel) -> mujoco.MjSpec:
     return out
 
 
-def executed_xml(spec: mujoco.MjSpec, model: mujoco.MjModel) -> str:
-    """The robot + scene as one self-contained MJCF string (meshes inline)."""
-    return inline_meshes(spec, model).to_xml()
-
-
 def compile_xml(xml: str) -> mujoco.MjModel:
     """Compile an MJCF string (one-line error when MuJoCo refuses it)."""
     try:
@@ -79,16 +76,22 @@ def check_same_layout(original: mujoco.MjModel, copy: mujoco.MjModel) -> None:
             raise ControlMMError(f"the saved physics model has {name}={b}, the scene model {a}")
 
 
-def planning_spec(xml: str, timestep: float, root_body: str, foot_bodies: list[str]) -> mujoco.MjSpec:
-    """The planning copy's spec: the executed MJCF with a longer timestep and the cost's sensors.
+def planning_spec(
+    inline: mujoco.MjSpec, timestep: float, root_body: str, foot_bodies: list[str]
+) -> mujoco.MjSpec:
+    """The planning copy's spec: a copy of the executed model's spec (``inline``, meshes inline:
+    :func:`inline_meshes`) with a longer timestep, no joint or tendon friction loss, and the
+    cost's sensors.
 
     Sensors (in this order, after the model's own): centre of mass of the robot (subtree of
     the root body, 3), its linear velocity (3), the world position of each foot body (3 each).
     """
-    spec = mujoco.MjSpec.from_string(xml)
+    spec = inline.copy()
     spec.option.timestep = timestep
-    for mesh in spec.meshes:
-        _hull_only(mesh)
+    for joint in spec.joints:
+        joint.frictionloss = 0.0
+    for tendon in spec.tendons:
+        tendon.frictionloss = 0.0
     spec.add_sensor(
         name=PLAN_SENSOR_PREFIX + "com",
         type=mujoco.mjtSensor.mjSENS_SUBTREECOM,
@@ -109,21 +112,6 @@ def planning_spec(xml: str, timestep: float, root_body: str, foot_bodies: list[s
             objname=foot,
         )
     return spec
-
-
-def _hull_only(mesh: mujoco.MjsMesh) -> None:
-    """Replace an inline mesh by its convex hull (vertices and triangles), when qhull can build one."""
-    verts = np.asarray(mesh.uservert, dtype=np.float64).reshape(-1, 3)
-    if verts.shape[0] < 5:
-        return
-    try:
-        hull = ConvexHull(verts)
-    except (QhullError, ValueError):  # flat or degenerate: keep it as it is
-        return
-    index = np.full(verts.shape[0], -1, dtype=np.int64)
-    index[hull.vertices] = np.arange(hull.vertices.size)
-    mesh.uservert = verts[hull.vertices].ravel()
-    mesh.userface = index[hull.simplices].ravel()
 
 
 def plan_sensor_start(model: mujoco.MjModel) -> int:

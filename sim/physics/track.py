@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -25,7 +26,7 @@ from sim.dynamics import DynamicsResult, dynamics_check
 from sim.kinematic import kinematic_check
 from sim.physics.actuation import Actuation, actuation, servo_planning
 from sim.physics.config import PhysicsConfig
-from sim.physics.model import check_same_layout, compile_xml, executed_xml, planning_spec
+from sim.physics.model import check_same_layout, compile_xml, inline_meshes, planning_spec
 from sim.physics.reference import Reference, build_reference
 from sim.physics.result import PhysicsResult, fall_frame, verdict
 from sim.physics.sampler import FULL_STATE, PredictiveSampler
@@ -69,29 +70,21 @@ def check_start(world: CheckWorld, qpos0: np.ndarray, config: PhysicsConfig) -> 
         )
 
 
-def _executed_model(world: CheckWorld) -> tuple[mujoco.MjModel, str | None]:
-    """The executed model (compiled from its own saved MJCF when the world has a spec)."""
-    if world.spec is None:
-        return world.model, None
-    spec = world.spec
-    xml = world.derived(("physics_xml",), lambda: executed_xml(spec, world.model))
-    model = world.derived(("physics_model",), lambda: compile_xml(xml))
-    check_same_layout(world.model, model)
+def _executed(inline: mujoco.MjSpec, original: mujoco.MjModel) -> tuple[mujoco.MjModel, str]:
+    """The executed model, compiled from its own saved MJCF text, and that text."""
+    xml = inline.to_xml()
+    model = compile_xml(xml)
+    check_same_layout(original, model)
     return model, xml
 
 
-def _plan_model(
-    world: CheckWorld, xml: str | None, substeps: int, act_kp: float, act_kv: float
+def _planning(
+    world: CheckWorld, inline: mujoco.MjSpec, substeps: int, act_kp: float, act_kv: float
 ) -> mujoco.MjModel:
-    if xml is None:
-        raise ControlMMError(
-            "the physics check needs the scene's MjSpec (to save the model and build the planning copy): "
-            "build the world from a scenes.Scene, an MjSpec or sim.worlds.robot_spec(...)"
-        )
     model = world.model
     act = actuation(model, act_kp, act_kv)
     spec = planning_spec(
-        xml,
+        inline,
         substeps * float(model.opt.timestep),
         world.body_name(world.root_body),
         [f.name for f in world.feet],
@@ -103,6 +96,33 @@ def _plan_model(
         raise ControlMMError(
             f"MuJoCo cannot compile the planning model: {' '.join(str(exc).split())}"
         ) from None
+
+
+def _models(
+    world: CheckWorld, substeps: int, act_kp: float, act_kv: float
+) -> tuple[mujoco.MjModel, str, mujoco.MjModel]:
+    """The executed model, its MJCF text and the planning copy, built once per world.
+
+    Saving and compiling the self-contained MJCF (meshes inline: seconds for a mesh robot)
+    runs on a second thread while this one builds the planning copy from the same inline
+    spec; MuJoCo releases the GIL in both.
+    """
+    if world.spec is None:
+        raise ControlMMError(
+            "the physics check needs the scene's MjSpec (to save the model and build the planning copy): "
+            "build the world from a scenes.Scene, an MjSpec or sim.worlds.robot_spec(...)"
+        )
+    spec, original = world.spec, world.model
+    inline = world.derived(("physics_inline",), lambda: inline_meshes(spec, original))
+    saved = inline.copy()  # the second thread's own copy: the planning copy is made from ``inline``
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        executed = pool.submit(world.derived, ("physics_executed",), lambda: _executed(saved, original))
+        plan = world.derived(
+            ("physics_plan", substeps, act_kp, act_kv),
+            lambda: _planning(world, inline, substeps, act_kp, act_kv),
+        )
+        model, xml = executed.result()
+    return model, xml, plan
 
 
 def _feedforward(
@@ -159,11 +179,7 @@ def track(
     if q.shape[0] < 2:
         raise ControlMMError("the physics check needs at least 2 frames; got 1")
     check_start(world, q[0], config)
-    exec_model, xml = _executed_model(world)
-    plan_model = world.derived(
-        ("physics_plan", config.plan_substeps, check.tracking_kp, check.tracking_kd),
-        lambda: _plan_model(world, xml, config.plan_substeps, check.tracking_kp, check.tracking_kd),
-    )
+    exec_model, xml, plan_model = _models(world, config.plan_substeps, check.tracking_kp, check.tracking_kd)
     if qvel is None or dynamics is None or flight is None:
         qvel, dynamics, flight = _feedforward(world, q, rate, check)
     act = actuation(exec_model, check.tracking_kp, check.tracking_kd)
