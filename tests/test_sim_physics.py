@@ -124,7 +124,9 @@ def test_a_fall_is_retried_from_an_earlier_state_and_the_run_still_replays(tmp_p
     q[12:, 3:7] = [0.0, 0.0, 1.0, 0.0]
     config = replace(FAST, retries=2, retry_back_s=0.1)
     r = track(q, g1(), config, fps=FPS)
-    assert r.fell and r.fall_frame == 12 and r.stats["retries"] == 2
+    # Falls at the flip; the planner sees the flipped reference within its horizon and may tip
+    # the robot past 60 degrees a frame before it.
+    assert r.fell and r.fall_frame in (11, 12) and r.stats["retries"] == 2
     assert np.isfinite(r.root_error_m[: r.fall_frame + 1]).all() and r.simulated[: r.fall_frame + 1].all()
     paths = save_certificate(r, tmp_path)
     assert np.array_equal(replay_certificate(paths["physics_model.xml"], paths["physics.npz"]), r.qpos)

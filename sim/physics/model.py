@@ -14,8 +14,7 @@ motor actuators turned into the position servos the controller emulates
 (:mod:`sim.physics.actuation`), and no dry friction in the joints and tendons
 (``frictionloss``: one constraint row per joint that made each rollout step about 1.4x as
 expensive on G1, for 0.3 N m against servo torques of tens of N m and their damping). It is
-compiled while the executed model's MJCF is saved and compiled on another thread
-(``sim.physics.track``).
+compiled from the same inline spec as the saved MJCF (no second parse of the saved text).
 """
 
 from __future__ import annotations

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -81,6 +80,7 @@ def _executed(inline: mujoco.MjSpec, original: mujoco.MjModel) -> tuple[mujoco.M
 def _planning(
     world: CheckWorld, inline: mujoco.MjSpec, substeps: int, act_kp: float, act_kv: float
 ) -> mujoco.MjModel:
+    """The planning copy (:func:`sim.physics.model.planning_spec`, motors as servos), compiled."""
     model = world.model
     act = actuation(model, act_kp, act_kv)
     spec = planning_spec(
@@ -103,9 +103,8 @@ def _models(
 ) -> tuple[mujoco.MjModel, str, mujoco.MjModel]:
     """The executed model, its MJCF text and the planning copy, built once per world.
 
-    Saving and compiling the self-contained MJCF (meshes inline: seconds for a mesh robot)
-    runs on a second thread while this one builds the planning copy from the same inline
-    spec; MuJoCo releases the GIL in both.
+    Both come from one spec with the meshes inline. (Not on two threads: saving one spec and
+    compiling another at the same time made MuJoCo write or read a broken mesh now and then.)
     """
     if world.spec is None:
         raise ControlMMError(
@@ -114,14 +113,11 @@ def _models(
         )
     spec, original = world.spec, world.model
     inline = world.derived(("physics_inline",), lambda: inline_meshes(spec, original))
-    saved = inline.copy()  # the second thread's own copy: the planning copy is made from ``inline``
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        executed = pool.submit(world.derived, ("physics_executed",), lambda: _executed(saved, original))
-        plan = world.derived(
-            ("physics_plan", substeps, act_kp, act_kv),
-            lambda: _planning(world, inline, substeps, act_kp, act_kv),
-        )
-        model, xml = executed.result()
+    model, xml = world.derived(("physics_executed",), lambda: _executed(inline.copy(), original))
+    plan = world.derived(
+        ("physics_plan", substeps, act_kp, act_kv),
+        lambda: _planning(world, inline, substeps, act_kp, act_kv),
+    )
     return model, xml, plan
 
 
