@@ -76,11 +76,6 @@ def resample_states(qpos: np.ndarray, timestep: float, fps: float, root_adr: int
 
 def save_certificate(result: PhysicsResult, directory: str | Path) -> dict[str, Path]:
     """Write ``physics_model.xml``, ``physics.npz`` and ``robot_physics.csv`` into ``directory``."""
-    if result.model_xml is None:
-        raise ControlMMError(
-            "this physics run has no saved model (its world had no MjSpec); build the world from a "
-            "scenes.Scene, an MjSpec or sim.worlds.robot_spec(...)"
-        )
     if result.root_qpos_adr != 0:
         raise ControlMMError("the LAFAN1/BeyondMimic CSV layout needs the robot's free joint first in qpos")
     paths = certificate_paths(directory)

@@ -53,7 +53,7 @@ class PhysicsResult:
         ctrl: (S, nu) the control input applied at each ``mj_step``.
         mocap_pos, mocap_quat: (S, nmocap, 3 / 4) mocap poses set before each step, or None
             when nothing moves.
-        model_xml: the executed model as one MJCF string (None when the world had no MjSpec).
+        model_xml: the executed model as one MJCF string (``sim.track`` needs the world's MjSpec).
         stats: summary figures (see :meth:`to_dict`).
         config: the settings used.
     """
@@ -83,7 +83,7 @@ class PhysicsResult:
     ctrl: np.ndarray
     mocap_pos: np.ndarray | None
     mocap_quat: np.ndarray | None
-    model_xml: str | None
+    model_xml: str
     config: PhysicsConfig
     stats: dict[str, Any] = field(default_factory=dict)
 

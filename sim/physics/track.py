@@ -194,7 +194,7 @@ def track(
 def _simulate(
     world: CheckWorld,
     m: mujoco.MjModel,
-    xml: str | None,
+    xml: str,
     act: Actuation,
     ref: Reference,
     sampler: PredictiveSampler,
