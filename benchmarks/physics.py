@@ -17,7 +17,9 @@ split: the root lifted 0.4 m for 2 s without a jump (legs unchanged), the walk p
 the whole robot (feet included) teleported 0.5 m sideways. Each must fail (target: 100 %).
 
 (c) *Speed*: seconds of motion per second of wall time on a 6 s G1 walk (a corpus walk clip
-cut or held to 6 s) for the physics check (``PhysicsConfig()`` defaults: 2 rollout threads), the
+cut or held to 6 s) for the physics check (``PhysicsConfig()`` defaults: 2 rollout threads; once
+with an empty model cache, as the first run of G1 + floor on a machine, once with the saved model
+cached: ``sim.physics.model_cache``), the
 open-loop PD replay (``CheckConfig(tracking=True)``) and, when the optional ``peers`` extra is
 installed (``pip install -e ".[peers]"``, or lighter: ``pip install --no-deps holosoma-inference``
 plus ``pip install onnxruntime onnx``), holosoma's G1 whole-body tracking policy (ONNX) on its
@@ -33,6 +35,7 @@ import json
 import os
 import platform
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from multiprocessing import Pool
@@ -45,6 +48,7 @@ sys.path.insert(0, str(ROOT))
 
 from controlmm.errors import ControlMMError  # noqa: E402
 from controlmm.motion import Motion  # noqa: E402
+from controlmm.user_cache import CACHE_ENV  # noqa: E402
 from retarget import retarget_motion  # noqa: E402
 from scenes import load_scene  # noqa: E402
 from sim import CheckConfig, PhysicsConfig, check_trajectory, make_world, track  # noqa: E402
@@ -78,9 +82,10 @@ def _retarget(corpus: Path, cid: str) -> np.ndarray:
     return retarget_motion(Motion(joints=joints, fps=20.0), "g1", fps=FPS, metrics=False).qpos
 
 
-def _physics(q: np.ndarray, threads: int, options: dict) -> dict:
+def _physics(q: np.ndarray, threads: int, options: dict, world=None) -> dict:
     config = PhysicsConfig(threads=threads, **options)
-    world = _world()  # built once per process, outside the timing (``sim.track`` takes it as input)
+    if world is None:
+        world = _world()  # built once per process, outside the timing (``sim.track`` takes it as input)
     start = time.perf_counter()
     r = track(q, world, config, fps=FPS)
     s = r.stats
@@ -203,19 +208,33 @@ def _six_seconds(corpus: Path) -> tuple[str, np.ndarray]:
 def speed(corpus: Path, options: dict) -> list[dict]:
     cid, q = _six_seconds(corpus)
     rows = []
-    phys = _physics(q, 2, options)
-    rows.append(
-        {
-            "method": "physics check (predictive sampling, 2 threads)",
-            "clip": f"walk {cid}",
-            "seconds": phys["simulated_s"],
-            "time_up_s": phys["time_up_s"],
-            "controller_rt": phys["realtime_factor"],
-            "call_rt": phys["simulated_s"] / phys["wall_s"],
-            "cpu_rt": phys["realtime_factor_cpu"],
-            "stayed_up": not phys["fell"],
-        }
-    )
+    # Twice, each on a new world (built before the timing): first with an empty model cache (the
+    # first run of this robot + scene on a machine saves its 12 MB MJCF), then with it cached.
+    previous = os.environ.get(CACHE_ENV)
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ[CACHE_ENV] = cache
+        try:
+            runs = [_physics(q, 2, options, make_world(load_scene("empty", robot="g1"))) for _ in range(2)]
+        finally:
+            if previous is None:
+                os.environ.pop(CACHE_ENV, None)
+            else:
+                os.environ[CACHE_ENV] = previous
+    if runs[0]["mean_root_error_m"] != runs[1]["mean_root_error_m"]:
+        print("# warning: the cached model gave another run than the saved one", file=sys.stderr)
+    for phys, when in zip(runs, ("first run of the model (cache empty)", "model cached"), strict=True):
+        rows.append(
+            {
+                "method": f"physics check (predictive sampling, 2 threads), {when}",
+                "clip": f"walk {cid}",
+                "seconds": phys["simulated_s"],
+                "time_up_s": phys["time_up_s"],
+                "controller_rt": phys["realtime_factor"],
+                "call_rt": phys["simulated_s"] / phys["wall_s"],
+                "cpu_rt": phys["realtime_factor_cpu"],
+                "stayed_up": not phys["fell"],
+            }
+        )
     report = check_trajectory(_world(), q, FPS, CheckConfig(dynamics=False, tracking=True))
     t, t_cpu = report.extra["timings_s"]["tracking_s"], report.extra["cpu_s"]["tracking_s"]
     tr = report.stats["tracking"]

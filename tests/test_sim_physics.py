@@ -7,6 +7,7 @@ measured in ``benchmarks/physics.py`` (docs/BENCHMARKS.md).
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import replace
 from functools import cache
@@ -20,6 +21,7 @@ from sim_motions import hold
 from controlmm.errors import ControlMMError, ShapeError
 from controlmm.frames import HumanToWorld
 from controlmm.pipeline.feedback import feedback_terms
+from controlmm.user_cache import CACHE_ENV
 from retarget.exports import read_csv_qpos, read_export
 from sim import (
     CheckConfig,
@@ -33,7 +35,9 @@ from sim import (
 )
 from sim.physics import save_certificate
 from sim.physics.certificate import CSV_FPS
-from sim.physics.model import PLAN_SENSOR_PREFIX, inline_meshes, planning_spec
+from sim.physics.model import PLAN_SENSOR_PREFIX
+from sim.physics.model_cache import MAX_ENTRIES, ModelTextCache, model_key
+from sim.physics.track import physics_models
 from sim.world import CheckWorld
 from sim.worlds import Obstacle, robot_spec, standing_qpos
 
@@ -97,23 +101,39 @@ def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path
     assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
 
 
-def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction():
-    # The rollouts run on a copy: 5x the timestep, no dry joint friction (one constraint row per
-    # joint, ~1.4x the cost of a G1 rollout step); the executed model keeps it.
+def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction_or_self_collision():
+    # The rollouts run on a copy of the executed model: 5x the timestep, no dry joint friction
+    # (one constraint row per joint, ~1.4x the cost of a G1 rollout step), no collisions between
+    # the robot's own links (~15 %); the executed model keeps both.
     world = g1()
-    inline = inline_meshes(world.spec, world.model)
-    executed = inline.compile()
-    root = world.body_name(world.root_body)
-    plan = planning_spec(inline, 5 * executed.opt.timestep, root, [f.name for f in world.feet]).compile()
+    executed, _, plan = physics_models(world, 5, CheckConfig().tracking_kp, CheckConfig().tracking_kd)
     assert (executed.dof_frictionloss > 0).sum() == executed.nu  # G1: 0.3 N m on every actuated joint
     assert (plan.dof_frictionloss == 0).all()
     assert (plan.nq, plan.nv, plan.nu) == (executed.nq, executed.nv, executed.nu)
-    assert np.allclose(plan.body_mass, executed.body_mass)
-    assert np.allclose(plan.dof_armature, executed.dof_armature)
+    assert np.array_equal(plan.body_mass, executed.body_mass)
+    assert np.array_equal(plan.dof_armature, executed.dof_armature)
     assert plan.opt.timestep == pytest.approx(5 * executed.opt.timestep)
     assert np.array_equal(plan.geom_size, executed.geom_size)  # the same geoms and meshes
-    assert plan.sensor_adr[-1] + 3 == plan.nsensordata  # the cost's sensors, last: com, com velocity, feet
-    assert mujoco.mj_name2id(plan, mujoco.mjtObj.mjOBJ_SENSOR, PLAN_SENSOR_PREFIX + "com") >= 0
+    for model in (executed, plan):  # the cost's sensors, last: com, com velocity, feet
+        assert model.sensor_adr[-1] + 3 == model.nsensordata
+        assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, PLAN_SENSOR_PREFIX + "com") >= 0
+
+    def collides(m: mujoco.MjModel, a: int, b: int) -> bool:
+        return bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
+
+    robot, floor = list(world.robot_geoms), list(world.floor_geoms)
+    pairs = [(a, b) for i, a in enumerate(robot) for b in robot[i + 1 :]]
+    assert sum(collides(executed, a, b) for a, b in pairs) == len(pairs)  # G1: every pair may touch
+    assert not any(collides(plan, a, b) for a, b in pairs)
+    assert all(collides(plan, a, f) == collides(executed, a, f) for a in robot for f in floor)
+    # Standing on the floor, both models see the same foot contacts.
+    contacts = []
+    for model in (executed, plan):
+        data = mujoco.MjData(model)
+        data.qpos[:] = stand(1)[0]
+        mujoco.mj_forward(model, data)
+        contacts.append(sorted(map(tuple, data.contact.geom[: data.ncon].tolist())))
+    assert contacts[0] and contacts[1] == [c for c in contacts[0] if c[0] in floor or c[1] in floor]
 
 
 def test_a_fall_is_retried_from_an_earlier_state_and_the_run_still_replays(tmp_path):
@@ -241,3 +261,41 @@ def test_report_carries_the_physics_verdict_and_reloads(tmp_path):
     loaded = load_report(tmp_path / "report.json")
     assert loaded.stats["physics"]["fell"] is False and "physics: PASSED" in loaded.summary()
     assert loaded.frames["physics_root_error_m"].shape == (12,)
+
+
+def test_the_saved_model_is_cached_per_model_and_an_unusable_entry_is_rebuilt(tmp_path, monkeypatch):
+    # Saving G1 + floor as one 12 MB MJCF takes MuJoCo seconds: a later process (here: a new
+    # world of the same model) reads the text from the user's cache and compiles it instead.
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    gains = (CheckConfig().tracking_kp, CheckConfig().tracking_kd)
+    first, xml, _ = physics_models(make_world(robot_spec("g1")), 5, *gains)
+    entries = list((tmp_path / "physics").glob("*.xml"))
+    assert len(entries) == 1 and entries[0].read_text() == xml
+    assert entries[0].stem == model_key(g1().model, "pelvis", *[f.name for f in g1().feet])
+    again, xml_again, _ = physics_models(make_world(robot_spec("g1")), 5, *gains)
+    assert xml_again == xml and np.array_equal(again.body_mass, first.body_mass)
+    # Another robot is another entry; the same robot's key does not depend on the build.
+    assert model_key(make_world(robot_spec("h1")).model) != model_key(g1().model)
+    assert model_key(make_world(robot_spec("g1")).model) == model_key(g1().model)
+    # A damaged entry (here: a model without the cost's sensors) is rebuilt and rewritten.
+    entries[0].write_text(robot_spec("g1").to_xml())
+    rebuilt, xml_rebuilt, _ = physics_models(make_world(robot_spec("g1")), 5, *gains)
+    assert xml_rebuilt == xml and entries[0].read_text() == xml
+    # No persistent cache when the variable is empty.
+    monkeypatch.setenv(CACHE_ENV, "")
+    assert ModelTextCache().path("x") is None
+
+
+def test_the_model_cache_keeps_the_most_recently_used_entries(tmp_path):
+    cache = ModelTextCache(tmp_path)
+    for i in range(MAX_ENTRIES + 2):
+        cache.put(f"k{i:02d}", f"<mujoco model='{i}'/>")
+        os.utime(tmp_path / "physics" / f"k{i:02d}.xml", (i, i))  # distinct, increasing times
+    assert cache.get("k02") == "<mujoco model='2'/>"  # read: now the most recent
+    cache.put("new", "<mujoco/>")
+    kept = sorted(p.stem for p in (tmp_path / "physics").glob("*.xml"))
+    assert len(kept) == MAX_ENTRIES and "new" in kept and "k02" in kept
+    assert "k00" not in kept and "k01" not in kept and "k03" not in kept
+    assert cache.get("k00") is None
+    (tmp_path / "physics" / "bad.xml").write_text("not a model")
+    assert cache.get("bad") is None

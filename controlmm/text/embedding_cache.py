@@ -1,24 +1,21 @@
 """A persistent cache of prompt embeddings, one small file per (text encoder, text).
 
 A prompt is embedded once per machine: the next run (a new process) reads its vectors from disk and
-never loads the text model. Where the files go:
-
-* ``$CONTROLMM_CACHE_DIR`` when set (``CONTROLMM_CACHE_DIR=`` empty: no persistent cache);
-* else ``$XDG_CACHE_HOME/controlmm``, else ``~/.cache/controlmm``;
-
-under ``text/<encoder key>/<text key>.npz``. The encoder key hashes the encoder's ``identity`` (its
-name, package version and a fingerprint of its files: other weights, other keys), the text key hashes
-the text. Every entry also stores the identity, the text and a format version, and is used only when
-all three match and its arrays have the expected shapes and finite values; anything else (a corrupt
-or truncated file, another model version, a hash collision) is recomputed and rewritten, never
-trusted. Files are written atomically (:mod:`controlmm.atomic`), so concurrent processes at worst
-write the same entry twice. Deleting the directory is always safe.
+never loads the text model. The files go under the user's cache directory
+(:func:`controlmm.user_cache.user_cache_dir`: ``$CONTROLMM_CACHE_DIR``, else
+``$XDG_CACHE_HOME/controlmm``, else ``~/.cache/controlmm``), in ``text/<encoder key>/<text key>.npz``.
+The encoder key hashes the encoder's ``identity`` (its name, package version and a fingerprint of its
+files: other weights, other keys), the text key hashes the text. Every entry also stores the
+identity, the text and a format version, and is used only when all three match and its arrays have
+the expected shapes and finite values; anything else (a corrupt or truncated file, another model
+version, a hash collision) is recomputed and rewritten, never trusted. Files are written atomically
+(:mod:`controlmm.atomic`), so concurrent processes at worst write the same entry twice.
+Deleting the directory is always safe.
 """
 
 from __future__ import annotations
 
 import hashlib
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,22 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from controlmm.atomic import atomic_path
+from controlmm.user_cache import CACHE_ENV, user_cache_dir
 
-CACHE_ENV = "CONTROLMM_CACHE_DIR"
-"""Environment variable overriding the cache directory (empty: no persistent cache)."""
+__all__ = ["CACHE_ENV", "Embedding", "EmbeddingCache", "user_cache_dir"]
 
 FORMAT = 1
 """Version of the entry layout; entries of another version are recomputed."""
-
-
-def user_cache_dir() -> Path | None:
-    """The user's controlmm cache directory (see the module docstring), or None when disabled."""
-    override = os.environ.get(CACHE_ENV)
-    if override is not None:
-        return Path(override).expanduser() if override.strip() else None
-    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
-    return base / "controlmm"
 
 
 def _digest(text: str, size: int = 32) -> str:

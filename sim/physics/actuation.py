@@ -158,24 +158,23 @@ def actuation(model: mujoco.MjModel, motor_kp: float, motor_kv: float) -> Actuat
     )
 
 
-def servo_planning(spec: mujoco.MjSpec, act: Actuation) -> None:
-    """Turn the motors of ``spec`` (compiled as ``act``) into the position servos the PD emulates."""
-    for a, actuator in enumerate(spec.actuators):
+def servo_planning(model: mujoco.MjModel, act: Actuation) -> None:
+    """Turn the motors of ``model`` (read as ``act``) into the position servos the PD emulates
+    (in place: the planning copy's actuator fields)."""
+    for a in range(model.nu):
         if act.servo[a]:
             continue
-        actuator.gaintype = mujoco.mjtGain.mjGAIN_FIXED
-        actuator.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-        gain = np.zeros(10)
-        gain[0] = act.kp[a]
-        bias = np.zeros(10)
-        bias[1], bias[2] = -act.kp[a], -act.kv[a]
-        actuator.gainprm = gain
-        actuator.biasprm = bias
+        model.actuator_gaintype[a] = _FIXED
+        model.actuator_biastype[a] = _AFFINE
+        model.actuator_gainprm[a] = 0.0
+        model.actuator_gainprm[a, 0] = act.kp[a]
+        model.actuator_biasprm[a] = 0.0
+        model.actuator_biasprm[a, 1], model.actuator_biasprm[a, 2] = -act.kp[a], -act.kv[a]
         if np.isfinite(act.force_low[a]):
-            actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            actuator.forcerange = [act.force_low[a], act.force_high[a]]
+            model.actuator_forcelimited[a] = 1
+            model.actuator_forcerange[a] = [act.force_low[a], act.force_high[a]]
         if np.isfinite(act.target_low[a]):
-            actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            actuator.ctrlrange = [act.target_low[a], act.target_high[a]]
+            model.actuator_ctrllimited[a] = 1
+            model.actuator_ctrlrange[a] = [act.target_low[a], act.target_high[a]]
         else:
-            actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+            model.actuator_ctrllimited[a] = 0

@@ -25,7 +25,15 @@ from sim.dynamics import DynamicsResult, dynamics_check
 from sim.kinematic import kinematic_check
 from sim.physics.actuation import Actuation, actuation, servo_planning
 from sim.physics.config import PhysicsConfig
-from sim.physics.model import check_same_layout, compile_xml, inline_meshes, planning_spec
+from sim.physics.model import (
+    add_plan_sensors,
+    check_same_layout,
+    compile_xml,
+    inline_meshes,
+    plan_sensor_start,
+    planning_model,
+)
+from sim.physics.model_cache import ModelTextCache, model_key
 from sim.physics.reference import Reference, build_reference
 from sim.physics.result import PhysicsResult, fall_frame, verdict
 from sim.physics.sampler import FULL_STATE, PredictiveSampler
@@ -78,33 +86,23 @@ def _executed(inline: mujoco.MjSpec, original: mujoco.MjModel) -> tuple[mujoco.M
 
 
 def _planning(
-    world: CheckWorld, inline: mujoco.MjSpec, substeps: int, act_kp: float, act_kv: float
+    world: CheckWorld, executed: mujoco.MjModel, substeps: int, act_kp: float, act_kv: float
 ) -> mujoco.MjModel:
-    """The planning copy (:func:`sim.physics.model.planning_spec`, motors as servos), compiled."""
-    model = world.model
-    act = actuation(model, act_kp, act_kv)
-    spec = planning_spec(
-        inline,
-        substeps * float(model.opt.timestep),
-        world.body_name(world.root_body),
-        [f.name for f in world.feet],
-    )
-    servo_planning(spec, act)
-    try:
-        return spec.compile()
-    except ValueError as exc:
-        raise ControlMMError(
-            f"MuJoCo cannot compile the planning model: {' '.join(str(exc).split())}"
-        ) from None
+    """The planning copy (:func:`sim.physics.model.planning_model`, motors as servos)."""
+    plan = planning_model(executed, substeps, world.robot_geoms)
+    servo_planning(plan, actuation(executed, act_kp, act_kv))
+    return plan
 
 
-def _models(
+def physics_models(
     world: CheckWorld, substeps: int, act_kp: float, act_kv: float
 ) -> tuple[mujoco.MjModel, str, mujoco.MjModel]:
     """The executed model, its MJCF text and the planning copy, built once per world.
 
-    Both come from one spec with the meshes inline. (Not on two threads: saving one spec and
-    compiling another at the same time made MuJoCo write or read a broken mesh now and then.)
+    The executed model is the robot + scene with the meshes inline and the cost's sensors,
+    compiled from its saved text (read from the user's cache when an earlier process saved the
+    same model: :mod:`sim.physics.model_cache`); the planning copy is that model with a few
+    fields changed.
     """
     if world.spec is None:
         raise ControlMMError(
@@ -112,11 +110,30 @@ def _models(
             "build the world from a scenes.Scene, an MjSpec or sim.worlds.robot_spec(...)"
         )
     spec, original = world.spec, world.model
-    inline = world.derived(("physics_inline",), lambda: inline_meshes(spec, original))
-    model, xml = world.derived(("physics_executed",), lambda: _executed(inline.copy(), original))
+    root, feet = world.body_name(world.root_body), [f.name for f in world.feet]
+
+    def executed() -> tuple[mujoco.MjModel, str]:
+        cache = ModelTextCache()
+        key = model_key(original, root, *feet)
+        xml = cache.get(key)
+        if xml is not None:
+            try:
+                model = compile_xml(xml)
+                check_same_layout(original, model)
+                plan_sensor_start(model)
+                return model, xml
+            except ControlMMError:  # an unusable entry: rebuilt and rewritten below
+                pass
+        inline = inline_meshes(spec, original)
+        add_plan_sensors(inline, root, feet)
+        model, xml = _executed(inline, original)
+        cache.put(key, xml)
+        return model, xml
+
+    model, xml = world.derived(("physics_executed",), executed)
     plan = world.derived(
         ("physics_plan", substeps, act_kp, act_kv),
-        lambda: _planning(world, inline, substeps, act_kp, act_kv),
+        lambda: _planning(world, model, substeps, act_kp, act_kv),
     )
     return model, xml, plan
 
@@ -175,7 +192,9 @@ def track(
     if q.shape[0] < 2:
         raise ControlMMError("the physics check needs at least 2 frames; got 1")
     check_start(world, q[0], config)
-    exec_model, xml, plan_model = _models(world, config.plan_substeps, check.tracking_kp, check.tracking_kd)
+    exec_model, xml, plan_model = physics_models(
+        world, config.plan_substeps, check.tracking_kp, check.tracking_kd
+    )
     if qvel is None or dynamics is None or flight is None:
         qvel, dynamics, flight = _feedforward(world, q, rate, check)
     act = actuation(exec_model, check.tracking_kp, check.tracking_kd)
