@@ -16,7 +16,7 @@ and change nothing of the dynamics.
 controller emulates (:mod:`sim.physics.actuation`), no dry friction in the joints and tendons
 (``frictionloss``: one constraint row per joint that made each rollout step about 1.4x as
 expensive on G1, for 0.3 N m against servo torques of tens of N m and their damping) and no
-collisions between the robot's own links. It is the compiled executed model with those
+collisions between links that its joints keep apart anyway. It is the compiled executed model with those
 fields changed (no second compile of the meshes).
 """
 
@@ -109,33 +109,87 @@ def add_plan_sensors(spec: mujoco.MjSpec, root_body: str, foot_bodies: list[str]
         )
 
 
-def without_self_collision(model: mujoco.MjModel, robot_geoms: np.ndarray) -> bool:
-    """Stop the robot's geoms from colliding with each other in ``model`` (in place); every
-    other pair (robot-scene, scene-scene) collides as before. Returns False (and changes
-    nothing) when the collision bitmasks use more than 15 bits.
+NEAR_DEPTH = 3
+"""Links from the start of a limb that count as its proximal segment (G1: hip pitch, roll, yaw)."""
 
-    MuJoCo collides two geoms when ``contype_a & conaffinity_b or contype_b & conaffinity_a``.
-    A robot geom keeps its contype in the low 16 bits and gets its conaffinity in the high 16;
-    every other geom gets both halves. Robot-robot: low & high = 0; all other pairs: the same
-    test as before, once in each half. Explicit ``<pair>`` elements are not affected.
+
+def _segments(model: mujoco.MjModel, bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per body in ``bodies``: its limb (the first body below the nearest branching ancestor;
+    the robot's root is a limb of its own), whether it is distal (``NEAR_DEPTH`` or more links
+    down its limb), and the limb it branches from (-1 for the root's)."""
+    nchild = np.bincount(model.body_parentid[1:], minlength=model.nbody)
+    limb, distal, parent_limb = [], [], []
+
+    def limb_of(b: int) -> tuple[int, int]:
+        cur, depth = b, 0
+        while True:
+            p = int(model.body_parentid[cur])
+            if p == 0 or nchild[p] >= 2:
+                return cur, depth
+            cur, depth = p, depth + 1
+
+    for b in bodies:
+        root, depth = limb_of(int(b))
+        above = int(model.body_parentid[root])
+        limb.append(root)
+        distal.append(depth >= NEAR_DEPTH)
+        parent_limb.append(limb_of(above)[0] if above != 0 else -1)
+    return np.array(limb), np.array(distal), np.array(parent_limb)
+
+
+def near_pairs_apart(model: mujoco.MjModel, robot_geoms: np.ndarray) -> bool:
+    """Stop collisions (in place) between the robot's links that its joints keep apart, where
+    MuJoCo would otherwise test mesh pairs that are always a few millimetres apart at every
+    step: links of one limb, and a limb's first ``NEAR_DEPTH`` links with the limb it branches
+    from (G1: pelvis and hip links, torso and shoulder links, wrist links). Every other pair
+    collides as before: left with right, arms with legs, a hand with the pelvis or torso, a knee
+    with the torso, the robot with the scene.
+
+    Needs every pair of robot collision geoms to collide in ``model`` and bitmasks of at most
+    8 bits; otherwise (or with more than 15 segments) nothing changes and False is returned.
+    MuJoCo collides two geoms when ``contype_a & conaffinity_b or contype_b & conaffinity_a``:
+    bits 0-7 carry robot contype x scene conaffinity, bits 8-15 scene contype x robot
+    conaffinity (scene geoms get both), bits 16-30 one bit per segment (limb, proximal or
+    distal) with each segment's conaffinity the set of segments it may touch.
     """
+    geoms = np.asarray(robot_geoms, dtype=np.int64)
     contype = model.geom_contype.astype(np.int64)
     conaffinity = model.geom_conaffinity.astype(np.int64)
-    if contype.max(initial=0) >= 1 << 15 or conaffinity.max(initial=0) >= 1 << 15:
+    ct, ca = contype[geoms], conaffinity[geoms]
+    if max(contype.max(initial=0), conaffinity.max(initial=0)) >= 1 << 8 or geoms.size < 2:
         return False
-    robot = np.zeros(model.ngeom, dtype=bool)
-    robot[np.asarray(robot_geoms, dtype=np.int64)] = True
-    model.geom_contype[:] = np.where(robot, contype, contype | contype << 16)
-    model.geom_conaffinity[:] = np.where(robot, conaffinity << 16, conaffinity | conaffinity << 16)
+    if not (((ct[:, None] & ca[None, :]) | (ct[None, :] & ca[:, None])) != 0).all():
+        return False
+    limb, distal, parent_limb = _segments(model, model.geom_bodyid[geoms])
+    keys = sorted(set(zip(limb.tolist(), distal.tolist(), strict=True)))
+    if len(keys) > 15:
+        return False
+    segment = np.array([keys.index(k) for k in zip(limb.tolist(), distal.tolist(), strict=True)])
+    info = {keys.index(k): (k[0], k[1]) for k in keys}
+    limb_parent = dict(zip(limb.tolist(), parent_limb.tolist(), strict=True))
+
+    def apart(s: int, t: int) -> bool:
+        (ls, ds), (lt, dt) = info[s], info[t]
+        return ls == lt or (not ds and limb_parent[ls] == lt) or (not dt and limb_parent[lt] == ls)
+
+    allowed = [sum(1 << (16 + t) for t in range(len(keys)) if not apart(s, t)) for s in range(len(keys))]
+    is_robot = np.zeros(model.ngeom, dtype=bool)
+    is_robot[geoms] = True
+    new_ct = contype | contype << 8
+    new_ca = conaffinity | conaffinity << 8
+    new_ct[geoms] = ct | np.array([1 << (16 + s) for s in segment])
+    new_ca[geoms] = ca << 8 | np.array([allowed[s] for s in segment])
+    model.geom_contype[:] = new_ct
+    model.geom_conaffinity[:] = new_ca
     return True
 
 
 def planning_model(executed: mujoco.MjModel, substeps: int, robot_geoms: np.ndarray) -> mujoco.MjModel:
     """The planning copy of the executed model (which has the cost's sensors:
     :func:`add_plan_sensors`): ``substeps`` x its timestep, no joint or tendon friction loss,
-    and no collisions between the robot's own geoms (about 15 % of a G1 rollout step: its
-    links are convex meshes; the executed model keeps both). Motors are turned into servos
-    afterwards (:func:`sim.physics.actuation.servo_planning`).
+    and no collisions between links that the joints keep apart (:func:`near_pairs_apart`;
+    the executed model keeps both). Motors are turned into servos afterwards
+    (:func:`sim.physics.actuation.servo_planning`).
 
     A copy of the compiled model with some of its fields changed: no second compile.
     """
@@ -143,7 +197,7 @@ def planning_model(executed: mujoco.MjModel, substeps: int, robot_geoms: np.ndar
     plan.opt.timestep = substeps * float(executed.opt.timestep)
     plan.dof_frictionloss[:] = 0.0
     plan.tendon_frictionloss[:] = 0.0
-    without_self_collision(plan, robot_geoms)
+    near_pairs_apart(plan, robot_geoms)
     return plan
 
 

@@ -28,7 +28,9 @@ from controlmm.atomic import atomic_path
 from controlmm.user_cache import CACHE_ENV, user_cache_dir
 
 FORMAT = 1
-"""Version of the saved model's construction; entries of another version are never read."""
+"""Version of the saved model's construction (:func:`sim.physics.model.inline_meshes`,
+:func:`sim.physics.model.add_plan_sensors`): bump it when they change, so that no entry of the
+old construction is read."""
 
 MAX_ENTRIES = 16
 """Entries kept (about 12 MB each for G1 in a scene)."""
