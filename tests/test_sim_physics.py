@@ -6,6 +6,7 @@ measured in ``benchmarks/physics.py`` (docs/BENCHMARKS.md).
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import re
@@ -35,7 +36,7 @@ from sim import (
 )
 from sim.physics import save_certificate
 from sim.physics.certificate import CSV_FPS
-from sim.physics.model import PLAN_SENSOR_PREFIX
+from sim.physics.model import PLAN_SENSOR_PREFIX, near_pairs_apart
 from sim.physics.model_cache import MAX_ENTRIES, ModelTextCache, model_key
 from sim.physics.track import physics_models
 from sim.world import CheckWorld
@@ -101,10 +102,11 @@ def test_certificate_replays_exactly_from_the_saved_model(standing_run, tmp_path
     assert read_csv_qpos(paths["robot_physics.csv"], "xyzw").tolist() == qpos[::stride].tolist()
 
 
-def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction_or_self_collision():
+def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction():
     # The rollouts run on a copy of the executed model: 5x the timestep, no dry joint friction
-    # (one constraint row per joint, ~1.4x the cost of a G1 rollout step), no collisions between
-    # the robot's own links (~15 %); the executed model keeps both.
+    # (one constraint row per joint, ~1.4x the cost of a G1 rollout step), no collision tests
+    # between links the joints keep apart (mesh pairs a few mm apart at every step); the
+    # executed model keeps all of it.
     world = g1()
     executed, _, plan = physics_models(world, 5, CheckConfig().tracking_kp, CheckConfig().tracking_kd)
     assert (executed.dof_frictionloss > 0).sum() == executed.nu  # G1: 0.3 N m on every actuated joint
@@ -118,22 +120,53 @@ def test_the_planning_copy_keeps_the_robots_dynamics_but_not_its_joint_friction_
         assert model.sensor_adr[-1] + 3 == model.nsensordata
         assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, PLAN_SENSOR_PREFIX + "com") >= 0
 
-    def collides(m: mujoco.MjModel, a: int, b: int) -> bool:
-        return bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
+    def pair(m: mujoco.MjModel, ga: int, gb: int) -> bool:
+        ct, ca = m.geom_contype, m.geom_conaffinity
+        return bool(ct[ga] & ca[gb] or ct[gb] & ca[ga])
 
-    robot, floor = list(world.robot_geoms), list(world.floor_geoms)
-    pairs = [(a, b) for i, a in enumerate(robot) for b in robot[i + 1 :]]
-    assert sum(collides(executed, a, b) for a, b in pairs) == len(pairs)  # G1: every pair may touch
-    assert not any(collides(plan, a, b) for a, b in pairs)
-    assert all(collides(plan, a, f) == collides(executed, a, f) for a in robot for f in floor)
-    # Standing on the floor, both models see the same foot contacts.
+    def collides(m: mujoco.MjModel, a: str, b: str) -> bool:  # the first collision geom of each body
+        robot = world.robot_geoms
+        ga, gb = (int(robot[np.flatnonzero(m.geom_bodyid[robot] == m.body(n).id)[0]]) for n in (a, b))
+        return pair(m, ga, gb)
+
+    apart = [  # one limb's links; a limb's first links with the one it branches from
+        ("left_elbow_link", "left_wrist_pitch_link"),
+        ("left_hip_roll_link", "left_knee_link"),
+        ("pelvis", "right_hip_roll_link"),
+        ("pelvis", "torso_link"),
+        ("torso_link", "left_shoulder_roll_link"),
+    ]
+    touching = [  # links that motions can bring together
+        ("left_knee_link", "right_knee_link"),
+        ("left_ankle_roll_link", "right_ankle_roll_link"),
+        ("left_wrist_yaw_link", "pelvis"),
+        ("right_wrist_yaw_link", "left_hip_roll_link"),
+        ("left_knee_link", "torso_link"),
+        ("left_elbow_link", "torso_link"),
+        ("left_wrist_yaw_link", "right_wrist_yaw_link"),
+    ]
+    for a, b in apart + touching:
+        assert collides(executed, a, b), (a, b)
+    assert not any(collides(plan, a, b) for a, b in apart)
+    assert all(collides(plan, a, b) for a, b in touching)
+    assert all(pair(plan, a, f) == pair(executed, a, f) for a in world.robot_geoms for f in world.floor_geoms)
+    # Standing on the floor, the copy sees the executed model's contacts that it tests (the feet's).
     contacts = []
     for model in (executed, plan):
         data = mujoco.MjData(model)
         data.qpos[:] = stand(1)[0]
         mujoco.mj_forward(model, data)
         contacts.append(sorted(map(tuple, data.contact.geom[: data.ncon].tolist())))
-    assert contacts[0] and contacts[1] == [c for c in contacts[0] if c[0] in floor or c[1] in floor]
+    floor = set(world.floor_geoms.tolist())
+    assert contacts[0] and contacts[1] == [c for c in contacts[0] if pair(plan, *c)]
+    assert all(c[0] in floor or c[1] in floor for c in contacts[1])
+    # A robot whose MJCF already keeps some of its links from colliding (Apollo's bitmasks) is
+    # left as it is: the segments would turn pairs on that its author turned off.
+    apollo = make_world(robot_spec("apollo"))
+    copy_ = copy.copy(apollo.model)
+    assert not near_pairs_apart(copy_, apollo.robot_geoms)
+    assert np.array_equal(copy_.geom_contype, apollo.model.geom_contype)
+    assert np.array_equal(copy_.geom_conaffinity, apollo.model.geom_conaffinity)
 
 
 def test_a_fall_is_retried_from_an_earlier_state_and_the_run_still_replays(tmp_path):
