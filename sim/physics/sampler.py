@@ -33,7 +33,7 @@ class PredictiveSampler:
     """Plans target offsets; call :meth:`plan` at a planning step, then :meth:`offset` per step.
 
     Args:
-        model: the planning model (:func:`sim.physics.model.planning_spec`), its timestep
+        model: the planning model (:func:`sim.physics.model.planning_model`), its timestep
             ``substeps`` x the executed model's.
         act: the actuators; ref: the reference; config: sampler settings and weights.
         substeps: simulation steps per rollout step.
