@@ -161,20 +161,18 @@ def near_pairs_apart(model: mujoco.MjModel, robot_geoms: np.ndarray) -> bool:
     if not (((ct[:, None] & ca[None, :]) | (ct[None, :] & ca[:, None])) != 0).all():
         return False
     limb, distal, parent_limb = _segments(model, model.geom_bodyid[geoms])
-    keys = sorted(set(zip(limb.tolist(), distal.tolist(), strict=True)))
+    keys = sorted(set(zip(limb.tolist(), distal.tolist(), strict=True)))  # (limb, distal) segments
     if len(keys) > 15:
         return False
-    segment = np.array([keys.index(k) for k in zip(limb.tolist(), distal.tolist(), strict=True)])
-    info = {keys.index(k): (k[0], k[1]) for k in keys}
+    index = {k: i for i, k in enumerate(keys)}
+    segment = [index[k] for k in zip(limb.tolist(), distal.tolist(), strict=True)]
     limb_parent = dict(zip(limb.tolist(), parent_limb.tolist(), strict=True))
 
     def apart(s: int, t: int) -> bool:
-        (ls, ds), (lt, dt) = info[s], info[t]
+        (ls, ds), (lt, dt) = keys[s], keys[t]
         return ls == lt or (not ds and limb_parent[ls] == lt) or (not dt and limb_parent[lt] == ls)
 
     allowed = [sum(1 << (16 + t) for t in range(len(keys)) if not apart(s, t)) for s in range(len(keys))]
-    is_robot = np.zeros(model.ngeom, dtype=bool)
-    is_robot[geoms] = True
     new_ct = contype | contype << 8
     new_ca = conaffinity | conaffinity << 8
     new_ct[geoms] = ct | np.array([1 << (16 + s) for s in segment])
