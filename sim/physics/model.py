@@ -113,12 +113,11 @@ NEAR_DEPTH = 3
 """Links from the start of a limb that count as its proximal segment (G1: hip pitch, roll, yaw)."""
 
 
-def _segments(model: mujoco.MjModel, bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _segments(model: mujoco.MjModel, bodies: np.ndarray) -> tuple[list[int], list[bool], dict[int, int]]:
     """Per body in ``bodies``: its limb (the first body below the nearest branching ancestor;
-    the robot's root is a limb of its own), whether it is distal (``NEAR_DEPTH`` or more links
-    down its limb), and the limb it branches from (-1 for the root's)."""
+    the robot's root is a limb of its own) and whether it is distal (``NEAR_DEPTH`` or more links
+    down its limb); and per limb, the limb it branches from (-1 for the root's)."""
     nchild = np.bincount(model.body_parentid[1:], minlength=model.nbody)
-    limb, distal, parent_limb = [], [], []
 
     def limb_of(b: int) -> tuple[int, int]:
         cur, depth = b, 0
@@ -128,13 +127,14 @@ def _segments(model: mujoco.MjModel, bodies: np.ndarray) -> tuple[np.ndarray, np
                 return cur, depth
             cur, depth = p, depth + 1
 
+    limb, distal, parent = [], [], {}
     for b in bodies:
         root, depth = limb_of(int(b))
-        above = int(model.body_parentid[root])
         limb.append(root)
         distal.append(depth >= NEAR_DEPTH)
-        parent_limb.append(limb_of(above)[0] if above != 0 else -1)
-    return np.array(limb), np.array(distal), np.array(parent_limb)
+        above = int(model.body_parentid[root])
+        parent[root] = limb_of(above)[0] if above != 0 else -1
+    return limb, distal, parent
 
 
 def near_pairs_apart(model: mujoco.MjModel, robot_geoms: np.ndarray) -> bool:
@@ -160,13 +160,12 @@ def near_pairs_apart(model: mujoco.MjModel, robot_geoms: np.ndarray) -> bool:
         return False
     if not (((ct[:, None] & ca[None, :]) | (ct[None, :] & ca[:, None])) != 0).all():
         return False
-    limb, distal, parent_limb = _segments(model, model.geom_bodyid[geoms])
-    keys = sorted(set(zip(limb.tolist(), distal.tolist(), strict=True)))  # (limb, distal) segments
+    limb, distal, limb_parent = _segments(model, model.geom_bodyid[geoms])
+    keys = sorted(set(zip(limb, distal, strict=True)))  # (limb, distal) segments
     if len(keys) > 15:
         return False
     index = {k: i for i, k in enumerate(keys)}
-    segment = [index[k] for k in zip(limb.tolist(), distal.tolist(), strict=True)]
-    limb_parent = dict(zip(limb.tolist(), parent_limb.tolist(), strict=True))
+    segment = [index[k] for k in zip(limb, distal, strict=True)]
 
     def apart(s: int, t: int) -> bool:
         (ls, ds), (lt, dt) = keys[s], keys[t]

@@ -77,12 +77,13 @@ def check_start(world: CheckWorld, qpos0: np.ndarray, config: PhysicsConfig) -> 
         )
 
 
-def _executed(inline: mujoco.MjSpec, original: mujoco.MjModel) -> tuple[mujoco.MjModel, str]:
-    """The executed model, compiled from its own saved MJCF text, and that text."""
-    xml = inline.to_xml()
+def _executed(xml: str, original: mujoco.MjModel) -> mujoco.MjModel:
+    """The executed model compiled from its saved MJCF text: the scene model's state layout and
+    the cost's sensors, else a one-line error."""
     model = compile_xml(xml)
     check_same_layout(original, model)
-    return model, xml
+    plan_sensor_start(model)
+    return model
 
 
 def _planning(
@@ -114,20 +115,19 @@ def physics_models(
 
     def executed() -> tuple[mujoco.MjModel, str]:
         cache = ModelTextCache()
-        key = model_key(original, root, *feet)
-        xml = cache.get(key)
-        if xml is not None:
+        key = model_key(original, root, *feet) if cache.directory is not None else ""
+        cached = cache.get(key) if key else None
+        if cached is not None:
             try:
-                model = compile_xml(xml)
-                check_same_layout(original, model)
-                plan_sensor_start(model)
-                return model, xml
+                return _executed(cached, original), cached
             except ControlMMError:  # an unusable entry: rebuilt and rewritten below
                 pass
         inline = inline_meshes(spec, original)
         add_plan_sensors(inline, root, feet)
-        model, xml = _executed(inline, original)
-        cache.put(key, xml)
+        xml = inline.to_xml()
+        model = _executed(xml, original)
+        if key:
+            cache.put(key, xml)
         return model, xml
 
     model, xml = world.derived(("physics_executed",), executed)
