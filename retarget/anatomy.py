@@ -1,8 +1,9 @@
 """The anatomy of a humanoid MJCF, read from its kinematic tree and geometry (never its names).
 
 :func:`find_anatomy` finds the pelvis, torso, head, two legs and two arms of a floating-base
-model in its rest pose (``qpos0`` with the floating base at identity rotation), in MuJoCo's
-convention: +Z up, the robot facing +X, so its left is +Y.
+model in its rest pose (``qpos0`` with the floating base in its rest orientation,
+:func:`retarget.rest_frame.rest_root_quat`), in MuJoCo's convention: +Z up, the robot facing
++X, so its left is +Y.
 
 1. **Feet**: on each side of the sagittal plane (the root's y), the body owning the lowest
    collision geom. **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
@@ -28,6 +29,7 @@ import numpy as np
 from controlmm.errors import ControlMMError
 from retarget.geoms import aabb_corners, geom_points
 from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND
+from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import free_root
 
 MIDDLE_RANGE = (0.25, 0.85)
@@ -42,6 +44,9 @@ WRIST_SHARE = HUMAN_FOREARM / (HUMAN_FOREARM + HUMAN_HALF_HAND)
 the human forearm against the forearm plus half a hand."""
 FEET_LEVEL = 0.05
 """The two feet's lowest points lie within this fraction of the robot's height of each other."""
+SOLE_BAND = 0.015
+"""A link whose collision geometry comes this close (fraction of the robot's height) to the
+floor in the rest pose stands on it: the foot above a toe link is the foot."""
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
@@ -92,7 +97,7 @@ class Anatomy:
             head's end body (None: the head is part of the torso).
         legs, arms: ``{"left": Limb, "right": Limb}`` (arms empty for a legs-only robot).
         xpos: (nbody, 3), xmat: (nbody, 3, 3) rest body poses (root at its qpos0 position,
-            identity rotation).
+            in its rest orientation: facing +X).
         floor_z: the lowest collision point (m); top_z: the highest point of any geom's
             bounding box (m).
     """
@@ -138,7 +143,7 @@ def _rest_data(model: mujoco.MjModel, root: int) -> mujoco.MjData:
     data.qpos[:] = model.qpos0
     free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
     adr = int(model.jnt_qposadr[free])
-    data.qpos[adr + 3 : adr + 7] = (1.0, 0.0, 0.0, 0.0)
+    data.qpos[adr + 3 : adr + 7] = rest_root_quat(model, root)
     mujoco.mj_kinematics(model, data)
     return data
 
@@ -258,6 +263,20 @@ def _jointed_ends(model: mujoco.MjModel, bodies: list[int]) -> list[int]:
     return [b for b in bodies if has_joint[b] and not below[b]]
 
 
+def _foot_above_toes(
+    model: mujoco.MjModel, body: int, root: int, low: dict[int, tuple[float, float]], sole_z: float
+) -> int:
+    """The highest of ``body`` and its ancestors (below ``root``) that each own a collision geom
+    reaching below ``sole_z``: the CMU humanoid stands on its toe links and on the foot above them."""
+    while True:
+        parent = int(model.body_parentid[body])
+        if parent in (0, root) or not any(
+            model.geom_bodyid[g] == parent and z < sole_z for g, (z, _) in low.items()
+        ):
+            return body
+        body = parent
+
+
 def _subtree(model: mujoco.MjModel, body: int, bodies: list[int]) -> list[int]:
     return [b for b in bodies if body in ancestors(model, b)]
 
@@ -313,6 +332,8 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
             f"{name} has no two legs: no pair of feet (collision geoms at the bottom of the robot, one "
             "on each side of its midline, +Y left)"
         )
+    for side in feet:  # a toe link below the foot: the foot is the link its sole is on
+        feet[side] = _foot_above_toes(model, feet[side], root, low, floor_z + SOLE_BAND * height)
     pelvis = common_ancestor(model, [feet["left"], feet["right"]])
     if pelvis in (feet["left"], feet["right"]) or pelvis == 0:
         raise ControlMMError(f"{name} has no two legs: its feet are not on two separate chains")

@@ -35,6 +35,9 @@ SOLE_MARGIN = 0.005
 """The toe point stays this far (m) inside the sole's front edge and above its bottom."""
 UNOBSERVED_POSTURE = 0.5
 """Posture weight of the joints the human does not observe (wrists, hands, neck)."""
+RIGID_POSTURE = 20.0
+"""Posture weight of the joints below a foot or a wrist's body (toes, fingers): held at rest,
+the toes part of the rigid foot the robot stands on, the fingers clear of each other."""
 FIVE_JOINT_LEVELS = [[3, 5], [1, 4]]
 """Solver schedule of robots with fewer than six joints in a leg (they converge more slowly)."""
 SMALL_SCALE = 0.4
@@ -90,6 +93,11 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
         toe[2] = max(toe[2], bottom + SOLE_MARGIN)
         kp[f"{side}_foot"] = _point(a, leg.end_body, toe)
     posture: dict[str, float] = {"default": 0.02}
+    for leg in a.legs.values():  # toe links: part of the foot
+        for j in range(m.njnt):
+            body = int(m.jnt_bodyid[j])
+            if body != leg.end_body and leg.end_body in ancestors(m, body) and m.joint(j).name:
+                posture[m.joint(j).name] = RIGID_POSTURE
     if a.arms and a.torso is not None:
         shoulders = np.mean([arm.root for arm in a.arms.values()], axis=0)
         kp["spine3"] = _point(a, a.torso, shoulders + off["spine3"])
@@ -103,9 +111,12 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
                 for j in range(m.njnt)
                 if int(m.jnt_bodyid[j]) != arm.end_body and arm.end_body in ancestors(m, int(m.jnt_bodyid[j]))
             ]
-            for j in (*arm.end_joints, *hand):
+            for j in arm.end_joints:
                 if m.joint(j).name:
                     posture[m.joint(j).name] = UNOBSERVED_POSTURE
+            for j in hand:
+                if m.joint(j).name:
+                    posture[m.joint(j).name] = RIGID_POSTURE
         if a.head is not None:
             for j in range(m.njnt):
                 body = int(m.jnt_bodyid[j])

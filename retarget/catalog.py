@@ -41,7 +41,7 @@ def standing_height(robot: RobotModel) -> float:
     m = robot.model
     data = mujoco.MjData(m)
     data.qpos[:] = m.qpos0
-    data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+    data.qpos[3:7] = robot.rest_root_quat
     data.qpos[:3] = 0.0
     mujoco.mj_kinematics(m, data)
     root = int(robot.tree.node_body[0])

@@ -21,10 +21,9 @@ def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.n
     """Root from the pelvis target (position + pelvis frame), joints at the rest pose:
     (root_pos (T, 3), root_rot (T, 3, 3), q (T, nj))."""
     k = robot.keypoint_index("pelvis")
-    node = robot.nodes[k]
     frame = human_frames(targets.human_world)["pelvis"]
-    rot = frame @ robot.rest.rot[0, node] @ robot.rest.rot[0, 0].T
-    pos = targets.kp_pos[:, k] - rot @ robot.rest_keypoints[k]
+    rot = frame @ robot.rest.rot[0, 0]  # the rest pose turned by the pelvis frame
+    pos = targets.kp_pos[:, k] - frame @ robot.rest_keypoints[k]
     q = np.tile(robot.rest_q, (len(pos), 1))
     return pos, rot, q
 

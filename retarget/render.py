@@ -33,14 +33,21 @@ def _scene_model(traj: RobotTrajectory) -> mujoco.MjModel:
         model = mujoco.MjModel.from_xml_path(str(robot_scene(robot.mapping.robot)))
     else:
         spec = mujoco.MjSpec.from_file(str(robot.mjcf))
-        spec.worldbody.add_light(pos=[0, 0, 3.0], dir=[0, 0, -1], directional=True)
-        spec.worldbody.add_geom(
-            type=mujoco.mjtGeom.mjGEOM_PLANE,
-            size=[0, 0, 0.05],
-            rgba=[0.6, 0.65, 0.7, 1],
-            contype=0,
-            conaffinity=0,
-        )
+        light = spec.worldbody.add_light(pos=[0, 0, 3.0], dir=[0, 0, -1])
+        if hasattr(mujoco, "mjtLightType"):  # MuJoCo >= 3.3: a light's type replaced ``directional``
+            light.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+        else:
+            light.directional = True
+        if not any(
+            g.type == mujoco.mjtGeom.mjGEOM_PLANE for g in spec.geoms
+        ):  # a file with its own floor keeps it
+            spec.worldbody.add_geom(
+                type=mujoco.mjtGeom.mjGEOM_PLANE,
+                size=[0, 0, 0.05],
+                rgba=[0.6, 0.65, 0.7, 1],
+                contype=0,
+                conaffinity=0,
+            )
         model = spec.compile()
     if model.nq != traj.qpos.shape[1]:
         raise ControlMMError(

@@ -196,14 +196,21 @@ def _solve_clear_of_self(
         # Exact enclosures (capsules, boxes): the safe margins at once; pairs whose geoms still
         # overlap (Apollo's thick thighs in a turn) get that much more room and the clearance
         # a stiffer weight for another solve, EXACT_TIGHTENINGS times at most.
+        # A tightened solve that overlaps deeper than the one before (it settled elsewhere:
+        # the CMU humanoid crouching 50 cm on the real clip) is not kept.
         tight, solves, cfg = clearance, 1, config
+        best: tuple[Solution, np.ndarray, Replay, float, float] | None = None
+        deepest = np.inf
         while True:
             sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
                 rm.with_self_clearance(tight), targets, cfg, solver, src_fps, fps
             )
             depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
+            if best is not None and depth.max(initial=0.0) >= deepest:
+                return (*best, solves)
+            best, deepest = (sol, qpos, rep, lift, swing_lift), depth.max(initial=0.0)
             if solves > EXACT_TIGHTENINGS or not np.any(depth > OTHER_DEPTH):
-                return sol, qpos, rep, lift, swing_lift, solves
+                return (*best, solves)
             tight, solves = tight.tightened(depth, OTHER_DEPTH), solves + 1
             cfg = replace(config, w_self=config.w_self * EXACT_SELF)
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)

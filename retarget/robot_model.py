@@ -12,6 +12,7 @@ import copy
 import functools
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
@@ -23,6 +24,7 @@ from retarget.geoms import FloorPoints, collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_PELVIS_HEIGHT
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.mapping import Mapping, load_mapping
+from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import compile_robot, robot_mjcf_path
 from retarget.selfcollision import SelfClearance, build_self_clearance
 from retarget.soles import flat_tilt
@@ -42,7 +44,9 @@ class RobotModel:
         lower, upper: (nj,) joint ranges the retargeter uses (MJCF ranges narrowed by the
             mapping's ``ranges``).
         rest_q: (nj,) rest joint angles (qpos0 clipped to those ranges).
-        rest: Poses of the rest pose with the root at the world origin, identity rotation.
+        rest_root_quat: (4,) wxyz the root's rest orientation: the MJCF's, turned to face +X
+            (:func:`retarget.rest_frame.rest_root_quat`; identity for most MJCFs).
+        rest: Poses of the rest pose with the root at the world origin in that orientation.
         floor_z: lowest foot point (m) of the rest pose (subtract it to stand on the floor).
         foot_flat_rot: {"left"|"right": (3, 3)} world rotation of each foot's node standing flat
             on its sole, facing as in the rest pose (:func:`retarget.soles.flat_tilt`: the rest
@@ -102,12 +106,13 @@ class RobotModel:
             k = self.keypoint_index(f"{side}_ankle")
             node = int(self.nodes[k])
             body = int(tree.node_body[node])
-            geoms = collision_geoms(m, body)
-            pts, rad = [], []
-            for g in geoms:
-                p, r = geom_points(m, g)
-                pts.append(p)
-                rad.append(r)
+            geoms, pts, rad = [], [], []
+            for b, (pos, rot) in _links_below(m, body).items():  # toe links held at rest
+                for g in collision_geoms(m, b):
+                    p, r = geom_points(m, g)
+                    geoms.append(g)
+                    pts.append(pos + p @ rot.T)
+                    rad.append(r)
             if not geoms or sum(len(p) for p in pts) == 0:
                 raise ControlMMError(
                     f"{where}: the {side} foot body '{m.body(body).name}' (body of "
@@ -128,9 +133,11 @@ class RobotModel:
                     f"{where}: range {[lo, hi]} of '{name}' does not overlap its MJCF range "
                     f"[{tree.lower[j]:.4g}, {tree.upper[j]:.4g}]"
                 )
-        # Rest pose: qpos0, root at the origin; the floor is its lowest foot point.
+        # Rest pose: qpos0, root at the origin in its rest orientation (facing +X); the floor
+        # is its lowest foot point.
         self.rest_q = np.clip(tree.qpos0, self.lower, self.upper)
-        self.rest = tree.forward(np.zeros((1, 3)), np.eye(3)[None], self.rest_q[None])
+        self.rest_root_quat = rest_root_quat(m, int(tree.node_body[0]))
+        self.rest = tree.forward(np.zeros((1, 3)), quat_to_mat(self.rest_root_quat)[None], self.rest_q[None])
         self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
         self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)
         # Flat feet: the rest orientation tilted until the sole lies on the floor.
@@ -259,6 +266,23 @@ class RobotModel:
 @functools.lru_cache(maxsize=16)
 def _load_cached(key: str) -> RobotModel:
     return RobotModel(load_mapping(key))
+
+
+def _links_below(model: mujoco.MjModel, foot: int) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """``foot`` and the links below it (toes) -> their rest pose in ``foot``'s frame: (3,)
+    position, (3, 3) rotation (the foot itself at the origin; most robots have no toe links)."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    mujoco.mj_kinematics(model, data)
+    rot_f = data.xmat[foot].reshape(3, 3)
+    out = {}
+    for b in range(model.nbody):
+        up = b
+        while up > 0 and up != foot:
+            up = int(model.body_parentid[up])
+        if up == foot:
+            out[b] = (rot_f.T @ (data.xpos[b] - data.xpos[foot]), rot_f.T @ data.xmat[b].reshape(3, 3))
+    return out
 
 
 def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:

@@ -56,6 +56,9 @@ TRUNK_MARGIN = 0.005
 """Metres kept between the trunk's and a thigh link's capsules (enclosures: 0 is contact free)."""
 
 
+_EXACT = (int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE))
+"""Geom types whose enclosing capsule is the geom itself."""
+
 REST_SLACK = 0.005
 """A pair closer than the margin in the rest pose may come this much closer than there."""
 
@@ -334,15 +337,28 @@ def build_self_clearance(
     # trunk bodies the leg hangs from (the pelvis) against the links above each knee, but for a
     # parent and its child and body pairs the model excludes (as MuJoCo does).
     excluded = {frozenset((int(s_ >> 16), int(s_ & 0xFFFF))) for s_ in m.exclude_signature}
+
+    def exact_pair(i: int, j: int) -> bool:
+        """Capsules ``i`` and ``j`` are their geoms (capsules, spheres), which MuJoCo collides."""
+        gi, gj = int(geom[i]), int(geom[j])
+        return bool(
+            m.geom_type[gi] in _EXACT
+            and m.geom_type[gj] in _EXACT
+            and (m.geom_contype[gi] & m.geom_conaffinity[gj] or m.geom_contype[gj] & m.geom_conaffinity[gi])
+        )
+
     trunk_bodies = (trunk or set()) | shared
 
-    def against_trunk(links: set[int]) -> list[int]:
-        """Appends the pairs of the trunk's capsules with those on ``links`` (bodies); their indices."""
+    def against_trunk(links: set[int], exact: bool = False) -> list[int]:
+        """Appends the pairs of the trunk's capsules with those on ``links`` (bodies), only
+        :func:`exact_pair` ones if ``exact``; their indices."""
         added: list[int] = []
         for i, bi in enumerate(body_of):
             if bi not in trunk_bodies:
                 continue
             for j, bj in enumerate(body_of):
+                if exact and not exact_pair(i, j):
+                    continue
                 if bj in links and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
                     added.append(len(first))
                     first.append(i)
@@ -362,9 +378,33 @@ def build_self_clearance(
     mesh = m.geom_type[np.asarray(geom)] == mujoco.mjtGeom.mjGEOM_MESH
     loose = any(mesh[first[k]] or mesh[second[k]] for k in range(arm_pairs))
     shoulder_pairs: list[int] = []
-    for shoulder_chain in shoulders.values() if loose else ():
-        shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies)
+    spine_pairs: list[int] = []
+    if loose:
+        for shoulder_chain in shoulders.values():
+            shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies)
+    else:
+        # Capsule robots (the CMU humanoid): the upper arm rolls into the chest as the
+        # clavicle lifts, and a jointed spine bends the pelvis onto the upper back. Kept apart
+        # in every solve where both geoms are capsules or spheres (their enclosures exact)
+        # that MuJoCo collides: trunk links that are not parent and child, and the trunk
+        # against the shoulder links.
+        for shoulder_chain in shoulders.values():
+            shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies, exact=True)
+        for i, bi in enumerate(body_of):
+            for j, bj in enumerate(body_of):
+                if (
+                    bi in trunk_bodies
+                    and bj in trunk_bodies
+                    and bi in ancestors(bj)
+                    and bi not in (bj, int(parent[bj]))
+                    and frozenset((bi, bj)) not in excluded
+                    and exact_pair(i, j)
+                ):
+                    spine_pairs.append(len(first))
+                    first.append(i)
+                    second.append(j)
     trunk_pairs += shoulder_pairs
+    relaxed_only = shoulder_pairs if loose else []
     if not first:
         return None
     sc = SelfClearance(
@@ -382,6 +422,8 @@ def build_self_clearance(
     margin = np.minimum(SELF_MARGIN, rest_dist[0] - REST_SLACK)
     keep = np.ones(len(first), dtype=bool)
     keep[hand_pairs] = rest_dist[0, hand_pairs] >= SELF_MARGIN + REST_SLACK
+    keep[spine_pairs] = rest_dist[0, spine_pairs] >= SELF_MARGIN + REST_SLACK
+    margin[spine_pairs] = TRUNK_MARGIN
     for k in trunk_pairs:
         margin[k] = min(margin[k], TRUNK_MARGIN)
         if (
@@ -410,7 +452,7 @@ def build_self_clearance(
     # The trunk-shoulder pairs belong to the relaxed solve only: the safe margins keep the arms
     # away without them (and the safe solve stays what it was before the relaxed one existed).
     is_shoulder = np.zeros(len(first), dtype=bool)
-    is_shoulder[shoulder_pairs] = True
+    is_shoulder[relaxed_only] = True
     safe = ~is_shoulder[keep]
     if safe.all():
         return full

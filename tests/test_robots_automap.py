@@ -14,6 +14,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from robot_checks import independent_check
 
 from controlmm.corpus.dataset import ClipSpec, make_clip
 from controlmm.errors import ControlMMError
@@ -90,30 +91,6 @@ def _outside_humanoid(tmp_path: Path) -> Path:
     return path
 
 
-def _independent_check(path: Path, qpos: np.ndarray) -> tuple[int, float, int]:
-    """(frames past a joint limit, deepest floor penetration m, frames with a robot-robot
-    contact deeper than 5 mm), measured with MuJoCo alone on the robot MJCF plus a floor."""
-    spec = mujoco.MjSpec.from_file(str(path))
-    floor = spec.worldbody.add_geom()
-    floor.type, floor.size, floor.name = mujoco.mjtGeom.mjGEOM_PLANE, [0, 0, 1], "check_floor"
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    floor_id = model.geom("check_floor").id
-    hinge = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
-    q = qpos[:, model.jnt_qposadr[hinge]]
-    lo, hi = model.jnt_range[hinge].T
-    limits = int(np.any((q < lo - 1e-6) | (q > hi + 1e-6), axis=1).sum())
-    floor_depth, self_frames = 0.0, 0
-    for frame in qpos:
-        data.qpos[:] = frame
-        mujoco.mj_forward(model, data)
-        contacts = data.contact[: data.ncon]
-        on_floor = [c.dist for c in contacts if floor_id in (c.geom1, c.geom2)]
-        floor_depth = max([floor_depth, *(-d for d in on_floor)])
-        self_frames += any(floor_id not in (c.geom1, c.geom2) and c.dist < -0.005 for c in contacts)
-    return limits, floor_depth, self_frames
-
-
 def test_outside_humanoid_by_path_through_the_cli(tmp_path, motion):
     """Issue 35's check: a humanoid MJCF of other naming and DoF, given by path, retargets the
     real clip; MuJoCo alone finds no limit, floor or self-collision fault, the similarity-aligned
@@ -127,7 +104,7 @@ def test_outside_humanoid_by_path_through_the_cli(tmp_path, motion):
     with np.load(f"{prefix}.npz") as data:
         qpos = data["qpos"]
     assert qpos.shape == (len(np.arange(0, (motion.num_frames - 1) / motion.fps + 1e-9, 1 / 30)), 30)
-    limits, floor_depth, self_frames = _independent_check(path, qpos)
+    limits, floor_depth, self_frames = independent_check(path, qpos)
     assert (limits, self_frames) == (0, 0) and floor_depth <= 0.005, (limits, floor_depth, self_frames)
     fit = similarity_fit(load_robot(path), qpos, 30, motion.joints, motion.fps).mean
     assert fit <= 0.05, fit

@@ -1,0 +1,183 @@
+"""A capsule humanoid MJCF written for the tests, optionally the way mocap-derived models are.
+
+``capsule_humanoid_xml(turned=True)`` writes the same 1.7 m humanoid (a three-link spine, a
+head, clavicles, three-joint shoulders and hips, hands with a finger and a thumb link, feet
+with a toe link; capsules and spheres only, no actuators) with its root body's frame Y up and the robot
+facing -Y in the world, as the dm_control CMU humanoid is written: every position, segment and
+joint axis below the root is given in that rotated frame. ``turned=False`` writes it plainly
+(+Z up, facing +X, root at identity). Both are one robot: retargeting must treat them alike.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+Vec = tuple[float, float, float]
+
+
+def _rot_x(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_z(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _quat(rot: np.ndarray) -> np.ndarray:
+    w = np.sqrt(max(1.0 + np.trace(rot), 1e-12)) / 2
+    return np.array(
+        [
+            w,
+            (rot[2, 1] - rot[1, 2]) / (4 * w),
+            (rot[0, 2] - rot[2, 0]) / (4 * w),
+            (rot[1, 0] - rot[0, 1]) / (4 * w),
+        ]
+    )
+
+
+def _limb(side: str, sign: float) -> tuple[list, list]:
+    """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested."""
+    s = sign
+    finger = (
+        "fingers_" + side,
+        (0, 0, -0.08),
+        [("fingers_" + side, (0, 1, 0), (0, 90))],
+        [("capsule", (0, 0, -0.01, 0, 0, -0.06), 0.015)],
+        [],
+    )
+    thumb = (
+        "thumb_" + side,
+        (0.04, 0, -0.04),
+        [("thumb_" + side, (1, 0, 0), (0, 60))],
+        [("capsule", (0, 0, 0, 0.03, 0, -0.03), 0.012)],
+        [],
+    )
+    hand = (
+        "hand_" + side,
+        (0, 0, -0.26),
+        [("hand_x_" + side, (1, 0, 0), (-60, 60)), ("hand_y_" + side, (0, 1, 0), (-60, 60))],
+        [("sphere", (0, 0, -0.04), 0.04)],
+        [finger, thumb],
+    )
+    forearm = (
+        "forearm_" + side,
+        (0, 0, -0.29),
+        [("elbow_" + side, (0, 1, 0), (-150, 0))],
+        [("capsule", (0, 0, -0.03, 0, 0, -0.22), 0.033)],
+        [hand],
+    )
+    upper = (
+        "upperarm_" + side,
+        (0, s * 0.17, 0),
+        [
+            (f"shoulder_{a}_" + side, ax, (-170, 170))
+            for a, ax in (("x", (1, 0, 0)), ("y", (0, 1, 0)), ("z", (0, 0, 1)))
+        ],
+        [("capsule", (0, 0, -0.04, 0, 0, -0.24), 0.04)],
+        [forearm],
+    )
+    clavicle = (
+        "clavicle_" + side,
+        (0, s * 0.05, 0.25),
+        [("clavicle_" + side, (0, 0, 1), (-20, 20))],
+        [("capsule", (0, s * 0.03, 0, 0, s * 0.1, 0), 0.035)],
+        [upper],
+    )
+    toes = (
+        "toes_" + side,
+        (0.12, 0, -0.04),
+        [("toes_" + side, (0, 1, 0), (-30, 30))],
+        [("sphere", (0.02, 0, 0), 0.03)],
+        [],
+    )
+    foot = (
+        "foot_" + side,
+        (0, 0, -0.42),
+        [("ankle_y_" + side, (0, 1, 0), (-50, 50)), ("ankle_x_" + side, (1, 0, 0), (-30, 30))],
+        [("capsule", (-0.05, 0, -0.04, 0.1, 0, -0.04), 0.03)],
+        [toes],
+    )
+    shin = (
+        "shin_" + side,
+        (0, 0, -0.42),
+        [("knee_" + side, (0, 1, 0), (0, 150))],
+        [("capsule", (0, 0, -0.05, 0, 0, -0.36), 0.05)],
+        [foot],
+    )
+    thigh = (
+        "thigh_" + side,
+        (0, s * 0.09, -0.05),
+        [
+            (f"hip_{a}_" + side, ax, rng)
+            for a, ax, rng in (
+                ("x", (1, 0, 0), (-60, 60)),
+                ("y", (0, 1, 0), (-130, 30)),
+                ("z", (0, 0, 1), (-60, 60)),
+            )
+        ],
+        [("capsule", (0, 0, -0.05, 0, 0, -0.36), 0.06)],
+        [shin],
+    )
+    return [clavicle], [thigh]
+
+
+def capsule_humanoid_xml(turned: bool = True) -> str:
+    """The MJCF text (see the module docstring)."""
+    facing = _rot_z(-90) if turned else np.eye(3)  # where the file makes the robot face
+    root_rot = facing @ _rot_x(90) if turned else np.eye(3)  # the root body's frame: Y up
+    local = root_rot.T @ facing  # an intended (Z up, facing +X) vector in the root's frame
+
+    def vec(v: tuple[float, ...]) -> str:
+        out = np.concatenate([local @ np.asarray(v[i : i + 3], dtype=float) for i in range(0, len(v), 3)])
+        return " ".join(f"{x:.6g}" for x in out)
+
+    def body(spec: tuple, indent: str) -> str:
+        name, pos, joints, geoms, children = spec
+        lines = [f'{indent}<body name="{name}" pos="{vec(pos)}">']
+        for jname, axis, (lo, hi) in joints:
+            lines.append(f'{indent}  <joint name="{jname}" axis="{vec(axis)}" range="{lo} {hi}"/>')
+        for gtype, where, size in geoms:
+            attr = "fromto" if gtype == "capsule" else "pos"
+            lines.append(f'{indent}  <geom type="{gtype}" {attr}="{vec(where)}" size="{size}"/>')
+        lines += [body(c, indent + "  ") for c in children]
+        lines.append(f"{indent}</body>")
+        return "\n".join(lines)
+
+    arms, legs = zip(*(_limb(side, s) for side, s in (("l", 1.0), ("r", -1.0))), strict=True)
+    head = (
+        "head",
+        (0, 0, 0.3),
+        [("neck_x", (1, 0, 0), (-45, 45)), ("neck_y", (0, 1, 0), (-45, 45))],
+        [("sphere", (0, 0, 0.1), 0.1)],
+        [],
+    )
+    chest = (
+        "chest",
+        (0, 0, 0.15),
+        [(f"chest_{a}", ax, (-30, 30)) for a, ax in (("x", (1, 0, 0)), ("y", (0, 1, 0)), ("z", (0, 0, 1)))],
+        [("capsule", (0, -0.09, 0.1, 0, 0.09, 0.1), 0.09)],
+        [head, *[a[0] for a in arms]],
+    )
+    lowerback = (
+        "lowerback",
+        (0, 0, 0.1),
+        [("spine_x", (1, 0, 0), (-30, 30)), ("spine_y", (0, 1, 0), (-30, 30))],
+        [("capsule", (0, -0.07, 0.05, 0, 0.07, 0.05), 0.075)],
+        [chest],
+    )
+    children = "\n".join(body(c, "      ") for c in (lowerback, *[leg[0] for leg in legs]))
+    w, x, y, z = _quat(root_rot)
+    return f"""<mujoco model="capsule_humanoid{"_turned" if turned else ""}">
+  <compiler angle="degree"/>
+  <default><geom friction="0.8"/><joint damping="1" armature="0.01"/></default>
+  <worldbody>
+    <body name="root" pos="0 0 0.96" quat="{w:.9g} {x:.9g} {y:.9g} {z:.9g}">
+      <freejoint name="root"/>
+      <geom type="capsule" fromto="{vec((0, -0.09, 0, 0, 0.09, 0))}" size="0.08"/>
+{children}
+    </body>
+  </worldbody>
+</mujoco>
+"""

@@ -1,0 +1,146 @@
+"""Humanoid MJCFs written the way mocap-derived models are: a root frame that is Y up, the robot
+facing -Y, toe links below the feet, finger and thumb links below each hand, clavicles and a jointed
+spine of capsules (:mod:`capsule_humanoid`). Such a robot retargets as the same robot written
+plainly (+Z up, facing +X): the rest frame is read from its feet, not assumed."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from capsule_humanoid import capsule_humanoid_xml
+from robot_checks import independent_check
+
+from controlmm.motion import Motion
+from retarget import infer_mapping, load_robot
+from retarget.automap import RIGID_POSTURE
+from retarget.compare import similarity_fit
+from retarget.rest_frame import rest_root_quat
+from retarget.robot_files import free_root
+
+
+@pytest.fixture(scope="module")
+def motion(sample_features) -> Motion:
+    return Motion.from_features(sample_features)
+
+
+@pytest.fixture(scope="module")
+def humanoids(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("humanoids")
+    out = {}
+    for name, turned in (("plain", False), ("turned", True)):
+        out[name] = folder / f"{name}.xml"
+        out[name].write_text(capsule_humanoid_xml(turned))
+    return out
+
+
+def cli(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "controlmm", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+
+
+def test_the_rest_frame_stands_a_turned_humanoid_facing_plus_x(humanoids):
+    """The plain file keeps its identity root; the turned one's root is turned so that its rest
+    pose is the plain one's: the same keypoints, feet and left leg (+Y)."""
+    plain, turned = (mujoco.MjModel.from_xml_path(str(humanoids[k])) for k in ("plain", "turned"))
+    assert np.allclose(rest_root_quat(plain, free_root(plain)), [1, 0, 0, 0])
+    assert not np.allclose(np.abs(rest_root_quat(turned, free_root(turned))), [1, 0, 0, 0])
+    a, b = load_robot(humanoids["plain"]), load_robot(humanoids["turned"])
+    assert np.allclose(a.rest_keypoints, b.rest_keypoints, atol=1e-9)
+    assert a.floor_z == pytest.approx(b.floor_z) and a.scale == pytest.approx(b.scale)
+    mapping = infer_mapping(humanoids["turned"])
+    kp = mapping["keypoints"]
+    assert (kp["left_hip"]["body"], kp["right_knee"]["body"], kp["left_wrist"]["body"]) == (
+        "thigh_l",
+        "shin_r",
+        "hand_l",
+    )
+    # The foot is the link above the toe link, and stands on the toe's geometry too; the toes
+    # and fingers are held at rest.
+    assert kp["left_ankle"]["body"] == "foot_l" and kp["right_ankle"]["body"] == "foot_r"
+    toe_geoms = {
+        g for g in range(b.model.ngeom) if b.model.body(int(b.model.geom_bodyid[g])).name == "toes_l"
+    }
+    assert toe_geoms and toe_geoms <= set(b.feet["left"].geoms)
+    for joint in ("toes_l", "toes_r", "fingers_l", "thumb_r"):
+        assert mapping["posture_weights"][joint] == RIGID_POSTURE
+
+
+def test_the_spine_and_the_clavicles_are_kept_clear_on_a_capsule_humanoid(humanoids):
+    """Capsule links that MuJoCo collides and the arm pairs leave out: the pelvis against the
+    chest over the lower back, the chest against the upper arms (a lifted clavicle)."""
+    robot = load_robot(humanoids["turned"])
+    sc, m = robot.self_clearance, robot.model
+    assert sc is not None
+    pairs = {
+        frozenset(m.body(int(m.geom_bodyid[sc.geom[i]])).name for i in (a, b))
+        for a, b in zip(sc.first, sc.second, strict=True)
+    }
+    for pair in (
+        ("root", "chest"),
+        ("chest", "upperarm_l"),
+        ("chest", "upperarm_r"),
+        ("lowerback", "upperarm_l"),
+    ):
+        assert frozenset(pair) in pairs, pair
+
+
+def test_a_turned_humanoid_retargets_like_the_plain_one(tmp_path, humanoids, motion):
+    """Issue 35's check on a humanoid written otherwise: given by path it retargets the real
+    clip with no limit, floor or self-collision fault (MuJoCo alone), closely, passing
+    ``controlmm validate``, and as the plain file does (same joint angles)."""
+    src = tmp_path / "clip.npy"
+    np.save(src, motion.joints)
+    qpos = {}
+    for name, path in humanoids.items():
+        prefix = tmp_path / name
+        done = cli("retarget", src, "--robot", path, "--fps", 30, "--out", prefix)
+        assert done.returncode == 0, done.stderr
+        with np.load(f"{prefix}.npz") as data:
+            qpos[name] = data["qpos"]
+    turned = humanoids["turned"]
+    limits, floor_depth, self_frames = independent_check(turned, qpos["turned"])
+    assert (limits, self_frames) == (0, 0) and floor_depth <= 0.005, (limits, floor_depth, self_frames)
+    fits = {
+        k: similarity_fit(load_robot(humanoids[k]), q, 30, motion.joints, motion.fps).mean
+        for k, q in qpos.items()
+    }
+    assert fits["turned"] <= 0.04 and abs(fits["turned"] - fits["plain"]) < 0.002, fits
+    assert np.abs(qpos["turned"][:, 7:] - qpos["plain"][:, 7:]).max() < 0.05
+    checked = cli(
+        "validate", f"{tmp_path / 'turned'}.npz", "--robot", turned, "--out", tmp_path / "r.json", "--no-plot"
+    )
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+
+
+def test_a_robot_given_by_path_renders_with_mujoco(tmp_path, humanoids, motion):
+    """The render scene of a robot file (a light and a floor added to it) compiles with this
+    MuJoCo: the video is drawn by MuJoCo, not the stick-figure fallback."""
+    src = tmp_path / "clip.npy"
+    np.save(src, motion.joints[:12])
+    small = ("--render-width", "64", "--render-height", "48", "--render-fps", "10")
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    done = cli(
+        "retarget",
+        src,
+        "--robot",
+        humanoids["turned"],
+        "--out",
+        tmp_path / "a",
+        "--render",
+        tmp_path / "a.mp4",
+        *small,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "(mujoco)" in done.stdout and (tmp_path / "a.mp4").stat().st_size > 500, done.stdout
