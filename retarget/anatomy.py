@@ -30,7 +30,7 @@ from controlmm.errors import ControlMMError
 from retarget.geoms import aabb_corners, geom_points
 from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND
 from retarget.rest_frame import rest_root_quat
-from retarget.robot_files import free_root
+from retarget.robot_files import ancestors, free_root
 
 MIDDLE_RANGE = (0.25, 0.85)
 """Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
@@ -153,15 +153,6 @@ def _geom_world_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tu
     pts, rad = geom_points(model, g)
     body = int(model.geom_bodyid[g])
     return data.xpos[body] + pts @ data.xmat[body].reshape(3, 3).T, rad
-
-
-def ancestors(model: mujoco.MjModel, body: int) -> list[int]:
-    """``body`` and its ancestors up to (without) the world body."""
-    out = []
-    while body > 0:
-        out.append(body)
-        body = int(model.body_parentid[body])
-    return out
 
 
 def common_ancestor(model: mujoco.MjModel, bodies: list[int]) -> int:

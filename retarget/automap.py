@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from retarget.anatomy import Anatomy, Limb, ancestors, find_anatomy
+from retarget.anatomy import Anatomy, Limb, find_anatomy
 from retarget.geoms import collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_OFFSETS
 from retarget.mapping import DEFAULT_WEIGHTS, MAPPING_FORMAT, Mapping, parse_mapping
-from retarget.robot_files import compile_robot, robot_mjcf_path
+from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path
 
 SOLE_MARGIN = 0.005
 """The toe point stays this far (m) inside the sole's front edge and above its bottom."""

@@ -38,9 +38,8 @@ def _scene_model(traj: RobotTrajectory) -> mujoco.MjModel:
             light.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
         else:
             light.directional = True
-        if not any(
-            g.type == mujoco.mjtGeom.mjGEOM_PLANE for g in spec.geoms
-        ):  # a file with its own floor keeps it
+        own_floor = any(g.type == mujoco.mjtGeom.mjGEOM_PLANE for g in spec.geoms)
+        if not own_floor:  # a file with its own floor (the CMU humanoid's) keeps it
             spec.worldbody.add_geom(
                 type=mujoco.mjtGeom.mjGEOM_PLANE,
                 size=[0, 0, 0.05],

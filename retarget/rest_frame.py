@@ -8,14 +8,15 @@ is the MJCF's own root orientation (``qpos0``, which stands the robot up) turned
 multiple of 90 degrees so that the robot faces +X. Facing is read from the geometry, never
 from names: the two feet are the bodies owning the lowest collision geoms on two separate
 chains (their common ancestor well above the floor); the robot faces across the line between
-them, towards the side where the feet's collision geometry extends beyond their bodies'
-origins (toes are longer than heels).
+them, towards where the soles reach beyond the ankles (toes are longer than heels).
 """
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
+
+from retarget.robot_files import ancestors
 
 QUARTER_TURN = np.pi / 2
 """Facing is rounded to a multiple of this (rad): a foot's toe-out or asymmetric toes never
@@ -44,14 +45,6 @@ def _lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[float, 
     return float(centre[2] - half[2]), centre
 
 
-def _chain(model: mujoco.MjModel, body: int) -> list[int]:
-    out = []
-    while body > 0:
-        out.append(body)
-        body = int(model.body_parentid[body])
-    return out
-
-
 def _two_feet(model: mujoco.MjModel, data: mujoco.MjData, root: int) -> tuple[int, int] | None:
     """The bodies of the lowest collision geoms on two separate legs, or None."""
     geoms = [
@@ -68,10 +61,10 @@ def _two_feet(model: mujoco.MjModel, data: mujoco.MjData, root: int) -> tuple[in
     floor = low[0][0]
     height = max(float(data.xpos[bodies, 2].max()) - floor, 1e-3)
     first = int(model.geom_bodyid[low[0][1]])
-    above = _chain(model, first)
+    above = ancestors(model, first)
     for _, g in low[1:]:
         other = int(model.geom_bodyid[g])
-        chain = _chain(model, other)
+        chain = ancestors(model, other)
         if other in above or first in chain:
             continue  # one chain (a toe below its foot)
         common = next(b for b in chain if b in above)
@@ -87,11 +80,11 @@ def _toe_reach(
     SOLE_BAND of the floor) reaches beyond the ankle (the highest body of the leg whose origin
     is within ANKLE_BAND of the robot's height above the floor)."""
     ankle = foot
-    for b in _chain(model, foot):
+    for b in ancestors(model, foot):
         if data.xpos[b][2] - floor > ANKLE_BAND * height:
             break
         ankle = b
-    below = [b for b in range(1, model.nbody) if ankle in _chain(model, b)]
+    below = [b for b in range(1, model.nbody) if ankle in ancestors(model, b)]
     sole = [
         centre
         for g in range(model.ngeom)

@@ -63,6 +63,15 @@ def _one_line(exc: Exception) -> str:
     return text or type(exc).__name__
 
 
+def ancestors(model: mujoco.MjModel, body: int) -> list[int]:
+    """``body`` and its ancestors up to (without) the world body."""
+    out = []
+    while body > 0:
+        out.append(body)
+        body = int(model.body_parentid[body])
+    return out
+
+
 def free_root(model: mujoco.MjModel) -> int | None:
     """The body holding the model's floating base (a free joint on a child of the world), or None.
 

@@ -25,7 +25,7 @@ from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_PELVIS_HEIGHT
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.mapping import Mapping, load_mapping
 from retarget.rest_frame import rest_root_quat
-from retarget.robot_files import compile_robot, robot_mjcf_path
+from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path
 from retarget.selfcollision import SelfClearance, build_self_clearance
 from retarget.soles import flat_tilt
 
@@ -275,14 +275,11 @@ def _links_below(model: mujoco.MjModel, foot: int) -> dict[int, tuple[np.ndarray
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
     rot_f = data.xmat[foot].reshape(3, 3)
-    out = {}
-    for b in range(model.nbody):
-        up = b
-        while up > 0 and up != foot:
-            up = int(model.body_parentid[up])
-        if up == foot:
-            out[b] = (rot_f.T @ (data.xpos[b] - data.xpos[foot]), rot_f.T @ data.xmat[b].reshape(3, 3))
-    return out
+    return {
+        b: (rot_f.T @ (data.xpos[b] - data.xpos[foot]), rot_f.T @ data.xmat[b].reshape(3, 3))
+        for b in range(1, model.nbody)
+        if foot in ancestors(model, b)
+    }
 
 
 def load_robot(robot: str | Path | Mapping | RobotModel = "g1") -> RobotModel:

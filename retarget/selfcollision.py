@@ -29,7 +29,11 @@ robot's collision geoms (:class:`SelfClearance`):
 * on robots with meshes, also the trunk against each arm's shoulder links (the chain from
   the trunk down to the shoulder keypoint), calibrated the same way: the first solve of
   :mod:`retarget.selfcheck` lets the arms closer to the trunk, and they roll those links
-  into it.
+  into it;
+* on robots without meshes, the trunk against the shoulder links and the trunk's own links
+  that are neither parent and child (a jointed spine: the CMU humanoid's pelvis and upper
+  back), where both are capsules or spheres (exact enclosures) that MuJoCo collides; spine
+  pairs closer than ``SELF_MARGIN`` at rest are left out.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
