@@ -44,6 +44,8 @@ WRIST_SHARE = HUMAN_FOREARM / (HUMAN_FOREARM + HUMAN_HALF_HAND)
 the human forearm against the forearm plus half a hand."""
 FEET_LEVEL = 0.05
 """The two feet's lowest points lie within this fraction of the robot's height of each other."""
+SAME_ANCHOR = 1e-3
+"""Hinges whose anchors are this close (m) act at one point (a ball joint written as hinges)."""
 SOLE_BAND = 0.015
 """A link whose collision geometry comes this close (fraction of the robot's height) to the
 floor in the rest pose stands on it: the foot above a toe link is the foot."""
@@ -65,6 +67,10 @@ class Limb:
         root, middle, end: (3,) the hip / shoulder centre, the knee / elbow centre and the
             ankle / wrist centre.
         tip: (3,) the limb's far end (the lowest sole point of a leg, a hand's farthest point).
+        beyond: the joints past the ankle / wrist where that is a ball joint written as
+            hinges at one point (an SMPL humanoid's hand joints past its wrist's).
+        before: the joints before the hip / shoulder where that is such a ball joint (a
+            clavicle's).
     """
 
     side: str
@@ -78,6 +84,8 @@ class Limb:
     middle: np.ndarray
     end: np.ndarray
     tip: np.ndarray
+    beyond: tuple[int, ...] = ()
+    before: tuple[int, ...] = ()
 
     @property
     def end_joints(self) -> tuple[int, ...]:
@@ -222,18 +230,55 @@ def limb_anatomy(
         middle_joint = joints[best]
         middle_body = int(model.jnt_bodyid[middle_joint])
         middle = anchors[best].copy()
-        root_idx, end_idx = list(range(best)), list(range(best + 1, len(joints)))
-    root = axes_centre(anchors[root_idx], axes[root_idx]) if root_idx else data.xpos[bodies[0]].copy()
+        # Hinges sharing the middle joint's anchor are the rest of a ball-like knee / elbow
+        # (SMPL humanoids' three-hinge knees and elbows), not the hip / ankle.
+        apart = [i for i in range(len(joints)) if np.linalg.norm(anchors[i] - middle) > SAME_ANCHOR]
+        root_idx = [i for i in apart if i < best]
+        end_idx = [i for i in apart if i > best]
     root_body = int(model.jnt_bodyid[joints[root_idx[-1]]]) if root_idx else bodies[0]
     if best is not None and root_body == middle_body:  # hip and knee on one body: keep the thigh's
         root_body = int(model.body_parentid[middle_body])
+    # A ball joint written as hinges at one point is the hip / shoulder (the last such group
+    # before the middle: a clavicle's joints come before it) or the ankle / wrist (the first
+    # after it: a hand's joints come after it); otherwise the centre of all the group's axes.
+    root_groups, end_groups = _same_anchor(root_idx, anchors), _same_anchor(end_idx, anchors)
+    before: list[int] = []
+    if root_groups and len(root_groups[-1]) > 1:
+        root_idx, before = root_groups[-1], [i for g in root_groups[:-1] for i in g]
+    beyond: list[int] = []
+    if end_groups and len(end_groups[0]) > 1:
+        end_idx, beyond = end_groups[0], [i for g in end_groups[1:] for i in g]
+    root = axes_centre(anchors[root_idx], axes[root_idx]) if root_idx else data.xpos[bodies[0]].copy()
     if end_idx:
         centre = axes_centre(anchors[end_idx], axes[end_idx])
     else:
         centre = data.xpos[end_body].copy()
     return Limb(
-        side, bodies, joints, middle_joint, root_body, middle_body, end_body, root, middle, centre, tip
+        side,
+        bodies,
+        joints,
+        middle_joint,
+        root_body,
+        middle_body,
+        end_body,
+        root,
+        middle,
+        centre,
+        tip,
+        tuple(joints[i] for i in beyond),
+        tuple(joints[i] for i in before),
     )
+
+
+def _same_anchor(idx: list[int], anchors: np.ndarray) -> list[list[int]]:
+    """``idx`` split into runs of joints whose anchors coincide (within SAME_ANCHOR)."""
+    groups: list[list[int]] = []
+    for i in idx:
+        if groups and np.linalg.norm(anchors[i] - anchors[groups[-1][-1]]) <= SAME_ANCHOR:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    return groups
 
 
 def _robot_bodies(model: mujoco.MjModel, root: int) -> list[int]:

@@ -36,8 +36,11 @@ SOLE_MARGIN = 0.005
 UNOBSERVED_POSTURE = 0.5
 """Posture weight of the joints the human does not observe (wrists, hands, neck)."""
 RIGID_POSTURE = 20.0
-"""Posture weight of the joints below a foot or a wrist's body (toes, fingers): held at rest,
-the toes part of the rigid foot the robot stands on, the fingers clear of each other."""
+"""Posture weight of the joints below a foot or a wrist's body (toes, fingers), past a ball
+wrist (an SMPL hand's) or before a ball shoulder (a clavicle's): held at rest, the toes part
+of the rigid foot the robot stands on, the fingers clear of each other, the hand in line with
+the forearm, the shoulders where the human's are (SMPL's +-180 degree clavicles folded them
+into the neck, and the CMU humanoid's into its chest)."""
 FIVE_JOINT_LEVELS = [[3, 5], [1, 4]]
 """Solver schedule of robots with fewer than six joints in a leg (they converge more slowly)."""
 SMALL_SCALE = 0.4
@@ -113,8 +116,11 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
             ]
             for j in arm.end_joints:
                 if m.joint(j).name:
-                    posture[m.joint(j).name] = UNOBSERVED_POSTURE
+                    posture[m.joint(j).name] = RIGID_POSTURE if j in arm.beyond else UNOBSERVED_POSTURE
             for j in hand:
+                if m.joint(j).name:
+                    posture[m.joint(j).name] = RIGID_POSTURE
+            for j in arm.before:  # a clavicle: the human's barely moves
                 if m.joint(j).name:
                     posture[m.joint(j).name] = RIGID_POSTURE
         if a.head is not None:

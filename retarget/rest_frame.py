@@ -2,13 +2,20 @@
 
 The retargeter reads a robot in its rest pose (``qpos0``) in MuJoCo's convention: +Z up, the
 robot facing +X, its left +Y. Most MJCFs are written that way with the floating base at
-identity; others orient their root body in the file (the dm_control CMU humanoid's
-``euler="90 0 0"``: its body frames are Y up) or face another way (-Y). The rest orientation
-is the MJCF's own root orientation (``qpos0``, which stands the robot up) turned about +Z by a
-multiple of 90 degrees so that the robot faces +X. Facing is read from the geometry, never
-from names: the two feet are the bodies owning the lowest collision geoms on two separate
-chains (their common ancestor well above the floor); the robot faces across the line between
-them, towards where the soles reach beyond the ankles (toes are longer than heels).
+identity. Others orient their root body in the file (the dm_control CMU humanoid's
+``euler="90 0 0"``: its body frames are Y up, and it faces -Y), or lay the whole robot along
+another axis (SMPL humanoids of physics-based character work are written Y up, lying on the
+MuJoCo floor until their simulator turns them). The rest orientation is the MJCF's own root
+orientation (``qpos0``), turned to stand the robot up and then about +Z by a multiple of 90
+degrees to face +X, all read from the geometry, never from names:
+
+1. **Up**: among the six world axes, those along which the lowest collision geoms lie on two
+   separate chains, level with each other, whose common ancestor is well above them (two feet:
+   along an arm, one hand is the extreme; upside down, the head); of those, the one along
+   which the root stands highest above them. +Z for a standing robot.
+2. **Facing**: across the line between the two feet, towards where the soles reach beyond
+   the ankles (toes are longer than heels). Where the toes do not say (less than
+   ``MIN_TOE_REACH``), the file's facing is kept.
 """
 
 from __future__ import annotations
@@ -24,6 +31,8 @@ turn a robot written facing +X."""
 LEG_SPLIT = 0.25
 """The two feet's common ancestor must be this fraction of the robot's height above its
 lowest point (two toes on one foot are not two legs)."""
+FEET_LEVEL = 0.05
+"""The two feet's lowest points lie within this fraction of the root's height of each other."""
 ANKLE_BAND = 0.15
 """A leg's ankle is its highest body whose origin is this fraction of the robot's height (or
 less) above the floor."""
@@ -35,41 +44,52 @@ is kept."""
 HALF_TURN_REACH = 0.02
 """Turning a robot written with its feet side by side along Y round (facing -X) needs its
 toes to say so by this much (m)."""
+_UP = np.array([0.0, 0.0, 1.0])
 
 
-def _lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[float, np.ndarray]:
-    """(lowest z, (3,) centre) of geom ``g``'s bounding box (MuJoCo's ``geom_aabb``) in the world."""
-    rot = data.geom_xmat[g].reshape(3, 3)
-    centre = data.geom_xpos[g] + rot @ model.geom_aabb[g, :3]
-    half = np.abs(rot) @ model.geom_aabb[g, 3:]
-    return float(centre[2] - half[2]), centre
-
-
-def _two_feet(model: mujoco.MjModel, data: mujoco.MjData, root: int) -> tuple[int, int] | None:
-    """The bodies of the lowest collision geoms on two separate legs, or None."""
-    geoms = [
+def _collision_geoms(model: mujoco.MjModel, root: int) -> list[int]:
+    return [
         g
         for g in range(model.ngeom)
         if model.body_rootid[model.geom_bodyid[g]] == root
         and (model.geom_contype[g] or model.geom_conaffinity[g])
         and model.geom_type[g] not in (mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_HFIELD)
     ]
-    if len(geoms) < 2:
+
+
+def _lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int, up: np.ndarray) -> tuple[float, np.ndarray]:
+    """(lowest height along the axis ``up``, (3,) centre) of geom ``g``'s bounding box (MuJoCo's
+    ``geom_aabb``) in the world."""
+    rot = data.geom_xmat[g].reshape(3, 3)
+    centre = data.geom_xpos[g] + rot @ model.geom_aabb[g, :3]
+    half = np.abs(rot) @ model.geom_aabb[g, 3:]
+    return float(centre @ up - half @ np.abs(up)), centre
+
+
+def _two_feet(
+    model: mujoco.MjModel, data: mujoco.MjData, root: int, up: np.ndarray
+) -> tuple[int, int, float] | None:
+    """(the bodies of the lowest collision geoms along ``up`` on two separate legs, the root's
+    height above them), or None."""
+    low = sorted((_lowest(model, data, g, up)[0], g) for g in _collision_geoms(model, root))
+    if len(low) < 2:
         return None
-    low = sorted((_lowest(model, data, g)[0], g) for g in geoms)
-    bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == root]
     floor = low[0][0]
-    height = max(float(data.xpos[bodies, 2].max()) - floor, 1e-3)
+    height = float(data.xpos[root] @ up) - floor
+    if height <= 0:
+        return None
     first = int(model.geom_bodyid[low[0][1]])
     above = ancestors(model, first)
-    for _, g in low[1:]:
+    for z, g in low[1:]:
+        if z - floor > FEET_LEVEL * height:
+            return None
         other = int(model.geom_bodyid[g])
         chain = ancestors(model, other)
         if other in above or first in chain:
             continue  # one chain (a toe below its foot)
         common = next(b for b in chain if b in above)
-        if data.xpos[common][2] - floor > LEG_SPLIT * height:
-            return first, other
+        if float(data.xpos[common] @ up) - floor > LEG_SPLIT * height:
+            return first, other, height
     return None
 
 
@@ -89,7 +109,7 @@ def _toe_reach(
         centre
         for g in range(model.ngeom)
         if model.geom_bodyid[g] in below and (model.geom_contype[g] or model.geom_conaffinity[g])
-        for low, centre in [_lowest(model, data, g)]
+        for low, centre in [_lowest(model, data, g, _UP)]
         if low - floor < SOLE_BAND
     ]
     if not sole:
@@ -97,42 +117,54 @@ def _toe_reach(
     return float(np.mean((np.array(sole) - data.xpos[ankle]) @ direction))
 
 
-def _yaw_quat(angle: float) -> np.ndarray:
-    return np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+def _turn(quat: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """``quat`` (wxyz) turned by ``angle`` (rad) about the world ``axis``."""
+    out = np.empty(4)
+    turn = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
+    mujoco.mju_mulQuat(out, turn, quat)
+    return out
 
 
 def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     """(4,) wxyz: the floating base ``root``'s rest orientation (see the module docstring).
 
-    The MJCF's own ``qpos0`` orientation where its feet do not say which way it faces.
+    The MJCF's own ``qpos0`` orientation where its feet do not say how it stands or faces.
     """
     free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
     adr = int(model.jnt_qposadr[free])
-    own = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
-    own /= max(float(np.linalg.norm(own)), 1e-12)
+    quat = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
+    quat /= max(float(np.linalg.norm(quat)), 1e-12)
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
-    feet = _two_feet(model, data, root)
+    stands = [
+        (f[2], i)
+        for i, u in enumerate(np.concatenate([np.eye(3), -np.eye(3)]))
+        if (f := _two_feet(model, data, root, u))
+    ]
+    if not stands:
+        return quat
+    up = np.concatenate([np.eye(3), -np.eye(3)])[max(stands)[1]]
+    if up[2] < 0.5:  # laid down (or upside down) in the file: stand it up
+        axis = np.cross(up, _UP) if abs(up[2]) < 0.5 else np.array([1.0, 0.0, 0.0])
+        quat = _turn(quat, axis, float(np.arccos(np.clip(up[2], -1.0, 1.0))))
+        data.qpos[adr + 3 : adr + 7] = quat
+        mujoco.mj_kinematics(model, data)
+    feet = _two_feet(model, data, root, _UP)
     if feet is None:
-        return own
+        return quat
     across = data.xpos[feet[1]] - data.xpos[feet[0]]
     across[2] = 0.0
     if np.linalg.norm(across) < 1e-6:
-        return own
-    forward = np.cross(across / np.linalg.norm(across), [0.0, 0.0, 1.0])
-    bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == root]
-    floor = min(_lowest(model, data, g)[0] for g in range(model.ngeom) if model.geom_bodyid[g] in bodies)
-    height = max(float(data.xpos[bodies, 2].max()) - floor, 1e-3)
-    reach = sum(_toe_reach(model, data, f, floor, height, forward) for f in feet) / 2
+        return quat
+    forward = np.cross(across / np.linalg.norm(across), _UP)
+    floor = float(data.xpos[root][2]) - feet[2]
+    reach = sum(_toe_reach(model, data, f, floor, feet[2], forward) for f in feet[:2]) / 2
     if abs(reach) < MIN_TOE_REACH:
-        return own
+        return quat
     if reach < 0:
         forward = -forward
     quarters = round(float(np.arctan2(forward[1], forward[0])) / QUARTER_TURN)
     if quarters == 0 or (abs(quarters) == 2 and abs(reach) < HALF_TURN_REACH):
-        return own
-    turn = -QUARTER_TURN * quarters
-    out = np.empty(4)
-    mujoco.mju_mulQuat(out, _yaw_quat(turn), own)
-    return out
+        return quat
+    return _turn(quat, _UP, -QUARTER_TURN * quarters)

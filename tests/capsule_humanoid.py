@@ -1,11 +1,18 @@
-"""A capsule humanoid MJCF written for the tests, optionally the way mocap-derived models are.
+"""A capsule humanoid MJCF written for the tests, three ways, as humanoid files are written.
 
-``capsule_humanoid_xml(turned=True)`` writes the same 1.7 m humanoid (a three-link spine, a
-head, clavicles, three-joint shoulders and hips, hands with a finger and a thumb link, feet
-with a toe link; capsules and spheres only, no actuators) with its root body's frame Y up and the robot
-facing -Y in the world, as the dm_control CMU humanoid is written: every position, segment and
-joint axis below the root is given in that rotated frame. ``turned=False`` writes it plainly
-(+Z up, facing +X, root at identity). Both are one robot: retargeting must treat them alike.
+``capsule_humanoid_xml(style)`` writes one 1.7 m humanoid (a three-link spine, a head,
+two-joint clavicles, ball shoulders and hips, knees and elbows of three and two hinges at one
+point as SMPL humanoids have, hands with a finger and a thumb link, feet with a toe link;
+capsules and spheres only, no actuators):
+
+* ``"plain"``: +Z up, facing +X, the root at identity (as the Menagerie robots are);
+* ``"turned"``: the root body's frame Y up and the robot facing -Y in the world, as the
+  dm_control CMU humanoid is written: every position, segment and joint axis below the root
+  is given in that rotated frame;
+* ``"lying"``: the whole robot written Y up with the root at identity, as SMPL humanoids
+  are: in MuJoCo's Z-up world it lies along +Y, facing +Z.
+
+All three are one robot: retargeting must treat them alike.
 """
 
 from __future__ import annotations
@@ -64,7 +71,7 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
     forearm = (
         "forearm_" + side,
         (0, 0, -0.29),
-        [("elbow_" + side, (0, 1, 0), (-150, 0))],
+        [("elbow_" + side, (0, 1, 0), (-150, 0)), ("elbow_twist_" + side, (0, 0, 1), (-90, 90))],
         [("capsule", (0, 0, -0.03, 0, 0, -0.22), 0.033)],
         [hand],
     )
@@ -81,7 +88,7 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
     clavicle = (
         "clavicle_" + side,
         (0, s * 0.05, 0.25),
-        [("clavicle_" + side, (0, 0, 1), (-20, 20))],
+        [("clavicle_" + side, (0, 0, 1), (-20, 20)), ("clavicle_x_" + side, (1, 0, 0), (-20, 20))],
         [("capsule", (0, s * 0.03, 0, 0, s * 0.1, 0), 0.035)],
         [upper],
     )
@@ -102,7 +109,11 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
     shin = (
         "shin_" + side,
         (0, 0, -0.42),
-        [("knee_" + side, (0, 1, 0), (0, 150))],
+        [
+            ("knee_" + side, (0, 1, 0), (0, 150)),
+            ("knee_x_" + side, (1, 0, 0), (-5, 5)),
+            ("knee_z_" + side, (0, 0, 1), (-5, 5)),
+        ],
         [("capsule", (0, 0, -0.05, 0, 0, -0.36), 0.05)],
         [foot],
     )
@@ -123,11 +134,18 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
     return [clavicle], [thigh]
 
 
-def capsule_humanoid_xml(turned: bool = True) -> str:
+STYLES = ("plain", "turned", "lying")
+_LAID = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+"""Forward (+X) -> +Z, left (+Y) -> +X, up (+Z) -> +Y: a Y-up humanoid facing +Z."""
+
+
+def capsule_humanoid_xml(style: str = "turned") -> str:
     """The MJCF text (see the module docstring)."""
-    facing = _rot_z(-90) if turned else np.eye(3)  # where the file makes the robot face
-    root_rot = facing @ _rot_x(90) if turned else np.eye(3)  # the root body's frame: Y up
-    local = root_rot.T @ facing  # an intended (Z up, facing +X) vector in the root's frame
+    # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
+    # body's frame; local: the intended vector in the root's frame.
+    world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
+    root_rot = world @ _rot_x(90) if style == "turned" else np.eye(3)
+    local = root_rot.T @ world
 
     def vec(v: tuple[float, ...]) -> str:
         out = np.concatenate([local @ np.asarray(v[i : i + 3], dtype=float) for i in range(0, len(v), 3)])
@@ -157,7 +175,7 @@ def capsule_humanoid_xml(turned: bool = True) -> str:
         "chest",
         (0, 0, 0.15),
         [(f"chest_{a}", ax, (-30, 30)) for a, ax in (("x", (1, 0, 0)), ("y", (0, 1, 0)), ("z", (0, 0, 1)))],
-        [("capsule", (0, -0.09, 0.1, 0, 0.09, 0.1), 0.09)],
+        [("capsule", (0, -0.09, 0.1, 0, 0.09, 0.1), 0.08)],
         [head, *[a[0] for a in arms]],
     )
     lowerback = (
@@ -169,11 +187,12 @@ def capsule_humanoid_xml(turned: bool = True) -> str:
     )
     children = "\n".join(body(c, "      ") for c in (lowerback, *[leg[0] for leg in legs]))
     w, x, y, z = _quat(root_rot)
-    return f"""<mujoco model="capsule_humanoid{"_turned" if turned else ""}">
+    x0, y0, z0 = world @ np.array([0.0, 0.0, 0.96])
+    return f"""<mujoco model="capsule_humanoid_{style}">
   <compiler angle="degree"/>
   <default><geom friction="0.8"/><joint damping="1" armature="0.01"/></default>
   <worldbody>
-    <body name="root" pos="0 0 0.96" quat="{w:.9g} {x:.9g} {y:.9g} {z:.9g}">
+    <body name="root" pos="{x0:.6g} {y0:.6g} {z0:.6g}" quat="{w:.9g} {x:.9g} {y:.9g} {z:.9g}">
       <freejoint name="root"/>
       <geom type="capsule" fromto="{vec((0, -0.09, 0, 0, 0.09, 0))}" size="0.08"/>
 {children}
