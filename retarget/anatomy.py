@@ -6,7 +6,8 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
 +X, so its left is +Y.
 
 1. **Feet**: on each side of the sagittal plane (the root's y), the body owning the lowest
-   collision geom. **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
+   collision geom, or the link above it where that link stands on the floor too (a toe link
+   below the foot). **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
    bodies from the pelvis down to a foot.
 2. **Arms**: the ends of the other jointed chains that lie clearly to one side (the head's
    chain stays near the midline); per side, the common ancestor of those ends is the hand
@@ -16,7 +17,10 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
 4. **Joints of a limb** (:func:`limb_anatomy`): the middle joint (knee / elbow) is the hinge
    past the first quarter of the limb whose axis crosses the limb; the joints before it form the
    hip / shoulder, the joints after it the ankle / wrist. Each group's centre is the point
-   nearest to its joint axes (a hip's three axes meet near one point).
+   nearest to its joint axes (a hip's three axes meet near one point). Ball joints written as
+   hinges at one point (SMPL humanoids): hinges at the knee's point are the knee's, the hip /
+   shoulder is the last ball before the knee (a clavicle before it: ``Limb.before``) and the
+   ankle / wrist the first after it (a hand past it: ``Limb.beyond``).
 """
 
 from __future__ import annotations
