@@ -23,6 +23,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from retarget.geoms import collision_geoms
 from retarget.robot_files import ancestors
 
 QUARTER_TURN = np.pi / 2
@@ -45,6 +46,8 @@ HALF_TURN_REACH = 0.02
 """Turning a robot written with its feet side by side along Y round (facing -X) needs its
 toes to say so by this much (m)."""
 _UP = np.array([0.0, 0.0, 1.0])
+_AXES = np.concatenate([np.eye(3), -np.eye(3)])
+"""The six world axes a file may stand its robot along."""
 
 
 def _collision_geoms(model: mujoco.MjModel, root: int) -> list[int]:
@@ -107,8 +110,8 @@ def _toe_reach(
     below = [b for b in range(1, model.nbody) if ankle in ancestors(model, b)]
     sole = [
         centre
-        for g in range(model.ngeom)
-        if model.geom_bodyid[g] in below and (model.geom_contype[g] or model.geom_conaffinity[g])
+        for b in below
+        for g in collision_geoms(model, b)
         for low, centre in [_lowest(model, data, g, _UP)]
         if low - floor < SOLE_BAND
     ]
@@ -137,17 +140,15 @@ def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
-    stands = [
-        (f[2], i)
-        for i, u in enumerate(np.concatenate([np.eye(3), -np.eye(3)]))
-        if (f := _two_feet(model, data, root, u))
-    ]
+    stands = [(f[2], i) for i, u in enumerate(_AXES) if (f := _two_feet(model, data, root, u))]
     if not stands:
         return quat
-    up = np.concatenate([np.eye(3), -np.eye(3)])[max(stands)[1]]
-    if up[2] < 0.5:  # laid down (or upside down) in the file: stand it up
-        axis = np.cross(up, _UP) if abs(up[2]) < 0.5 else np.array([1.0, 0.0, 0.0])
-        quat = _turn(quat, axis, float(np.arccos(np.clip(up[2], -1.0, 1.0))))
+    up = _AXES[max(stands)[1]]
+    if up[2] != 1.0:  # laid down (a quarter turn) or upside down (a half turn) in the file
+        if up[2] == 0.0:
+            quat = _turn(quat, np.cross(up, _UP), QUARTER_TURN)
+        else:
+            quat = _turn(quat, np.array([1.0, 0.0, 0.0]), 2 * QUARTER_TURN)
         data.qpos[adr + 3 : adr + 7] = quat
         mujoco.mj_kinematics(model, data)
     feet = _two_feet(model, data, root, _UP)

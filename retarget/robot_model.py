@@ -102,12 +102,14 @@ class RobotModel:
         self.posture_weights = np.array([mapping.posture_weights.get(n, default) for n in tree.joint_names])
         # Feet: the bodies of the ankle keypoints and their collision geometry.
         self.feet: dict[str, FloorPoints] = {}
+        qpos0 = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, qpos0)
         for side in ("left", "right"):
             k = self.keypoint_index(f"{side}_ankle")
             node = int(self.nodes[k])
             body = int(tree.node_body[node])
             geoms, pts, rad = [], [], []
-            for b, (pos, rot) in _links_below(m, body).items():  # toe links held at rest
+            for b, (pos, rot) in _links_below(m, qpos0, body).items():  # toe links held at rest
                 for g in collision_geoms(m, b):
                     p, r = geom_points(m, g)
                     geoms.append(g)
@@ -268,12 +270,12 @@ def _load_cached(key: str) -> RobotModel:
     return RobotModel(load_mapping(key))
 
 
-def _links_below(model: mujoco.MjModel, foot: int) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """``foot`` and the links below it (toes) -> their rest pose in ``foot``'s frame: (3,)
-    position, (3, 3) rotation (the foot itself at the origin; most robots have no toe links)."""
-    data = mujoco.MjData(model)
-    data.qpos[:] = model.qpos0
-    mujoco.mj_kinematics(model, data)
+def _links_below(
+    model: mujoco.MjModel, data: mujoco.MjData, foot: int
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """``foot`` and the links below it (toes) -> their pose in ``foot``'s frame in ``data``
+    (kinematics of ``qpos0``): (3,) position, (3, 3) rotation (the foot itself at the origin;
+    most robots have no toe links)."""
     rot_f = data.xmat[foot].reshape(3, 3)
     return {
         b: (rot_f.T @ (data.xpos[b] - data.xpos[foot]), rot_f.T @ data.xmat[b].reshape(3, 3))

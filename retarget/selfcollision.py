@@ -361,9 +361,12 @@ def build_self_clearance(
             if bi not in trunk_bodies:
                 continue
             for j, bj in enumerate(body_of):
-                if exact and not exact_pair(i, j):
-                    continue
-                if bj in links and int(parent[bj]) != bi and frozenset((bi, bj)) not in excluded:
+                if (
+                    bj in links
+                    and int(parent[bj]) != bi
+                    and frozenset((bi, bj)) not in excluded
+                    and (not exact or exact_pair(i, j))
+                ):
                     added.append(len(first))
                     first.append(i)
                     second.append(j)
@@ -394,12 +397,12 @@ def build_self_clearance(
         # against the shoulder links.
         for shoulder_chain in shoulders.values():
             shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies, exact=True)
-        for i, bi in enumerate(body_of):
-            for j, bj in enumerate(body_of):
+        on_trunk = [i for i, b in enumerate(body_of) if b in trunk_bodies]
+        for i in on_trunk:
+            for j in on_trunk:
+                bi, bj = body_of[i], body_of[j]
                 if (
-                    bi in trunk_bodies
-                    and bj in trunk_bodies
-                    and bi in ancestors(bj)
+                    bi in ancestors(bj)
                     and bi not in (bj, int(parent[bj]))
                     and frozenset((bi, bj)) not in excluded
                     and exact_pair(i, j)

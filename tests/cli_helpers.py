@@ -1,6 +1,9 @@
-"""Running the ``controlmm`` command line in-process, as the console script does."""
+"""Running the ``controlmm`` command line in-process, as the console script does, or in a subprocess."""
 
 from __future__ import annotations
+
+import subprocess
+import sys
 
 from controlmm.cli.main import main
 
@@ -23,3 +26,15 @@ def one_line_error(capsys, argv: list[str], *needles: str) -> str:
     for needle in needles:
         assert needle in err, err
     return err.strip()
+
+
+def console(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """``python -m controlmm ARGS`` in a subprocess (its own environment ``env``, e.g. MUJOCO_GL),
+    output captured as text."""
+    return subprocess.run(
+        [sys.executable, "-m", "controlmm", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )

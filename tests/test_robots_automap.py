@@ -7,13 +7,12 @@ joints are renamed, with the left and right names swapped, still maps its left l
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from cli_helpers import console as cli
 from robot_checks import independent_check
 
 from controlmm.corpus.dataset import ClipSpec, make_clip
@@ -35,12 +34,6 @@ from scenes import load_scene
 from sim import check_trajectory
 
 ROBOTS = tuple(PACKAGED_ROBOTS)
-
-
-def cli(*args: object) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "controlmm", *map(str, args)], capture_output=True, text=True, timeout=300
-    )
 
 
 @pytest.fixture(scope="module")

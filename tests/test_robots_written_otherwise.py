@@ -7,14 +7,13 @@ written plainly (+Z up, facing +X): the rest frame is read from its feet, not as
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 from capsule_humanoid import STYLES, capsule_humanoid_xml
+from cli_helpers import console as cli
 from robot_checks import independent_check
 
 from controlmm.motion import Motion
@@ -38,16 +37,6 @@ def humanoids(tmp_path_factory) -> dict[str, Path]:
         out[style] = folder / f"{style}.xml"
         out[style].write_text(capsule_humanoid_xml(style))
     return out
-
-
-def cli(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "controlmm", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=env,
-    )
 
 
 def test_the_rest_frame_stands_every_style_up_facing_plus_x(humanoids):
