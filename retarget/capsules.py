@@ -63,6 +63,8 @@ def segment_distance(
     eps = 1e-12
     denom = a * e - b * b
     s = np.where((denom > eps) & (a > eps), np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
+    # The second segment a point (a sphere's capsule): the first's point nearest to it.
+    s = np.where((e <= eps) & (a > eps), np.clip(-c / np.maximum(a, eps), 0.0, 1.0), s)
     t = np.where(e > eps, (b * s + f) / np.maximum(e, eps), 0.0)
     t_c = np.clip(t, 0.0, 1.0)  # t outside [0, 1]: clamp it and recompute s
     s = np.where(t != t_c, np.where(a > eps, np.clip((b * t_c - c) / np.maximum(a, eps), 0.0, 1.0), 0.0), s)

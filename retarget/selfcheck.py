@@ -54,7 +54,7 @@ the safe margins too) and geoms the solver does not keep apart may overlap this 
 RELAXED_SOLVES = 2
 """Relaxed solves at most (the first one, then more room where it overlapped); still
 overlapping after them, the safe margins everywhere (one more solve)."""
-OUTPUT_SELF = (3.0, 10.0)
+OUTPUT_SELF = (3.0, 10.0, 30.0)
 """Where the output frames still overlap deeper than ``OTHER_DEPTH`` after all that (the solver's
 frames clear but an arm sweeping through a hip between two of them, or a hand target deep in
 the body that a soft margin gives way to), the motion is solved again at the output rate
@@ -62,11 +62,14 @@ the body that a soft margin gives way to), the motion is solved again at the out
 each while the overlap lasts, the pairs still overlapping getting that much more room for the
 next (G1's pelvis and a hip link in a stoop, corpus clip 000005 at 30 fps: 8 mm after the
 first); each kept if it overlaps less. x10 at once lifted a seated G1's planted foot 15 cm
-(clip 000012 at 30 fps: the solve stopped in a poor minimum)."""
+(clip 000012 at 30 fps: the solve stopped in a poor minimum). The third rung: G1's stoop
+000005 at 30 fps left the right shoulder 6.0 and 5.8 mm inside the torso after x3 and x10,
+none after x30."""
 OUTPUT_SLIP = 0.015
 """...and only if no foot that the human keeps down slides further between two output frames
-than before and than this (m): a solve with another weight may settle elsewhere (x3 slid
-H1's planted feet 2 cm a frame in a sit-down, corpus clip 000012 at 50 fps; x10 did not).
+than before and than this (m): a solve with another weight may settle elsewhere (x3 and
+x10 slid H1's planted feet 2 cm a frame in a sit-down, corpus clip 000012 at 50 fps; x30
+did not).
 Solves at the output rate hold planted feet less tightly than the resampled ones (no
 pinning between frames: 0.8-1.3 cm a frame against 0.1-0.3 on G1's stoop 000005 and H1's
 000012), so "no more than before" alone would keep their overlaps."""

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from retarget import load_robot
+from retarget.capsules import segment_distance
 from retarget.robots import PACKAGED_ROBOTS
 from retarget.selfcollision import SELF_MARGIN, capsule_distances
 
@@ -62,3 +63,57 @@ def test_g1_pelvis_against_hip_links_from_the_real_meshes():
                 deep += 1
                 assert dist[t, k] < sc.margin[k], (k, t, dist[t, k], sc.margin[k])
     assert deep > 10  # the sample reaches the contacts it checks
+
+
+def _sampled_distance(p: np.ndarray, d1: np.ndarray, q: np.ndarray, d2: np.ndarray) -> float:
+    """Smallest distance between 401 points along each segment (brute force)."""
+    s = np.linspace(0.0, 1.0, 401)[:, None]
+    a, b = p + s * d1, q + s * d2
+    return float(np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)).min())
+
+
+def test_segment_distance_of_segments_and_points():
+    """Closest points of two segments, either or both of them a point (a sphere's capsule),
+    against brute-force sampling; the points returned lie on the segments at that distance."""
+    rng = np.random.default_rng(3)
+    for case in range(240):
+        p, q = rng.normal(size=3), rng.normal(size=3)
+        d1, d2 = rng.normal(size=3), rng.normal(size=3)
+        if case % 4 == 1:
+            d2 = np.zeros(3)
+        elif case % 4 == 2:
+            d1 = np.zeros(3)
+        elif case % 4 == 3:
+            d1, d2 = np.zeros(3), np.zeros(3)
+        dist, pa, pb = segment_distance(p, d1, q, d2)
+        sampled = _sampled_distance(p, d1, q, d2)
+        step = (np.linalg.norm(d1) + np.linalg.norm(d2)) / 400  # the sampling's resolution
+        assert sampled - step - 1e-9 <= float(dist) <= sampled + 1e-9, case
+        assert np.isclose(np.linalg.norm(pa - pb), dist), case
+
+
+@pytest.mark.parametrize("name", ["g1", "h1"])
+def test_capsule_pairs_never_farther_than_their_geoms(name):
+    """The capsules enclose their geoms, so in any pose a pair's capsule distance is at most
+    MuJoCo's distance between the real geoms (G1's hip-pitch and H1's hip meshes are enclosed
+    by spheres: a sphere's distance was once measured from the other capsule's end point)."""
+    robot = load_robot(name)
+    model, sc, tree = robot.model, robot.self_clearance, robot.tree
+    assert sc is not None
+    sphere = np.linalg.norm(sc.p1 - sc.p0, axis=1) < 1e-9
+    pairs = np.flatnonzero(sphere[sc.second] & ~sphere[sc.first])
+    assert pairs.size > 20
+    rng = np.random.default_rng(1)
+    lower, upper = np.clip(robot.lower, -np.pi, np.pi), np.clip(robot.upper, -np.pi, np.pi)
+    q = rng.uniform(lower, upper, (40, len(lower)))
+    n = len(q)
+    dist, _, _ = capsule_distances(tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q), sc)
+    data = mujoco.MjData(model)
+    for t in range(n):
+        data.qpos[:] = model.qpos0
+        data.qpos[7:] = q[t]
+        mujoco.mj_kinematics(model, data)
+        for k in pairs:
+            g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
+            real = mujoco.mj_geomDistance(model, data, g1, g2, 10.0, None)
+            assert dist[t, k] <= real + 1e-4, (name, t, k, dist[t, k], real)
