@@ -46,6 +46,7 @@ from retarget.selfcheck import (
     RELAXED_SOLVES,
     RETRY_DEPTH,
     penetration_depths,
+    unpaired_overlaps,
 )
 from retarget.selfcollision import SelfClearance
 from retarget.solver import Solution, solve
@@ -178,7 +179,7 @@ def _solve_and_resample(
 
 def _solve_clear_of_self(
     rm: RobotModel, targets: Targets, config: SolverConfig, solver: str, src_fps: float, fps: float
-) -> tuple[Solution, np.ndarray, Replay, float, float, int]:
+) -> tuple[Solution, np.ndarray, Replay, float, float, int, SelfClearance | None]:
     """:func:`_solve_and_resample` with the arms' self-clearance relaxed where the robot's
     enclosures are loose (:mod:`retarget.selfcheck`): a first solve lets them come closer,
     MuJoCo checks the real geoms, pairs that overlap get more room for another solve (from
@@ -186,18 +187,22 @@ def _solve_clear_of_self(
     overlapping after RELAXED_SOLVES solves, or deeper than RETRY_DEPTH anywhere, the safe
     margins everywhere (a solve from scratch), checked in turn: pairs still overlapping more
     than OTHER_DEPTH get that much more room for a last solve. A robot without loose
-    enclosures starts from the safe margins (selfcheck.EXACT_TIGHTENINGS). Returns (solution,
-    output qpos, its replay, floor lift, swing lift, solves)."""
+    enclosures starts from the safe margins (selfcheck.EXACT_TIGHTENINGS), and pairs of geoms
+    found overlapping that it does not keep apart are added (selfcheck.unpaired_overlaps).
+    Returns (solution, output qpos, its replay, floor lift, swing lift, solves, the
+    self-clearance in use with any pairs added, None without one)."""
     clearance = _clearance_in_use(rm, config, solver)
     if clearance is None:
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
-        return sol, qpos, rep, lift, swing_lift, 1
+        return sol, qpos, rep, lift, swing_lift, 1, clearance
     if clearance.looseness is None or not np.any(clearance.looseness > 0):
         # Exact enclosures (capsules, boxes): the safe margins at once; pairs whose geoms still
         # overlap (Apollo's thick thighs in a turn) get that much more room and the clearance
         # a stiffer weight for another solve, EXACT_TIGHTENINGS times at most.
         # A tightened solve that overlaps deeper than the one before (it settled elsewhere:
         # the CMU humanoid crouching 50 cm on the real clip) is not kept.
+        # Geoms the anatomy's pairs leave alone but that overlap (a free ball wrist folding a
+        # hand into its forearm) get a pair of their own from then on (unpaired_overlaps).
         tight, solves, cfg = clearance, 1, config
         best: tuple[Solution, np.ndarray, Replay, float, float] | None = None
         deepest = np.inf
@@ -205,12 +210,19 @@ def _solve_clear_of_self(
             sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
                 rm.with_self_clearance(tight), targets, cfg, solver, src_fps, fps
             )
+            first_new, second_new, margin_new = unpaired_overlaps(
+                rm.model, rm.tree, qpos_in, clearance, rm.rest
+            )
+            if first_new.size and solves <= EXACT_TIGHTENINGS:
+                clearance = clearance.with_pairs(first_new, second_new, margin_new)
+                tight = tight.with_pairs(first_new, second_new, margin_new)
+                deepest = np.inf  # the solves before did not count those pairs
             depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
             if best is not None and depth.max(initial=0.0) >= deepest:
-                return (*best, solves)
+                return (*best, solves, clearance)
             best, deepest = (sol, qpos, rep, lift, swing_lift), depth.max(initial=0.0)
             if solves > EXACT_TIGHTENINGS or not np.any(depth > OTHER_DEPTH):
-                return (*best, solves)
+                return (*best, solves, clearance)
             tight, solves = tight.tightened(depth, OTHER_DEPTH), solves + 1
             cfg = replace(config, w_self=config.w_self * EXACT_SELF)
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
@@ -224,7 +236,7 @@ def _solve_clear_of_self(
         # Checked at the solver's frames (the output's in-between frames move a few mrad).
         depth = penetration_depths(rm.model, rm.tree, qpos_in, first)
         if not np.any(depth > tolerance):
-            return sol, qpos, rep, lift, swing_lift, solves
+            return sol, qpos, rep, lift, swing_lift, solves, clearance
         if depth.max() > RETRY_DEPTH:
             break  # arms pressed into the body (hands on the knees): the safe margins at once
         first = first.tightened(depth, tolerance)
@@ -232,11 +244,11 @@ def _solve_clear_of_self(
     # The safe margins are soft too: pairs whose geoms still overlap get that much more room.
     depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
     if not np.any(depth > OTHER_DEPTH):
-        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1
+        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1, clearance
     sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
         rm.with_self_clearance(clearance.tightened(depth, OTHER_DEPTH)), targets, config, solver, src_fps, fps
     )
-    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2
+    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2, clearance
 
 
 def _stance_slip(rm: RobotModel, rep: Replay, targets: Targets, fps: float) -> float:
@@ -262,11 +274,16 @@ def _clearance_in_use(rm: RobotModel, config: SolverConfig, solver: str) -> Self
     return rm.self_clearance if config.self_clearance and solver != "mink" else None
 
 
-def _output_overlap(rm: RobotModel, qpos: np.ndarray, config: SolverConfig, solver: str) -> np.ndarray:
-    """(P,) deepest overlap (m, 0 for none) of each pair of the robot's real geoms that the
-    self-clearance keeps apart, over the output frames ``qpos`` (T, nq); empty where the solve
-    keeps no self-clearance."""
-    clearance = _clearance_in_use(rm, config, solver)
+def _with_unpaired(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
+    """``clearance`` with a pair for each two geoms found overlapping in ``qpos`` (T, nq) that it
+    does not keep apart and that are apart at rest (:func:`retarget.selfcheck.unpaired_overlaps`)."""
+    first, second, margin = unpaired_overlaps(rm.model, rm.tree, qpos, clearance, rm.rest)
+    return clearance.with_pairs(first, second, margin) if first.size else clearance
+
+
+def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance | None) -> np.ndarray:
+    """(P,) deepest overlap (m, 0 for none) of each pair of the robot's real geoms that
+    ``clearance`` keeps apart, over the output frames ``qpos`` (T, nq); empty without one."""
     if clearance is None:
         return np.zeros(0)
     return penetration_depths(rm.model, rm.tree, qpos, clearance)
@@ -323,14 +340,16 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
-    sol, qpos, rep, lift, swing_lift, solves = _solve_clear_of_self(rm, targets, config, solver, src_fps, fps)
-    depth = _output_overlap(rm, qpos, config, solver)
+    sol, qpos, rep, lift, swing_lift, solves, clearance = _solve_clear_of_self(
+        rm, targets, config, solver, src_fps, fps
+    )
+    clearance = None if clearance is None else _with_unpaired(rm, qpos, clearance)
+    depth = _output_overlap(rm, qpos, clearance)
     if depth.max(initial=0.0) > OTHER_DEPTH:
         # At the output rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve
         # kept if it overlaps less and slips no more (selfcheck.OUTPUT_SLIP); pairs that still
         # overlap get that much more room and the next weight for another.
         dense = resample(joints, src_fps, fps)
-        clearance = _clearance_in_use(rm, config, solver)
         assert clearance is not None  # the overlaps were measured on it
         slip = _stance_slip(rm, rep, targets, fps)
         for stiffness in OUTPUT_SELF:
@@ -340,7 +359,8 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
                 rm.with_self_clearance(clearance), dense_targets, stiff, solver, fps, fps
             )
             solves += 1
-            depth2 = _output_overlap(rm, qpos2, config, solver)
+            clearance = _with_unpaired(rm, qpos2, clearance)
+            depth2 = _output_overlap(rm, qpos2, clearance)
             slip2 = _stance_slip(rm, rep2, dense_targets, fps)
             kept = depth2.max() < depth.max() and slip2 <= max(slip, OUTPUT_SLIP)
             if kept:

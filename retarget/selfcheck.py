@@ -31,8 +31,8 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
-from retarget.kinematics import KinematicTree, quat_to_mat
-from retarget.selfcollision import SelfClearance, close_pairs
+from retarget.kinematics import KinematicTree, Poses, quat_to_mat
+from retarget.selfcollision import REST_SLACK, SELF_MARGIN, SelfClearance, capsule_distances, close_pairs
 
 RELAX_FRACTION = 0.3
 """In the first solve a pair's capsules may come closer than their safe margin by this
@@ -116,6 +116,81 @@ def penetration_depths(
             arm = relaxed & _in_subtree(model, sc, b1 if _depth(model, b1) >= _depth(model, b2) else b2)
             found[arm] = np.maximum(found[arm], depth)
     return found
+
+
+def unpaired_overlaps(
+    model: mujoco.MjModel,
+    tree: KinematicTree,
+    qpos: np.ndarray,
+    sc: SelfClearance,
+    rest: Poses,
+    depth: float = OTHER_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Capsule pairs (first, second: (Q,) indices into ``sc``'s capsules) whose geoms overlap
+    deeper than ``depth`` (m) in some frame of ``qpos`` (T, nq) but that ``sc`` does not keep
+    apart, with their margins (Q,): ``SELF_MARGIN``, or the rest distance less ``REST_SLACK``
+    where that is smaller. A free ball wrist folding a hand into its own forearm, a free neck
+    folding the head onto a clavicle (SMPL humanoids): geoms the pairs built from the anatomy
+    (:func:`retarget.selfcollision.build_self_clearance`) leave alone.
+
+    Candidates: the geom pairs MuJoCo collides (contype/conaffinity; not one body or a parent
+    and its child after welding; not excluded) whose capsules are apart at rest (``rest``, one
+    frame; capsules that overlap there touch by design); only where their capsules overlap
+    (they enclose the geoms) are the geoms measured (``mj_geomDistance``)."""
+    qpos = np.asarray(qpos, dtype=np.float64)
+    none = np.zeros(0, dtype=int)
+    first, second = np.triu_indices(len(sc.geom), 1)
+    g1, g2 = sc.geom[first], sc.geom[second]
+    weld = model.body_weldid[model.geom_bodyid]
+    w1, w2 = weld[g1], weld[g2]
+    up1, up2 = model.body_weldid[model.body_parentid[w1]], model.body_weldid[model.body_parentid[w2]]
+    excluded = {frozenset((int(x >> 16), int(x & 0xFFFF))) for x in model.exclude_signature}
+    bodies = model.geom_bodyid
+    paired = set(_pair_index(sc))
+    keep = (
+        (w1 != w2)
+        & (up1 != w2)
+        & (up2 != w1)
+        & (
+            (
+                (model.geom_contype[g1] & model.geom_conaffinity[g2])
+                | (model.geom_contype[g2] & model.geom_conaffinity[g1])
+            )
+            != 0
+        )
+    )
+    keep &= np.array(
+        [
+            (int(a), int(b)) not in paired and frozenset((int(bodies[a]), int(bodies[b]))) not in excluded
+            for a, b in zip(g1, g2, strict=True)
+        ],
+        dtype=bool,
+    )
+    first, second = first[keep], second[keep]
+    if not first.size:
+        return none, none, np.zeros(0)
+    cand = sc.with_pairs(first, second, 0.0).select_pairs(
+        np.arange(sc.num_pairs + len(first)) >= sc.num_pairs
+    )
+    at_rest = capsule_distances(rest, cand)[0][0]
+    apart = at_rest > 2 * REST_SLACK
+    first, second, at_rest, cand = first[apart], second[apart], at_rest[apart], cand.select_pairs(apart)
+    if not first.size:
+        return none, none, np.zeros(0)
+    poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
+    near = close_pairs(poses, replace(cand, margin=np.zeros(cand.num_pairs)))
+    found = np.zeros(cand.num_pairs, dtype=bool)
+    data = mujoco.MjData(model)
+    for frame in np.unique(near.frame):
+        data.qpos[:] = qpos[frame]
+        mujoco.mj_kinematics(model, data)
+        for k in near.pair[near.frame == frame]:
+            if not found[k]:
+                gap = mujoco.mj_geomDistance(
+                    model, data, int(cand.geom[cand.first[k]]), int(cand.geom[cand.second[k]]), 0.01, None
+                )
+                found[k] = gap < -depth
+    return first[found], second[found], np.minimum(SELF_MARGIN, at_rest[found] - REST_SLACK)
 
 
 def pair_depths(

@@ -11,7 +11,8 @@ robot's collision geoms (:class:`SelfClearance`):
 * the *arm* geoms (the bodies from below the shoulder keypoint's body down to the wrist
   keypoint's body and its descendants) are paired with every geom of the other bodies
   (trunk, legs, the other arm) except the arm's own shoulder chain and the feet (the foot
-  and ankle bodies: out of reach but for touching the toes), and the hand (the wrist body and
+  and ankle bodies: out of reach but for touching the toes; a shin the foot hangs from
+  directly is not an ankle body), and the hand (the wrist body and
   below) with that shoulder chain where the two are apart at rest (a hand brought to its own
   shoulder); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
@@ -32,8 +33,9 @@ robot's collision geoms (:class:`SelfClearance`):
   into it;
 * on robots without meshes, the trunk against the shoulder links and the trunk's own links
   that are neither parent and child (a jointed spine: the CMU humanoid's pelvis and upper
-  back), where both are capsules or spheres (exact enclosures) that MuJoCo collides; spine
-  pairs closer than ``SELF_MARGIN`` at rest are left out.
+  back), and the head's links against the shoulder links (a jointed neck folding the head
+  onto a clavicle), where both are capsules or spheres (exact enclosures) that MuJoCo
+  collides; such pairs closer than ``SELF_MARGIN`` at rest are left out.
 
 The solver adds, per frame and active pair, the residual ``sqrt(w_self) * (d - margin)``
 where ``d`` is the capsules' signed distance (:func:`capsule_distances`;
@@ -119,6 +121,25 @@ class SelfClearance:
         bad = depth > tolerance
         more = np.where(self.margin < safe, np.maximum(safe, self.margin + depth), self.margin + depth)
         return replace(self, margin=np.where(bad, more, self.margin))
+
+    def with_pairs(self, first: np.ndarray, second: np.ndarray, margin: float | np.ndarray) -> SelfClearance:
+        """A copy keeping the capsule pairs ``first``, ``second`` (Q,) apart too, with
+        ``margin`` (m, one or (Q,); no looseness), e.g. geoms found overlapping that the pairs
+        built from the robot's anatomy leave alone (:func:`retarget.selfcheck.unpaired_overlaps`)."""
+        extra = np.broadcast_to(np.asarray(margin, dtype=np.float64), (len(first),)).copy()
+
+        def grow(values: np.ndarray | None, more: np.ndarray) -> np.ndarray | None:
+            return None if values is None else np.concatenate([values, more])
+
+        return replace(
+            self,
+            first=np.concatenate([self.first, np.asarray(first, dtype=int)]),
+            second=np.concatenate([self.second, np.asarray(second, dtype=int)]),
+            margin=np.concatenate([self.margin, extra]),
+            safe_margin=grow(self.safe_margin, extra),
+            looseness=grow(self.looseness, np.zeros(len(first))),
+            relaxed_pairs=None,
+        )
 
     def select_pairs(self, keep: np.ndarray) -> SelfClearance:
         """A copy with the pairs where ``keep`` (P,) bool is true (their margins and looseness)."""
@@ -277,10 +298,14 @@ def build_self_clearance(
         return None
     caps = capsules
     # The feet (ankle bodies and below) are out of the arms' reach but for touching the toes.
+    # The ankle link above the foot too, unless it is the shin (the knee's body: MuJoCo's,
+    # the CMU and SMPL humanoids' and H1's feet hang from the shin, which a stooping hand reaches).
     foot_bodies: set[int] = set()
     for side in ("left", "right"):
         fb = int(tree.node_body[feet[side].node])
-        foot_bodies |= {b for b in range(1, m.nbody) if fb in ancestors(b) or int(parent[fb]) == b}
+        knee_node = keypoint_nodes.get(f"{side}_knee")
+        shin = -1 if knee_node is None else int(tree.node_body[knee_node])
+        foot_bodies |= {b for b in range(1, m.nbody) if fb in ancestors(b) or int(parent[fb]) == b != shin}
     node, p0, p1, radius, geom, body_of = (
         caps.node,
         caps.p0,
@@ -410,6 +435,18 @@ def build_self_clearance(
                     spine_pairs.append(len(first))
                     first.append(i)
                     second.append(j)
+        # A jointed neck (SMPL's, +-180 degrees) folds the head onto a clavicle: the bodies
+        # above the trunk that are neither arm nor shoulder chain against the shoulder chains.
+        chains = set().union(*shoulders.values()) - trunk_bodies if shoulders else set()
+        head = {b for b in range(1, m.nbody) if int(parent[b]) in trunk_bodies} - trunk_bodies - chains
+        head = {b for b in range(1, m.nbody) if head & set(ancestors(b))} - set(leg) - set(arm)
+        for i, bi in enumerate(body_of):
+            if bi in head:
+                for j, bj in enumerate(body_of):
+                    if bj in chains and exact_pair(i, j):
+                        spine_pairs.append(len(first))
+                        first.append(i)
+                        second.append(j)
     trunk_pairs += shoulder_pairs
     relaxed_only = shoulder_pairs if loose else []
     if not first:

@@ -22,6 +22,8 @@ from retarget.automap import RIGID_POSTURE
 from retarget.compare import robot_keypoints, similarity_fit
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import free_root
+from retarget.selfcheck import unpaired_overlaps
+from retarget.selfcollision import SELF_MARGIN
 
 
 @pytest.fixture(scope="module")
@@ -85,8 +87,53 @@ def test_the_spine_and_the_clavicles_are_kept_clear_on_a_capsule_humanoid(humano
         ("chest", "upperarm_l"),
         ("chest", "upperarm_r"),
         ("lowerback", "upperarm_l"),
+        ("head", "clavicle_l"),  # a jointed neck folding the head onto a clavicle
+        ("head", "clavicle_r"),
+        ("head", "upperarm_l"),
+        ("hand_l", "shin_l"),  # the foot hangs from the shin: a stooping hand reaches it
+        ("hand_r", "shin_r"),
     ):
         assert frozenset(pair) in pairs, pair
+
+
+def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
+    """Without its head-clavicle pairs, the capsule humanoid's clearance does not keep the head
+    off the clavicles; rolling the neck 45 degrees puts the head 1.4 cm into the right clavicle
+    by MuJoCo: ``unpaired_overlaps`` finds that pair (apart at rest: a full 2 cm margin), and
+    nothing at rest or once the pair is kept."""
+    robot = load_robot(humanoids["plain"])
+    sc, m = robot.self_clearance, robot.model
+    assert sc is not None
+
+    def body(c: int) -> str:
+        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
+
+    neck = np.array(
+        [
+            {body(a), body(b)} in ({"head", "clavicle_l"}, {"head", "clavicle_r"})
+            for a, b in zip(sc.first, sc.second, strict=True)
+        ]
+    )
+    assert neck.sum() == 2
+    without = sc.select_pairs(~neck)
+    rest = m.qpos0.copy()
+    rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
+    rolled = rest.copy()
+    rolled[m.jnt_qposadr[m.joint("neck_x").id]] = np.radians(45)
+    data = mujoco.MjData(m)
+    data.qpos[:] = rolled
+    mujoco.mj_forward(m, data)
+    assert any(
+        {m.body(int(m.geom_bodyid[c.geom1])).name, m.body(int(m.geom_bodyid[c.geom2])).name}
+        == {"head", "clavicle_r"}
+        and c.dist < -0.01
+        for c in data.contact[: data.ncon]
+    )
+    first, second, margin = unpaired_overlaps(m, robot.tree, np.stack([rest, rolled]), without, robot.rest)
+    assert [(body(a), body(b)) for a, b in zip(first, second, strict=True)] == [("head", "clavicle_r")]
+    assert margin.tolist() == [SELF_MARGIN]
+    assert unpaired_overlaps(m, robot.tree, rest[None], without, robot.rest)[0].size == 0
+    assert unpaired_overlaps(m, robot.tree, rolled[None], sc, robot.rest)[0].size == 0
 
 
 def test_every_style_retargets_like_the_plain_one(tmp_path, humanoids, motion):
