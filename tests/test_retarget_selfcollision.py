@@ -28,6 +28,17 @@ def _trunk_thigh_pairs(name: str) -> list[int]:
     return [k for k in range(sc.num_pairs) if body[sc.first[k]] == root and sc.margin[k] < SELF_MARGIN]
 
 
+def _random_poses(robot, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random joint vectors within the limits (+-pi for unlimited joints), root at the
+    origin, and every self-clearance pair's capsule distance in them, (n, P)."""
+    rng = np.random.default_rng(seed)
+    lower, upper = np.clip(robot.lower, -np.pi, np.pi), np.clip(robot.upper, -np.pi, np.pi)
+    q = rng.uniform(lower, upper, (n, len(lower)))
+    poses = robot.tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q)
+    dist, _, _ = capsule_distances(poses, robot.self_clearance)
+    return q, dist
+
+
 @pytest.mark.parametrize("name", PACKAGED_ROBOTS)
 def test_rest_pose_violates_no_pair(name):
     robot = load_robot(name)
@@ -39,18 +50,15 @@ def test_rest_pose_violates_no_pair(name):
 
 def test_g1_pelvis_against_hip_links_from_the_real_meshes():
     robot = load_robot("g1")
-    model, sc, tree = robot.model, robot.self_clearance, robot.tree
+    model, sc = robot.model, robot.self_clearance
     assert sc is not None
     pairs = _trunk_thigh_pairs("g1")
     names = {(model.body(int(robot.capsules.body[sc.second[k]])).name) for k in pairs}
     assert {"left_hip_roll_link", "right_hip_roll_link"} <= names
     # Random poses of every joint (not the sweep's grid): where the real geoms are > 8 mm deep,
     # the capsule pair is below its margin, so the solver pushes them apart.
-    rng = np.random.default_rng(0)
-    lower, upper = np.clip(robot.lower, -np.pi, np.pi), np.clip(robot.upper, -np.pi, np.pi)
-    q = rng.uniform(lower, upper, (1500, len(lower)))
+    q, dist = _random_poses(robot, 1500, seed=0)
     n = len(q)
-    dist, _, _ = capsule_distances(tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q), sc)
     data = mujoco.MjData(model)
     deep = 0
     for k in pairs:
@@ -98,16 +106,13 @@ def test_capsule_pairs_never_farther_than_their_geoms(name):
     MuJoCo's distance between the real geoms (G1's hip-pitch and H1's hip meshes are enclosed
     by spheres: a sphere's distance was once measured from the other capsule's end point)."""
     robot = load_robot(name)
-    model, sc, tree = robot.model, robot.self_clearance, robot.tree
+    model, sc = robot.model, robot.self_clearance
     assert sc is not None
     sphere = np.linalg.norm(sc.p1 - sc.p0, axis=1) < 1e-9
     pairs = np.flatnonzero(sphere[sc.second] & ~sphere[sc.first])
     assert pairs.size > 20
-    rng = np.random.default_rng(1)
-    lower, upper = np.clip(robot.lower, -np.pi, np.pi), np.clip(robot.upper, -np.pi, np.pi)
-    q = rng.uniform(lower, upper, (40, len(lower)))
+    q, dist = _random_poses(robot, 40, seed=1)
     n = len(q)
-    dist, _, _ = capsule_distances(tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q), sc)
     data = mujoco.MjData(model)
     for t in range(n):
         data.qpos[:] = model.qpos0
