@@ -210,13 +210,14 @@ def _solve_clear_of_self(
             sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
                 rm.with_self_clearance(tight), targets, cfg, solver, src_fps, fps
             )
-            first_new, second_new, margin_new = unpaired_overlaps(
-                rm.model, rm.tree, qpos_in, clearance, rm.rest
-            )
-            if first_new.size and solves <= EXACT_TIGHTENINGS:
-                clearance = clearance.with_pairs(first_new, second_new, margin_new)
-                tight = tight.with_pairs(first_new, second_new, margin_new)
-                deepest = np.inf  # the solves before did not count those pairs
+            if solves <= EXACT_TIGHTENINGS:  # a solve follows: pairs found now are kept in it
+                first_new, second_new, margin_new = unpaired_overlaps(
+                    rm.model, rm.tree, qpos_in, clearance, rm.rest
+                )
+                if first_new.size:
+                    clearance = clearance.with_pairs(first_new, second_new, margin_new)
+                    tight = tight.with_pairs(first_new, second_new, margin_new)
+                    deepest = np.inf  # the solves before did not count those pairs
             depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
             if best is not None and depth.max(initial=0.0) >= deepest:
                 return (*best, solves, clearance)
