@@ -86,3 +86,9 @@ def aabb_corners(model: mujoco.MjModel, g: int) -> np.ndarray:
     """The 8 corners (8, 3) of geom ``g``'s bounding box (MuJoCo's ``geom_aabb``) in its body frame."""
     centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
     return model.geom_pos[g] + (centre + _SIGNS * half) @ quat_to_mat(model.geom_quat[g]).T
+
+
+def excluded_body_pairs(model: mujoco.MjModel) -> set[frozenset[int]]:
+    """The body pairs the model's ``<contact><exclude>`` elements keep MuJoCo from colliding
+    (``exclude_signature`` packs the two body ids as ``first << 16 | second``)."""
+    return {frozenset((int(s >> 16), int(s & 0xFFFF))) for s in model.exclude_signature}

@@ -31,6 +31,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
+from retarget.geoms import excluded_body_pairs
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.selfcollision import REST_SLACK, SELF_MARGIN, SelfClearance, capsule_distances, close_pairs
 
@@ -144,7 +145,7 @@ def unpaired_overlaps(
     weld = model.body_weldid[model.geom_bodyid]
     w1, w2 = weld[g1], weld[g2]
     up1, up2 = model.body_weldid[model.body_parentid[w1]], model.body_weldid[model.body_parentid[w2]]
-    excluded = {frozenset((int(x >> 16), int(x & 0xFFFF))) for x in model.exclude_signature}
+    excluded = excluded_body_pairs(model)
     bodies = model.geom_bodyid
     paired = set(_pair_index(sc))
     keep = (

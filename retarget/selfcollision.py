@@ -51,7 +51,7 @@ import mujoco
 import numpy as np
 
 from retarget.capsules import Capsules, segment_distance
-from retarget.geoms import FloorPoints
+from retarget.geoms import FloorPoints, excluded_body_pairs
 from retarget.kinematics import KinematicTree, Poses
 
 SELF_MARGIN = 0.02
@@ -365,7 +365,7 @@ def build_self_clearance(
     # The trunk against the thighs (a deep stoop or crouch folds the trunk onto the hips): the
     # trunk bodies the leg hangs from (the pelvis) against the links above each knee, but for a
     # parent and its child and body pairs the model excludes (as MuJoCo does).
-    excluded = {frozenset((int(s_ >> 16), int(s_ & 0xFFFF))) for s_ in m.exclude_signature}
+    excluded = excluded_body_pairs(m)
 
     def exact_pair(i: int, j: int) -> bool:
         """Capsules ``i`` and ``j`` are their geoms (capsules, spheres), which MuJoCo collides."""

@@ -28,6 +28,7 @@ from retarget import (
     robot_mjcf,
 )
 from retarget.compare import similarity_fit, stance_foot_speed
+from retarget.geoms import excluded_body_pairs
 from retarget.robot_files import exclude_rest_contacts
 from retarget.robots import PACKAGED_ROBOTS, robot_scene
 from scenes import load_scene
@@ -308,6 +309,9 @@ def test_contacts_of_the_rest_pose_are_excluded(tmp_path):
         ("left_ankle_roll_link", "left_knee_link")
     ]
     assert len(loaded.excludes) == len(spec.excludes) + 1
+    model = load_robot(path).model
+    pair = frozenset((model.body("left_knee_link").id, model.body("left_ankle_roll_link").id))
+    assert pair in excluded_body_pairs(model) and pair not in excluded_body_pairs(g1)
     report = check_trajectory(load_scene("empty", robot=str(path)), load_robot(path).model.qpos0[None], 30)
     assert report.stats["self_collision_frames"] == 0, report.summary()
 
