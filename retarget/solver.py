@@ -25,7 +25,8 @@ bandwidth to 6 + nj and quarters the factorisation time.
   the rest; every step is projected onto the box.
 * Damping is per frame: frames are nearly independent, so each frame keeps the step only
   if its own cost drops, and its damping falls or rises on its own.
-* Coarse to fine (``SolverConfig.levels``): every 3rd frame first, then all frames.
+* Coarse to fine (``SolverConfig.levels``): every 3rd frame first, then all frames (which
+  also keep the self-clearance halfway between frames, :mod:`retarget.midpoints`).
 * Local refinement: frames where the stiff self-clearance / body-floor terms are still
   violated are solved again in padded spans. The spans form one problem with no temporal
   term between them (independent blocks of the banded system), each span accepting,
@@ -124,6 +125,7 @@ def solve(
             config,
             max_iterations=iters,
             damping=damping,
+            self_midpoints=config.self_midpoints and last,
             body_floor_weight=config.body_floor_weight
             if last
             else min(config.w_body_floor_coarse, config.body_floor_weight),

@@ -204,20 +204,29 @@ def test_a_stoop_keeps_g1s_hand_and_hips_apart_at_every_output_rate(fps):
 
 
 def test_an_output_rate_solve_that_slides_a_planted_foot_is_not_kept():
-    """Corpus clip 000012 (``sit_down``) on H1 at 50 fps: the hands on the lap sweep 3 cm into
-    the hips between the solver's frames. The first two output-rate solves (x3, x10) clear
-    them but slide the planted feet about 2 cm in a frame: they are not kept
-    (``OUTPUT_SLIP``); the last (x30) clears them with the feet down: no self-collision, a
-    stance foot at most 0.3 m/s (``controlmm validate`` allows 0.2: one frame at 0.24 fails
-    it since the capsule-sphere distances were corrected, 2026-11-28)."""
+    """Corpus clip 000012 (``sit_down``) on H1 at 50 fps: without the self-clearance halfway
+    between the solver's frames (``self_midpoints``), the elbows sweep 3 cm into the hips
+    between two of them. The first two output-rate solves (x3, x10) clear them but slide the
+    planted feet about 2 cm in a frame: they are not kept (``OUTPUT_SLIP``); the last (x30)
+    clears them with the feet down: no self-collision, a stance foot at most 0.3 m/s. With the
+    midpoint term (the default) the first solve keeps them apart: no output-rate solve, and
+    the motion passes the simulation check (feet slower than its 0.2 m/s)."""
     spec = plan_clips(CorpusConfig(clips=9800, seed=0))[12]
     assert spec.family == "sit_down"
     _, joints, _, _ = make_clip(spec)
-    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "h1", fps=50.0, metrics=False)
-    assert traj.solver["self_clearance_solves"] == 1 + len(OUTPUT_SELF)  # one solve, then the rungs
-    report = sim.check_trajectory(scenes.load_scene("empty", robot="h1"), traj.qpos, 50.0)
+    motion = Motion(joints=joints.astype(np.float64), fps=20.0)
+    scene = scenes.load_scene("empty", robot="h1")
+    config = SolverConfig(**load_robot("h1").mapping.solver, self_midpoints=False)
+    ladder = retarget_motion(motion, "h1", fps=50.0, metrics=False, config=config)
+    assert ladder.solver["self_clearance_solves"] == 1 + len(OUTPUT_SELF)  # one solve, then the rungs
+    report = sim.check_trajectory(scene, ladder.qpos, 50.0)
     assert report.stats["self_collision_frames"] == 0
     assert report.stats["max_foot_slide_speed_mps"] < 0.3
+    traj = retarget_motion(motion, "h1", fps=50.0, metrics=False)
+    assert traj.solver["self_clearance_solves"] == 1
+    report = sim.check_trajectory(scene, traj.qpos, 50.0)
+    assert report.stats["self_collision_frames"] == 0
+    assert report.passed, report.stats["error_kinds"]
 
 
 def test_apollos_thighs_stay_apart_in_a_turn():

@@ -17,7 +17,7 @@ from retarget.costs.keypoints import KeypointCost
 from retarget.costs.orientations import OrientationCost
 from retarget.costs.posture import PostureCost
 from retarget.costs.segments import SegmentCost
-from retarget.costs.self_clearance import SelfClearanceCost
+from retarget.costs.self_clearance import MidpointClearanceCost, SelfClearanceCost
 from retarget.costs.velocity import VelocityCost
 from retarget.robot_model import RobotModel
 from retarget.solver_config import SolverConfig
@@ -30,6 +30,7 @@ __all__ = [
     "CostTerm",
     "FloorCost",
     "KeypointCost",
+    "MidpointClearanceCost",
     "NormalEquations",
     "OrientationCost",
     "PostureCost",
@@ -64,6 +65,8 @@ def default_costs(
         terms.append(BodyFloorCost(robot.body_floor, c.body_floor_weight, c.body_clearance))
     if c.self_clearance and robot.self_clearance is not None:
         terms.append(SelfClearanceCost(robot.self_clearance, c.w_self))
+        if c.self_midpoints:
+            terms.append(MidpointClearanceCost(robot.self_clearance, c.w_self, span))
     terms += [
         VelocityCost(ref_x, span, targets.fps, c.w_vel_root, c.w_vel_joint),
         AccelerationCost(ref_x, span, targets.fps, c.w_acc_root, c.w_acc_joint, c.exact_acceleration),
