@@ -10,10 +10,12 @@ placements (end point and segment vector averaged): a point at parameter s of th
 :mod:`retarget.costs.self_clearance`). It is close to the capsules of the interpolated pose
 (the chord of a swing instead of its arc: 5 mm for a 0.5 m arm turning 0.3 rad in a frame).
 
-Halfway, a pair keeps its margin, or, where the frames themselves come closer (a pair the
-other terms hold together, a pair in contact), what it keeps at both ends less
-``MIDPOINT_SLACK``: the term adds nothing where the frames' own term acts already, only where
-the pair passes through itself between them.
+Only a pair that keeps its margin at both frames is kept apart halfway (a pair passing
+through itself between them): where the frames' own term acts, the midpoint's gradient, the
+same direction for both frames, can push the nearer frame's capsule into the other one (an
+SMPL humanoid's hand driven 5 cm into its hip). Halfway it keeps its margin, or its distance
+at the nearer frame less ``MIDPOINT_SLACK`` where that is less than 5 mm above the margin
+(the chord's error).
 """
 
 from __future__ import annotations
@@ -61,7 +63,8 @@ def _parameter(point: np.ndarray, start: np.ndarray, vector: np.ndarray) -> np.n
 
 def midpoint_pairs(poses: Poses, sc: SelfClearance, coupled: np.ndarray) -> MidpointPairs:
     """The entries closer than their limit between the frames t and t + 1 where ``coupled``
-    (T - 1,) bool is true (frames of one span), each capsule averaged over the two frames.
+    (T - 1,) bool is true (frames of one span), each capsule averaged over the two frames,
+    of the pairs that keep their margin at both frames.
 
     Broad phase as :func:`retarget.selfcollision.close_pairs` (an averaged capsule's segment is
     no longer than the capsule's).
@@ -86,8 +89,9 @@ def midpoint_pairs(poses: Poses, sc: SelfClearance, coupled: np.ndarray) -> Midp
     nxt = frame + 1
     at_t = segment_distance(start[frame, i], vector[frame, i], start[frame, j], vector[frame, j])[0]
     at_next = segment_distance(start[nxt, i], vector[nxt, i], start[nxt, j], vector[nxt, j])[0]
-    limit = np.minimum(sc.margin[pr], np.minimum(at_t, at_next) - radii - MIDPOINT_SLACK)
-    keep = dist < limit
+    ends = np.minimum(at_t, at_next) - radii
+    limit = np.minimum(sc.margin[pr], ends - MIDPOINT_SLACK)
+    keep = (dist < limit) & (ends >= sc.margin[pr])
     frame, pr, i, j, s, u = frame[keep], pr[keep], i[keep], j[keep], s[keep], u[keep]
     nxt = frame + 1
     return MidpointPairs(

@@ -347,29 +347,40 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     clearance = None if clearance is None else _with_unpaired(rm, qpos, clearance)
     depth = _output_overlap(rm, qpos, clearance)
     if depth.max(initial=0.0) > OTHER_DEPTH:
-        # At the output rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve
-        # kept if it overlaps less and slips no more (selfcheck.OUTPUT_SLIP); pairs that still
-        # overlap get that much more room and the next weight for another.
+        # Solved again, first at the motion's rate with the pairs kept apart halfway between
+        # its frames too (retarget.midpoints: a hand sweeping through a hip between two of
+        # them; skipped where the solve had that already), then at the output rate with a
+        # stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve kept if it overlaps less
+        # and slips no more (selfcheck.OUTPUT_SLIP); pairs that still overlap after an
+        # output-rate solve get that much more room for the next rung.
         dense = resample(joints, src_fps, fps)
         assert clearance is not None  # the overlaps were measured on it
         slip = _stance_slip(rm, rep, targets, fps)
-        for stiffness in OUTPUT_SELF:
-            stiff = replace(config, w_self=config.w_self * stiffness)
-            dense_targets = build_targets(rm, dense, fps, transform, stiff)
+        rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
+        for stiffness in rungs:
+            if stiffness is None:  # the midpoint rung
+                cfg2, rung = replace(config, self_midpoints=True), (joints, src_fps, targets)
+            else:
+                cfg2 = replace(config, w_self=config.w_self * stiffness)
+                rung = (dense, fps, build_targets(rm, dense, fps, transform, cfg2))
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-                rm.with_self_clearance(clearance), dense_targets, stiff, solver, fps, fps
+                rm.with_self_clearance(clearance), rung[2], cfg2, solver, rung[1], fps
             )
             solves += 1
             clearance = _with_unpaired(rm, qpos2, clearance)
             depth2 = _output_overlap(rm, qpos2, clearance)
-            slip2 = _stance_slip(rm, rep2, dense_targets, fps)
+            slip2 = _stance_slip(rm, rep2, rung[2], fps)
             kept = depth2.max() < depth.max() and slip2 <= max(slip, OUTPUT_SLIP)
+            if stiffness is None:  # it removes sweeps between frames: no pair may come out deeper
+                before = np.pad(depth, (0, len(depth2) - len(depth)))  # pairs added since: none
+                kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
             if kept:
-                joints, src_fps, targets, depth, slip = dense, fps, dense_targets, depth2, slip2
+                (joints, src_fps, targets), depth, slip = rung, depth2, slip2
                 sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
             if kept and depth2.max() <= OTHER_DEPTH:
                 break
-            clearance = clearance.tightened(depth2, OTHER_DEPTH)
+            if stiffness is not None:  # the output-rate rungs go on as they would without it
+                clearance = clearance.tightened(depth2, OTHER_DEPTH)
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)

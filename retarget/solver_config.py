@@ -45,9 +45,10 @@ class SolverConfig:
     locked feet pull the legs."""
     self_clearance: bool = True
     """Keep the arms clear of the trunk, the legs and each other (:mod:`retarget.selfcollision`)."""
-    self_midpoints: bool = True
+    self_midpoints: bool = False
     """Keep them clear halfway between consecutive frames too (:mod:`retarget.midpoints`): an
-    arm swinging past a hip between two frames would pass through it in the output's frames."""
+    arm swinging past a hip between two frames would pass through it in the output's frames.
+    ``retarget_motion`` solves again with it where its output frames self-collide."""
     pin_iterations: int = 1
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
     # Weights of the per-frame cost terms (appended: positional construction keeps its order).

@@ -22,10 +22,11 @@ from retarget import load_robot
 from retarget.costs import Configuration, MidpointClearanceCost, NormalEquations
 from retarget.costs.self_clearance import MidpointClearanceValue
 from retarget.kinematics import so3_exp
-from retarget.midpoints import MidpointPairs, midpoint_pairs
+from retarget.midpoints import MIDPOINT_SLACK, MidpointPairs, midpoint_pairs
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel
 from retarget.selfcheck import OTHER_DEPTH, penetration_depths
+from retarget.selfcollision import capsule_distances
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
 from retarget.targets import Targets, build_targets
@@ -90,6 +91,20 @@ def test_the_term_keeps_the_frames_in_between_clear(sit_down, solved):
     assert not _tunnels(robot, sol)[0].size
     between = resample_qpos(_qpos(sol), 20.0, 40.0, robot.lower, robot.upper)
     assert penetration_depths(robot.model, robot.tree, between, robot.self_clearance).max() <= OTHER_DEPTH
+
+
+def test_only_pairs_that_keep_their_margin_at_both_frames_count(sit_down, solved):
+    """Where a frame's own term acts, the midpoint is left alone (its gradient, one direction
+    for both frames, could push the nearer frame's capsule into the other)."""
+    robot, _ = sit_down
+    sol, sc = solved[False], robot.self_clearance
+    poses = robot.tree.forward(sol.root_pos, sol.root_rot, sol.q)
+    mid = midpoint_pairs(poses, sc, np.ones(len(sol.q) - 1, dtype=bool))
+    dist, _, _ = capsule_distances(poses, sc)
+    assert mid.frame.size and np.any(dist < sc.margin)  # some pairs come inside their margin
+    ends = np.minimum(dist[mid.frame, mid.pair], dist[mid.frame + 1, mid.pair])
+    np.testing.assert_array_less(sc.margin[mid.pair] - 1e-12, ends)
+    np.testing.assert_allclose(mid.limit, np.minimum(sc.margin[mid.pair], ends - MIDPOINT_SLACK))
 
 
 def test_a_pair_that_does_not_move_between_frames_adds_nothing(sit_down, solved):
