@@ -10,6 +10,7 @@ apart halfway between consecutive frames (:mod:`retarget.midpoints`).
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import TypeVar
 
 import numpy as np
 
@@ -17,6 +18,22 @@ from retarget.costs.base import Configuration, CostTerm, NormalEquations, Sparse
 from retarget.costs.temporal import coupled_pairs
 from retarget.midpoints import MidpointPairs, midpoint_pairs
 from retarget.selfcollision import ClosePairs, SelfClearance, close_pairs
+
+Entries = TypeVar("Entries", ClosePairs, MidpointPairs)
+
+
+def _merge(use: np.ndarray, mine: Entries, theirs: Entries) -> Entries:
+    """The entries of ``mine`` on the frames where ``use`` (T,) bool is true, those of
+    ``theirs`` on the others (by each entry's frame)."""
+    a, b = use[mine.frame], ~use[theirs.frame]
+    merged = (np.concatenate([getattr(mine, f.name)[a], getattr(theirs, f.name)[b]]) for f in fields(mine))
+    return type(mine)(*merged)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` (E, 3) normalised (+z where a row is zero)."""
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), np.array([0.0, 0.0, 1.0]))
 
 
 @dataclass
@@ -27,14 +44,7 @@ class SelfClearanceValue(TermValue):
 
     def select(self, use: np.ndarray, other: TermValue) -> SelfClearanceValue:
         assert isinstance(other, SelfClearanceValue)
-        mine, theirs = use[self.close.frame], ~use[other.close.frame]
-        close = ClosePairs(
-            *(
-                np.concatenate([getattr(self.close, f.name)[mine], getattr(other.close, f.name)[theirs]])
-                for f in fields(ClosePairs)
-            )
-        )
-        return SelfClearanceValue(np.where(use, self.cost, other.cost), close)
+        return SelfClearanceValue(np.where(use, self.cost, other.cost), _merge(use, self.close, other.close))
 
 
 class SelfClearanceCost(CostTerm[SelfClearanceValue]):
@@ -57,9 +67,7 @@ class SelfClearanceCost(CostTerm[SelfClearanceValue]):
         close, sc = value.close, self.clearance
         if not close.frame.size:
             return
-        u = close.pa - close.pb
-        norm = np.linalg.norm(u, axis=1, keepdims=True)
-        u = np.where(norm > 1e-9, u / np.maximum(norm, 1e-9), np.array([0.0, 0.0, 1.0]))
+        u = _unit(close.pa - close.pb)
         tree = cfg.robot.tree
         ja = tree.directional_jacobian(cfg.poses, close.frame, sc.node[sc.first[close.pair]], close.pa, u)
         jb = tree.directional_jacobian(cfg.poses, close.frame, sc.node[sc.second[close.pair]], close.pb, u)
@@ -75,12 +83,6 @@ class SelfClearanceCost(CostTerm[SelfClearanceValue]):
         return worst
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of ``v`` (E, 3) normalised (+z where a row is zero)."""
-    norm = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), np.array([0.0, 0.0, 1.0]))
-
-
 @dataclass
 class MidpointClearanceValue(TermValue):
     """``close``: the (frame pair, capsule pair) entries closer than their margin halfway."""
@@ -90,13 +92,7 @@ class MidpointClearanceValue(TermValue):
     def select(self, use: np.ndarray, other: TermValue) -> MidpointClearanceValue:
         """Whole spans only (the solver's span acceptance): an entry goes with its frame t."""
         assert isinstance(other, MidpointClearanceValue)
-        mine, theirs = use[self.close.frame], ~use[other.close.frame]
-        close = MidpointPairs(
-            *(
-                np.concatenate([getattr(self.close, f.name)[mine], getattr(other.close, f.name)[theirs]])
-                for f in fields(MidpointPairs)
-            )
-        )
+        close = _merge(use, self.close, other.close)
         return MidpointClearanceValue(np.where(use, self.cost, other.cost), close)
 
 
