@@ -282,6 +282,19 @@ def _with_unpaired(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -
     return clearance.with_pairs(first, second, margin) if first.size else clearance
 
 
+def _rung_kept(depth: np.ndarray, slip: float, depth2: np.ndarray, slip2: float, midpoint: bool) -> bool:
+    """Whether the output check keeps a new solve (its pairs' deepest overlaps ``depth2`` (P2,)
+    m, P2 >= P, and its largest planted-foot step ``slip2`` m) over the one it has (``depth``
+    (P,), ``slip``): it overlaps less deep and slides no foot further than that one and than
+    ``OUTPUT_SLIP``; the midpoint solve, which is to remove sweeps between frames, also brings
+    no pair deeper than before and than ``OTHER_DEPTH`` (pairs added since count from 0)."""
+    kept = depth2.max(initial=0.0) < depth.max(initial=0.0) and slip2 <= max(slip, OUTPUT_SLIP)
+    if midpoint:
+        before = np.pad(depth, (0, len(depth2) - len(depth)))
+        kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
+    return kept
+
+
 def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance | None) -> np.ndarray:
     """(P,) deepest overlap (m, 0 for none) of each pair of the robot's real geoms that
     ``clearance`` keeps apart, over the output frames ``qpos`` (T, nq); empty without one."""
@@ -370,10 +383,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
             clearance = _with_unpaired(rm, qpos2, clearance)
             depth2 = _output_overlap(rm, qpos2, clearance)
             slip2 = _stance_slip(rm, rep2, rung[2], fps)
-            kept = depth2.max() < depth.max() and slip2 <= max(slip, OUTPUT_SLIP)
-            if stiffness is None:  # it removes sweeps between frames: no pair may come out deeper
-                before = np.pad(depth, (0, len(depth2) - len(depth)))  # pairs added since: none
-                kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
+            kept = _rung_kept(depth, slip, depth2, slip2, midpoint=stiffness is None)
             if kept:
                 (joints, src_fps, targets), depth, slip = rung, depth2, slip2
                 sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2

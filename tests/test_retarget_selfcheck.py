@@ -20,10 +20,12 @@ from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from retarget import load_robot, retarget_motion
 from retarget.compare import similarity_fit, stance_foot_speed
+from retarget.retarget_motion import _rung_kept
 from retarget.selfcheck import (
     CHECK_DEPTH,
     OTHER_DEPTH,
     OUTPUT_SELF,
+    OUTPUT_SLIP,
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
@@ -220,6 +222,22 @@ def test_a_sweep_between_the_solver_frames_is_solved_again_with_the_midpoints():
     report = sim.check_trajectory(scenes.load_scene("empty", robot="h1"), traj.qpos, 50.0)
     assert report.stats["self_collision_frames"] == 0
     assert report.passed, report.stats["error_kinds"]
+
+
+def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_more():
+    """The rule of the output check's solves (``OUTPUT_SLIP``, and for the midpoint solve no
+    pair deeper than before and than ``OTHER_DEPTH``), on overlaps (m) of three pairs."""
+    depth, slip = np.array([0.030, 0.006, 0.0]), 0.010
+    assert _rung_kept(depth, slip, np.array([0.010, 0.006, 0.0]), 0.012, midpoint=False)
+    assert not _rung_kept(depth, slip, np.array([0.030, 0.0, 0.0]), 0.001, midpoint=False)  # as deep
+    assert not _rung_kept(depth, slip, np.array([0.010, 0.0, 0.0]), OUTPUT_SLIP + 0.001, midpoint=False)
+    assert _rung_kept(depth, 0.020, np.array([0.010, 0.0, 0.0]), 0.020, midpoint=False)  # no further
+    # the midpoint solve may not trade one overlap for another; a new pair counts from 0
+    trade = np.array([0.010, 0.008, 0.0])
+    assert _rung_kept(depth, slip, trade, slip, midpoint=False)
+    assert not _rung_kept(depth, slip, trade, slip, midpoint=True)
+    assert _rung_kept(depth, slip, np.array([0.010, 0.006, OTHER_DEPTH, OTHER_DEPTH]), slip, midpoint=True)
+    assert not _rung_kept(depth, slip, np.array([0.010, 0.0, 0.0, 0.005]), slip, midpoint=True)
 
 
 def test_apollos_thighs_stay_apart_in_a_turn():
