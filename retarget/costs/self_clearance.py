@@ -85,7 +85,7 @@ class SelfClearanceCost(CostTerm[SelfClearanceValue]):
 
 @dataclass
 class MidpointClearanceValue(TermValue):
-    """``close``: the (frame pair, capsule pair) entries closer than their margin halfway."""
+    """``close``: the (frame pair, capsule pair) entries closer than their limit halfway."""
 
     close: MidpointPairs
 
@@ -120,9 +120,9 @@ class MidpointClearanceCost(CostTerm[MidpointClearanceValue]):
         return MidpointClearanceValue(cost, close)
 
     def linearise(self, cfg: Configuration, value: MidpointClearanceValue, eq: NormalEquations) -> None:
-        """The residual's row is (J_t, J_t+1) / 2 (:mod:`retarget.midpoints`; the limit is held
-        fixed: it only stops the term from pulling where the frames' own term acts). Its Gauss-Newton
-        block w J^T J couples the two frames; it is bounded by twice its two diagonal blocks
+        """The residual's row is (J_t, J_t+1) / 2 (:mod:`retarget.midpoints`; the limit, the
+        margin or up to the chord's slack less, is held fixed). Its Gauss-Newton block
+        w J^T J couples the two frames; it is bounded by twice its two diagonal blocks
         (as the banded solve's lag-2 couplings are), so each frame gets 2 w (J_f / 2)^T (J_f / 2)
         and the exact gradient w (J_f / 2)^T r."""
         close, sc = value.close, self.clearance
