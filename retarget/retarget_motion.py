@@ -371,21 +371,22 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         slip = _stance_slip(rm, rep, targets, fps)
         rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
         for stiffness in rungs:
-            if stiffness is None:  # the midpoint rung
-                cfg2, rung = replace(config, self_midpoints=True), (joints, src_fps, targets)
+            if stiffness is None:  # the midpoint rung: the motion's own frames
+                cfg2 = replace(config, self_midpoints=True)
+                joints2, fps2, targets2 = joints, src_fps, targets
             else:
                 cfg2 = replace(config, w_self=config.w_self * stiffness)
-                rung = (dense, fps, build_targets(rm, dense, fps, transform, cfg2))
+                joints2, fps2, targets2 = dense, fps, build_targets(rm, dense, fps, transform, cfg2)
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-                rm.with_self_clearance(clearance), rung[2], cfg2, solver, rung[1], fps
+                rm.with_self_clearance(clearance), targets2, cfg2, solver, fps2, fps
             )
             solves += 1
             clearance = _with_unpaired(rm, qpos2, clearance)
             depth2 = _output_overlap(rm, qpos2, clearance)
-            slip2 = _stance_slip(rm, rep2, rung[2], fps)
+            slip2 = _stance_slip(rm, rep2, targets2, fps)
             kept = _rung_kept(depth, slip, depth2, slip2, midpoint=stiffness is None)
             if kept:
-                (joints, src_fps, targets), depth, slip = rung, depth2, slip2
+                joints, src_fps, targets, depth, slip = joints2, fps2, targets2, depth2, slip2
                 sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
             if kept and depth2.max() <= OTHER_DEPTH:
                 break
