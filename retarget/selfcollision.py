@@ -17,6 +17,9 @@ robot's collision geoms (:class:`SelfClearance`):
   shoulder); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
+* within a hand, the links that branch from it (fingers against thumb) where MuJoCo
+  collides them and they are apart at rest (more than ``2 * REST_SLACK``), with the same
+  margins: the arm's pairs would otherwise push a thumb out of a shin into the fingers;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
   hips turned out, feet placed close together), and in each leg the links above the knee
   with the links below the knee's own (a deep crouch), with the same margins;
@@ -234,6 +237,11 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
     return ClosePairs(fr[keep], pr[keep], dist[keep], pa[keep], pb[keep])
 
 
+def _collides(m: mujoco.MjModel, g1: int, g2: int) -> bool:
+    """Whether MuJoCo's contype/conaffinity filter lets geoms ``g1`` and ``g2`` collide."""
+    return bool(m.geom_contype[g1] & m.geom_conaffinity[g2] or m.geom_contype[g2] & m.geom_conaffinity[g1])
+
+
 def build_self_clearance(
     model: mujoco.MjModel,
     tree: KinematicTree,
@@ -341,6 +349,26 @@ def build_self_clearance(
                 hand_pairs.append(len(first))
                 first.append(i)
                 second.append(j)
+    # Within a hand: links that branch from it (the CMU humanoid's fingers and thumb), which
+    # nothing else keeps apart: a pair pushing the thumb out of a shin turns it into the fingers.
+    # Kept only where they collide and are apart at rest, with the rest distance less
+    # REST_SLACK where that is below the margin.
+    finger_pairs: list[int] = []  # indices into first/second
+    excluded = excluded_body_pairs(m)
+    for i, bi in enumerate(body_of):
+        for j, bj in enumerate(body_of):
+            if (
+                j > i
+                and bi in hands
+                and hands.get(bj) == hands[bi]
+                and bi not in ancestors(bj)
+                and bj not in ancestors(bi)
+                and frozenset((bi, bj)) not in excluded
+                and _collides(m, int(geom[i]), int(geom[j]))
+            ):
+                finger_pairs.append(len(first))
+                first.append(i)
+                second.append(j)
     for i, bi in enumerate(body_of):  # left leg against right leg (crossing steps, turned-out hips)
         if leg.get(bi) != 0:
             continue
@@ -362,19 +390,14 @@ def build_self_clearance(
                     if bj in lower:
                         first.append(i)
                         second.append(j)
+
     # The trunk against the thighs (a deep stoop or crouch folds the trunk onto the hips): the
     # trunk bodies the leg hangs from (the pelvis) against the links above each knee, but for a
     # parent and its child and body pairs the model excludes (as MuJoCo does).
-    excluded = excluded_body_pairs(m)
-
     def exact_pair(i: int, j: int) -> bool:
         """Capsules ``i`` and ``j`` are their geoms (capsules, spheres), which MuJoCo collides."""
         gi, gj = int(geom[i]), int(geom[j])
-        return bool(
-            m.geom_type[gi] in _EXACT
-            and m.geom_type[gj] in _EXACT
-            and (m.geom_contype[gi] & m.geom_conaffinity[gj] or m.geom_contype[gj] & m.geom_conaffinity[gi])
-        )
+        return bool(m.geom_type[gi] in _EXACT and m.geom_type[gj] in _EXACT and _collides(m, gi, gj))
 
     trunk_bodies = (trunk or set()) | shared
 
@@ -467,6 +490,7 @@ def build_self_clearance(
     keep = np.ones(len(first), dtype=bool)
     keep[hand_pairs] = rest_dist[0, hand_pairs] >= SELF_MARGIN + REST_SLACK
     keep[spine_pairs] = rest_dist[0, spine_pairs] >= SELF_MARGIN + REST_SLACK
+    keep[finger_pairs] = rest_dist[0, finger_pairs] > 2 * REST_SLACK
     margin[spine_pairs] = TRUNK_MARGIN
     for k in trunk_pairs:
         margin[k] = min(margin[k], TRUNK_MARGIN)

@@ -2,8 +2,9 @@
 
 ``capsule_humanoid_xml(style)`` writes one 1.7 m humanoid (a three-link spine, a head,
 two-joint clavicles, ball shoulders and hips, knees and elbows of three and two hinges at one
-point as SMPL humanoids have, hands with a finger and a thumb link, feet with a toe link;
-capsules and spheres only, no actuators):
+point as SMPL humanoids have, hands with a finger and a thumb link (the thumb turned 90
+degrees lies in the finger, as the CMU humanoid's can), feet with a toe link; capsules and
+spheres only, no actuators):
 
 * ``"plain"``: +Z up, facing +X, the root at identity (as the Menagerie robots are);
 * ``"turned"``: the root body's frame Y up and the robot facing -Y in the world, as the
@@ -57,7 +58,7 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
     thumb = (
         "thumb_" + side,
         (0.04, 0, -0.04),
-        [("thumb_" + side, (1, 0, 0), (0, 60))],
+        [("thumb_" + side, (0, 1, 0), (0, 90))],
         [("capsule", (0, 0, 0, 0.03, 0, -0.03), 0.012)],
         [],
     )

@@ -23,7 +23,7 @@ from retarget.compare import robot_keypoints, similarity_fit
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import free_root
 from retarget.selfcheck import unpaired_overlaps
-from retarget.selfcollision import SELF_MARGIN
+from retarget.selfcollision import SELF_MARGIN, capsule_distances
 
 
 @pytest.fixture(scope="module")
@@ -94,6 +94,43 @@ def test_the_spine_and_the_clavicles_are_kept_clear_on_a_capsule_humanoid(humano
         ("hand_r", "shin_r"),
     ):
         assert frozenset(pair) in pairs, pair
+
+
+def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
+    """Links branching from one hand (the fingers and the thumb) are a pair of their own: the
+    arm's pairs push a thumb out of a shin, nothing else keeps it from turning into the
+    fingers (the CMU humanoid's crouches). Clear at rest (3.7 cm apart), the pair falls short
+    of its margin where the thumb is turned 90 degrees, 4-5 mm inside the finger by MuJoCo."""
+    robot = load_robot(humanoids["plain"])
+    sc, m = robot.self_clearance, robot.model
+    assert sc is not None
+
+    def body(c: int) -> str:
+        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
+
+    hand = np.array(
+        [
+            {body(a), body(b)} in ({"fingers_l", "thumb_l"}, {"fingers_r", "thumb_r"})
+            for a, b in zip(sc.first, sc.second, strict=True)
+        ]
+    )
+    assert hand.sum() == 2 and np.all(sc.margin[hand] == SELF_MARGIN)
+    rest = m.qpos0.copy()
+    rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
+    folded = rest.copy()
+    folded[m.jnt_qposadr[m.joint("thumb_l").id]] = np.radians(90)
+    data = mujoco.MjData(m)
+    data.qpos[:] = folded
+    mujoco.mj_forward(m, data)
+    assert any(
+        {m.body(int(m.geom_bodyid[c.geom1])).name, m.body(int(m.geom_bodyid[c.geom2])).name}
+        == {"thumb_l", "fingers_l"}
+        and c.dist < -0.003
+        for c in data.contact[: data.ncon]
+    )
+    poses = robot.tree.forward(np.zeros((2, 3)), np.stack([np.eye(3)] * 2), np.stack([rest[7:], folded[7:]]))
+    dist = capsule_distances(poses, sc.select_pairs(hand))[0]
+    assert np.all(dist[0] > SELF_MARGIN) and dist[1, 0] < 0.0 < dist[1, 1]
 
 
 def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
