@@ -295,6 +295,23 @@ def _rung_kept(depth: np.ndarray, slip: float, depth2: np.ndarray, slip2: float,
     return kept
 
 
+def _with_relaxed_pairs(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
+    """``clearance`` with the pairs only its relaxed solves keep (the trunk against the shoulder
+    links, calibrated on the real geoms: ``relaxed_pairs``) where the output ``qpos`` (T, nq)
+    overlaps on one of them deeper than ``OTHER_DEPTH``: the safe margins alone may leave a
+    shoulder in the torso (G1 with hands sitting down: 2 cm), and the output check then
+    solves again with them."""
+    full = clearance.relaxed_pairs
+    if full is None:
+        return clearance
+    kept = set(zip(clearance.first.tolist(), clearance.second.tolist(), strict=True))
+    extra = np.array(
+        [pair not in kept for pair in zip(full.first.tolist(), full.second.tolist(), strict=True)]
+    )
+    depth = penetration_depths(rm.model, rm.tree, qpos, full.select_pairs(extra))
+    return full if np.any(depth > OTHER_DEPTH) else clearance
+
+
 def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance | None) -> np.ndarray:
     """(P,) deepest overlap (m, 0 for none) of each pair of the robot's real geoms that
     ``clearance`` keeps apart, over the output frames ``qpos`` (T, nq); empty without one."""
@@ -357,7 +374,8 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     sol, qpos, rep, lift, swing_lift, solves, clearance = _solve_clear_of_self(
         rm, targets, config, solver, src_fps, fps
     )
-    clearance = None if clearance is None else _with_unpaired(rm, qpos, clearance)
+    if clearance is not None:
+        clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
     depth = _output_overlap(rm, qpos, clearance)
     if depth.max(initial=0.0) > OTHER_DEPTH:
         # Solved again, first at the motion's rate with the pairs kept apart halfway between
