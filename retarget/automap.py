@@ -41,7 +41,7 @@ wrist (an SMPL hand's) or before a ball shoulder (a clavicle's): held at rest, t
 of the rigid foot the robot stands on, the fingers clear of each other, the hand in line with
 the forearm, the shoulders where the human's are (SMPL's +-180 degree clavicles folded them
 into the neck, and the CMU humanoid's into its chest)."""
-FIVE_JOINT_LEVELS = [[3, 5], [1, 4]]
+FIVE_JOINT_LEVELS = [[3, 10], [1, 4]]
 """Solver schedule of robots with fewer than six joints in a leg (they converge more slowly)."""
 SMALL_SCALE = 0.4
 SMALL_W_SELF = 300.0

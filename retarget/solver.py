@@ -130,7 +130,7 @@ def solve(
             if last
             else min(config.w_body_floor_coarse, config.body_floor_weight),
         )
-        sol, final = _solve(robot, small, cfg, init)
+        sol, final = _solve(robot, small, cfg, init, settle_steps=1 if last else config.coarse_settle_steps)
         total += sol.iterations
         damping = max(config.damping, float(np.median(sol.damping)))
         prev = (sol.root_pos, sol.root_rot, sol.q, idx)
@@ -214,12 +214,15 @@ def _solve(
     damping: np.ndarray | None = None,
     patience: int | None = None,
     until_resolved: bool = False,
+    settle_steps: int = 1,
 ) -> tuple[Solution, tuple[Problem, State]]:
     """Levenberg-Marquardt on one problem; ``pinned`` (T,) bool: frames held fixed;
     ``damping`` (T,): each frame's initial damping (default ``config.damping``);
     ``patience``: refused steps in a row after which a span gives up (default: until its
     damping explodes); ``until_resolved``: a span also stops once none of its frames
-    violates the stiff terms by more than CONSTRAINT_TOLERANCE (the local refinement's aim).
+    violates the stiff terms by more than CONSTRAINT_TOLERANCE (the local refinement's aim);
+    ``settle_steps``: accepted steps in a row that each lower a span's cost by less than
+    ``config.tolerance`` after which it stops.
 
     ``span`` (T,) int: independent spans side by side (see :class:`~retarget.problem.Problem`). Each span
     accepts or refuses its step, stops and gives up on its own, exactly as if it were solved
@@ -242,6 +245,7 @@ def _solve(
     out_lam = lam.copy()
     hold = np.zeros(prob.t_len, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool).copy()
     refused = np.zeros(prob.n_spans, dtype=int)  # refused steps in a row, per span
+    settling = np.zeros(prob.n_spans, dtype=int)  # accepted steps in a row that gained little
     iterations = 0
     need_linearise = True
     while iterations < config.max_iterations:
@@ -294,7 +298,9 @@ def _solve(
         accept = trial.span_cost < st.span_cost
         done = np.zeros(prob.n_spans, dtype=bool)
         if accept.any():
-            done = accept & ((st.span_cost - trial.span_cost) < config.tolerance * st.span_cost)
+            little = accept & ((st.span_cost - trial.span_cost) < config.tolerance * st.span_cost)
+            settling = np.where(accept, np.where(little, settling + 1, 0), settling)
+            done = settling >= settle_steps
             st = trial if accept.all() else trial.select(accept[sp], st, accept)
             history.append(settled + st.cost)
             lam = np.where(accept[sp], np.where(better, np.maximum(lam / 3, 1e-9), lam * 10), lam * 10)
@@ -330,7 +336,13 @@ def _solve(
                 span=new_span,
             )
             st = prob.evaluate(st.root_pos[rows], st.root_rot[rows], st.q[rows])
-            frames, lam, hold, refused = frames[rows], lam[rows], hold[rows], refused[~done]
+            frames, lam, hold, refused, settling = (
+                frames[rows],
+                lam[rows],
+                hold[rows],
+                refused[~done],
+                settling[~done],
+            )
             need_linearise = True
     out_pos[frames], out_rot[frames], out_q[frames], out_lam[frames] = st.root_pos, st.root_rot, st.q, lam
     # re-orthonormalise the root rotations

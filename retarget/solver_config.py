@@ -30,9 +30,18 @@ class SolverConfig:
     w_acc_joint: float = 8.0
     exact_acceleration: bool = False
     """Keep the lag-2 acceleration couplings in the banded matrix (2x bandwidth, ~4x solve time)."""
-    levels: tuple[tuple[int, int], ...] = ((3, 5), (1, 2))
-    """Coarse-to-fine schedule: (solve every k-th frame, iterations); () solves all frames with
-    max_iterations."""
+    levels: tuple[tuple[int, int], ...] = ((3, 10), (1, 2))
+    """Coarse-to-fine schedule: (solve every k-th frame, iterations at most); () solves all
+    frames with max_iterations. The coarse level costs a third of the full one per iteration
+    and stops once settled (``coarse_settle_steps``); 10 rather than 5 at most brought the
+    packaged robots 0.1-0.4 cm closer (21 motions each) and the AMP humanoid's raised arms,
+    sit-down and kneel out of 7-11 cm (2026-12-02, docs/BENCHMARKS.md)."""
+    coarse_settle_steps: int = 2
+    """A coarse level stops after this many accepted iterations in a row that each lower the
+    cost by less than ``tolerance`` (the full-rate level after one). One stopped the AMP
+    humanoid's stoop (corpus clip 000000) at its second iteration, its knees straight at their
+    range's end (rest pose, the solver's starting point) and a step gaining 0.1 %: 19.9 cm
+    from the human; two take it to 2.3 cm."""
     extra_iterations: int = 6
     """Iterations of the local refinement of frames where the self-clearance or body-floor
     terms are still violated by more than CONSTRAINT_TOLERANCE (stiff terms converge more
