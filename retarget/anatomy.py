@@ -435,7 +435,10 @@ def _arm(
     model: mujoco.MjModel, data: mujoco.MjData, side: str, bodies: tuple[int, ...], hand: list[int]
 ) -> Limb:
     """An arm: its tip is the point of the hand's geometry (visual or not) farthest from the
-    shoulder; without wrist joints the wrist lies on the elbow -> tip line (WRIST_SHARE)."""
+    shoulder; without wrist joints the wrist lies on the elbow -> tip line (WRIST_SHARE), and
+    so it does where the only joints past the elbow turn the forearm about its own length (an
+    elbow roll: the older G1's, 10 cm past the elbow, whose hand is part of that link), unless
+    the hand is a link of its own without joints: the wrist is where it is attached."""
     joints = _chain_joints(model, bodies)
     start = data.xanchor[joints[0]]
     best, best_d = data.xpos[bodies[-1]].copy(), -1.0
@@ -452,8 +455,13 @@ def _arm(
             direction = (pts[i] - start) / max(float(np.linalg.norm(pts[i] - start)), 1e-9)
             best = pts[i] + rad[i] * direction
     limb = limb_anatomy(model, data, side, bodies, best)
-    if limb.end_joints or limb.middle_joint is None:
+    if limb.middle_joint is None:
         return limb
+    along = (best - limb.middle) / max(float(np.linalg.norm(best - limb.middle)), 1e-9)
+    if any(abs(float(data.xaxis[j] @ along)) < ACROSS for j in limb.end_joints):
+        return limb  # a wrist that bends the hand
+    if limb.end_joints and model.body_jntnum[limb.end_body] == 0:
+        return replace(limb, end=data.xpos[limb.end_body].copy())  # a rigid hand on a forearm roll
     # No wrist joint: the wrist sits WRIST_SHARE of the way from the elbow to the hand's tip.
     wrist = limb.middle + WRIST_SHARE * (best - limb.middle)
     return replace(limb, end=wrist)

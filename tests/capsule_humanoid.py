@@ -45,8 +45,9 @@ def _quat(rot: np.ndarray) -> np.ndarray:
     )
 
 
-def _limb(side: str, sign: float) -> tuple[list, list]:
-    """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested."""
+def _limb(side: str, sign: float, forearm_roll: bool = False) -> tuple[list, list]:
+    """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested;
+    ``forearm_roll``: see :func:`capsule_humanoid_xml`."""
     s = sign
     finger = (
         "fingers_" + side,
@@ -76,6 +77,22 @@ def _limb(side: str, sign: float) -> tuple[list, list]:
         [("capsule", (0, 0, -0.03, 0, 0, -0.22), 0.033)],
         [hand],
     )
+    if forearm_roll:  # the hand rigid on a link that rolls about the forearm 8 cm past the elbow
+        rigid_hand = (hand[0], hand[1], [], hand[3], hand[4])
+        roll = (
+            "forearm_roll_" + side,
+            (0, 0, -0.08),
+            [("forearm_roll_" + side, (0, 0, 1), (-90, 90))],
+            [("capsule", (0, 0, -0.02, 0, 0, -0.14), 0.033)],
+            [(rigid_hand[0], (0, 0, -0.18), *rigid_hand[2:])],
+        )
+        forearm = (
+            "forearm_" + side,
+            (0, 0, -0.29),
+            [("elbow_" + side, (0, 1, 0), (-150, 0))],
+            [("capsule", (0, 0, -0.03, 0, 0, -0.06), 0.033)],
+            [roll],
+        )
     upper = (
         "upperarm_" + side,
         (0, s * 0.17, 0),
@@ -140,8 +157,10 @@ _LAID = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 """Forward (+X) -> +Z, left (+Y) -> +X, up (+Z) -> +Y: a Y-up humanoid facing +Z."""
 
 
-def capsule_humanoid_xml(style: str = "turned") -> str:
-    """The MJCF text (see the module docstring)."""
+def capsule_humanoid_xml(style: str = "turned", forearm_roll: bool = False) -> str:
+    """The MJCF text (see the module docstring); ``forearm_roll``: the arms end as the older
+    G1's do, an elbow, then a link that only rolls about the forearm 8 cm past it and carries
+    the hand (no wrist joint)."""
     # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
     # body's frame; local: the intended vector in the root's frame.
     world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
@@ -164,7 +183,7 @@ def capsule_humanoid_xml(style: str = "turned") -> str:
         lines.append(f"{indent}</body>")
         return "\n".join(lines)
 
-    arms, legs = zip(*(_limb(side, s) for side, s in (("l", 1.0), ("r", -1.0))), strict=True)
+    arms, legs = zip(*(_limb(side, s, forearm_roll) for side, s in (("l", 1.0), ("r", -1.0))), strict=True)
     head = (
         "head",
         (0, 0, 0.3),

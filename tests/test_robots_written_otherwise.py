@@ -17,7 +17,7 @@ from cli_helpers import console as cli
 from robot_checks import independent_check
 
 from controlmm.motion import Motion
-from retarget import infer_mapping, load_robot
+from retarget import infer_mapping, load_robot, retarget_motion
 from retarget.automap import RIGID_POSTURE
 from retarget.compare import robot_keypoints, similarity_fit
 from retarget.rest_frame import rest_root_quat
@@ -131,6 +131,29 @@ def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
     poses = robot.tree.forward(np.zeros((2, 3)), np.stack([np.eye(3)] * 2), np.stack([rest[7:], folded[7:]]))
     dist = capsule_distances(poses, sc.select_pairs(hand))[0]
     assert np.all(dist[0] > SELF_MARGIN) and dist[1, 0] < 0.0 < dist[1, 1]
+
+
+def test_an_elbow_roll_is_not_taken_for_the_wrist(tmp_path, motion):
+    """Arms whose only joint past the elbow rolls the forearm about its own length, 8 cm past
+    the elbow, with the hand a rigid link below it (the older G1's elbow roll, PHC's G1): the
+    wrist is where the hand is attached, 26 cm past the elbow as on the plain humanoid with its
+    wrist joints, not the roll's anchor (8 cm: the real clip's wrists 14 cm from the human's);
+    the real clip's wrists fit as on the plain humanoid."""
+    fits = {}
+    for roll in (False, True):
+        path = tmp_path / f"roll_{roll}.xml"
+        path.write_text(capsule_humanoid_xml("plain", forearm_roll=roll))
+        robot = load_robot(path)
+        for side in ("left", "right"):
+            wrist, elbow = (
+                robot.rest_keypoints[robot.keypoint_index(f"{side}_{j}")] for j in ("wrist", "elbow")
+            )
+            assert np.linalg.norm(wrist - elbow) == pytest.approx(0.26, abs=0.005), (roll, side)
+        traj = retarget_motion(motion, robot, fps=30.0, metrics=False)
+        fit = similarity_fit(robot, traj.qpos, 30.0, motion.joints, motion.fps)
+        fits[roll] = [fit.per_joint[f"{side}_wrist"] for side in ("left", "right")]
+    assert max(fits[True]) < 0.05
+    assert np.allclose(fits[True], fits[False], atol=0.01)
 
 
 def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
