@@ -27,7 +27,7 @@ from retarget.mapping import Mapping, load_mapping
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path
 from retarget.selfcollision import SelfClearance, build_self_clearance
-from retarget.soles import flat_tilt
+from retarget.soles import flat_tilt, lowest_candidates
 
 
 class RobotModel:
@@ -140,6 +140,9 @@ class RobotModel:
         self.rest_q = np.clip(tree.qpos0, self.lower, self.upper)
         self.rest_root_quat = rest_root_quat(m, int(tree.node_body[0]))
         self.rest = tree.forward(np.zeros((1, 3)), quat_to_mat(self.rest_root_quat)[None], self.rest_q[None])
+        for side, f in self.feet.items():  # a finely meshed foot: the points that can touch the floor
+            keep = lowest_candidates(f.points, f.radius, self.rest.rot[0, f.node])
+            self.feet[side] = FloorPoints(f.node, f.points[keep], f.radius[keep], f.geoms)
         self.floor_z = min(float(self.foot_lowest(self.rest, side)[0]) for side in ("left", "right"))
         self.rest_keypoints = tree.points(self.rest, self.nodes, self.offsets)[0]  # (K, 3)
         # Flat feet: the rest orientation tilted until the sole lies on the floor.

@@ -15,15 +15,18 @@ import pytest
 from capsule_humanoid import STYLES, capsule_humanoid_xml
 from cli_helpers import console as cli
 from robot_checks import independent_check
+from scipy.spatial.transform import Rotation
 
 from controlmm.motion import Motion
 from retarget import infer_mapping, load_robot, retarget_motion
 from retarget.automap import RIGID_POSTURE
 from retarget.compare import robot_keypoints, similarity_fit
+from retarget.geoms import geom_points
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import free_root
 from retarget.selfcheck import unpaired_overlaps
 from retarget.selfcollision import SELF_MARGIN, capsule_distances
+from retarget.soles import FOOT_POINTS_MOST
 
 
 @pytest.fixture(scope="module")
@@ -131,6 +134,79 @@ def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
     poses = robot.tree.forward(np.zeros((2, 3)), np.stack([np.eye(3)] * 2), np.stack([rest[7:], folded[7:]]))
     dist = capsule_distances(poses, sc.select_pairs(hand))[0]
     assert np.all(dist[0] > SELF_MARGIN) and dist[1, 0] < 0.0 < dist[1, 1]
+
+
+def _meshed_sole_humanoid(tmp_path: Path) -> tuple[Path, np.ndarray]:
+    """The plain capsule humanoid with its feet a rounded mesh of many vertices (a sole 20 x
+    9 cm, 4 cm high, as finely tessellated as an STL foot) in place of their capsules; the
+    path and the mesh's vertices (V, 3)."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 40, endpoint=False), np.linspace(-np.pi / 2, np.pi / 2, 16))
+    c, s = np.cos(v), np.sin(v)
+    # a superellipsoid: flat-ish sole and sides, rounded edges
+    sgn = lambda x, e: np.sign(x) * np.abs(x) ** e  # noqa: E731
+    verts = np.stack(
+        [
+            0.1 * sgn(c, 0.4) * sgn(np.cos(u), 0.4),
+            0.045 * sgn(c, 0.4) * sgn(np.sin(u), 0.4),
+            0.02 * sgn(s, 0.4),
+        ],
+        -1,
+    ).reshape(-1, 3)
+    verts = np.unique(np.round(verts, 6), axis=0)
+    text = capsule_humanoid_xml("plain").replace(
+        "<worldbody>",
+        '<asset><mesh name="sole" vertex="'
+        + " ".join(f"{x:.6f}" for x in verts.ravel())
+        + '"/></asset>\n  <worldbody>',
+    )
+    foot = '<geom type="capsule" fromto="-0.05 0 -0.04 0.1 0 -0.04" size="0.03"/>'
+    assert text.count(foot) == 2
+    text = text.replace(foot, '<geom type="mesh" mesh="sole" pos="0.025 0 -0.05"/>')
+    path = tmp_path / "meshed_sole.xml"
+    path.write_text(text)
+    return path, verts
+
+
+def test_a_finely_meshed_foot_keeps_the_points_that_can_touch_the_floor(tmp_path):
+    """A foot whose collision mesh has hundreds of hull vertices (PHC's G1: 900-1,000, which
+    made its floor terms 70 % of a call) keeps those that are its lowest for some tilt up to
+    75 degrees from rest: the lowest point of the foot is the same for any such tilt, and
+    the rest pose stands on the same floor."""
+    path, verts = _meshed_sole_humanoid(tmp_path)
+    robot = load_robot(path)
+    model = robot.model
+    mesh_geoms = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]
+    assert len(mesh_geoms) == 2
+    hull = len(geom_points(model, mesh_geoms[0])[0])
+    assert hull > 300
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    rng = np.random.default_rng(0)
+    for side in ("left", "right"):
+        f = robot.feet[side]
+        assert FOOT_POINTS_MOST < len(f.points) < hull / 2
+        # every point of the foot's geoms (its toe link's too), in the foot body's frame
+        foot = int(robot.tree.node_body[f.node])
+        every = np.concatenate(
+            [
+                (
+                    data.xpos[model.geom_bodyid[g]]
+                    + geom_points(model, g)[0] @ data.xmat[model.geom_bodyid[g]].reshape(3, 3).T
+                    - data.xpos[foot]
+                )
+                @ data.xmat[foot].reshape(3, 3)
+                for g in f.geoms
+            ]
+        )
+        radius = np.concatenate([geom_points(model, g)[1] for g in f.geoms])
+        rest = robot.rest.rot[0, f.node]
+        for k in range(200):
+            axis = rng.normal(size=3)
+            axis[2] = 0.0
+            angle = rng.uniform(0.0, np.radians(60)) if k else 0.0  # the rest pose first
+            tilt = Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix() @ rest
+            lowest = ((f.points @ tilt.T)[:, 2] - f.radius).min()
+            assert lowest == pytest.approx(((every @ tilt.T)[:, 2] - radius).min(), abs=1e-3)
 
 
 def test_an_elbow_roll_is_not_taken_for_the_wrist(tmp_path, motion):
