@@ -17,9 +17,9 @@ robot's collision geoms (:class:`SelfClearance`):
   shoulder); each pair keeps
   ``SELF_MARGIN`` free, or, when its enclosures are closer than that in the (collision free)
   rest pose, comes at most ``REST_SLACK`` closer than there;
-* within a hand, the links that branch from it (fingers against thumb) where MuJoCo
-  collides them and they are apart at rest (more than ``2 * REST_SLACK``), with the same
-  margins: the arm's pairs would otherwise push a thumb out of a shin into the fingers;
+* within a hand, the links that branch from it (fingers against thumb, fingers side by
+  side) where MuJoCo collides them, with the same margins: the arm's pairs would otherwise
+  push a thumb out of a shin into the fingers;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
   hips turned out, feet placed close together), and in each leg the links above the knee
   with the links below the knee's own (a deep crouch), with the same margins;
@@ -351,8 +351,8 @@ def build_self_clearance(
                 second.append(j)
     # Within a hand: links that branch from it (the CMU humanoid's fingers and thumb), which
     # nothing else keeps apart: a pair pushing the thumb out of a shin turns it into the fingers.
-    # Kept only where they collide and are apart at rest, with the rest distance less
-    # REST_SLACK where that is below the margin.
+    # Where MuJoCo collides them, with the rest distance less REST_SLACK where that is below
+    # the margin (fingers side by side, their enclosures overlapping at rest: PHC's G1).
     finger_pairs: list[int] = []  # indices into first/second
     excluded = excluded_body_pairs(m)
     for i, bi in enumerate(body_of):
@@ -490,7 +490,6 @@ def build_self_clearance(
     keep = np.ones(len(first), dtype=bool)
     keep[hand_pairs] = rest_dist[0, hand_pairs] >= SELF_MARGIN + REST_SLACK
     keep[spine_pairs] = rest_dist[0, spine_pairs] >= SELF_MARGIN + REST_SLACK
-    keep[finger_pairs] = rest_dist[0, finger_pairs] > 2 * REST_SLACK
     margin[spine_pairs] = TRUNK_MARGIN
     for k in trunk_pairs:
         margin[k] = min(margin[k], TRUNK_MARGIN)

@@ -25,7 +25,7 @@ from retarget.geoms import geom_points
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import free_root
 from retarget.selfcheck import unpaired_overlaps
-from retarget.selfcollision import SELF_MARGIN, capsule_distances
+from retarget.selfcollision import REST_SLACK, SELF_MARGIN, capsule_distances
 from retarget.soles import FOOT_POINTS_MOST
 
 
@@ -134,6 +134,35 @@ def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
     poses = robot.tree.forward(np.zeros((2, 3)), np.stack([np.eye(3)] * 2), np.stack([rest[7:], folded[7:]]))
     dist = capsule_distances(poses, sc.select_pairs(hand))[0]
     assert np.all(dist[0] > SELF_MARGIN) and dist[1, 0] < 0.0 < dist[1, 1]
+
+
+def test_fingers_side_by_side_are_kept_apart(tmp_path):
+    """Links of one hand 7 mm apart at rest (PHC's G1: its fingers side by side, their
+    enclosures touching) are kept from coming more than ``REST_SLACK`` closer than that."""
+    text = capsule_humanoid_xml("plain")
+    for side in ("l", "r"):
+        old = f'<body name="thumb_{side}" pos="0.04 0 -0.04">'
+        assert old in text
+        text = text.replace(old, f'<body name="thumb_{side}" pos="0 0.034 -0.09">')
+    path = tmp_path / "close_thumbs.xml"
+    path.write_text(text)
+    robot = load_robot(path)
+    sc, m = robot.self_clearance, robot.model
+    assert sc is not None
+
+    def body(c: int) -> str:
+        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
+
+    hand = np.array(
+        [
+            {body(a), body(b)} in ({"fingers_l", "thumb_l"}, {"fingers_r", "thumb_r"})
+            for a, b in zip(sc.first, sc.second, strict=True)
+        ]
+    )
+    assert hand.sum() == 2
+    rest = capsule_distances(robot.rest, sc.select_pairs(hand))[0][0]
+    np.testing.assert_allclose(rest, 0.007, atol=1e-6)
+    np.testing.assert_allclose(sc.margin[hand], rest - REST_SLACK, atol=1e-9)
 
 
 def _meshed_sole_humanoid(tmp_path: Path) -> tuple[Path, np.ndarray]:
