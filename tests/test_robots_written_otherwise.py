@@ -18,7 +18,7 @@ from robot_checks import independent_check
 from scipy.spatial.transform import Rotation
 
 from controlmm.motion import Motion
-from retarget import infer_mapping, load_robot, retarget_motion
+from retarget import RobotModel, infer_mapping, load_robot, retarget_motion
 from retarget.automap import RIGID_POSTURE
 from retarget.compare import robot_keypoints, similarity_fit
 from retarget.geoms import geom_points
@@ -42,6 +42,24 @@ def humanoids(tmp_path_factory) -> dict[str, Path]:
         out[style] = folder / f"{style}.xml"
         out[style].write_text(capsule_humanoid_xml(style))
     return out
+
+
+def _capsule_body(robot: RobotModel, c: int) -> str:
+    """The name of the body whose geom self-clearance capsule ``c`` encloses."""
+    m, sc = robot.model, robot.self_clearance
+    return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
+
+
+def _pairs_between(robot: RobotModel, *pairs: tuple[str, str]) -> np.ndarray:
+    """(P,) which of the robot's self-clearance pairs join the bodies of one of ``pairs``."""
+    sc = robot.self_clearance
+    wanted = [set(p) for p in pairs]
+    return np.array(
+        [
+            {_capsule_body(robot, a), _capsule_body(robot, b)} in wanted
+            for a, b in zip(sc.first, sc.second, strict=True)
+        ]
+    )
 
 
 def test_the_rest_frame_stands_every_style_up_facing_plus_x(humanoids):
@@ -107,16 +125,7 @@ def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
     robot = load_robot(humanoids["plain"])
     sc, m = robot.self_clearance, robot.model
     assert sc is not None
-
-    def body(c: int) -> str:
-        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
-
-    hand = np.array(
-        [
-            {body(a), body(b)} in ({"fingers_l", "thumb_l"}, {"fingers_r", "thumb_r"})
-            for a, b in zip(sc.first, sc.second, strict=True)
-        ]
-    )
+    hand = _pairs_between(robot, ("fingers_l", "thumb_l"), ("fingers_r", "thumb_r"))
     assert hand.sum() == 2 and np.all(sc.margin[hand] == SELF_MARGIN)
     rest = m.qpos0.copy()
     rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
@@ -147,18 +156,9 @@ def test_fingers_side_by_side_are_kept_apart(tmp_path):
     path = tmp_path / "close_thumbs.xml"
     path.write_text(text)
     robot = load_robot(path)
-    sc, m = robot.self_clearance, robot.model
+    sc = robot.self_clearance
     assert sc is not None
-
-    def body(c: int) -> str:
-        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
-
-    hand = np.array(
-        [
-            {body(a), body(b)} in ({"fingers_l", "thumb_l"}, {"fingers_r", "thumb_r"})
-            for a, b in zip(sc.first, sc.second, strict=True)
-        ]
-    )
+    hand = _pairs_between(robot, ("fingers_l", "thumb_l"), ("fingers_r", "thumb_r"))
     assert hand.sum() == 2
     rest = capsule_distances(robot.rest, sc.select_pairs(hand))[0][0]
     np.testing.assert_allclose(rest, 0.007, atol=1e-6)
@@ -269,16 +269,7 @@ def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
     robot = load_robot(humanoids["plain"])
     sc, m = robot.self_clearance, robot.model
     assert sc is not None
-
-    def body(c: int) -> str:
-        return m.body(int(m.geom_bodyid[int(sc.geom[c])])).name
-
-    neck = np.array(
-        [
-            {body(a), body(b)} in ({"head", "clavicle_l"}, {"head", "clavicle_r"})
-            for a, b in zip(sc.first, sc.second, strict=True)
-        ]
-    )
+    neck = _pairs_between(robot, ("head", "clavicle_l"), ("head", "clavicle_r"))
     assert neck.sum() == 2
     without = sc.select_pairs(~neck)
     rest = m.qpos0.copy()
@@ -295,7 +286,9 @@ def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
         for c in data.contact[: data.ncon]
     )
     first, second, margin = unpaired_overlaps(m, robot.tree, np.stack([rest, rolled]), without, robot.rest)
-    assert [(body(a), body(b)) for a, b in zip(first, second, strict=True)] == [("head", "clavicle_r")]
+    assert [
+        (_capsule_body(robot, a), _capsule_body(robot, b)) for a, b in zip(first, second, strict=True)
+    ] == [("head", "clavicle_r")]
     assert margin.tolist() == [SELF_MARGIN]
     assert unpaired_overlaps(m, robot.tree, rest[None], without, robot.rest)[0].size == 0
     assert unpaired_overlaps(m, robot.tree, rolled[None], sc, robot.rest)[0].size == 0
