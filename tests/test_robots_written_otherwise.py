@@ -62,6 +62,32 @@ def _pairs_between(robot: RobotModel, *pairs: tuple[str, str]) -> np.ndarray:
     )
 
 
+def _rest_and_turned(model: mujoco.MjModel, joint: str, degrees: float) -> tuple[np.ndarray, np.ndarray]:
+    """The plain capsule humanoid's rest qpos standing at the origin, and the same with ``joint`` turned."""
+    rest = model.qpos0.copy()
+    rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
+    turned = rest.copy()
+    turned[model.jnt_qposadr[model.joint(joint).id]] = np.radians(degrees)
+    return rest, turned
+
+
+def _overlap(model: mujoco.MjModel, qpos: np.ndarray, first: str, second: str) -> float:
+    """How deep (m, 0 if not at all) MuJoCo finds bodies ``first`` and ``second`` overlapping."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    depths = [
+        -c.dist
+        for c in data.contact[: data.ncon]
+        if {
+            model.body(int(model.geom_bodyid[c.geom1])).name,
+            model.body(int(model.geom_bodyid[c.geom2])).name,
+        }
+        == {first, second}
+    ]
+    return max([0.0, *depths])
+
+
 def test_the_rest_frame_stands_every_style_up_facing_plus_x(humanoids):
     """The plain file keeps its identity root; the turned and the lying ones are turned so that
     their rest pose is the plain one's: the same keypoints, feet, scale and left leg (+Y)."""
@@ -127,19 +153,8 @@ def test_a_thumb_is_kept_out_of_its_fingers(humanoids):
     assert sc is not None
     hand = _pairs_between(robot, ("fingers_l", "thumb_l"), ("fingers_r", "thumb_r"))
     assert hand.sum() == 2 and np.all(sc.margin[hand] == SELF_MARGIN)
-    rest = m.qpos0.copy()
-    rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
-    folded = rest.copy()
-    folded[m.jnt_qposadr[m.joint("thumb_l").id]] = np.radians(90)
-    data = mujoco.MjData(m)
-    data.qpos[:] = folded
-    mujoco.mj_forward(m, data)
-    assert any(
-        {m.body(int(m.geom_bodyid[c.geom1])).name, m.body(int(m.geom_bodyid[c.geom2])).name}
-        == {"thumb_l", "fingers_l"}
-        and c.dist < -0.003
-        for c in data.contact[: data.ncon]
-    )
+    rest, folded = _rest_and_turned(m, "thumb_l", 90)
+    assert _overlap(m, folded, "thumb_l", "fingers_l") > 0.003
     poses = robot.tree.forward(np.zeros((2, 3)), np.stack([np.eye(3)] * 2), np.stack([rest[7:], folded[7:]]))
     dist = capsule_distances(poses, sc.select_pairs(hand))[0]
     assert np.all(dist[0] > SELF_MARGIN) and dist[1, 0] < 0.0 < dist[1, 1]
@@ -272,19 +287,8 @@ def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
     neck = _pairs_between(robot, ("head", "clavicle_l"), ("head", "clavicle_r"))
     assert neck.sum() == 2
     without = sc.select_pairs(~neck)
-    rest = m.qpos0.copy()
-    rest[:7] = [0, 0, 0.96, 1, 0, 0, 0]
-    rolled = rest.copy()
-    rolled[m.jnt_qposadr[m.joint("neck_x").id]] = np.radians(45)
-    data = mujoco.MjData(m)
-    data.qpos[:] = rolled
-    mujoco.mj_forward(m, data)
-    assert any(
-        {m.body(int(m.geom_bodyid[c.geom1])).name, m.body(int(m.geom_bodyid[c.geom2])).name}
-        == {"head", "clavicle_r"}
-        and c.dist < -0.01
-        for c in data.contact[: data.ncon]
-    )
+    rest, rolled = _rest_and_turned(m, "neck_x", 45)
+    assert _overlap(m, rolled, "head", "clavicle_r") > 0.01
     first, second, margin = unpaired_overlaps(m, robot.tree, np.stack([rest, rolled]), without, robot.rest)
     assert [
         (_capsule_body(robot, a), _capsule_body(robot, b)) for a, b in zip(first, second, strict=True)
