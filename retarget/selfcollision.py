@@ -355,14 +355,15 @@ def build_self_clearance(
     # the margin (fingers side by side, their enclosures overlapping at rest: PHC's G1).
     finger_pairs: list[int] = []  # indices into first/second
     excluded = excluded_body_pairs(m)
+    hand_ancestors = {b: set(ancestors(b)) for b in hands}
     for i, bi in enumerate(body_of):
         for j, bj in enumerate(body_of):
             if (
                 j > i
                 and bi in hands
                 and hands.get(bj) == hands[bi]
-                and bi not in ancestors(bj)
-                and bj not in ancestors(bi)
+                and bi not in hand_ancestors[bj]
+                and bj not in hand_ancestors[bi]
                 and frozenset((bi, bj)) not in excluded
                 and _collides(m, int(geom[i]), int(geom[j]))
             ):

@@ -78,13 +78,12 @@ def _limb(side: str, sign: float, forearm_roll: bool = False) -> tuple[list, lis
         [hand],
     )
     if forearm_roll:  # the hand rigid on a link that rolls about the forearm 8 cm past the elbow
-        rigid_hand = (hand[0], hand[1], [], hand[3], hand[4])
         roll = (
             "forearm_roll_" + side,
             (0, 0, -0.08),
             [("forearm_roll_" + side, (0, 0, 1), (-90, 90))],
             [("capsule", (0, 0, -0.02, 0, 0, -0.14), 0.033)],
-            [(rigid_hand[0], (0, 0, -0.18), *rigid_hand[2:])],
+            [(hand[0], (0, 0, -0.18), [], hand[3], hand[4])],
         )
         forearm = (
             "forearm_" + side,
