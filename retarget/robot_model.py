@@ -17,6 +17,7 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.motion.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
+from retarget.actuators import damping_share
 from retarget.automap import auto_mapping
 from retarget.bodyfloor import BodyFloor, build_body_floor
 from retarget.capsules import Capsules, robot_capsules
@@ -44,6 +45,8 @@ class RobotModel:
         lower, upper: (nj,) joint ranges the retargeter uses (MJCF ranges narrowed by the
             mapping's ``ranges``).
         rest_q: (nj,) rest joint angles (qpos0 clipped to those ranges).
+        damping_share: (nj,) each joint's damping over its torque limit (s/rad, 0 where the
+            MJCF has neither: :func:`retarget.actuators.damping_share`).
         rest_root_quat: (4,) wxyz the root's rest orientation: the MJCF's, turned to face +X
             (:func:`retarget.rest_frame.rest_root_quat`; identity for most MJCFs).
         rest: Poses of the rest pose with the root at the world origin in that orientation.
@@ -100,6 +103,7 @@ class RobotModel:
                 )
         default = mapping.posture_weights.get("default", 0.02)
         self.posture_weights = np.array([mapping.posture_weights.get(n, default) for n in tree.joint_names])
+        self.damping_share = damping_share(m, tree.joint_ids)
         # Feet: the bodies of the ankle keypoints and their collision geometry.
         self.feet: dict[str, FloorPoints] = {}
         qpos0 = mujoco.MjData(m)

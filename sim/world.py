@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from controlmm.errors import ControlMMError
+from retarget.actuators import joint_torque_limits
 from sim.geometry import support_heights
 
 _Derived = TypeVar("_Derived")
@@ -205,35 +206,6 @@ def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
         if model.jnt_type[j] in (_HINGE, _SLIDE) and model.jnt_bodyid[j] in set(robot_bodies.tolist())
     ]
     dof_adr = np.array([model.jnt_dofadr[j] for j in rows], dtype=np.int64)
-    torque = np.full(len(rows), np.nan)
-    for i, j in enumerate(rows):
-        if model.jnt_actfrclimited[j]:
-            torque[i] = float(np.max(np.abs(model.jnt_actfrcrange[j])))
-    # Motor actuators (no bias, fixed gain) on a joint: their control range is a torque range.
-    for a in range(model.nu):
-        if model.actuator_trntype[a] != int(mujoco.mjtTrn.mjTRN_JOINT):
-            continue
-        j = int(model.actuator_trnid[a, 0])
-        if j not in rows:
-            continue
-        i = rows.index(j)
-        gear = abs(float(model.actuator_gear[a, 0]))
-        if model.actuator_forcelimited[a]:
-            limit = float(np.max(np.abs(model.actuator_forcerange[a]))) * gear
-        elif (
-            model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
-            and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
-            and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
-            and model.actuator_ctrllimited[a]
-        ):
-            limit = (
-                float(np.max(np.abs(model.actuator_ctrlrange[a])))
-                * abs(float(model.actuator_gainprm[a, 0]))
-                * gear
-            )
-        else:
-            continue
-        torque[i] = limit if np.isnan(torque[i]) else min(torque[i], limit)
     return Joints(
         names=tuple(model.joint(j).name or f"joint{j}" for j in rows),
         bodies=tuple(model.body(int(model.jnt_bodyid[j])).name for j in rows),
@@ -242,7 +214,7 @@ def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
         limited=np.array([bool(model.jnt_limited[j]) for j in rows], dtype=bool),
         lower=np.array([model.jnt_range[j, 0] for j in rows], dtype=np.float64),
         upper=np.array([model.jnt_range[j, 1] for j in rows], dtype=np.float64),
-        torque_limit=torque,
+        torque_limit=joint_torque_limits(model, rows),
     )
 
 

@@ -18,6 +18,7 @@ from retarget.costs.orientations import OrientationCost
 from retarget.costs.posture import PostureCost
 from retarget.costs.segments import SegmentCost
 from retarget.costs.self_clearance import MidpointClearanceCost, SelfClearanceCost
+from retarget.costs.temporal import REFERENCE_FPS
 from retarget.costs.velocity import VelocityCost
 from retarget.robot_model import RobotModel
 from retarget.solver_config import SolverConfig
@@ -40,7 +41,15 @@ __all__ = [
     "TermValue",
     "VelocityCost",
     "default_costs",
+    "joint_speed_weights",
 ]
+
+
+def joint_speed_weights(robot: RobotModel, config: SolverConfig) -> np.ndarray:
+    """(nj,) the velocity term's weight per joint at 20 fps: ``w_vel_joint``, plus
+    ``w_joint_damping`` on the squared share of the motor the joint's damping takes at its
+    speed (``damping_share * dq * 20``: :attr:`RobotModel.damping_share`)."""
+    return config.w_vel_joint + config.w_joint_damping * (REFERENCE_FPS * robot.damping_share) ** 2
 
 
 def default_costs(
@@ -68,7 +77,7 @@ def default_costs(
         if c.self_midpoints:
             terms.append(MidpointClearanceCost(robot.self_clearance, c.w_self, span))
     terms += [
-        VelocityCost(ref_x, span, targets.fps, c.w_vel_root, c.w_vel_joint),
+        VelocityCost(ref_x, span, targets.fps, c.w_vel_root, joint_speed_weights(robot, c)),
         AccelerationCost(ref_x, span, targets.fps, c.w_acc_root, c.w_acc_joint, c.exact_acceleration),
     ]
     return terms

@@ -22,9 +22,10 @@ def temporal_values(cfg: Configuration, ref_x: np.ndarray) -> np.ndarray:
     return np.concatenate([cfg.root_pos, cfg.root_unwrapped, cfg.q], axis=1) - ref_x
 
 
-def coordinate_weights(n: int, root: float, joint: float) -> np.ndarray:
-    """(n,) a weight per velocity coordinate: ``root`` for the 6 root ones, ``joint`` for the joints."""
-    return np.concatenate([np.full(6, root), np.full(n - 6, joint)])
+def coordinate_weights(n: int, root: float, joint: float | np.ndarray) -> np.ndarray:
+    """(n,) a weight per velocity coordinate: ``root`` for the 6 root ones, ``joint`` (a
+    number or (n - 6,) one per joint) for the joints."""
+    return np.concatenate([np.full(6, root), np.broadcast_to(joint, (n - 6,))])
 
 
 def coupled_pairs(span: np.ndarray) -> np.ndarray:

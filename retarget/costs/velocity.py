@@ -16,9 +16,12 @@ class VelocityCost(CostTerm[TermValue]):
     couples_frames = True
     lag = 1
 
-    def __init__(self, ref_x: np.ndarray, span: np.ndarray, fps: float, root: float, joint: float) -> None:
+    def __init__(
+        self, ref_x: np.ndarray, span: np.ndarray, fps: float, root: float, joint: float | np.ndarray
+    ) -> None:
         """``ref_x`` (T, n): reference of x; ``span`` (T,) int: span of each frame; ``fps``:
-        frame rate; ``root``, ``joint``: weights at 20 fps (rescaled by (fps / 20)^2)."""
+        frame rate; ``root``, ``joint`` (a number or one per joint): weights at 20 fps
+        (rescaled by (fps / 20)^2)."""
         self.ref_x = ref_x
         w = coordinate_weights(ref_x.shape[1], root, joint) * (fps / REFERENCE_FPS) ** 2
         self.weight = coupled_pairs(span)[:, None] * w  # (T - 1, n)

@@ -1,0 +1,61 @@
+"""What a robot's motors can do at each joint, as its MJCF states it.
+
+* :func:`joint_torque_limits`: the largest torque (N m; N for a slide) the model lets act on
+  each joint: its ``actuatorfrcrange``, or the force range of the motors driving it (times
+  their gear), or for a plain motor (no bias, fixed gain) its control range times gain and
+  gear; the smallest of those that apply, NaN where the model states none.
+* :func:`damping_share`: joint damping over that limit (s/rad): the share of the motor a joint
+  moving at 1 rad/s spends on its own damping (MuJoCo's passive force ``-damping * qvel``,
+  which the actuators must overcome in simulation). A joint with damping 200 N m s/rad and a
+  120 N m motor (the Apollo's torso yaw) can turn no faster than 0.6 rad/s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+
+def joint_torque_limits(model: mujoco.MjModel, joints: Sequence[int] | np.ndarray) -> np.ndarray:
+    """(J,) the torque limit of each of ``joints`` (MuJoCo joint ids of hinges or slides);
+    NaN where the model states none (see the module docstring)."""
+    rows = {int(j): i for i, j in enumerate(joints)}
+    torque = np.full(len(rows), np.nan)
+    for j, row in rows.items():
+        if model.jnt_actfrclimited[j]:
+            torque[row] = float(np.max(np.abs(model.jnt_actfrcrange[j])))
+    for a in range(model.nu):
+        if model.actuator_trntype[a] != int(mujoco.mjtTrn.mjTRN_JOINT):
+            continue
+        i = rows.get(int(model.actuator_trnid[a, 0]))
+        if i is None:
+            continue
+        gear = abs(float(model.actuator_gear[a, 0]))
+        if model.actuator_forcelimited[a]:
+            limit = float(np.max(np.abs(model.actuator_forcerange[a]))) * gear
+        elif (
+            model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
+            and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
+            and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
+            and model.actuator_ctrllimited[a]
+        ):
+            limit = (
+                float(np.max(np.abs(model.actuator_ctrlrange[a])))
+                * abs(float(model.actuator_gainprm[a, 0]))
+                * gear
+            )
+        else:
+            continue
+        torque[i] = limit if np.isnan(torque[i]) else min(torque[i], limit)
+    return torque
+
+
+def damping_share(model: mujoco.MjModel, joints: Sequence[int] | np.ndarray) -> np.ndarray:
+    """(J,) each joint's damping over its torque limit (s/rad; 0 without damping or a limit)."""
+    ids = np.asarray(joints, dtype=np.int64)
+    limit = joint_torque_limits(model, ids)
+    damping = model.dof_damping[model.jnt_dofadr[ids]]
+    ok = np.isfinite(limit) & (limit > 0)
+    return np.where(ok, damping / np.where(ok, limit, 1.0), 0.0)

@@ -1,0 +1,80 @@
+"""Motor limits and joint damping read from the MJCF, and the solver keeping damped joints slow."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+from retarget import SolverConfig, load_robot, retarget_motion
+from retarget.actuators import damping_share, joint_torque_limits
+from retarget.compare import similarity_fit
+from scenes import load_scene
+from sim import check_trajectory
+from sim.world import make_world
+
+FPS = 30.0
+
+
+def _joint(model: mujoco.MjModel, name: str) -> int:
+    return int(model.joint(name).id)
+
+
+def test_torque_limits_and_damping_come_from_the_mjcf():
+    apollo = load_robot("apollo").model
+    yaw = _joint(apollo, "torso_yaw")
+    assert joint_torque_limits(apollo, [yaw])[0] == 120.0  # its actuatorfrcrange
+    assert apollo.dof_damping[apollo.jnt_dofadr[yaw]] == 200.0
+    assert damping_share(apollo, [yaw])[0] == 200.0 / 120.0
+    h1 = load_robot("h1").model  # plain motors: control range x gain x gear
+    knee = _joint(h1, "left_knee")
+    motor = next(a for a in range(h1.nu) if h1.actuator_trnid[a, 0] == knee)
+    expected = np.abs(h1.actuator_ctrlrange[motor]).max() * abs(h1.actuator_gear[motor, 0])
+    assert joint_torque_limits(h1, [knee])[0] == expected > 0
+    g1 = load_robot("g1")  # no joint damping
+    assert np.all(g1.damping_share == 0.0)
+    assert np.all(load_robot("apollo").damping_share > 0.0)
+    # The solver and the check read the same limits.
+    world = make_world(load_scene("empty", robot="apollo").model)
+    ids = [_joint(apollo, n) for n in world.joints.names]
+    np.testing.assert_array_equal(world.joints.torque_limit, joint_torque_limits(apollo, ids))
+
+
+def _damping_load(robot, qpos: np.ndarray, joint: str) -> float:
+    """Largest 0.5 s mean of |damping * speed| / torque limit of ``joint`` (the share of its
+    motor its damping alone takes, as the check averages torques)."""
+    model = robot.model
+    j = _joint(model, joint)
+    speed = np.diff(qpos[:, model.jnt_qposadr[j]]) * FPS
+    share = damping_share(model, [j])[0] * np.abs(speed)
+    return float(uniform_filter1d(share, int(0.5 * FPS) + 1).max())
+
+
+def test_a_damped_joint_turns_no_faster_than_its_motor_allows(sample_joints):
+    """The real clip turns on the spot; the Apollo's torso yaw (damping 200 N m s/rad, a
+    120 N m motor) followed the human's shoulders at 3.6 rad/s, its damping alone four times
+    its motor. Weighing the damping's share of the motor keeps it within reach."""
+    robot = load_robot("apollo")
+    config = SolverConfig(**robot.mapping.solver)
+    plain = retarget_motion(sample_joints, "apollo", fps=FPS, config=replace(config, w_joint_damping=0.0))
+    kept = retarget_motion(sample_joints, "apollo", fps=FPS, config=config)
+    before, after = (_damping_load(robot, t.qpos, "torso_yaw") for t in (plain, kept))
+    assert before > 2.0
+    assert after < before / 2
+    # ... with the robot as close to the human as before.
+    fits = [similarity_fit(robot, t.qpos, FPS, sample_joints, 20.0).mean for t in (plain, kept)]
+    assert fits[1] < fits[0] + 0.005
+    worst = [_torque_errors(t.qpos).get("torso_yaw", 0.0) for t in (plain, kept)]
+    assert worst[0] > 2.0  # the check's sustained torque (damping, inertia, load) on the torso yaw
+    assert worst[1] < worst[0] / 1.5
+
+
+def _torque_errors(qpos: np.ndarray) -> dict[str, float]:
+    """joint -> the worst sustained torque ratio of the check's torque_limit errors."""
+    out: dict[str, float] = {}
+    for f in check_trajectory(load_scene("empty", robot="apollo"), qpos, FPS).failures:
+        if f.is_error and f.kind == "torque_limit" and f.joint:
+            out[f.joint] = max(out.get(f.joint, 0.0), float(f.depth))
+    return out
