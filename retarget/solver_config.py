@@ -26,7 +26,7 @@ class SolverConfig:
     """Initial Levenberg-Marquardt damping (per frame)."""
     w_vel_root: float = 0.5
     w_vel_joint: float = 0.1
-    w_joint_damping: float = 0.05
+    w_joint_damping: float = 0.01
     """Weight of ``(damping * speed / torque limit)^2`` per joint and frame (speed in rad/s; the
     MJCF's joint damping and motor limits, :func:`retarget.actuators.damping_share`): the share
     of a motor that its joint's damping takes. The Apollo's torso yaw (damping 200, 120 N m)
