@@ -36,12 +36,18 @@ EPS = 1e-6
 
 @pytest.fixture(scope="module")
 def sit_down() -> tuple[RobotModel, Targets]:
-    """H1 and the targets of the generated sit-down 000012 (20 fps)."""
+    """H1 and the targets of the generated sit-down 000012 (20 fps), its knees and feet kept
+    in the robot's own proportions (its hips 0.4 m apart: the hands pass close by them)."""
     spec = plan_clips(CorpusConfig(clips=9800, seed=0))[12]
     assert spec.family == "sit_down"
     _, joints, _, _ = make_clip(spec)
     robot = load_robot("h1")
-    return robot, build_targets(robot, joints.astype(np.float64), 20.0, HumanToWorld(scale=robot.scale))
+    world = HumanToWorld(scale=robot.scale)
+    return robot, build_targets(robot, joints.astype(np.float64), 20.0, world, _config(robot, False))
+
+
+def _config(robot: RobotModel, midpoints: bool) -> SolverConfig:
+    return SolverConfig(**robot.mapping.solver, self_midpoints=midpoints, human_leg_share=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +55,7 @@ def solved(sit_down) -> dict[bool, Solution]:
     """The solutions without and with the midpoint term."""
     robot, targets = sit_down
     return {
-        on: solve(robot, targets, SolverConfig(**robot.mapping.solver, self_midpoints=on))
+        on: solve(robot, targets, _config(robot, on))
         for on in (False, True)
     }
 
