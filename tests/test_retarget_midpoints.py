@@ -54,10 +54,7 @@ def _config(robot: RobotModel, midpoints: bool) -> SolverConfig:
 def solved(sit_down) -> dict[bool, Solution]:
     """The solutions without and with the midpoint term."""
     robot, targets = sit_down
-    return {
-        on: solve(robot, targets, _config(robot, on))
-        for on in (False, True)
-    }
+    return {on: solve(robot, targets, _config(robot, on)) for on in (False, True)}
 
 
 def _qpos(sol: Solution) -> np.ndarray:
