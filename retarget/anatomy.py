@@ -434,18 +434,18 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
 def _arm(
     model: mujoco.MjModel, data: mujoco.MjData, side: str, bodies: tuple[int, ...], hand: list[int]
 ) -> Limb:
-    """An arm: its tip is the point of the hand's geometry (visual or not) farthest from the
-    shoulder; without wrist joints the wrist lies on the elbow -> tip line (WRIST_SHARE), and
-    so it does where the only joints past the elbow turn the forearm about its own length (an
-    elbow roll: the older G1's, 10 cm past the elbow, whose hand is part of that link), unless
-    the hand is a link of its own without joints: the wrist is where it is attached."""
+    """An arm: its tip is the point of the hand's geometry (visual or not) or centre of mass
+    farthest from the shoulder; without wrist joints the wrist lies on the elbow -> tip line
+    (WRIST_SHARE), and so it does where the only joints past the elbow turn the forearm about
+    its own length (an elbow roll: the older G1's, 10 cm past the elbow, whose hand is part of
+    that link), unless the hand is a link of its own without joints: the wrist is where it is attached."""
     joints = _chain_joints(model, bodies)
     start = data.xanchor[joints[0]]
     best, best_d = data.xpos[bodies[-1]].copy(), -1.0
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] not in hand:
-            continue
-        pts, rad = _geom_world_points(model, data, g)
+    # The hand's geoms, and its links' centres of mass (an arm written without geometry).
+    points = [_geom_world_points(model, data, g) for g in range(model.ngeom) if model.geom_bodyid[g] in hand]
+    points.append((data.xipos[hand], np.zeros(len(hand))))
+    for pts, rad in points:
         if not len(pts):
             continue
         d = np.linalg.norm(pts - start, axis=1) + rad

@@ -156,10 +156,13 @@ _LAID = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 """Forward (+X) -> +Z, left (+Y) -> +X, up (+Z) -> +Y: a Y-up humanoid facing +Z."""
 
 
-def capsule_humanoid_xml(style: str = "turned", forearm_roll: bool = False) -> str:
+def capsule_humanoid_xml(
+    style: str = "turned", forearm_roll: bool = False, bare_forearms: bool = False
+) -> str:
     """The MJCF text (see the module docstring); ``forearm_roll``: the arms end as the older
     G1's do, an elbow, then a link that only rolls about the forearm 8 cm past it and carries
-    the hand (no wrist joint)."""
+    the hand (no wrist joint); ``bare_forearms``: the forearms, hands, fingers and thumbs carry
+    no geometry, only their masses (an inertial where their geom's centre was)."""
     # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
     # body's frame; local: the intended vector in the root's frame.
     world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
@@ -176,6 +179,11 @@ def capsule_humanoid_xml(style: str = "turned", forearm_roll: bool = False) -> s
         for jname, axis, (lo, hi) in joints:
             lines.append(f'{indent}  <joint name="{jname}" axis="{vec(axis)}" range="{lo} {hi}"/>')
         for gtype, where, size in geoms:
+            if bare_forearms and name.split("_")[0] in ("forearm", "hand", "fingers", "thumb"):
+                centre = np.reshape(where, (-1, 3)).mean(axis=0)
+                inertia = 'mass="0.3" diaginertia="1e-3 1e-3 1e-3"'
+                lines.append(f'{indent}  <inertial pos="{vec(tuple(centre))}" {inertia}/>')
+                continue
             attr = "fromto" if gtype == "capsule" else "pos"
             lines.append(f'{indent}  <geom type="{gtype}" {attr}="{vec(where)}" size="{size}"/>')
         lines += [body(c, indent + "  ") for c in children]

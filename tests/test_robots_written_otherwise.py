@@ -276,6 +276,27 @@ def test_an_elbow_roll_is_not_taken_for_the_wrist(tmp_path, motion):
     assert np.allclose(fits[True], fits[False], atol=0.01)
 
 
+def test_an_arm_without_geometry_past_its_elbow_is_read_from_its_masses(tmp_path):
+    """Forearms, hands and fingers written with masses but no geoms (BXI's Elf2 has only
+    visual meshes there; without them nothing marks where its arms end): the arm's end is
+    its farthest centre of mass, and its shoulder, elbow and wrist are where the plain
+    humanoid's are (on the old code the arm ended at the hand's origin and the shoulder and
+    elbow keypoints fell on the forearm and upper arm)."""
+    keypoints = {}
+    for bare in (False, True):
+        path = tmp_path / f"bare_{bare}.xml"
+        path.write_text(capsule_humanoid_xml("plain", bare_forearms=bare))
+        mapping = load_robot(path).mapping
+        keypoints[bare] = {k.joint: (k.body, k.offset) for k in mapping.keypoints}
+    for side in ("left", "right"):
+        for joint in ("shoulder", "elbow", "wrist"):
+            (body, offset), (plain_body, plain_offset) = (
+                keypoints[b][f"{side}_{joint}"] for b in (True, False)
+            )
+            assert body == plain_body, (side, joint)
+            np.testing.assert_allclose(offset, plain_offset, atol=0.01)
+
+
 def test_geoms_the_anatomy_leaves_alone_are_found_where_they_overlap(humanoids):
     """Without its head-clavicle pairs, the capsule humanoid's clearance does not keep the head
     off the clavicles; rolling the neck 45 degrees puts the head 1.4 cm into the right clavicle
