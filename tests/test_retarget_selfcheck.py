@@ -31,6 +31,7 @@ from retarget.selfcheck import (
     RELAXED_SOLVES,
     penetration_depths,
 )
+from retarget.selfcollision import capsule_distances
 from retarget.solver_config import SolverConfig
 
 
@@ -113,6 +114,31 @@ def test_penetration_depths_are_mujocos(stoop):
                 if {int(sc.geom[sc.first[i]]), int(sc.geom[sc.second[i]])} == set(key)
             )
             assert depth[k] == pytest.approx(d)
+
+
+def test_an_overlap_between_the_calibration_poses_is_found():
+    """The trunk-shoulder margins are calibrated on a sweep of a few joints; between its poses
+    the real geoms may overlap with their capsules outside the margin. G1's right shoulder-yaw
+    link 7 mm inside the torso, their capsules just outside the margin and no other pair close:
+    the check sees it (on the old code MuJoCo was never asked about that frame)."""
+    rm = load_robot("g1")
+    sc = rm.self_clearance.relaxed_pairs
+    q = rm.rest_q.copy()
+    for name, angle in (("pitch", -0.44), ("roll", 0.11), ("yaw", 0.92)):
+        q[rm.tree.joint_names.index(f"right_shoulder_{name}_joint")] = angle
+    q[rm.tree.joint_names.index("right_elbow_joint")] = 1.3
+    qpos = np.concatenate([[0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0], q])[None]
+    bodies = [
+        {rm.model.body(int(rm.model.geom_bodyid[sc.geom[i]])).name for i in (a, b)}
+        for a, b in zip(sc.first, sc.second, strict=True)
+    ]
+    k = bodies.index({"right_shoulder_yaw_link", "torso_link"})
+    poses = rm.tree.forward(qpos[:, :3], np.eye(3)[None], qpos[:, 7:])
+    assert capsule_distances(poses, sc)[0][0, k] > sc.margin[k]
+    a, b = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
+    truth = _contact_depths(rm.model, qpos)[(min(a, b), max(a, b))]
+    assert truth > OTHER_DEPTH
+    assert penetration_depths(rm.model, rm.tree, qpos, sc)[k] == pytest.approx(truth)
 
 
 def test_the_stoop_fits_closer_and_stays_clear_of_itself(stoop):
