@@ -107,7 +107,8 @@ def penetration_depths(
     """(P,) deepest overlap (m, 0 where none) of each pair's real geoms over the frames of
     ``qpos`` (T, nq), by MuJoCo's own collision detection of the robot's model (its exclusions
     honoured). Only the frames where some pair's capsules overlap (or, for pairs that overlap
-    at rest, come inside their margin) are replayed: elsewhere their geoms cannot. Two other
+    at rest, come within CALIBRATION_SLACK of their margin) are replayed: elsewhere their
+    geoms cannot overlap (or hardly: the margins are calibrated on a sweep). Two other
     geoms of the robot overlapping deeper than ``other_depth`` there (bodies the solver does
     not keep apart, pushed together by the closer pairs) count against the relaxed pairs of
     the subtree below the deeper of the two bodies (that arm)."""
@@ -231,7 +232,8 @@ def _overlaps(
 ) -> Iterator[tuple[int, int, int, float]]:
     """(frame, geom, geom, depth > 0 in m) of every two of the model's geoms that overlap in
     the frames of ``qpos`` (T, nq) where some pair's capsules overlap (or, for pairs that
-    overlap at rest, come inside their margin): ``mj_collision``, the model's exclusions honoured."""
+    overlap at rest, come within CALIBRATION_SLACK of their margin): ``mj_collision``, the
+    model's exclusions honoured."""
     qpos = np.asarray(qpos, dtype=np.float64)
     safe = sc.margin if sc.safe_margin is None else sc.safe_margin
     poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
