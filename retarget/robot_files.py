@@ -190,4 +190,14 @@ def compile_robot(robot: str | Path) -> mujoco.MjModel:
             f"robot MJCF '{path.name}' has no free joint on a body of the world: a humanoid needs a "
             "floating base (<freejoint/> in its root body)"
         )
+    free = [
+        model.body(int(model.jnt_bodyid[j])).name
+        for j in range(model.njnt)
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
+    ]
+    if len(free) > 1:
+        raise ControlMMError(
+            f"robot MJCF '{path.name}' has {len(free)} free joints (on {', '.join(free)}): a retargeting "
+            "robot has one floating base; pass the robot's own MJCF, not a scene with loose bodies"
+        )
     return model

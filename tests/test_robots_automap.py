@@ -12,6 +12,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from capsule_humanoid import capsule_humanoid_xml
 from cli_helpers import console as cli
 from robot_checks import independent_check
 
@@ -241,6 +242,9 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         tmp_path / "ball.xml",
         '<mujoco><worldbody><body name="a"><freejoint/><geom size="0.1"/></body></worldbody></mujoco>',
     )
+    humanoid = capsule_humanoid_xml("plain")
+    loose = '<body name="prop" pos="1 0 0.1"><freejoint/><geom size="0.1"/></body>\n  </worldbody>'
+    scene = _write(tmp_path / "scene.xml", humanoid.replace("</worldbody>", loose, 1))
     bad_body = json.loads((Path(__file__).parents[1] / "retarget/mappings/t1.json").read_text())
     bad_body["keypoints"]["left_knee"]["body"] = "Knee_Left"
     bad_mapping = _write(tmp_path / "bad.json", json.dumps(bad_body))
@@ -250,6 +254,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (no_free, "no free joint"),
         (broken, "does not load"),
         (ball, "no two legs"),
+        (scene, r"2 free joints \(on root, prop\)"),
         (bad_mapping, "body 'Knee_Left'"),
         (tmp_path / "missing.xml", "does not exist"),
     ]
@@ -261,12 +266,13 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (("retarget", src, "--robot", broken, "--out", tmp_path / "r"), "does not load"),
         (("retarget", src, "--robot", bad_mapping, "--out", tmp_path / "r"), "body 'Knee_Left'"),
         (("robots", "map", ball, "--out", tmp_path / "m.json"), "no two legs"),
+        (("robots", "map", scene, "--out", tmp_path / "m.json"), "not a scene with loose bodies"),
     ):
         done = cli(*argv)
         err = done.stderr.strip()
         assert done.returncode == 2 and needle in err and len(err.splitlines()) == 1, (argv, err)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        ["nofree.xml", "broken.xml", "ball.xml", "bad.json", "m.npy"]
+        ["nofree.xml", "broken.xml", "ball.xml", "scene.xml", "bad.json", "m.npy"]
     )
 
 
