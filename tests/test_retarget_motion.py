@@ -208,7 +208,8 @@ def test_limits_floor_and_positions_checked_in_mujoco(exported, motion, robot):
         # The upper arms of a hanging arm are abducted on purpose (the mapping's arm_abduction,
         # G1/H1 hips are wider than the scaled human's: see docs/retargeting.md). The knees go
         # under the human's: H1's thighs start 0.4 m apart (the human's 0.12 m) and turn in by
-        # up to asin(0.14 / 0.4) = 20 degrees to get there (G1's: 0.23 m against 0.09, 13).
+        # up to asin(0.14 / 0.4) = 20 degrees to get there (G1's, 0.23 m against 0.09: 10 on
+        # this clip, within the general bound).
         bound = 12 + (np.degrees(traj.robot_model().mapping.arm_abduction) if a in (16, 17) else 0)
         if robot == "h1" and a in (1, 2):
             bound = 20
