@@ -187,6 +187,17 @@ def _move_foot(robot: RobotModel, kp_pos: np.ndarray, side: str, delta: np.ndarr
             kp_pos[:, robot.keypoint_index(joint)] += delta
 
 
+def foot_keypoints(robot: RobotModel, side: str) -> list[int]:
+    """Indices of the ``side`` foot's keypoints (its ankle and, on the same body, its toe):
+    the ones a stance locks."""
+    foot_node = robot.nodes[robot.keypoint_index(f"{side}_ankle")]
+    return [
+        k
+        for k in range(len(robot.joints))
+        if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
+    ]
+
+
 def space_feet(robot: RobotModel, kp_pos: np.ndarray, world: np.ndarray, pelvis: np.ndarray) -> None:
     """Push the feet targets apart sideways where the robot's feet would overlap (in place).
 
@@ -285,12 +296,7 @@ def feet_targets(
     Returns (T,) the contact run each frame's lock belongs to (-1 where the foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
-    foot_node = robot.nodes[ka]
-    same_node = [
-        k
-        for k in range(len(robot.joints))
-        if robot.nodes[k] == foot_node and robot.keypoint_names[k] in (f"{side}_ankle", f"{side}_foot")
-    ]
+    same_node = foot_keypoints(robot, side)
     rest_rot = robot.foot_flat_rot[side]  # the foot flat on the floor, facing +X
     flat_height = robot.foot_flat_height[side]  # its node's height then
     heading, elevation = foot_heading_pitch(world, side)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +51,7 @@ from retarget.selfcheck import (
 from retarget.selfcollision import SelfClearance
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
-from retarget.targets import Targets, build_targets
+from retarget.targets import Targets, build_targets, stiffer_locks
 from retarget.trajectory import RobotTrajectory
 
 SOLVERS = ("batched", "mink")
@@ -320,6 +320,74 @@ def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance |
     return penetration_depths(rm.model, rm.tree, qpos, clearance)
 
 
+@dataclass
+class _Solved:
+    """A solve as the output check weighs it: its solution, output qpos (T, nq) and replay,
+    floor and swing lifts (m), the targets it was solved for, its pairs' deepest overlaps
+    (P,) m and its planted feet's largest step (m, :func:`_stance_slip`)."""
+
+    sol: Solution
+    qpos: np.ndarray
+    rep: Replay
+    lift: float
+    swing_lift: float
+    targets: Targets
+    depth: np.ndarray
+    slip: float
+
+
+def _output_rungs(
+    rm: RobotModel,
+    config: SolverConfig,
+    solver: str,
+    transform: HumanToWorld,
+    joints: np.ndarray,
+    fps: float,
+    clearance: SelfClearance,
+    best: _Solved,
+    solves: int,
+) -> tuple[_Solved, int, SelfClearance]:
+    """Solve again where the output frames of ``best`` overlap deeper than ``OTHER_DEPTH``:
+    first at the motion's rate (``joints`` (T, 22, 3) at ``best.targets.fps``) with the pairs
+    kept apart halfway between its frames too (retarget.midpoints: a hand sweeping through a
+    hip between two of them; skipped where the solve had that already), then at the output
+    rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each rung solved with the
+    planted feet as they were and, unless that one is kept clear of every pair, with their
+    locks as stiff as the self-clearance (:func:`retarget.targets.stiffer_locks`: the arms and trunk give
+    way, not the feet). A solve is kept if it overlaps less and slips no more than the one
+    kept (selfcheck.OUTPUT_SLIP); pairs that still overlap after an output-rate rung get
+    that much more room for the next. Returns (the solve kept, solves so far, the
+    self-clearance with any pairs added)."""
+    dense = resample(joints, best.targets.fps, fps)
+    rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
+    for stiffness in rungs:
+        if stiffness is None:  # the midpoint rung: the motion's own frames
+            candidates = [(replace(config, self_midpoints=True), best.targets)]
+        else:
+            cfg2 = replace(config, w_self=config.w_self * stiffness)
+            dense_targets = build_targets(rm, dense, fps, transform, cfg2)
+            candidates = [(cfg2, dense_targets), (cfg2, stiffer_locks(rm, dense_targets, stiffness))]
+        for k, (cfg2, targets2) in enumerate(candidates):
+            sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
+                rm.with_self_clearance(clearance), targets2, cfg2, solver, targets2.fps, fps
+            )
+            solves += 1
+            # Pairs found overlapping are kept apart from then on; those the stiff-lock solve
+            # finds count in its own check only (the rungs go on as they would without it).
+            measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, clearance))
+            depth2 = _output_overlap(rm, qpos2, measured)
+            slip2 = _stance_slip(rm, rep2, targets2, fps)
+            if k == 0:
+                clearance, plain = measured, depth2
+            if _rung_kept(best.depth, best.slip, depth2, slip2, midpoint=stiffness is None):
+                best = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2)
+                if depth2.max() <= OTHER_DEPTH:
+                    return best, solves, clearance
+        if stiffness is not None:  # the output-rate rungs go on as they would without it:
+            clearance = clearance.tightened(plain, OTHER_DEPTH)  # the plain solve's pairs get more room
+    return best, solves, clearance
+
+
 def retarget_motion(
     motion: Motion | np.ndarray | str | Path,
     robot: RobotSpec = "g1",
@@ -376,42 +444,22 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     )
     if clearance is not None:
         clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
-    depth = _output_overlap(rm, qpos, clearance)
-    if depth.max(initial=0.0) > OTHER_DEPTH:
-        # Solved again, first at the motion's rate with the pairs kept apart halfway between
-        # its frames too (retarget.midpoints: a hand sweeping through a hip between two of
-        # them; skipped where the solve had that already), then at the output rate with a
-        # stiffer self-clearance (selfcheck.OUTPUT_SELF), each solve kept if it overlaps less
-        # and slips no more (selfcheck.OUTPUT_SLIP); pairs that still overlap after an
-        # output-rate solve get that much more room for the next rung.
-        dense = resample(joints, src_fps, fps)
-        assert clearance is not None  # the overlaps were measured on it
-        slip = _stance_slip(rm, rep, targets, fps)
-        rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
-        for stiffness in rungs:
-            if stiffness is None:  # the midpoint rung: the motion's own frames
-                cfg2 = replace(config, self_midpoints=True)
-                joints2, fps2, targets2 = joints, src_fps, targets
-            else:
-                cfg2 = replace(config, w_self=config.w_self * stiffness)
-                joints2, fps2, targets2 = dense, fps, build_targets(rm, dense, fps, transform, cfg2)
-            sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-                rm.with_self_clearance(clearance), targets2, cfg2, solver, fps2, fps
+        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, _output_overlap(rm, qpos, clearance), 0.0)
+        if out.depth.max(initial=0.0) > OTHER_DEPTH:
+            out.slip = _stance_slip(rm, rep, targets, fps)
+            out, solves, clearance = _output_rungs(
+                rm, config, solver, transform, joints, fps, clearance, out, solves
             )
-            solves += 1
-            clearance = _with_unpaired(rm, qpos2, clearance)
-            depth2 = _output_overlap(rm, qpos2, clearance)
-            slip2 = _stance_slip(rm, rep2, targets2, fps)
-            kept = _rung_kept(depth, slip, depth2, slip2, midpoint=stiffness is None)
-            if kept:
-                joints, src_fps, targets, depth, slip = joints2, fps2, targets2, depth2, slip2
-                sol, qpos, rep, lift, swing_lift = sol2, qpos2, rep2, lift2, swing_lift2
-            if kept and depth2.max() <= OTHER_DEPTH:
-                break
-            if stiffness is not None:  # the output-rate rungs go on as they would without it
-                clearance = clearance.tightened(depth2, OTHER_DEPTH)
+        sol, qpos, rep, lift, swing_lift, targets = (
+            out.sol,
+            out.qpos,
+            out.rep,
+            out.lift,
+            out.swing_lift,
+            out.targets,
+        )
     times = np.arange(len(qpos)) / fps
-    near = np.clip(np.rint(times * src_fps).astype(int), 0, len(joints) - 1)
+    near = np.clip(np.rint(times * targets.fps).astype(int), 0, len(targets.stance["left"]) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
     method = {
         "batched": "whole-sequence Levenberg-Marquardt (banded)",

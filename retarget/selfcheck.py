@@ -65,7 +65,9 @@ next (G1's pelvis and a hip link in a stoop, corpus clip 000005 at 30 fps: 8 mm 
 first); each kept if it overlaps less. x10 at once lifted a seated G1's planted foot 15 cm
 (clip 000012 at 30 fps: the solve stopped in a poor minimum). The third rung: G1's stoop
 000005 at 30 fps left the right shoulder 6.0 and 5.8 mm inside the torso after x3 and x10,
-none after x30 (with the coarse level's schedule before 2026-12-02; since, x10 clears it)."""
+none after x30 (with the coarse level's schedule before 2026-12-02; since, x10 clears it).
+A rung whose solve is not kept clear is solved again with the planted feet's locks that many
+times stiffer too (:func:`retarget.targets.stiffer_locks`): the arms give way, not the feet."""
 OUTPUT_SLIP = 0.015
 """...and only if no foot that the human keeps down slides further between two output frames
 than before and than this (m): a solve with another weight may settle elsewhere (x3 and

@@ -28,13 +28,13 @@ Steps (all positions in the MuJoCo world, placed by :class:`controlmm.frames.Hum
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.foot_targets import STANCE_CLEARANCE, feet_targets, separate_locks, space_feet
+from retarget.foot_targets import STANCE_CLEARANCE, feet_targets, foot_keypoints, separate_locks, space_feet
 from retarget.robot_model import RobotModel
 from retarget.solver_config import SolverConfig
 from retarget.stance import RAMP_SECONDS, detect_contacts, detect_stance, lock_ramp, slowness
@@ -333,3 +333,22 @@ def take_frames(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
         lock={k: pick(v) for k, v in targets.lock.items()},
         clearance={k: pick(v) for k, v in targets.clearance.items()},
     )
+
+
+def stiffer_locks(robot: RobotModel, targets: Targets, factor: float) -> Targets:
+    """``targets`` with the stance feet's weights (their keypoints' positions and the ankle's
+    orientation) ``factor`` times their own where locked, in proportion to the lock.
+
+    A solve that stiffens another term (the self-clearance's output rungs,
+    :mod:`retarget.selfcheck`) stiffens the locks with it: the feet then keep their places and
+    the tracked arms and trunk give way (the CMU humanoid sitting down with its self-clearance
+    ten times stiffer slid a planted foot 17 mm in a frame; with locks as stiff, 0.3 mm)."""
+    kp_weight, ori_weight = targets.kp_weight.copy(), targets.ori_weight.copy()
+    ori_kp = targets.ori_kp.tolist()
+    for side in ("left", "right"):
+        gain = 1.0 + targets.lock[side] * (factor - 1.0)  # (T,)
+        for k in foot_keypoints(robot, side):
+            kp_weight[:, k] *= gain
+            if k in ori_kp:
+                ori_weight[:, ori_kp.index(k)] *= gain
+    return replace(targets, kp_weight=kp_weight, ori_weight=ori_weight)

@@ -13,6 +13,8 @@ from controlmm.motion import Motion
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget import load_robot, retarget_motion, robot_scale
 from retarget.compare import similarity_fit
+from retarget.solver_config import SolverConfig
+from retarget.targets import build_targets, stiffer_locks
 
 FPS = 20.0
 
@@ -169,3 +171,27 @@ def test_toes_turned_out_keep_the_knees_over_the_feet(sample_joints, monkeypatch
     monkeypatch.setattr(ft, "KNEE_TURN_MOST_DEG", 0.0)
     toes_only = knees_fit()
     assert turned < toes_only - 0.005, (turned, toes_only)
+
+
+def test_stiffer_locks_weigh_only_the_planted_feet(g1, sample_joints):
+    """``stiffer_locks`` (the output check's stiffer solves): the feet's keypoints and the
+    ankles' orientation weigh ``factor`` times more where fully locked, in proportion to the
+    lock where it ramps, and as before in swing; every other keypoint as before."""
+    targets = build_targets(
+        g1, sample_joints.astype(np.float64), FPS, HumanToWorld(scale=robot_scale("g1")), SolverConfig()
+    )
+    stiff = stiffer_locks(g1, targets, 10.0)
+    feet = {side: ft.foot_keypoints(g1, side) for side in ("left", "right")}
+    assert all(g1.keypoint_index(f"{side}_ankle") in feet[side] for side in feet)
+    ori = targets.ori_kp.tolist()
+    for side, keys in feet.items():
+        lock = targets.lock[side]
+        assert (lock == 1.0).any() and (lock == 0.0).any() and ((lock > 0) & (lock < 1)).any()
+        for k in keys:
+            np.testing.assert_allclose(stiff.kp_weight[:, k], targets.kp_weight[:, k] * (1 + 9 * lock))
+        o = ori.index(g1.keypoint_index(f"{side}_ankle"))
+        np.testing.assert_allclose(stiff.ori_weight[:, o], targets.ori_weight[:, o] * (1 + 9 * lock))
+    others = [k for k in range(targets.kp_weight.shape[1]) if k not in feet["left"] + feet["right"]]
+    np.testing.assert_array_equal(stiff.kp_weight[:, others], targets.kp_weight[:, others])
+    np.testing.assert_array_equal(stiff.kp_pos, targets.kp_pos)
+    assert stiff.kp_weight is not targets.kp_weight  # the targets given are left alone
