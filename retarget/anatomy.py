@@ -40,6 +40,9 @@ MIDDLE_RANGE = (0.25, 0.85)
 """Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
 ACROSS = 0.6
 """A middle joint's axis crosses the limb: |cos| to the limb's direction below this."""
+ALONG = 0.1
+"""A twist hinge's axis runs along the limb: |cos| to the limb's direction (first joint to tip)
+above 1 - this."""
 SIDE_FRACTION = 0.3
 """A chain end belongs to an arm when it lies further from the midline than this fraction of
 the furthest such end; nearer ends are the head's (or other midline parts)."""
@@ -210,7 +213,7 @@ def limb_anatomy(
     length = max(float(np.linalg.norm(tip - start)), 1e-6)
     # The first hinge past the hip / shoulder whose axis crosses the limb (a twist joint's
     # axis runs along it); else the hinge nearest the middle.
-    best, best_score = None, np.inf
+    best, best_score, across = None, np.inf, []
     for i in range(1, len(joints)):
         if model.jnt_type[joints[i]] != mujoco.mjtJoint.mjJNT_HINGE:
             continue
@@ -220,10 +223,11 @@ def limb_anatomy(
             continue
         cos = abs(float(axes[i] @ out)) / max(float(np.linalg.norm(out)), 1e-9)
         if cos < ACROSS:
-            best = i
-            break
-        if abs(frac - 0.5) < best_score:
+            across.append(i)
+        elif not across and abs(frac - 0.5) < best_score:
             best, best_score = i, abs(frac - 0.5)
+    if across:
+        best = _after_upper_twist(model, joints, anchors, axes, start, length, tip, across)
     end_body = bodies[-1]
     if best is None:
         middle_joint, middle_body = None, bodies[len(bodies) // 2]
@@ -272,6 +276,37 @@ def limb_anatomy(
         tuple(joints[i] for i in beyond),
         tuple(joints[i] for i in before),
     )
+
+
+def _after_upper_twist(
+    model: mujoco.MjModel,
+    joints: tuple[int, ...],
+    anchors: np.ndarray,
+    axes: np.ndarray,
+    start: np.ndarray,
+    length: float,
+    tip: np.ndarray,
+    across: list[int],
+) -> int:
+    """Of the hinges across the limb (``across``: indices into ``joints``, in order), the
+    knee / elbow: the first, unless no twist (a hinge along the limb) comes before it, one
+    follows it, and the next one across past that twist sits nearer the limb's middle; then
+    that one. Atlas's clavicle joint sits 25 cm above its shoulder-roll hinge, which so comes
+    a third of the way along its arm, before the upper arm's twist and the elbow."""
+    direction = (tip - start) / length
+    hinge = [model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE for j in joints]
+    twists = [i for i in range(len(joints)) if hinge[i] and abs(float(axes[i] @ direction)) >= 1.0 - ALONG]
+    first = across[0]
+    if any(t < first for t in twists):
+        return first
+    twist = next((t for t in twists if t > first), None)
+    if twist is None:
+        return first
+    later = [i for i in across if i > twist and np.linalg.norm(anchors[i] - anchors[twist]) > SAME_ANCHOR]
+    if not later:
+        return first
+    off_middle = [abs(float(np.linalg.norm(anchors[i] - start)) / length - 0.5) for i in (first, later[0])]
+    return later[0] if off_middle[1] < off_middle[0] else first
 
 
 def _same_anchor(idx: list[int], anchors: np.ndarray) -> list[list[int]]:

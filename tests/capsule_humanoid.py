@@ -45,9 +45,11 @@ def _quat(rot: np.ndarray) -> np.ndarray:
     )
 
 
-def _limb(side: str, sign: float, forearm_roll: bool = False) -> tuple[list, list]:
+def _limb(
+    side: str, sign: float, forearm_roll: bool = False, clavicle_drop: float = 0.0
+) -> tuple[list, list]:
     """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested;
-    ``forearm_roll``: see :func:`capsule_humanoid_xml`."""
+    ``forearm_roll``, ``clavicle_drop``: see :func:`capsule_humanoid_xml`."""
     s = sign
     finger = (
         "fingers_" + side,
@@ -94,7 +96,7 @@ def _limb(side: str, sign: float, forearm_roll: bool = False) -> tuple[list, lis
         )
     upper = (
         "upperarm_" + side,
-        (0, s * 0.17, 0),
+        (0, s * 0.17, -clavicle_drop),
         [
             (f"shoulder_{a}_" + side, ax, (-170, 170))
             for a, ax in (("x", (1, 0, 0)), ("y", (0, 1, 0)), ("z", (0, 0, 1)))
@@ -102,10 +104,14 @@ def _limb(side: str, sign: float, forearm_roll: bool = False) -> tuple[list, lis
         [("capsule", (0, 0, -0.04, 0, 0, -0.24), 0.04)],
         [forearm],
     )
+    clavicle_axes = ((0, 0, 1), (1, 0, 0)) if not clavicle_drop else ((0, 1, 0), (1, 0, 0))
     clavicle = (
         "clavicle_" + side,
-        (0, s * 0.05, 0.25),
-        [("clavicle_" + side, (0, 0, 1), (-20, 20)), ("clavicle_x_" + side, (1, 0, 0), (-20, 20))],
+        (0, s * 0.05, 0.25 + clavicle_drop),
+        [
+            ("clavicle_" + side, clavicle_axes[0], (-20, 20)),
+            ("clavicle_x_" + side, clavicle_axes[1], (-20, 20)),
+        ],
         [("capsule", (0, s * 0.03, 0, 0, s * 0.1, 0), 0.035)],
         [upper],
     )
@@ -157,12 +163,15 @@ _LAID = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
 def capsule_humanoid_xml(
-    style: str = "turned", forearm_roll: bool = False, bare_forearms: bool = False
+    style: str = "turned", forearm_roll: bool = False, bare_forearms: bool = False, clavicle_drop: float = 0.0
 ) -> str:
     """The MJCF text (see the module docstring); ``forearm_roll``: the arms end as the older
     G1's do, an elbow, then a link that only rolls about the forearm 8 cm past it and carries
     the hand (no wrist joint); ``bare_forearms``: the forearms, hands, fingers and thumbs carry
-    no geometry, only their masses (an inertial where their geom's centre was)."""
+    no geometry, only their masses (an inertial where their geom's centre was);
+    ``clavicle_drop``: the clavicle joints this far (m) above the shoulder, which stays where
+    it is, turning the clavicle forward and sideways (Atlas's is 25 cm above its shoulder-roll
+    hinge), not about the hanging arm."""
     # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
     # body's frame; local: the intended vector in the root's frame.
     world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
@@ -190,7 +199,9 @@ def capsule_humanoid_xml(
         lines.append(f"{indent}</body>")
         return "\n".join(lines)
 
-    arms, legs = zip(*(_limb(side, s, forearm_roll) for side, s in (("l", 1.0), ("r", -1.0))), strict=True)
+    arms, legs = zip(
+        *(_limb(side, s, forearm_roll, clavicle_drop) for side, s in (("l", 1.0), ("r", -1.0))), strict=True
+    )
     head = (
         "head",
         (0, 0, 0.3),
