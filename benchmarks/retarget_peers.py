@@ -6,7 +6,8 @@
         --json out/peers.json
 
 Motions: the real HumanML3D clip 012314 resampled to 30 fps (the rate both peers assume),
-the first ``--clips`` clips of ``--corpus`` (a ``controlmm corpus`` folder), and, when
+the first ``--clips`` clips of ``--corpus`` (a ``controlmm corpus`` folder), with ``--families``
+one generated clip of each of the corpus's families (no files needed), and, when
 holosoma-retargeting is available, the real OMOMO mocap clips it ships (SMPL-H: its first 22
 joints are HumanML3D's), fed to each retargeter in its own format.
 
@@ -63,6 +64,7 @@ sys.path.insert(0, str(ROOT))
 
 from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
 
+from controlmm.corpus import CorpusConfig, make_clip, plan_clips  # noqa: E402
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
 from controlmm.motion.skeleton import JOINT_INDEX  # noqa: E402
@@ -92,16 +94,33 @@ GMR_RECORDED = {  # listed when GMR cannot run here
 }
 
 
-def human_motions(corpus: Path | None, clips: int) -> dict[str, tuple[Motion, np.ndarray]]:
+def family_motions() -> list[tuple[str, Motion]]:
+    """One generated clip of each corpus family: the first of each in the default corpus's plan
+    (``controlmm corpus --clips 9800 --seed 0``; the same motion as that corpus's file)."""
+    first: dict[str, int] = {}
+    specs = plan_clips(CorpusConfig(clips=9800, seed=0))
+    for i, spec in enumerate(specs):
+        first.setdefault(spec.family, i)
+    return [
+        (f"family {family} {i:06d}", Motion(joints=make_clip(specs[i])[1].astype(np.float64), fps=20.0))
+        for family, i in sorted(first.items())
+    ]
+
+
+def human_motions(
+    corpus: Path | None, clips: int, families: bool = False
+) -> dict[str, tuple[Motion, np.ndarray]]:
     """name -> (the motion as loaded, its HumanML3D joints (T, 22, 3) resampled to FPS)."""
     out = {}
-    sources = [("real 012314", real_clip())]
+    sources: list[tuple[str, Path | Motion]] = [("real 012314", real_clip())]
     if corpus is not None:
         sources += [
             (f"corpus {p.stem}", p) for p in sorted((corpus / "new_joint_vecs").glob("*.npy"))[:clips]
         ]
-    for name, path in sources:
-        m = load_motion(path)
+    if families:
+        sources += family_motions()
+    for name, source in sources:
+        m = source if isinstance(source, Motion) else load_motion(source)
         frames = int(np.floor((m.num_frames - 1) / m.fps * FPS)) + 1
         out[name] = (m, resample_human(m.joints, m.fps, frames, FPS))
     return out
@@ -315,6 +334,11 @@ def main() -> int:
     p.add_argument("--robots", default="all", help="comma-separated packaged robots (default: all)")
     p.add_argument("--corpus", type=Path, default=None, help="a controlmm corpus folder for more motions")
     p.add_argument("--clips", type=int, default=10, help="corpus clips to use (default 10)")
+    p.add_argument(
+        "--families",
+        action="store_true",
+        help="also one generated clip of each corpus family (the first of each in the default corpus's plan)",
+    )
     p.add_argument("--repeats", type=int, default=3, help="timed runs of ours per motion (best is kept)")
     p.add_argument("--holosoma-python", type=Path, default=ROOT / ".venv-holosoma" / "bin" / "python")
     p.add_argument(
@@ -326,7 +350,7 @@ def main() -> int:
     p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
     args = p.parse_args()
     robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
-    motions = human_motions(args.corpus, args.clips)
+    motions = human_motions(args.corpus, args.clips, args.families)
     per: dict[str, dict[str, dict]] = {}
     rows = []
     print(
@@ -337,9 +361,22 @@ def main() -> int:
         for name, (motion, joints) in motions.items():
             qpos, seconds = ours(robot, motion, args.repeats)
             per[f"ours/{robot}"][name] = measure(robot, qpos, joints, seconds, len(joints))
-        results = list(per[f"ours/{robot}"].values())
-        rows.append(summarise("controlmm", robot, "real + corpus", results))
+        runs = per[f"ours/{robot}"]
+        rows.append(
+            summarise(
+                "controlmm",
+                robot,
+                "real + corpus",
+                [v for k, v in runs.items() if not k.startswith("family")],
+            )
+        )
         print(f"  {robot}: fit {rows[-1]['fit_cm']:.2f} cm, {rows[-1]['fps']:.0f} frames/s", flush=True)
+        if args.families:
+            rows.append(
+                summarise(
+                    "controlmm", robot, "families", [v for k, v in runs.items() if k.startswith("family")]
+                )
+            )
     print("\nEvery robot (ours):\n" + table(rows, []))
     # The G1 side by side with the peers: per retargeter, per motion group, the figures per motion.
     peer_rows: list[dict] = []
