@@ -39,6 +39,7 @@ from retarget.selfcheck import (
     EXACT_SELF,
     EXACT_TIGHTENINGS,
     OTHER_DEPTH,
+    OUTPUT_FIT_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
     RELAX_FRACTION,
@@ -336,6 +337,14 @@ class _Solved:
     slip: float
 
 
+def _keypoint_error(rm: RobotModel, rep: Replay, reference: np.ndarray) -> float:
+    """Mean distance (m) of the robot's keypoints in the frames of ``rep`` to ``reference``
+    (T, K, 3), the targets at the output rate."""
+    bodies = np.array([rm.tree.node_body[n] for n in rm.nodes])
+    points = rep.xpos[:, bodies] + np.einsum("tkij,kj->tki", rep.xmat[:, bodies], rm.offsets)
+    return float(np.linalg.norm(points - reference, axis=-1).mean())
+
+
 def _output_rungs(
     rm: RobotModel,
     config: SolverConfig,
@@ -353,12 +362,17 @@ def _output_rungs(
     hip between two of them; skipped where the solve had that already), then at the output
     rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each rung solved with the
     planted feet as they were and, unless that one is kept clear of every pair, with their
-    locks as stiff as the self-clearance (:func:`retarget.targets.stiffer_locks`: the arms and trunk give
-    way, not the feet). A solve is kept if it overlaps less and slips no more than the one
-    kept (selfcheck.OUTPUT_SLIP); pairs that still overlap after an output-rate rung get
-    that much more room for the next. Returns (the solve kept, solves so far, the
-    self-clearance with any pairs added)."""
+    locks as stiff as the self-clearance (:func:`retarget.targets.stiffer_locks`: the arms and
+    trunk give way, not the feet). A solve is kept if it overlaps less and slips no more than
+    the one kept (selfcheck.OUTPUT_SLIP) and its keypoints stay within
+    selfcheck.OUTPUT_FIT_GIVE of the first solve's distance to the targets; a solve that
+    clears every pair but gives up more of the motion is kept only where none clears within
+    it. Pairs that still overlap after an output-rate rung get that much more room for the
+    next. Returns (the solve kept, solves so far, the self-clearance with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
+    reference = build_targets(rm, dense, fps, transform, config).kp_pos  # (T, K, 3) at the output rate
+    most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
+    far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
     for stiffness in rungs:
         if stiffness is None:  # the midpoint rung: the motion's own frames
@@ -379,13 +393,19 @@ def _output_rungs(
             slip2 = _stance_slip(rm, rep2, targets2, fps)
             if k == 0:
                 clearance, plain = measured, depth2
-            if _rung_kept(best.depth, best.slip, depth2, slip2, midpoint=stiffness is None):
-                best = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2)
-                if depth2.max() <= OTHER_DEPTH:
-                    return best, solves, clearance
+            if not _rung_kept(best.depth, best.slip, depth2, slip2, midpoint=stiffness is None):
+                continue
+            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2)
+            clear = depth2.max() <= OTHER_DEPTH
+            if _keypoint_error(rm, rep2, reference) > most_error:  # gives up the motion
+                far_but_clear = far_but_clear or (solved if clear else None)
+                continue
+            best = solved
+            if clear:
+                return best, solves, clearance
         if stiffness is not None:  # the output-rate rungs go on as they would without it:
             clearance = clearance.tightened(plain, OTHER_DEPTH)  # the plain solve's pairs get more room
-    return best, solves, clearance
+    return far_but_clear or best, solves, clearance
 
 
 def retarget_motion(

@@ -18,9 +18,11 @@ import sim
 from controlmm.corpus import CorpusConfig, make_clip
 from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
+from controlmm.motion.container import resample
 from retarget import load_robot, retarget_motion, robot_mjcf
-from retarget.compare import similarity_fit, stance_foot_speed
-from retarget.retarget_motion import _rung_kept
+from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
+from retarget.metrics import replay
+from retarget.retarget_motion import _keypoint_error, _rung_kept
 from retarget.selfcheck import (
     CHECK_DEPTH,
     OTHER_DEPTH,
@@ -33,6 +35,7 @@ from retarget.selfcheck import (
 )
 from retarget.selfcollision import capsule_distances
 from retarget.solver_config import SolverConfig
+from retarget.targets import build_targets
 
 
 @pytest.fixture(scope="module")
@@ -307,6 +310,22 @@ def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_m
     assert not _rung_kept(depth, slip, trade, slip, midpoint=True)
     assert _rung_kept(depth, slip, np.array([0.010, 0.006, OTHER_DEPTH, OTHER_DEPTH]), slip, midpoint=True)
     assert not _rung_kept(depth, slip, np.array([0.010, 0.0, 0.0, 0.005]), slip, midpoint=True)
+
+
+def test_the_output_check_measures_how_far_a_solve_gives_up_the_motion(stoop):
+    """``_keypoint_error`` (the output check keeps no solve whose keypoints end more than
+    ``OUTPUT_FIT_GIVE`` further from their targets than its first solve's): the mean distance of
+    the robot's keypoints to the targets, 0 against its own keypoints, the shift against shifted
+    ones, and G1's stoop a few centimetres from the targets it was solved for."""
+    robot = load_robot("g1")
+    traj = retarget_motion(stoop, "g1", fps=30.0, metrics=False)
+    rep = replay(robot.model, traj.qpos)
+    own = robot_keypoints(robot, traj.qpos)
+    assert _keypoint_error(robot, rep, own) == pytest.approx(0.0, abs=1e-9)
+    assert _keypoint_error(robot, rep, own + np.array([0.0, 0.03, 0.04])) == pytest.approx(0.05)
+    dense = resample(stoop.joints, stoop.fps, 30.0)
+    targets = build_targets(robot, dense, 30.0, traj.transform, SolverConfig(**robot.mapping.solver))
+    assert 0.005 < _keypoint_error(robot, rep, targets.kp_pos) < 0.05
 
 
 def test_apollos_thighs_stay_apart_in_a_turn():
