@@ -7,6 +7,7 @@ joints are renamed, with the left and right names swapped, still maps its left l
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import mujoco
@@ -245,6 +246,13 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
     humanoid = capsule_humanoid_xml("plain")
     loose = '<body name="prop" pos="1 0 0.1"><freejoint/><geom size="0.1"/></body>\n  </worldbody>'
     scene = _write(tmp_path / "scene.xml", humanoid.replace("</worldbody>", loose, 1))
+    # the left shoulder's three hinges written as one ball joint
+    shoulder = re.sub(
+        r'<joint name="shoulder_x_l"[^>]*/>', '<joint name="shoulder_l" type="ball"/>', humanoid
+    )
+    ball_joint = _write(
+        tmp_path / "balljoint.xml", re.sub(r'\s*<joint name="shoulder_[yz]_l"[^>]*/>', "", shoulder)
+    )
     bad_body = json.loads((Path(__file__).parents[1] / "retarget/mappings/t1.json").read_text())
     bad_body["keypoints"]["left_knee"]["body"] = "Knee_Left"
     bad_mapping = _write(tmp_path / "bad.json", json.dumps(bad_body))
@@ -255,6 +263,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (broken, "does not load"),
         (ball, "no two legs"),
         (scene, r"2 free joints \(on root, prop\)"),
+        (ball_joint, "joint 'shoulder_l' is a mjJNT_BALL joint; the retargeter supports hinge and slide"),
         (bad_mapping, "body 'Knee_Left'"),
         (tmp_path / "missing.xml", "does not exist"),
     ]
@@ -267,12 +276,16 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (("retarget", src, "--robot", bad_mapping, "--out", tmp_path / "r"), "body 'Knee_Left'"),
         (("robots", "map", ball, "--out", tmp_path / "m.json"), "no two legs"),
         (("robots", "map", scene, "--out", tmp_path / "m.json"), "not a scene with loose bodies"),
+        (
+            ("retarget", src, "--robot", ball_joint, "--out", tmp_path / "r"),
+            "joint 'shoulder_l' is a mjJNT_BALL",
+        ),
     ):
         done = cli(*argv)
         err = done.stderr.strip()
         assert done.returncode == 2 and needle in err and len(err.splitlines()) == 1, (argv, err)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        ["nofree.xml", "broken.xml", "ball.xml", "scene.xml", "bad.json", "m.npy"]
+        ["nofree.xml", "broken.xml", "ball.xml", "scene.xml", "balljoint.xml", "bad.json", "m.npy"]
     )
 
 
