@@ -507,6 +507,6 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         model=rm,
     )
     if metrics:
-        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, src_fps, rep=rep)
+        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, targets.fps, rep=rep)
     traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)
     return traj

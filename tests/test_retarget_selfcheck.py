@@ -21,7 +21,7 @@ from controlmm.motion import Motion
 from controlmm.motion.container import resample
 from retarget import load_robot, retarget_motion, robot_mjcf
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
-from retarget.metrics import replay
+from retarget.metrics import replay, trajectory_metrics
 from retarget.retarget_motion import _keypoint_error, _rung_kept
 from retarget.selfcheck import (
     CHECK_DEPTH,
@@ -205,7 +205,7 @@ def test_the_output_frames_are_checked_at_the_end():
     spec = plan_clips(CorpusConfig(clips=9800, seed=0))[5]
     assert spec.family == "pick_up"
     _, joints, _, _ = make_clip(spec)
-    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "g1", fps=30.0, metrics=False)
+    traj = retarget_motion(Motion(joints=joints.astype(np.float64), fps=20.0), "g1", fps=30.0)
     # the relaxed solves, the safe one and its tightened one, the midpoint one, output-rate ones
     assert (
         RELAXED_SOLVES + 2 + 1
@@ -216,6 +216,12 @@ def test_the_output_frames_are_checked_at_the_end():
     assert report.stats["self_collision_frames"] == 0, [
         f for f in report.failures if f.kind == "self_collision"
     ]
+    # the metrics of the output-rate solve kept measure it against the human at its own rate
+    human = np.asarray(traj.transform.to_world(joints.astype(np.float64)))
+    again = trajectory_metrics(load_robot("g1"), traj.qpos, 30.0, human, 20.0)
+    assert traj.metrics["keypoint_error_mm"]["all"]["mean"] == pytest.approx(
+        again["keypoint_error_mm"]["all"]["mean"], rel=0.05
+    )
 
 
 @pytest.mark.parametrize("fps", [30.0, 50.0])
