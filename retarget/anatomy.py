@@ -212,7 +212,8 @@ def limb_anatomy(
     start = anchors[0]
     length = max(float(np.linalg.norm(tip - start)), 1e-6)
     # The first hinge past the hip / shoulder whose axis crosses the limb (a twist joint's
-    # axis runs along it); else the hinge nearest the middle.
+    # axis runs along it), or the next one past the upper arm's twist (_after_upper_twist);
+    # else the hinge nearest the middle.
     best, best_score, across = None, np.inf, []
     for i in range(1, len(joints)):
         if model.jnt_type[joints[i]] != mujoco.mjtJoint.mjJNT_HINGE:
@@ -291,8 +292,8 @@ def _after_upper_twist(
     """Of the hinges across the limb (``across``: indices into ``joints``, in order), the
     knee / elbow: the first, unless no twist (a hinge along the limb) comes before it, one
     follows it, and the next one across past that twist sits nearer the limb's middle; then
-    that one. Atlas's clavicle joint sits 25 cm above its shoulder-roll hinge, which so comes
-    a third of the way along its arm, before the upper arm's twist and the elbow."""
+    that one. Atlas's clavicle joint sits 25 cm above its shoulder-roll hinge, so that hinge
+    comes a third of the way along the arm, before the upper arm's twist and the elbow."""
     direction = (tip - start) / length
     hinge = [model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE for j in joints]
     twists = [i for i in range(len(joints)) if hinge[i] and abs(float(axes[i] @ direction)) >= 1.0 - ALONG]

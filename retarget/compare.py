@@ -25,7 +25,7 @@ import numpy as np
 
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
-from retarget.metrics import foot_steps, replay
+from retarget.metrics import foot_steps, replay, replay_keypoints
 from retarget.robot_model import RobotModel
 from retarget.stance import detect_contacts
 
@@ -81,9 +81,7 @@ def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.nda
 
 def robot_keypoints(robot: RobotModel, qpos: np.ndarray) -> np.ndarray:
     """(T, K) keypoint world positions (T, K, 3) of ``qpos`` (T, nq), through MuJoCo."""
-    rep = replay(robot.model, qpos)
-    bodies = np.array([robot.tree.node_body[n] for n in robot.nodes])
-    return rep.xpos[:, bodies] + np.einsum("tkij,kj->tki", rep.xmat[:, bodies], robot.offsets)
+    return replay_keypoints(robot, replay(robot.model, qpos))
 
 
 def similarity_fit(

@@ -75,6 +75,12 @@ def replay(model: mujoco.MjModel, qpos: np.ndarray) -> Replay:
 _HULLS: dict[bytes, np.ndarray] = {}
 
 
+def replay_keypoints(robot: RobotModel, rep: Replay) -> np.ndarray:
+    """(T, K, 3) world positions of the robot's keypoints in the frames of ``rep``."""
+    bodies = np.array([robot.tree.node_body[n] for n in robot.nodes])
+    return rep.xpos[:, bodies] + np.einsum("tkij,kj->tki", rep.xmat[:, bodies], robot.offsets)
+
+
 def foot_steps(robot: RobotModel, rep: Replay, side: str, sole: bool = True) -> np.ndarray:
     """(T - 1,) horizontal step (m) between consecutive frames of ``rep`` of the ``side``
     foot's slowest sole point (its floor points: a foot pivoting on its heel or toe does not

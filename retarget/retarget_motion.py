@@ -30,7 +30,7 @@ from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.feet import hold_feet_between_frames, lift_swing_feet
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
-from retarget.metrics import Replay, foot_steps, geom_lowest_z, replay, trajectory_metrics
+from retarget.metrics import Replay, foot_steps, geom_lowest_z, replay, replay_keypoints, trajectory_metrics
 from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
@@ -340,9 +340,7 @@ class _Solved:
 def _keypoint_error(rm: RobotModel, rep: Replay, reference: np.ndarray) -> float:
     """Mean distance (m) of the robot's keypoints in the frames of ``rep`` to ``reference``
     (T, K, 3), the targets at the output rate."""
-    bodies = np.array([rm.tree.node_body[n] for n in rm.nodes])
-    points = rep.xpos[:, bodies] + np.einsum("tkij,kj->tki", rep.xmat[:, bodies], rm.offsets)
-    return float(np.linalg.norm(points - reference, axis=-1).mean())
+    return float(np.linalg.norm(replay_keypoints(rm, rep) - reference, axis=-1).mean())
 
 
 def _output_rungs(
