@@ -368,7 +368,8 @@ def _output_rungs(
     it. Pairs that still overlap after an output-rate rung get that much more room for the
     next. Returns (the solve kept, solves so far, the self-clearance with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
-    reference = build_targets(rm, dense, fps, transform, config).kp_pos  # (T, K, 3) at the output rate
+    dense_targets = build_targets(rm, dense, fps, transform, config)  # the output rate's
+    reference = dense_targets.kp_pos  # (T, K, 3)
     most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
     far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
@@ -377,7 +378,6 @@ def _output_rungs(
             candidates = [(replace(config, self_midpoints=True), best.targets)]
         else:
             cfg2 = replace(config, w_self=config.w_self * stiffness)
-            dense_targets = build_targets(rm, dense, fps, transform, cfg2)
             candidates = [(cfg2, dense_targets), (cfg2, stiffer_locks(rm, dense_targets, stiffness))]
         for k, (cfg2, targets2) in enumerate(candidates):
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
