@@ -9,6 +9,8 @@ head, legs and arms; each human joint follows the matching point of the robot:
 * pelvis, chest (``spine3``), head and toes: points placed from the hips, shoulders and
   ankles with the HumanML3D skeleton's offsets times the robot's scale
   (:data:`retarget.human.HUMAN_OFFSETS`), the toe kept on the sole;
+* ranges: the waist joints, knees and elbows kept where the robot's own geoms leave them
+  clear (:mod:`retarget.clear_ranges`);
 * weights: the mapping defaults (:data:`retarget.mapping.DEFAULT_WEIGHTS`); the wrist and
   head joints, which the human does not observe, are held near rest by the posture prior.
 
@@ -20,12 +22,14 @@ robot's rest hip height above its soles over the human's (:data:`retarget.human.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
 import numpy as np
 
 from retarget.anatomy import Anatomy, Limb, find_anatomy
+from retarget.clear_ranges import clear_ranges
 from retarget.geoms import collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_OFFSETS
 from retarget.mapping import DEFAULT_WEIGHTS, MAPPING_FORMAT, Mapping, parse_mapping
@@ -153,6 +157,11 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
     }
     if a.arms:
         out["arm_abduction"] = 0.2
+    ranges = clear_ranges(a)
+    if ranges:  # rounded inwards
+        out["ranges"] = {
+            n: [math.ceil(lo * 1e4) / 1e4, math.floor(hi * 1e4) / 1e4] for n, (lo, hi) in ranges.items()
+        }
     if solver:
         out["solver"] = solver
     return out

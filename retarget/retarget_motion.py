@@ -39,13 +39,16 @@ from retarget.selfcheck import (
     EXACT_SELF,
     EXACT_TIGHTENINGS,
     OTHER_DEPTH,
+    OUTPUT_FAR_DEPTH,
     OUTPUT_FIT_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
+    OUTPUT_SPEED,
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
     RETRY_DEPTH,
+    overlap_gaps,
     penetration_depths,
     unpaired_overlaps,
 )
@@ -283,17 +286,35 @@ def _with_unpaired(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -
     return clearance.with_pairs(first, second, margin) if first.size else clearance
 
 
-def _rung_kept(depth: np.ndarray, slip: float, depth2: np.ndarray, slip2: float, midpoint: bool) -> bool:
+def _rung_kept(
+    depth: np.ndarray,
+    slip: float,
+    depth2: np.ndarray,
+    slip2: float,
+    midpoint: bool,
+    speed: np.ndarray | None = None,
+    speed2: np.ndarray | None = None,
+) -> bool:
     """Whether the output check keeps a new solve (its pairs' deepest overlaps ``depth2`` (P2,)
-    m, P2 >= P, and its largest planted-foot step ``slip2`` m) over the one it has (``depth``
-    (P,), ``slip``): it overlaps less deep and slides no foot further than that one and than
-    ``OUTPUT_SLIP``; the midpoint solve, which is to remove sweeps between frames, also brings
-    no pair deeper than before and than ``OTHER_DEPTH`` (pairs added since count from 0)."""
+    m, P2 >= P, its largest planted-foot step ``slip2`` m and its joints' top speeds ``speed2``
+    (nj,) rad/s) over the one it has (``depth`` (P,), ``slip``, ``speed``): it overlaps less
+    deep, slides no foot further than that one and than ``OUTPUT_SLIP`` and turns no joint
+    faster than that one and than ``OUTPUT_SPEED``; the midpoint solve, which is to remove
+    sweeps between frames, also brings no pair deeper than before and than ``OTHER_DEPTH``
+    (pairs added since count from 0)."""
     kept = depth2.max(initial=0.0) < depth.max(initial=0.0) and slip2 <= max(slip, OUTPUT_SLIP)
+    if speed is not None and speed2 is not None:
+        kept = kept and bool(np.all((speed2 <= speed) | (speed2 <= OUTPUT_SPEED)))
     if midpoint:
         before = np.pad(depth, (0, len(depth2) - len(depth)))
         kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
     return kept
+
+
+def _joint_speeds(qpos: np.ndarray, fps: float) -> np.ndarray:
+    """(nj,) each joint's top speed (rad/s, m/s for a slide) between frames of ``qpos`` (T, nq)."""
+    q = np.asarray(qpos)[:, 7:]
+    return np.abs(np.diff(q, axis=0)).max(axis=0, initial=0.0) * fps
 
 
 def _with_relaxed_pairs(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
@@ -309,7 +330,7 @@ def _with_relaxed_pairs(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearan
     extra = np.array(
         [pair not in kept for pair in zip(full.first.tolist(), full.second.tolist(), strict=True)]
     )
-    depth = penetration_depths(rm.model, rm.tree, qpos, full.select_pairs(extra))
+    depth = penetration_depths(rm.model, rm.tree, qpos, full.select_pairs(extra), every_frame=True)
     return full if np.any(depth > OTHER_DEPTH) else clearance
 
 
@@ -318,14 +339,15 @@ def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance |
     ``clearance`` keeps apart, over the output frames ``qpos`` (T, nq); empty without one."""
     if clearance is None:
         return np.zeros(0)
-    return penetration_depths(rm.model, rm.tree, qpos, clearance)
+    return penetration_depths(rm.model, rm.tree, qpos, clearance, every_frame=True)
 
 
 @dataclass
 class _Solved:
     """A solve as the output check weighs it: its solution, output qpos (T, nq) and replay,
     floor and swing lifts (m), the targets it was solved for, its pairs' deepest overlaps
-    (P,) m and its planted feet's largest step (m, :func:`_stance_slip`)."""
+    (P,) m, its planted feet's largest step (m, :func:`_stance_slip`) and its joints' top
+    speeds (nj,) rad/s (:func:`_joint_speeds`)."""
 
     sol: Solution
     qpos: np.ndarray
@@ -335,6 +357,7 @@ class _Solved:
     targets: Targets
     depth: np.ndarray
     slip: float
+    speed: np.ndarray
 
 
 def _keypoint_error(rm: RobotModel, rep: Replay, reference: np.ndarray) -> float:
@@ -365,8 +388,12 @@ def _output_rungs(
     the one kept (selfcheck.OUTPUT_SLIP) and its keypoints stay within
     selfcheck.OUTPUT_FIT_GIVE of the first solve's distance to the targets; a solve that
     clears every pair but gives up more of the motion is kept only where none clears within
-    it. Pairs that still overlap after an output-rate rung get that much more room for the
-    next. Returns (the solve kept, solves so far, the self-clearance with any pairs added)."""
+    it and the closer one kept overlaps deeper than selfcheck.OUTPUT_FAR_DEPTH. Pairs that
+    still overlap after an output-rate rung get that much more room for the next, counted from
+    where their capsules were in the frame of the deepest overlap (selfcheck.overlap_gaps).
+    The output frames are replayed in MuJoCo every one (their capsules may be far outside a
+    margin calibrated on a sweep where the geoms overlap). Returns (the solve kept, solves so
+    far, the self-clearance with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
     dense_targets = build_targets(rm, dense, fps, transform, config)  # the output rate's
     reference = dense_targets.kp_pos  # (T, K, 3)
@@ -391,9 +418,11 @@ def _output_rungs(
             slip2 = _stance_slip(rm, rep2, targets2, fps)
             if k == 0:
                 clearance, plain = measured, depth2
-            if not _rung_kept(best.depth, best.slip, depth2, slip2, midpoint=stiffness is None):
+                gaps = overlap_gaps(rm.model, rm.tree, qpos2, measured)
+            speed2 = _joint_speeds(qpos2, fps)
+            if not _rung_kept(best.depth, best.slip, depth2, slip2, stiffness is None, best.speed, speed2):
                 continue
-            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2)
+            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2)
             clear = depth2.max() <= OTHER_DEPTH
             if _keypoint_error(rm, rep2, reference) > most_error:  # gives up the motion
                 far_but_clear = far_but_clear or (solved if clear else None)
@@ -402,8 +431,10 @@ def _output_rungs(
             if clear:
                 return best, solves, clearance
         if stiffness is not None:  # the output-rate rungs go on as they would without it:
-            clearance = clearance.tightened(plain, OTHER_DEPTH)  # the plain solve's pairs get more room
-    return far_but_clear or best, solves, clearance
+            clearance = clearance.tightened(plain, OTHER_DEPTH, gaps)  # the plain solve's pairs get more room
+    if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
+        return far_but_clear, solves, clearance
+    return best, solves, clearance
 
 
 def retarget_motion(
@@ -462,7 +493,8 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     )
     if clearance is not None:
         clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
-        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, _output_overlap(rm, qpos, clearance), 0.0)
+        depth = _output_overlap(rm, qpos, clearance)
+        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, depth, 0.0, _joint_speeds(qpos, fps))
         if out.depth.max(initial=0.0) > OTHER_DEPTH:
             out.slip = _stance_slip(rm, rep, targets, fps)
             out, solves, clearance = _output_rungs(

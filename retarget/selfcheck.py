@@ -76,6 +76,11 @@ did not).
 Solves at the output rate hold planted feet less tightly than the resampled ones (no
 pinning between frames: 0.8-1.3 cm a frame against 0.1-0.3 on G1's stoop 000005 and H1's
 000012), so "no more than before" alone would keep their overlaps."""
+OUTPUT_SPEED = 3.0 * np.pi
+"""...and only if it turns no joint faster than before and than this (rad/s; the swing-foot
+lift's own bound, :data:`retarget.feet.LIFT_SPEED`): the room the stiffer solves give a pair
+may spin an unobserved joint (an SMPL humanoid's free wrist sitting down, corpus clip 000012
+at 30 fps: 5.8 times its speed limit)."""
 OUTPUT_FIT_GIVE = 0.02
 """...and only if its keypoints stay within this (m, mean over keypoints and frames) of as
 close to their targets as the output check's first solve was; one that clears every overlap
@@ -83,6 +88,11 @@ by giving up more of the motion is kept only where no later solve clears within 
 humanoid's kneel at 50 fps: a 3x stiffer solve with the feet as stiff cleared a hand 2 cm in
 a thigh with its keypoints 3.6 cm further from their targets, the 10x one clears it 4 cm
 closer than the first solve)."""
+OUTPUT_FAR_DEPTH = 0.005
+"""...and then only where the closer solve kept still overlaps deeper than this (m: what
+``controlmm validate`` fails); G1 with hands sitting down (corpus clip 65 at 30 fps) kept a
+clear solve 3 cm further from its targets, with a thumb past its velocity limit, over one
+4.5 mm in."""
 EXACT_TIGHTENINGS = 2
 """A robot whose capsules are its geoms (no loose enclosures: Apollo) is solved with the safe
 margins; pairs whose geoms still overlap deeper than ``OTHER_DEPTH`` (Apollo's thighs, 10.5 cm
@@ -112,12 +122,14 @@ def penetration_depths(
     qpos: np.ndarray,
     sc: SelfClearance,
     other_depth: float = OTHER_DEPTH,
+    every_frame: bool = False,
 ) -> np.ndarray:
     """(P,) deepest overlap (m, 0 where none) of each pair's real geoms over the frames of
     ``qpos`` (T, nq), by MuJoCo's own collision detection of the robot's model (its exclusions
-    honoured). Only the frames where some pair's capsules overlap (or, for pairs that overlap
-    at rest, come within CALIBRATION_SLACK of their margin) are replayed: elsewhere their
-    geoms cannot overlap (or hardly: the margins are calibrated on a sweep). Two other
+    honoured). Unless ``every_frame`` (the output check), only the frames where some pair's
+    capsules overlap (or, for pairs that overlap at rest, come within CALIBRATION_SLACK of
+    their margin) are replayed: elsewhere their geoms cannot overlap (or hardly: the margins
+    are calibrated on a sweep of a few joints). Two other
     geoms of the robot overlapping deeper than ``other_depth`` there (bodies the solver does
     not keep apart, pushed together by the closer pairs) count against the relaxed pairs of
     the subtree below the deeper of the two bodies (that arm)."""
@@ -126,7 +138,7 @@ def penetration_depths(
     relaxed = sc.margin < safe
     pair_of = _pair_index(sc)
     root = model.body_rootid[model.geom_bodyid]
-    for _, g1, g2, depth in _overlaps(model, tree, qpos, sc):
+    for _, g1, g2, depth in _overlaps(model, tree, qpos, sc, every_frame):
         k = pair_of.get((g1, g2))
         if k is not None:
             found[k] = max(found[k], depth)
@@ -213,17 +225,33 @@ def unpaired_overlaps(
 
 
 def pair_depths(
-    model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance
+    model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance, every_frame: bool = False
 ) -> np.ndarray:
     """(T, P) overlap (m, 0 where none) of each pair's real geoms in each frame of ``qpos``
     (T, nq), measured as :func:`penetration_depths` measures it (only the pairs themselves)."""
     found = np.zeros((len(qpos), sc.num_pairs))
     pair_of = _pair_index(sc)
-    for frame, g1, g2, depth in _overlaps(model, tree, qpos, sc):
+    for frame, g1, g2, depth in _overlaps(model, tree, qpos, sc, every_frame):
         k = pair_of.get((g1, g2))
         if k is not None:
             found[frame, k] = max(found[frame, k], depth)
     return found
+
+
+def overlap_gaps(
+    model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance
+) -> np.ndarray:
+    """(P,) each pair's capsule distance (m) in the frame of ``qpos`` (T, nq) where its real
+    geoms overlap deepest (:func:`pair_depths`); -inf where they do not overlap."""
+    per = pair_depths(model, tree, qpos, sc, every_frame=True)  # (T, P)
+    gaps = np.full(sc.num_pairs, -np.inf)
+    hit = np.flatnonzero(per.max(axis=0, initial=0.0) > 0.0)
+    if hit.size:
+        frames = per[:, hit].argmax(axis=0)
+        q = np.asarray(qpos, dtype=np.float64)[frames]
+        poses = tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
+        gaps[hit] = capsule_distances(poses, sc)[0][np.arange(hit.size), hit]
+    return gaps
 
 
 def _pair_index(sc: SelfClearance) -> dict[tuple[int, int], int]:
@@ -237,12 +265,12 @@ def _pair_index(sc: SelfClearance) -> dict[tuple[int, int], int]:
 
 
 def _overlaps(
-    model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance
+    model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance, every_frame: bool = False
 ) -> Iterator[tuple[int, int, int, float]]:
     """(frame, geom, geom, depth > 0 in m) of every two of the model's geoms that overlap in
-    the frames of ``qpos`` (T, nq) where some pair's capsules overlap (or, for pairs that
-    overlap at rest, come within CALIBRATION_SLACK of their margin): ``mj_collision``, the
-    model's exclusions honoured."""
+    the frames of ``qpos`` (T, nq) (``every_frame``) or those where some pair's capsules
+    overlap (or, for pairs that overlap at rest, come within CALIBRATION_SLACK of their
+    margin): ``mj_collision``, the model's exclusions honoured."""
     qpos = np.asarray(qpos, dtype=np.float64)
     safe = sc.margin if sc.safe_margin is None else sc.safe_margin
     poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
@@ -251,8 +279,13 @@ def _overlaps(
     # sweep of a few joints) may overlap inside their margin, and a little outside it between
     # the sweep's poses (CALIBRATION_SLACK).
     maybe = np.where(safe >= 0.0, 0.0, np.maximum(sc.margin, safe) + CALIBRATION_SLACK)
+    frames = (
+        np.arange(len(qpos))
+        if every_frame
+        else np.unique(close_pairs(poses, replace(sc, margin=maybe)).frame)
+    )
     data = mujoco.MjData(model)
-    for frame in np.unique(close_pairs(poses, replace(sc, margin=maybe)).frame):
+    for frame in frames:
         data.qpos[:] = qpos[frame]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_collision(model, data)

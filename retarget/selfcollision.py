@@ -116,13 +116,22 @@ class SelfClearance:
         margin = np.where(safe >= 0.0, safe - np.minimum(fraction * loose, most), base.margin)
         return replace(base, margin=margin, safe_margin=safe, relaxed_pairs=None)
 
-    def tightened(self, depth: np.ndarray, tolerance: float | np.ndarray) -> SelfClearance:
+    def tightened(
+        self, depth: np.ndarray, tolerance: float | np.ndarray, gap: np.ndarray | None = None
+    ) -> SelfClearance:
         """A copy in which the pairs whose real geoms overlap deeper than ``tolerance``
         (m, one or (P,); ``depth`` (P,), m) keep more room: their safe margin when below it, else their
-        margin plus that depth (the margin is a soft penalty that other terms can overcome)."""
+        margin plus that depth (the margin is a soft penalty that other terms can overcome).
+        ``gap`` (P,), m: each pair's capsule distance where its geoms overlapped deepest
+        (:func:`retarget.selfcheck.overlap_gaps`); the margin is then at least that plus the
+        depth. Loose enclosures that overlap at rest (a shoulder link's inside the torso's,
+        5 cm) may have their geoms overlap with the capsules well outside the margin, where
+        the margin plus the depth does not push them apart at all."""
         safe = self.margin if self.safe_margin is None else self.safe_margin
         bad = depth > tolerance
         more = np.where(self.margin < safe, np.maximum(safe, self.margin + depth), self.margin + depth)
+        if gap is not None:
+            more = np.maximum(more, gap + depth)
         return replace(self, margin=np.where(bad, more, self.margin))
 
     def with_pairs(self, first: np.ndarray, second: np.ndarray, margin: float | np.ndarray) -> SelfClearance:

@@ -21,6 +21,7 @@ from controlmm.motion import Motion
 from controlmm.motion.container import resample
 from retarget import load_robot, retarget_motion, robot_mjcf
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
+from retarget.kinematics import quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
 from retarget.retarget_motion import _keypoint_error, _rung_kept
 from retarget.selfcheck import (
@@ -28,9 +29,12 @@ from retarget.selfcheck import (
     OTHER_DEPTH,
     OUTPUT_SELF,
     OUTPUT_SLIP,
+    OUTPUT_SPEED,
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
+    overlap_gaps,
+    pair_depths,
     penetration_depths,
 )
 from retarget.selfcollision import capsule_distances
@@ -117,6 +121,44 @@ def test_penetration_depths_are_mujocos(stoop):
                 if {int(sc.geom[sc.first[i]]), int(sc.geom[sc.second[i]])} == set(key)
             )
             assert depth[k] == pytest.approx(d)
+
+
+def test_a_pair_overlapping_gets_room_from_where_its_capsules_were(stoop):
+    """More room for a pair whose geoms overlap counts from its capsules' distance in the frame
+    of the deepest overlap (overlap_gaps): loose enclosures that overlap at rest (a shoulder
+    link's inside the torso's) may overlap with the capsules outside their margin, where the
+    margin plus the depth pushes nothing apart."""
+    rm = load_robot("g1")
+    loose = retarget_motion(
+        stoop,
+        rm,
+        fps=30.0,
+        metrics=False,
+        config=replace(SolverConfig(**rm.mapping.solver), self_clearance=False),
+    )
+    sc = rm.self_clearance
+    per = pair_depths(rm.model, rm.tree, loose.qpos, sc)  # (T, P)
+    gaps = overlap_gaps(rm.model, rm.tree, loose.qpos, sc)
+    hit = per.max(axis=0) > 0
+    assert hit.sum() >= 3 and np.all(np.isneginf(gaps[~hit]))
+    q = loose.qpos
+    poses = rm.tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
+    dist = capsule_distances(poses, sc)[0]  # (T, P)
+    for k in np.flatnonzero(hit):
+        assert gaps[k] == pytest.approx(dist[per[:, k].argmax(), k])
+    depth = per.max(axis=0)
+    tight = sc.tightened(depth, OTHER_DEPTH, gaps)
+    bad = depth > OTHER_DEPTH
+    np.testing.assert_allclose(
+        tight.margin[bad], np.maximum(sc.tightened(depth, OTHER_DEPTH).margin[bad], gaps[bad] + depth[bad])
+    )
+    np.testing.assert_array_equal(tight.margin[~bad], sc.margin[~bad])
+    # The output check replays every frame: each pair's depth is MuJoCo's deepest over all.
+    every = penetration_depths(rm.model, rm.tree, q, sc, other_depth=np.inf, every_frame=True)
+    truth = _contact_depths(rm.model, q)
+    for k in range(sc.num_pairs):
+        a, b = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
+        assert every[k] == pytest.approx(max(truth.get((min(a, b), max(a, b)), 0.0), 0.0), abs=1e-9)
 
 
 def test_an_overlap_between_the_calibration_poses_is_found():
@@ -316,6 +358,12 @@ def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_m
     assert not _rung_kept(depth, slip, trade, slip, midpoint=True)
     assert _rung_kept(depth, slip, np.array([0.010, 0.006, OTHER_DEPTH, OTHER_DEPTH]), slip, midpoint=True)
     assert not _rung_kept(depth, slip, np.array([0.010, 0.0, 0.0, 0.005]), slip, midpoint=True)
+    # No joint turning faster than before and than OUTPUT_SPEED.
+    speed = np.array([1.0, 9.0])
+    less = np.array([0.010, 0.0, 0.0])
+    assert _rung_kept(depth, slip, less, slip, False, speed, np.array([OUTPUT_SPEED, 9.0]))
+    assert not _rung_kept(depth, slip, less, slip, False, speed, np.array([1.0, 9.5]))
+    assert not _rung_kept(depth, slip, less, slip, False, speed, np.array([OUTPUT_SPEED + 0.1, 1.0]))
 
 
 def test_the_output_check_measures_how_far_a_solve_gives_up_the_motion(stoop):
