@@ -14,11 +14,12 @@ from retarget.robot_model import RobotModel
 from retarget.targets import Targets, human_frames
 
 INSIDE_RANGE = 0.5
-"""Where a joint of a forearm (below the shoulder keypoint's body, down to the wrist's) rests at
-an end of its range, the solver starts it this share of the range inside it: a straight elbow
-held at its limit cannot bend the way the gradient does not point at first, nor the upper arm
-turn to the plane the elbow should bend in (an outside humanoid's arm raised over the head on
-the real clip stayed hanging, the wrist 73 cm from the human's)."""
+"""Where an elbow joint (a joint of the elbow keypoint's body) rests at an end of its range,
+the solver starts it this share of the range inside it: a straight elbow held at its limit
+cannot bend the way the gradient does not point at first, nor the upper arm turn to the
+plane the elbow should bend in (an outside humanoid's arm raised over the head on the real
+clip stayed hanging, the wrist 73 cm from the human's). Only the elbow: a wrist's twist
+started a quarter turn away folded the CMU humanoid's forearm into its thigh in a stoop."""
 
 AT_LIMIT = 1e-3
 """A joint within this (rad or m) of an end of its range rests at it."""
@@ -39,11 +40,11 @@ def initial_guess(robot: RobotModel, targets: Targets) -> tuple[np.ndarray, np.n
 
 
 def start_q(robot: RobotModel) -> np.ndarray:
-    """(nj,) the rest pose with each forearm joint that rests at an end of its range moved
+    """(nj,) the rest pose with each elbow joint that rests at an end of its range moved
     ``INSIDE_RANGE`` of the range inside it."""
     q = robot.rest_q.astype(np.float64).copy()
     arm = np.zeros(len(q), dtype=bool)
-    arm[forearm_joints(robot)] = True
+    arm[elbow_joints(robot)] = True
     inside = INSIDE_RANGE * (robot.upper - robot.lower)
     low = arm & (q - robot.lower < AT_LIMIT)
     high = arm & (robot.upper - q < AT_LIMIT)
@@ -52,19 +53,13 @@ def start_q(robot: RobotModel) -> np.ndarray:
     return q
 
 
-def forearm_joints(robot: RobotModel) -> list[int]:
-    """Coordinates (indices into q) of the joints from below each shoulder keypoint's body down
-    to the wrist keypoint's body (the elbow and the forearm's)."""
+def elbow_joints(robot: RobotModel) -> list[int]:
+    """Coordinates (indices into q) of the joints of each elbow keypoint's body."""
     tree, out = robot.tree, []
     for side in ("left", "right"):
-        if not (robot.has_keypoint(f"{side}_shoulder") and robot.has_keypoint(f"{side}_wrist")):
-            continue
-        top = int(robot.nodes[robot.keypoint_index(f"{side}_shoulder")])
-        node = int(robot.nodes[robot.keypoint_index(f"{side}_wrist")])
-        while node > 0 and node != top:
-            if tree.node_joint[node] >= 0:
-                out.append(int(tree.node_joint[node]))
-            node = int(tree.node_parent[node])
+        if robot.has_keypoint(f"{side}_elbow"):
+            body = tree.node_body[int(robot.nodes[robot.keypoint_index(f"{side}_elbow")])]
+            out += [int(j) for n, j in enumerate(tree.node_joint) if j >= 0 and tree.node_body[n] == body]
     return out
 
 

@@ -1,5 +1,5 @@
 """Trunk joints kept where the robot's own trunk geoms leave them clear (retarget.clear_ranges),
-and the solver's start: forearm joints resting at a limit start inside their range
+and the solver's start: elbow joints resting at a limit start inside their range
 (retarget.reference.start_q)."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from controlmm.motion.skeleton import JOINT_INDEX
 from retarget import infer_mapping, load_robot, retarget_motion
 from retarget.clear_ranges import CLEAR_DEPTH
 from retarget.compare import resample_human, robot_keypoints, umeyama
-from retarget.reference import INSIDE_RANGE, forearm_joints, start_q
+from retarget.reference import INSIDE_RANGE, elbow_joints, start_q
 
 
 def _box_trunk_xml() -> str:
@@ -87,7 +87,7 @@ def test_a_straight_elbow_at_its_limit_starts_bent(tmp_path):
     moved = np.flatnonzero(q != caps.rest_q)
     names = {caps.tree.joint_names[j] for j in moved}
     assert names == {"elbow_l", "elbow_r"}  # range (-150, 0) degrees, rest 0
-    assert set(moved) <= set(forearm_joints(caps))
+    assert set(moved) <= set(elbow_joints(caps))
     np.testing.assert_allclose(q[moved], caps.upper[moved] - INSIDE_RANGE * (caps.upper - caps.lower)[moved])
     g1 = load_robot("g1")  # every joint inside its range at rest: the rest pose itself
     np.testing.assert_array_equal(start_q(g1), g1.rest_q)
