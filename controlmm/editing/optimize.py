@@ -161,7 +161,8 @@ def optimize_lbfgs(
         value = loss.detach()
         finished = finished if config.early_stop else torch.zeros_like(finished)
         ok = torch.isfinite(value)
-        moving = active & ~state.done
+        # A line search may ask for more evaluations than the budget left: those are not steps.
+        moving = active & ~state.done & (state.count <= evaluations)
         if state.count == 0:
             scale.copy_(1.0 / value.clamp(min=1e-12).nan_to_num(1.0))
         else:  # the first evaluation is the starting point, not a step
