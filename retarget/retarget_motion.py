@@ -48,6 +48,7 @@ from retarget.selfcheck import (
     RELAX_MOST,
     RELAXED_SOLVES,
     RETRY_DEPTH,
+    overlap_frames,
     overlap_gaps,
     penetration_depths,
     unpaired_overlaps,
@@ -294,17 +295,24 @@ def _rung_kept(
     midpoint: bool,
     speed: np.ndarray | None = None,
     speed2: np.ndarray | None = None,
+    frames: int | None = None,
+    frames2: int | None = None,
 ) -> bool:
     """Whether the output check keeps a new solve (its pairs' deepest overlaps ``depth2`` (P2,)
     m, P2 >= P, its largest planted-foot step ``slip2`` m and its joints' top speeds ``speed2``
     (nj,) rad/s) over the one it has (``depth`` (P,), ``slip``, ``speed``): it overlaps less
     deep, slides no foot further than that one and than ``OUTPUT_SLIP`` and turns no joint
-    faster than that one and than ``OUTPUT_SPEED``; the midpoint solve, which is to remove
+    faster than that one and than ``OUTPUT_SPEED``, and has no more output frames in which
+    two geoms overlap deeper than ``OUTPUT_FAR_DEPTH`` (``frames2`` against ``frames``:
+    a shallower overlap spread over more frames fails more of ``controlmm validate``;
+    Kuavo's thighs on the real clip, 3 frames -> 57); the midpoint solve, which is to remove
     sweeps between frames, also brings no pair deeper than before and than ``OTHER_DEPTH``
     (pairs added since count from 0)."""
     kept = depth2.max(initial=0.0) < depth.max(initial=0.0) and slip2 <= max(slip, OUTPUT_SLIP)
     if speed is not None and speed2 is not None:
         kept = kept and bool(np.all((speed2 <= speed) | (speed2 <= OUTPUT_SPEED)))
+    if frames is not None and frames2 is not None:
+        kept = kept and frames2 <= frames
     if midpoint:
         before = np.pad(depth, (0, len(depth2) - len(depth)))
         kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
@@ -346,8 +354,9 @@ def _output_overlap(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance |
 class _Solved:
     """A solve as the output check weighs it: its solution, output qpos (T, nq) and replay,
     floor and swing lifts (m), the targets it was solved for, its pairs' deepest overlaps
-    (P,) m, its planted feet's largest step (m, :func:`_stance_slip`) and its joints' top
-    speeds (nj,) rad/s (:func:`_joint_speeds`)."""
+    (P,) m, its planted feet's largest step (m, :func:`_stance_slip`), its joints' top
+    speeds (nj,) rad/s (:func:`_joint_speeds`) and its frames with an overlap deeper than
+    OUTPUT_FAR_DEPTH (selfcheck.overlap_frames)."""
 
     sol: Solution
     qpos: np.ndarray
@@ -358,6 +367,7 @@ class _Solved:
     depth: np.ndarray
     slip: float
     speed: np.ndarray
+    frames: int
 
 
 def _keypoint_error(rm: RobotModel, rep: Replay, reference: np.ndarray) -> float:
@@ -419,10 +429,20 @@ def _output_rungs(
             if k == 0:
                 clearance, plain = measured, depth2
                 gaps = overlap_gaps(rm.model, rm.tree, qpos2, measured)
-            speed2 = _joint_speeds(qpos2, fps)
-            if not _rung_kept(best.depth, best.slip, depth2, slip2, stiffness is None, best.speed, speed2):
+            speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
+            if not _rung_kept(
+                best.depth,
+                best.slip,
+                depth2,
+                slip2,
+                stiffness is None,
+                best.speed,
+                speed2,
+                best.frames,
+                frames2,
+            ):
                 continue
-            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2)
+            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
             clear = depth2.max() <= OTHER_DEPTH
             if _keypoint_error(rm, rep2, reference) > most_error:  # gives up the motion
                 far_but_clear = far_but_clear or (solved if clear else None)
@@ -494,9 +514,10 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     if clearance is not None:
         clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
         depth = _output_overlap(rm, qpos, clearance)
-        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, depth, 0.0, _joint_speeds(qpos, fps))
+        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, depth, 0.0, _joint_speeds(qpos, fps), 0)
         if out.depth.max(initial=0.0) > OTHER_DEPTH:
             out.slip = _stance_slip(rm, rep, targets, fps)
+            out.frames = overlap_frames(rm.model, qpos)
             out, solves, clearance = _output_rungs(
                 rm, config, solver, transform, joints, fps, clearance, out, solves
             )

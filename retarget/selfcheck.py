@@ -254,6 +254,24 @@ def overlap_gaps(
     return gaps
 
 
+def overlap_frames(model: mujoco.MjModel, qpos: np.ndarray, depth: float = OUTPUT_FAR_DEPTH) -> int:
+    """Frames of ``qpos`` (T, nq) in which two geoms of the robot overlap deeper than ``depth``
+    (m), by ``mj_collision`` (the model's exclusions honoured), as ``controlmm validate`` counts
+    self-collision frames (at the frames themselves)."""
+    data = mujoco.MjData(model)
+    root = model.body_rootid[model.geom_bodyid]
+    count = 0
+    for frame in np.asarray(qpos, dtype=np.float64):
+        data.qpos[:] = frame
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_collision(model, data)
+        n = data.ncon
+        g = data.contact.geom[:n]
+        ours = (root[g[:, 0]] == root[g[:, 1]]) & (model.geom_bodyid[g[:, 0]] > 0)
+        count += bool(np.any(data.contact.dist[:n][ours] < -depth))
+    return count
+
+
 def _pair_index(sc: SelfClearance) -> dict[tuple[int, int], int]:
     """Pair index of each (geom, geom) of the clearance, both orders."""
     pair_of = {

@@ -12,6 +12,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 import pytest
+from robot_checks import independent_check
 
 import scenes
 import sim
@@ -19,7 +20,7 @@ from controlmm.corpus import CorpusConfig, make_clip
 from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from controlmm.motion.container import resample
-from retarget import load_robot, retarget_motion, robot_mjcf
+from retarget import load_robot, retarget_motion, robot_mjcf, robot_mjcf_path
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
 from retarget.kinematics import quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
@@ -33,6 +34,7 @@ from retarget.selfcheck import (
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
+    overlap_frames,
     overlap_gaps,
     pair_depths,
     penetration_depths,
@@ -153,6 +155,8 @@ def test_a_pair_overlapping_gets_room_from_where_its_capsules_were(stoop):
         tight.margin[bad], np.maximum(sc.tightened(depth, OTHER_DEPTH).margin[bad], gaps[bad] + depth[bad])
     )
     np.testing.assert_array_equal(tight.margin[~bad], sc.margin[~bad])
+    # Frames with two geoms deeper than 5 mm, as an independent MuJoCo check counts them.
+    assert overlap_frames(rm.model, q) == independent_check(robot_mjcf_path("g1"), q)[2] > 0
     # The output check replays every frame: each pair's depth is MuJoCo's deepest over all.
     every = penetration_depths(rm.model, rm.tree, q, sc, other_depth=np.inf, every_frame=True)
     truth = _contact_depths(rm.model, q)
@@ -364,6 +368,9 @@ def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_m
     assert _rung_kept(depth, slip, less, slip, False, speed, np.array([OUTPUT_SPEED, 9.0]))
     assert not _rung_kept(depth, slip, less, slip, False, speed, np.array([1.0, 9.5]))
     assert not _rung_kept(depth, slip, less, slip, False, speed, np.array([OUTPUT_SPEED + 0.1, 1.0]))
+    # Nor one with more frames overlapping deeper than OUTPUT_FAR_DEPTH (shallower but spread).
+    assert _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 3)
+    assert not _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 57)
 
 
 def test_the_output_check_measures_how_far_a_solve_gives_up_the_motion(stoop):
