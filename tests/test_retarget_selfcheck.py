@@ -20,7 +20,7 @@ from controlmm.corpus import CorpusConfig, make_clip
 from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from controlmm.motion.container import resample
-from retarget import load_robot, retarget_motion, robot_mjcf, robot_mjcf_path
+from retarget import RobotModel, load_robot, retarget_motion, robot_mjcf, robot_mjcf_path
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
 from retarget.kinematics import quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
@@ -92,9 +92,9 @@ def test_relaxed_margins_follow_the_looseness_of_the_enclosures():
     np.testing.assert_array_equal(tight.margin[1:], relaxed.margin[1:])
 
 
-def test_penetration_depths_are_mujocos(stoop):
-    """Without self-clearance the stoop's arms pass into the legs; the check reports, per pair,
-    the depth MuJoCo's own collision detection finds for those two geoms."""
+@pytest.fixture(scope="module")
+def loose_stoop(stoop) -> tuple[RobotModel, np.ndarray]:
+    """G1 and the stoop retargeted without self-clearance (T, nq) at 30 fps: its arms in its legs."""
     rm = load_robot("g1")
     loose = retarget_motion(
         stoop,
@@ -103,10 +103,17 @@ def test_penetration_depths_are_mujocos(stoop):
         metrics=False,
         config=replace(SolverConfig(**rm.mapping.solver), self_clearance=False),
     )
+    return rm, loose.qpos
+
+
+def test_penetration_depths_are_mujocos(loose_stoop):
+    """Without self-clearance the stoop's arms pass into the legs; the check reports, per pair,
+    the depth MuJoCo's own collision detection finds for those two geoms."""
+    rm, q = loose_stoop
     sc = rm.self_clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
-    depth = penetration_depths(rm.model, rm.tree, loose.qpos, sc, other_depth=np.inf)
+    depth = penetration_depths(rm.model, rm.tree, q, sc, other_depth=np.inf)
     assert depth.max() > 0.02  # centimetres into the thighs
-    truth = _contact_depths(rm.model, loose.qpos)
+    truth = _contact_depths(rm.model, q)
     for k in np.flatnonzero(depth > 0):
         a, b = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
         assert depth[k] == pytest.approx(truth[(min(a, b), max(a, b))], abs=1e-9)
@@ -125,25 +132,17 @@ def test_penetration_depths_are_mujocos(stoop):
             assert depth[k] == pytest.approx(d)
 
 
-def test_a_pair_overlapping_gets_room_from_where_its_capsules_were(stoop):
+def test_a_pair_overlapping_gets_room_from_where_its_capsules_were(loose_stoop):
     """More room for a pair whose geoms overlap counts from its capsules' distance in the frame
     of the deepest overlap (overlap_gaps): loose enclosures that overlap at rest (a shoulder
     link's inside the torso's) may overlap with the capsules outside their margin, where the
     margin plus the depth pushes nothing apart."""
-    rm = load_robot("g1")
-    loose = retarget_motion(
-        stoop,
-        rm,
-        fps=30.0,
-        metrics=False,
-        config=replace(SolverConfig(**rm.mapping.solver), self_clearance=False),
-    )
+    rm, q = loose_stoop
     sc = rm.self_clearance
-    per = pair_depths(rm.model, rm.tree, loose.qpos, sc)  # (T, P)
-    gaps = overlap_gaps(rm.model, rm.tree, loose.qpos, sc)
+    per = pair_depths(rm.model, rm.tree, q, sc)  # (T, P)
+    gaps = overlap_gaps(rm.model, rm.tree, q, sc)
     hit = per.max(axis=0) > 0
     assert hit.sum() >= 3 and np.all(np.isneginf(gaps[~hit]))
-    q = loose.qpos
     poses = rm.tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
     dist = capsule_distances(poses, sc)[0]  # (T, P)
     for k in np.flatnonzero(hit):
