@@ -32,7 +32,7 @@ import numpy as np
 
 from controlmm.errors import ControlMMError
 from retarget.geoms import aabb_corners, geom_points
-from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND
+from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND, HUMAN_UPPER_ARM
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import ancestors, free_root
 
@@ -498,6 +498,28 @@ def _arm(
         return limb  # a wrist that bends the hand
     if limb.end_joints and model.body_jntnum[limb.end_body] == 0:
         return replace(limb, end=data.xpos[limb.end_body].copy())  # a rigid hand on a forearm roll
-    # No wrist joint: the wrist sits WRIST_SHARE of the way from the elbow to the hand's tip.
+    # No wrist joint: the wrist sits WRIST_SHARE of the way from the elbow to the hand's tip,
+    # or where a link past the elbow is attached on that line (a wrist whose joints the file
+    # leaves out), whichever gives the forearm the human's length against the upper arm.
     wrist = limb.middle + WRIST_SHARE * (best - limb.middle)
-    return replace(limb, end=wrist)
+    upper = max(float(np.linalg.norm(limb.middle - limb.root)), 1e-9)
+    candidates = [wrist]
+    for b in _rigid_below(model, limb.end_body):
+        out = data.xpos[b] - limb.middle
+        if float(out @ along) >= (1.0 - ALONG) * float(np.linalg.norm(out)) > 0.0:
+            candidates.append(data.xpos[b].copy())
+
+    def off_human(point: np.ndarray) -> float:
+        return abs(float(np.linalg.norm(point - limb.middle)) / upper - HUMAN_FOREARM / HUMAN_UPPER_ARM)
+
+    return replace(limb, end=min(candidates, key=off_human))
+
+
+def _rigid_below(model: mujoco.MjModel, body: int) -> list[int]:
+    """The bodies below ``body`` joined to it without a joint (directly or through such bodies)."""
+    out: list[int] = []
+    for b in range(body + 1, model.nbody):  # children have larger ids than their parents
+        parent = int(model.body_parentid[b])
+        if model.body_jntnum[b] == 0 and (parent == body or parent in out):
+            out.append(b)
+    return out

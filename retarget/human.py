@@ -37,6 +37,8 @@ standing at its start (the toe: its flat right foot)."""
 
 HUMAN_FOREARM = float(BONE_LENGTHS[JOINT_INDEX["left_wrist"]])
 """Elbow -> wrist length (m)."""
+HUMAN_UPPER_ARM = float(BONE_LENGTHS[JOINT_INDEX["left_elbow"]])
+"""Shoulder -> elbow length (m)."""
 HUMAN_HALF_HAND = 0.06
 """Wrist -> palm centre (m): where a robot's hand without wrist joints holds what the wrist follows."""
 

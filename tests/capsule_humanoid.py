@@ -46,10 +46,10 @@ def _quat(rot: np.ndarray) -> np.ndarray:
 
 
 def _limb(
-    side: str, sign: float, forearm_roll: bool = False, clavicle_drop: float = 0.0
+    side: str, sign: float, forearm_roll: bool = False, clavicle_drop: float = 0.0, rigid_hand: str = ""
 ) -> tuple[list, list]:
     """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested;
-    ``forearm_roll``, ``clavicle_drop``: see :func:`capsule_humanoid_xml`."""
+    ``forearm_roll``, ``clavicle_drop``, ``rigid_hand``: see :func:`capsule_humanoid_xml`."""
     s = sign
     finger = (
         "fingers_" + side,
@@ -72,6 +72,10 @@ def _limb(
         [("sphere", (0, 0, -0.04), 0.04)],
         [finger, thumb],
     )
+    if rigid_hand == "inline":  # a 24 cm mitten without joints, attached where the wrist is
+        hand = ("hand_" + side, (0, 0, -0.26), [], [("capsule", (0, 0, -0.02, 0, 0, -0.2), 0.04)], [])
+    elif rigid_hand == "aside":  # attached 10 cm in front of the forearm, reaching back below it
+        hand = ("hand_" + side, (0.1, 0, -0.2), [], [("capsule", (0, 0, 0, -0.1, 0, -0.2), 0.04)], [])
     forearm = (
         "forearm_" + side,
         (0, 0, -0.29),
@@ -163,7 +167,11 @@ _LAID = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
 def capsule_humanoid_xml(
-    style: str = "turned", forearm_roll: bool = False, bare_forearms: bool = False, clavicle_drop: float = 0.0
+    style: str = "turned",
+    forearm_roll: bool = False,
+    bare_forearms: bool = False,
+    clavicle_drop: float = 0.0,
+    rigid_hand: str = "",
 ) -> str:
     """The MJCF text (see the module docstring); ``forearm_roll``: the arms end as the older
     G1's do, an elbow, then a link that only rolls about the forearm 8 cm past it and carries
@@ -171,7 +179,10 @@ def capsule_humanoid_xml(
     no geometry, only their masses (an inertial where their geom's centre was);
     ``clavicle_drop``: the clavicle joints this far (m) above the shoulder, which stays where
     it is, turning the clavicle forward and sideways (Atlas's is 25 cm above its shoulder-roll
-    hinge), not about the hanging arm."""
+    hinge), not about the hanging arm; ``rigid_hand``: hands without joints or fingers, a
+    mitten 24 cm long (GMR's T1 file, its wrist joints left out): ``"inline"`` attached on the
+    forearm's line 26 cm past the elbow, ``"aside"`` attached 10 cm in front of that line and
+    reaching back below the forearm (ToddlerBot's hand hangs off a gear 34 degrees aside)."""
     # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
     # body's frame; local: the intended vector in the root's frame.
     world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
@@ -200,7 +211,8 @@ def capsule_humanoid_xml(
         return "\n".join(lines)
 
     arms, legs = zip(
-        *(_limb(side, s, forearm_roll, clavicle_drop) for side, s in (("l", 1.0), ("r", -1.0))), strict=True
+        *(_limb(side, s, forearm_roll, clavicle_drop, rigid_hand) for side, s in (("l", 1.0), ("r", -1.0))),
+        strict=True,
     )
     head = (
         "head",

@@ -276,6 +276,35 @@ def test_an_elbow_roll_is_not_taken_for_the_wrist(tmp_path, motion):
     assert np.allclose(fits[True], fits[False], atol=0.01)
 
 
+def test_a_hand_without_wrist_joints_is_held_where_it_is_attached(tmp_path, motion):
+    """Hands written without their wrist joints, a 24 cm mitten (GMR's T1 file): attached on
+    the forearm's line, the wrist is where the hand is attached, 26 cm past the elbow as on the
+    plain humanoid (on the old code 41 cm, most of the way to the mitten's end: the real clip's
+    wrists 8-9 cm from the human's, the plain humanoid's 3.5-4.6), and the real clip's wrists
+    fit as on the plain humanoid; attached 10 cm in front of that line (a hand hanging off a
+    gear), the attachment is not taken: the wrist stays on the elbow -> hand tip line."""
+    wrists, fits = {}, {}
+    for hand in ("", "inline", "aside"):
+        path = tmp_path / f"hand_{hand or 'plain'}.xml"
+        path.write_text(capsule_humanoid_xml("plain", rigid_hand=hand))
+        robot = load_robot(path)
+        wrists[hand] = [
+            robot.rest_keypoints[robot.keypoint_index(f"{side}_wrist")]
+            - robot.rest_keypoints[robot.keypoint_index(f"{side}_elbow")]
+            for side in ("left", "right")
+        ]
+        if hand != "aside":
+            traj = retarget_motion(motion, robot, fps=30.0, metrics=False)
+            fit = similarity_fit(robot, traj.qpos, 30.0, motion.joints, motion.fps)
+            fits[hand] = [fit.per_joint[f"{side}_wrist"] for side in ("left", "right")]
+    for side in range(2):
+        assert np.allclose(wrists["inline"][side], wrists[""][side], atol=0.005), side
+        aside = wrists["aside"][side]
+        assert abs(aside[0]) < 0.01 and np.linalg.norm(aside - (0.1, 0.0, -0.2)) > 0.05, side
+    assert max(fits["inline"]) < 0.05
+    assert np.allclose(fits["inline"], fits[""], atol=0.01)
+
+
 def test_an_arm_without_geometry_past_its_elbow_is_read_from_its_masses(tmp_path):
     """Forearms, hands and fingers written with masses but no geoms (BXI's Elf2 has only
     visual meshes there; without them nothing marks where its arms end): the arm's end is
