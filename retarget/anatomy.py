@@ -474,7 +474,11 @@ def _arm(
     farthest from the shoulder; without wrist joints the wrist lies on the elbow -> tip line
     (WRIST_SHARE), and so it does where the only joints past the elbow turn the forearm about
     its own length (an elbow roll: the older G1's, 10 cm past the elbow, whose hand is part of
-    that link), unless the hand is a link of its own without joints: the wrist is where it is attached."""
+    that link), unless the hand is a link of its own without joints: the wrist is where it is
+    attached. Past an elbow with no joint after it, a link attached on the elbow -> tip line
+    (within ALONG) holds the wrist instead where that gives the forearm the human's length
+    against the upper arm more closely (GMR's T1, whose file leaves the wrist joints out: the
+    WRIST_SHARE point lies 33 cm past a 21 cm upper arm, the hand is attached 22 cm past it)."""
     joints = _chain_joints(model, bodies)
     start = data.xanchor[joints[0]]
     best, best_d = data.xpos[bodies[-1]].copy(), -1.0
