@@ -18,13 +18,15 @@ import scenes
 import sim
 from controlmm.corpus import CorpusConfig, make_clip
 from controlmm.corpus.dataset import plan_clips
+from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from controlmm.motion.container import resample
 from retarget import RobotModel, load_robot, retarget_motion, robot_mjcf, robot_mjcf_path
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
+from retarget.human import size_ratio
 from retarget.kinematics import quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
-from retarget.retarget_motion import _keypoint_error, _rung_kept
+from retarget.retarget_motion import _keypoint_error, _rung_kept, _solve_clear_of_self
 from retarget.selfcheck import (
     CHECK_DEPTH,
     OTHER_DEPTH,
@@ -418,3 +420,32 @@ def test_apollos_thighs_stay_apart_in_a_turn():
         mujoco.mj_kinematics(model, data)
         gap.append(mujoco.mj_geomDistance(model, data, left, right, 1.0, None))
     assert min(gap) > -0.005
+
+
+def test_the_output_check_starts_from_the_room_the_first_solves_found():
+    """Apollo on corpus clip 000006 (its thighs meet in a turn, exact capsules): the solves
+    before the output check give the thigh pair more room than the safe margin; the
+    self-clearance they hand on keeps that room (before, the output check's solves began again
+    from the safe margins: ToddlerBot's elbow sat 5.3 mm in its box chest for 28 frames of a
+    carry, 0 when they start from the room found), the other pairs as they were."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[6]
+    _, joints, _, _ = make_clip(spec)
+    rm = load_robot("apollo")
+    config = SolverConfig(**rm.mapping.solver)
+    transform = HumanToWorld(scale=rm.scale * size_ratio(joints))
+    targets = build_targets(rm, joints.astype(np.float64), 20.0, transform, config)
+    *_, solves, handed_on = _solve_clear_of_self(rm, targets, config, "batched", 20.0, 30.0)
+    base = rm.self_clearance
+    assert solves >= 2 and handed_on is not None and base is not None
+    assert np.array_equal(handed_on.first[: len(base.first)], base.first)
+    extra = handed_on.margin[: len(base.margin)] - base.margin
+    assert extra.min() >= 0.0
+    model = rm.model
+    thighs = {
+        model.geom("collision_capsule_body_l_thigh").id,
+        model.geom("collision_capsule_body_r_thigh").id,
+    }
+    pairs = {int(k) for k in np.flatnonzero(extra > 0.001)}
+    assert pairs and all(
+        {int(base.geom[base.first[k]]), int(base.geom[base.second[k]])} == thighs for k in pairs
+    ), pairs
