@@ -476,9 +476,10 @@ def _arm(
     its own length (an elbow roll: the older G1's, 10 cm past the elbow, whose hand is part of
     that link), unless the hand is a link of its own without joints: the wrist is where it is
     attached. Past an elbow with no joint after it, a link attached on the elbow -> tip line
-    (within ALONG) holds the wrist instead where that gives the forearm the human's length
-    against the upper arm more closely (GMR's T1, whose file leaves the wrist joints out: the
-    WRIST_SHARE point lies 33 cm past a 21 cm upper arm, the hand is attached 22 cm past it)."""
+    (within ALONG), with at least half a human hand past it (scaled by the upper arm), holds
+    the wrist instead where that gives the forearm the human's length against the upper arm
+    more closely (GMR's T1, whose file leaves the wrist joints out: the WRIST_SHARE point lies
+    33 cm past a 21 cm upper arm, the hand is attached 22 cm past it, its tip 19 cm further)."""
     joints = _chain_joints(model, bodies)
     start = data.xanchor[joints[0]]
     best, best_d = data.xpos[bodies[-1]].copy(), -1.0
@@ -510,7 +511,11 @@ def _arm(
     candidates = [wrist]
     for b in _rigid_below(model, limb.end_body):
         out = data.xpos[b] - limb.middle
-        if float(out @ along) >= (1.0 - ALONG) * float(np.linalg.norm(out)) > 0.0:
+        on_line = float(out @ along) >= (1.0 - ALONG) * float(np.linalg.norm(out)) > 0.0
+        # ...with a hand past it: its tip at least half a human hand away, against the upper arm
+        # (the MuJoCo humanoid's hand is a ball whose centre is its body's origin).
+        hand_past = float(np.linalg.norm(best - data.xpos[b])) / upper >= HUMAN_HALF_HAND / HUMAN_UPPER_ARM
+        if on_line and hand_past:
             candidates.append(data.xpos[b].copy())
 
     def off_human(point: np.ndarray) -> float:

@@ -293,7 +293,7 @@ def test_a_hand_without_wrist_joints_is_held_where_it_is_attached(tmp_path, moti
             - robot.rest_keypoints[robot.keypoint_index(f"{side}_elbow")]
             for side in ("left", "right")
         ]
-        if hand != "aside":
+        if hand in ("", "inline"):
             traj = retarget_motion(motion, robot, fps=30.0, metrics=False)
             fit = similarity_fit(robot, traj.qpos, 30.0, motion.joints, motion.fps)
             fits[hand] = [fit.per_joint[f"{side}_wrist"] for side in ("left", "right")]
