@@ -184,7 +184,7 @@ def _solve_and_resample(
 
 def _solve_clear_of_self(
     rm: RobotModel, targets: Targets, config: SolverConfig, solver: str, src_fps: float, fps: float
-) -> tuple[Solution, np.ndarray, Replay, float, float, int, SelfClearance | None]:
+) -> tuple[Solution, np.ndarray, Replay, float, float, int, SelfClearance | None, SelfClearance | None]:
     """:func:`_solve_and_resample` with the arms' self-clearance relaxed where the robot's
     enclosures are loose (:mod:`retarget.selfcheck`): a first solve lets them come closer,
     MuJoCo checks the real geoms, pairs that overlap get more room for another solve (from
@@ -195,14 +195,13 @@ def _solve_clear_of_self(
     enclosures starts from the safe margins (selfcheck.EXACT_TIGHTENINGS), and pairs of geoms
     found overlapping that it does not keep apart are added (selfcheck.unpaired_overlaps).
     Returns (solution, output qpos, its replay, floor lift, swing lift, solves, the
-    self-clearance in use with any pairs added, None without one: with exact enclosures the
-    margins the kept solve was tightened to, so that the output check's solves start from
-    the room it found (ToddlerBot's elbow in its box chest: 28 frames 5.3 mm deep from the
-    untightened margins, 0 from these), else the safe margins)."""
+    self-clearance in use with any pairs added, None without one, and with exact enclosures
+    the clearance the kept solve was tightened to, else None: the room the output check's
+    stiffer solves start from)."""
     clearance = _clearance_in_use(rm, config, solver)
     if clearance is None:
         sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(rm, targets, config, solver, src_fps, fps)
-        return sol, qpos, rep, lift, swing_lift, 1, clearance
+        return sol, qpos, rep, lift, swing_lift, 1, clearance, None
     if clearance.looseness is None or not np.any(clearance.looseness > 0):
         # Exact enclosures (capsules, boxes): the safe margins at once; pairs whose geoms still
         # overlap (Apollo's thick thighs in a turn) get that much more room and the clearance
@@ -228,10 +227,10 @@ def _solve_clear_of_self(
                     deepest = np.inf  # the solves before did not count those pairs
             depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
             if best is not None and depth.max(initial=0.0) >= deepest:
-                return (*best, solves, best_tight)
+                return (*best, solves, clearance, best_tight)
             best, deepest, best_tight = (sol, qpos, rep, lift, swing_lift), depth.max(initial=0.0), tight
             if solves > EXACT_TIGHTENINGS or not np.any(depth > OTHER_DEPTH):
-                return (*best, solves, best_tight)
+                return (*best, solves, clearance, best_tight)
             tight, solves = tight.tightened(depth, OTHER_DEPTH), solves + 1
             cfg = replace(config, w_self=config.w_self * EXACT_SELF)
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
@@ -245,7 +244,7 @@ def _solve_clear_of_self(
         # Checked at the solver's frames (the output's in-between frames move a few mrad).
         depth = penetration_depths(rm.model, rm.tree, qpos_in, first)
         if not np.any(depth > tolerance):
-            return sol, qpos, rep, lift, swing_lift, solves, clearance
+            return sol, qpos, rep, lift, swing_lift, solves, clearance, None
         if depth.max() > RETRY_DEPTH:
             break  # arms pressed into the body (hands on the knees): the safe margins at once
         first = first.tightened(depth, tolerance)
@@ -253,11 +252,11 @@ def _solve_clear_of_self(
     # The safe margins are soft too: pairs whose geoms still overlap get that much more room.
     depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
     if not np.any(depth > OTHER_DEPTH):
-        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1, clearance
+        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1, clearance, None
     sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
         rm.with_self_clearance(clearance.tightened(depth, OTHER_DEPTH)), targets, config, solver, src_fps, fps
     )
-    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2, clearance
+    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2, clearance, None
 
 
 def _stance_slip(rm: RobotModel, rep: Replay, targets: Targets, fps: float) -> float:
@@ -389,6 +388,7 @@ def _output_rungs(
     clearance: SelfClearance,
     best: _Solved,
     solves: int,
+    room: SelfClearance | None = None,
 ) -> tuple[_Solved, int, SelfClearance]:
     """Solve again where the output frames of ``best`` overlap deeper than ``OTHER_DEPTH``:
     first at the motion's rate (``joints`` (T, 22, 3) at ``best.targets.fps``) with the pairs
@@ -405,33 +405,47 @@ def _output_rungs(
     still overlap after an output-rate rung get that much more room for the next, counted from
     where their capsules were in the frame of the deepest overlap (selfcheck.overlap_gaps).
     The output frames are replayed in MuJoCo every one (their capsules may be far outside a
-    margin calibrated on a sweep where the geoms overlap). Returns (the solve kept, solves so
-    far, the self-clearance with any pairs added)."""
+    margin calibrated on a sweep where the geoms overlap). With ``room`` (the clearance the
+    solves before were tightened to, pairs in the same order), each output-rate rung solves a
+    third time, plainly, on a ladder of its own that starts from at least those margins:
+    ToddlerBot's elbow, 5.3 mm in its box chest in a carry, came back 25 mm deep from the safe
+    margins (28 frames over 5 mm; 0 from that room), while from that room the CMU humanoid's
+    feet slid in a crouch that the safe ladder clears. Returns (the solve kept, solves so far,
+    the self-clearance of the safe ladder with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
     dense_targets = build_targets(rm, dense, fps, transform, config)  # the output rate's
     reference = dense_targets.kp_pos  # (T, K, 3)
     most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
     far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
+    ladders: dict[str, SelfClearance] = {"safe": clearance}  # each tightened by its own plain solve
+    plain: dict[str, np.ndarray] = {}
+    gaps: dict[str, np.ndarray] = {}
     for stiffness in rungs:
+        if stiffness is not None and room is not None:
+            ladders["room"], room = _with_room(ladders["safe"], room), None
         if stiffness is None:  # the midpoint rung: the motion's own frames
-            candidates = [(replace(config, self_midpoints=True), best.targets)]
+            candidates = [(replace(config, self_midpoints=True), best.targets, "safe", True)]
         else:
             cfg2 = replace(config, w_self=config.w_self * stiffness)
-            candidates = [(cfg2, dense_targets), (cfg2, stiffer_locks(rm, dense_targets, stiffness))]
-        for k, (cfg2, targets2) in enumerate(candidates):
+            candidates = [
+                (cfg2, dense_targets, "safe", True),
+                (cfg2, stiffer_locks(rm, dense_targets, stiffness), "safe", False),
+                *[(cfg2, dense_targets, "room", True) for _ in ladders.keys() - {"safe"}],
+            ]
+        for cfg2, targets2, ladder, is_plain in candidates:
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-                rm.with_self_clearance(clearance), targets2, cfg2, solver, targets2.fps, fps
+                rm.with_self_clearance(ladders[ladder]), targets2, cfg2, solver, targets2.fps, fps
             )
             solves += 1
             # Pairs found overlapping are kept apart from then on; those the stiff-lock solve
             # finds count in its own check only (the rungs go on as they would without it).
-            measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, clearance))
+            measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladders[ladder]))
             depth2 = _output_overlap(rm, qpos2, measured)
             slip2 = _stance_slip(rm, rep2, targets2, fps)
-            if k == 0:
-                clearance, plain = measured, depth2
-                gaps = overlap_gaps(rm.model, rm.tree, qpos2, measured)
+            if is_plain:
+                ladders[ladder], plain[ladder] = measured, depth2
+                gaps[ladder] = overlap_gaps(rm.model, rm.tree, qpos2, measured)
             speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
             if not _rung_kept(
                 best.depth,
@@ -452,12 +466,30 @@ def _output_rungs(
                 continue
             best = solved
             if clear:
-                return best, solves, clearance
+                return best, solves, ladders["safe"]
         if stiffness is not None:  # the output-rate rungs go on as they would without it:
-            clearance = clearance.tightened(plain, OTHER_DEPTH, gaps)  # the plain solve's pairs get more room
+            for ladder in ladders:  # the plain solves' pairs get more room
+                ladders[ladder] = ladders[ladder].tightened(plain[ladder], OTHER_DEPTH, gaps[ladder])
+    clearance = ladders["safe"]
     if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
         return far_but_clear, solves, clearance
     return best, solves, clearance
+
+
+def _with_room(clearance: SelfClearance, room: SelfClearance) -> SelfClearance:
+    """``clearance`` with each of the pairs it shares with ``room`` (its first pairs, in the
+    same order) kept at least as far apart as there; unchanged where the pairs differ."""
+    n = len(room.first)
+    same = (
+        len(clearance.first) >= n
+        and np.array_equal(clearance.first[:n], room.first)
+        and np.array_equal(clearance.second[:n], room.second)
+    )
+    if not same:
+        return clearance
+    margin = clearance.margin.copy()
+    margin[:n] = np.maximum(margin[:n], room.margin)
+    return replace(clearance, margin=margin)
 
 
 def retarget_motion(
@@ -511,7 +543,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
-    sol, qpos, rep, lift, swing_lift, solves, clearance = _solve_clear_of_self(
+    sol, qpos, rep, lift, swing_lift, solves, clearance, room = _solve_clear_of_self(
         rm, targets, config, solver, src_fps, fps
     )
     if clearance is not None:
@@ -522,7 +554,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
             out.slip = _stance_slip(rm, rep, targets, fps)
             out.frames = overlap_frames(rm.model, qpos)
             out, solves, clearance = _output_rungs(
-                rm, config, solver, transform, joints, fps, clearance, out, solves
+                rm, config, solver, transform, joints, fps, clearance, out, solves, room
             )
         sol, qpos, rep, lift, swing_lift, targets = (
             out.sol,

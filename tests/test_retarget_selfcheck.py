@@ -422,21 +422,23 @@ def test_apollos_thighs_stay_apart_in_a_turn():
     assert min(gap) > -0.005
 
 
-def test_the_output_check_starts_from_the_room_the_first_solves_found():
+def test_the_output_check_also_solves_from_the_room_the_first_solves_found():
     """Apollo on corpus clip 000006 (its thighs meet in a turn, exact capsules): the solves
-    before the output check give the thigh pair more room than the safe margin; the
-    self-clearance they hand on keeps that room (before, the output check's solves began again
-    from the safe margins: ToddlerBot's elbow sat 5.3 mm in its box chest for 28 frames of a
-    carry, 0 when they start from the room found), the other pairs as they were."""
+    before the output check give the thigh pair more room than the safe margin; they hand
+    that room on (the output check's rungs solve once more from it: before, they began again
+    from the safe margins only, where ToddlerBot's elbow sat 5.3 mm in its box chest for 28
+    frames of a carry, 0 from the room found), the other pairs as they were, and the safe
+    clearance with it."""
     spec = plan_clips(CorpusConfig(clips=9800, seed=0))[6]
     _, joints, _, _ = make_clip(spec)
     rm = load_robot("apollo")
     config = SolverConfig(**rm.mapping.solver)
     transform = HumanToWorld(scale=rm.scale * size_ratio(joints))
     targets = build_targets(rm, joints.astype(np.float64), 20.0, transform, config)
-    *_, solves, handed_on = _solve_clear_of_self(rm, targets, config, "batched", 20.0, 30.0)
+    *_, solves, safe, handed_on = _solve_clear_of_self(rm, targets, config, "batched", 20.0, 30.0)
     base = rm.self_clearance
-    assert solves >= 2 and handed_on is not None and base is not None
+    assert solves >= 2 and handed_on is not None and base is not None and safe is not None
+    assert np.array_equal(safe.margin[: len(base.margin)], base.margin)
     assert np.array_equal(handed_on.first[: len(base.first)], base.first)
     extra = handed_on.margin[: len(base.margin)] - base.margin
     assert extra.min() >= 0.0
