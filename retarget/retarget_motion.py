@@ -423,7 +423,9 @@ def _output_rungs(
     gaps: dict[str, np.ndarray] = {}
     for stiffness in rungs:
         if stiffness is not None and room is not None:
-            ladders["room"], room = _with_room(ladders["safe"], room), None
+            roomier, room = _with_room(ladders["safe"], room), None
+            if roomier is not None:
+                ladders["room"] = roomier
         if stiffness is None:  # the midpoint rung: the motion's own frames
             candidates = [(replace(config, self_midpoints=True), best.targets, "safe", True)]
         else:
@@ -431,7 +433,7 @@ def _output_rungs(
             candidates = [
                 (cfg2, dense_targets, "safe", True),
                 (cfg2, stiffer_locks(rm, dense_targets, stiffness), "safe", False),
-                *[(cfg2, dense_targets, "room", True) for _ in ladders.keys() - {"safe"}],
+                *([(cfg2, dense_targets, "room", True)] if "room" in ladders else []),
             ]
         for cfg2, targets2, ladder, is_plain in candidates:
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
@@ -476,17 +478,18 @@ def _output_rungs(
     return best, solves, clearance
 
 
-def _with_room(clearance: SelfClearance, room: SelfClearance) -> SelfClearance:
+def _with_room(clearance: SelfClearance, room: SelfClearance) -> SelfClearance | None:
     """``clearance`` with each of the pairs it shares with ``room`` (its first pairs, in the
-    same order) kept at least as far apart as there; unchanged where the pairs differ."""
+    same order) kept at least as far apart as there; None where that keeps none further apart
+    (or the pairs differ): a ladder from it would repeat the safe one."""
     n = len(room.first)
     same = (
         len(clearance.first) >= n
         and np.array_equal(clearance.first[:n], room.first)
         and np.array_equal(clearance.second[:n], room.second)
     )
-    if not same:
-        return clearance
+    if not same or not np.any(room.margin > clearance.margin[:n]):
+        return None
     margin = clearance.margin.copy()
     margin[:n] = np.maximum(margin[:n], room.margin)
     return replace(clearance, margin=margin)

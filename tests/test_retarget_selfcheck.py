@@ -26,7 +26,7 @@ from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
 from retarget.human import size_ratio
 from retarget.kinematics import quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
-from retarget.retarget_motion import _keypoint_error, _rung_kept, _solve_clear_of_self
+from retarget.retarget_motion import _keypoint_error, _rung_kept, _solve_clear_of_self, _with_room
 from retarget.selfcheck import (
     CHECK_DEPTH,
     OTHER_DEPTH,
@@ -451,3 +451,8 @@ def test_the_output_check_also_solves_from_the_room_the_first_solves_found():
     assert pairs and all(
         {int(base.geom[base.first[k]]), int(base.geom[base.second[k]])} == thighs for k in pairs
     ), pairs
+    # The output check's room ladder starts from those margins, and only where they add room.
+    roomier = _with_room(safe, handed_on)
+    assert roomier is not None and _with_room(safe, safe) is None
+    n = len(handed_on.margin)
+    assert np.array_equal(roomier.margin[:n], np.maximum(safe.margin[:n], handed_on.margin))
