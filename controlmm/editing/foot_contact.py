@@ -33,11 +33,12 @@ tolerance: how far a try gets before its line searches leave the constraints dep
 so on the CPU. Weighed 1, the test walk's sliding fell by half on a 2-core AMD EPYC and by 0.2 % on a
 2-core Intel Xeon (seeds 0-3 there: 0.2-58 %); weighed 10, by 82-99.9 % on those four walks on the
 Intel machine (2026-12-02, 16:00 UTC) but by 9 % (seed 0) and 17.5 % (seed 1) on another AMD EPYC
-later that day, where weighed 1 it fell by 100 % (seed 0). A second try runs where the first left a
-sample sliding more than CONTACT_ENOUGH of what it did before the run."""
-CONTACT_ENOUGH = 0.5
+later that day, where weighed 1 it fell by 100 % (seed 0). A second try runs where the first stalled:
+it left a sample sliding more than CONTACT_ENOUGH of what it did before the run."""
+CONTACT_ENOUGH = 0.8
 """A try that leaves a sample's sliding (:func:`foot_contact_term`) at most this fraction of what it
-was before the run ends the run for it."""
+was before the run ends the run for it (0.5 ran the second try in most plans: plan benchmark +19 % CPU
+time against +14 % with 0.8, the same passes)."""
 
 
 def foot_contact_term(
