@@ -94,19 +94,20 @@ def foot_contact_run(
     def meets(joints: torch.Tensor) -> torch.Tensor:  # only states that still meet the objective count
         return objective.evaluate(joints)[1]
 
+    contact = replace(
+        objective,
+        terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),),
+        hinge_weight=config.contact_hinge_weight,
+    )
+    steps = replace(config, codebook_steps=config.contact_steps)
     for weight in CONTACT_CONTROL_WEIGHTS:
         todo = done_before & (least > CONTACT_ENOUGH * before)
         if not bool(todo.any()):  # no sample could keep a try's result, or none needs another
             break
-        contact = replace(
-            objective,
-            terms=tuple(objective.terms) + (foot_contact_term(config.contact_weight),),
-            hinge_weight=config.contact_hinge_weight,
-            control_weight=weight,
-        )
-        steps = replace(config, codebook_steps=config.contact_steps)
         with torch.enable_grad():
-            outcome = codebook_editing(latent, decode, contact, steps, admissible=meets)
+            outcome = codebook_editing(
+                latent, decode, replace(contact, control_weight=weight), steps, admissible=meets
+            )
         with torch.no_grad():
             joints = decode(outcome.param)
             _, done_after, _ = objective.evaluate(joints)
