@@ -35,6 +35,7 @@ from retarget.mink_ik import solve_mink
 from retarget.resample import resample_qpos
 from retarget.robot_model import RobotModel, load_robot
 from retarget.selfcheck import (
+    BALL_MARGIN,
     CHECK_DEPTH,
     EXACT_SELF,
     EXACT_TIGHTENINGS,
@@ -48,6 +49,7 @@ from retarget.selfcheck import (
     RELAX_MOST,
     RELAXED_SOLVES,
     RETRY_DEPTH,
+    contact_balls,
     overlap_frames,
     overlap_gaps,
     penetration_depths,
@@ -327,6 +329,13 @@ def _joint_speeds(qpos: np.ndarray, fps: float) -> np.ndarray:
     return np.abs(np.diff(q, axis=0)).max(axis=0, initial=0.0) * fps
 
 
+def _with_contact_balls(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
+    """``clearance`` with balls held where two of its pairs' geoms overlap in ``qpos`` (T, nq)
+    and an enclosure does not see it (:func:`retarget.selfcheck.contact_balls`)."""
+    node, centre, radius, geom = contact_balls(rm.model, rm.tree, qpos, clearance)
+    return clearance.with_balls(node, centre, radius, geom, BALL_MARGIN) if len(node) else clearance
+
+
 def _with_relaxed_pairs(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
     """``clearance`` with the pairs only its relaxed solves keep (the trunk against the shoulder
     links, calibrated on the real geoms: ``relaxed_pairs``) where the output ``qpos`` (T, nq)
@@ -418,8 +427,11 @@ def _output_rungs(
     most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
     far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
-    ladders: dict[str, SelfClearance] = {"safe": clearance}  # each tightened by its own plain solve
+    # each tightened by its own plain solve, with balls where enclosures miss a contact
+    ladders: dict[str, SelfClearance] = {"safe": _with_contact_balls(rm, best.qpos, clearance)}
+    best.depth = _output_overlap(rm, best.qpos, ladders["safe"])  # the balls' pairs too
     plain: dict[str, np.ndarray] = {}
+    plain_qpos: dict[str, np.ndarray] = {}
     gaps: dict[str, np.ndarray] = {}
     for stiffness in rungs:
         if stiffness is not None and room is not None:
@@ -446,7 +458,7 @@ def _output_rungs(
             depth2 = _output_overlap(rm, qpos2, measured)
             slip2 = _stance_slip(rm, rep2, targets2, fps)
             if is_plain:
-                ladders[ladder], plain[ladder] = measured, depth2
+                ladders[ladder], plain[ladder], plain_qpos[ladder] = measured, depth2, qpos2
                 gaps[ladder] = overlap_gaps(rm.model, rm.tree, qpos2, measured)
             speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
             if not _rung_kept(
@@ -471,7 +483,8 @@ def _output_rungs(
                 return best, solves, ladders["safe"]
         if stiffness is not None:  # the output-rate rungs go on as they would without it:
             for ladder in ladders:  # the plain solves' pairs get more room
-                ladders[ladder] = ladders[ladder].tightened(plain[ladder], OTHER_DEPTH, gaps[ladder])
+                tight = ladders[ladder].tightened(plain[ladder], OTHER_DEPTH, gaps[ladder])
+                ladders[ladder] = _with_contact_balls(rm, plain_qpos[ladder], tight)
     clearance = ladders["safe"]
     if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
         return far_but_clear, solves, clearance

@@ -142,7 +142,7 @@ def penetration_depths(
     for _, g1, g2, depth in _overlaps(model, tree, qpos, sc, every_frame):
         k = pair_of.get((g1, g2))
         if k is not None:
-            found[k] = max(found[k], depth)
+            found[k] = np.maximum(found[k], depth)
         elif depth > other_depth and root[g1] == root[g2]:
             b1, b2 = int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])
             arm = relaxed & _in_subtree(model, sc, b1 if _depth(model, b1) >= _depth(model, b2) else b2)
@@ -171,7 +171,7 @@ def unpaired_overlaps(
     (they enclose the geoms) are the geoms measured (``mj_geomDistance``)."""
     qpos = np.asarray(qpos, dtype=np.float64)
     none = np.zeros(0, dtype=int)
-    first, second = np.triu_indices(len(sc.geom), 1)
+    first, second = np.triu_indices(len(sc.geom) - sc.balls, 1)  # the geoms' enclosures
     g1, g2 = sc.geom[first], sc.geom[second]
     weld = model.body_weldid[model.geom_bodyid]
     w1, w2 = weld[g1], weld[g2]
@@ -225,6 +225,110 @@ def unpaired_overlaps(
     return first[found], second[found], np.minimum(SELF_MARGIN, at_rest[found] - REST_SLACK)
 
 
+BALL_RADIUS = 0.01
+"""Radius (m) of the balls :func:`contact_balls` holds where two geoms touch (at least the
+overlap found, so that the two balls overlap by as much as the geoms do)."""
+BALL_MARGIN = 0.005
+"""Metres the solver keeps between two such balls (soft: a few mm in is what it leaves)."""
+BALLS_PER_PAIR = 4
+"""At most this many ball pairs per geom pair, the deepest contacts first."""
+_OWN_CAPSULE = (int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE))
+
+
+def contact_balls(
+    model: mujoco.MjModel,
+    tree: KinematicTree,
+    qpos: np.ndarray,
+    sc: SelfClearance,
+    depth: float = OTHER_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Balls (:meth:`SelfClearance.with_balls`) where two geoms that ``sc`` keeps apart overlap
+    deeper than ``depth`` (m) in frames of ``qpos`` (T, nq) and one of them is not its own
+    capsule (a cylinder, box or mesh: its enclosure may not see the contact), where their
+    enclosures are outside their pair's margin (inside it they are pushed apart already). Kuavo's thighs
+    are cylinders across the hips, 14 cm long with flat ends 3 cm apart; their enclosing
+    capsules reach 6 cm past those ends, overlap by 9 cm at rest, and a hip yaw that swings
+    the rims together moves them apart. Per contact (MuJoCo's, the normal from the first geom
+    to the second), a ball in each geom tangent inside its surface at the deepest point, in
+    its body's frame: the two balls overlap by as much as the geoms there and part as those
+    points part. Up to BALLS_PER_PAIR per geom pair, deepest first, none within a ball radius
+    of one taken before on the same geom (those already in ``sc`` included).
+
+    Returns node (Q, 2), centre (Q, 2, 3) in the nodes' frames, radius (Q, 2) m, geom (Q, 2)."""
+    qpos = np.asarray(qpos, dtype=np.float64)
+    pair_of = _pair_index(sc)
+    data = mujoco.MjData(model)
+    found: dict[tuple[int, int], list[tuple[float, int, int]]] = {}  # (overlap, frame, contact)
+    for frame in range(len(qpos)):
+        for i, g1, g2, overlap in _contacts(model, data, qpos[frame], depth):
+            exact = int(model.geom_type[g1]) in _OWN_CAPSULE and int(model.geom_type[g2]) in _OWN_CAPSULE
+            if (g1, g2) in pair_of and not exact:
+                found.setdefault((g1, g2), []).append((overlap, frame, i))
+    taken: dict[int, list[np.ndarray]] = {}  # ball centres per geom, in its body's frame
+    for c in range(len(sc.geom) - sc.balls, len(sc.geom)):
+        taken.setdefault(int(sc.geom[c]), []).append(sc.p0[c])
+    node, centre, radius, geom = [], [], [], []
+    for (g1, g2), hits in found.items():
+        enclosures = sc.select_pairs(np.arange(sc.num_pairs) == pair_of[(g1, g2)][0])
+        kept = 0
+        for overlap, frame, i in sorted(hits, reverse=True):
+            q = qpos[frame : frame + 1]
+            poses = tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
+            if kept == BALLS_PER_PAIR or capsule_distances(poses, enclosures)[0][0, 0] < enclosures.margin[0]:
+                continue  # enough, or the enclosures are within their margin there: they push already
+            r = max(BALL_RADIUS, overlap)
+            local = _balls_at(model, data, qpos[frame], i, overlap, r)
+            pairs = list(zip((g1, g2), local, strict=True))
+            if any(np.linalg.norm(p - at) < r for g, at in pairs for p in taken.get(g, [])):
+                continue  # a ball held there already
+            for g, at in pairs:
+                taken.setdefault(g, []).append(at)
+            node.append([tree.node_of_body(int(model.geom_bodyid[g])) for g in (g1, g2)])
+            centre.append(local)
+            radius.append([r, r])
+            geom.append([g1, g2])
+            kept += 1
+    return (
+        np.array(node, dtype=int).reshape(-1, 2),
+        np.array(centre).reshape(-1, 2, 3),
+        np.array(radius).reshape(-1, 2),
+        np.array(geom, dtype=int).reshape(-1, 2),
+    )
+
+
+def _contacts(
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, depth: float
+) -> list[tuple[int, int, int, float]]:
+    """(contact index, geom, geom, overlap m) of the contacts of one frame ``qpos`` (nq,)
+    deeper than ``depth``, by ``mj_collision`` (the model's exclusions honoured)."""
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_collision(model, data)
+    dist = data.contact.dist[: data.ncon]
+    return [
+        (int(i), int(data.contact.geom[i][0]), int(data.contact.geom[i][1]), float(-dist[i]))
+        for i in np.flatnonzero(dist < -depth)
+    ]
+
+
+def _balls_at(
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, i: int, overlap: float, r: float
+) -> list[np.ndarray]:
+    """Centres (3,) in their bodies' frames of two balls of radius ``r`` (m), one in each geom
+    of contact ``i`` of frame ``qpos`` (nq,), tangent inside it at its deepest point (MuJoCo:
+    ``pos`` halfway between the two surfaces, the normal from the first geom to the second)."""
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_collision(model, data)
+    con = data.contact[i]
+    inward = (0.5 * overlap - r) * con.frame[:3]
+    out = []
+    for g, world in zip(con.geom, (con.pos + inward, con.pos - inward), strict=True):
+        b = int(model.geom_bodyid[g])
+        out.append(data.xmat[b].reshape(3, 3).T @ (world - data.xpos[b]))
+    return out
+
+
 def pair_depths(
     model: mujoco.MjModel, tree: KinematicTree, qpos: np.ndarray, sc: SelfClearance, every_frame: bool = False
 ) -> np.ndarray:
@@ -235,7 +339,7 @@ def pair_depths(
     for frame, g1, g2, depth in _overlaps(model, tree, qpos, sc, every_frame):
         k = pair_of.get((g1, g2))
         if k is not None:
-            found[frame, k] = max(found[frame, k], depth)
+            found[frame, k] = np.maximum(found[frame, k], depth)
     return found
 
 
@@ -273,13 +377,15 @@ def overlap_frames(model: mujoco.MjModel, qpos: np.ndarray, depth: float = OUTPU
     return count
 
 
-def _pair_index(sc: SelfClearance) -> dict[tuple[int, int], int]:
-    """Pair index of each (geom, geom) of the clearance, both orders."""
-    pair_of = {
-        (int(a), int(b)): k
-        for k, (a, b) in enumerate(zip(sc.geom[sc.first], sc.geom[sc.second], strict=True))
-    }
-    pair_of.update({(b, a): k for (a, b), k in list(pair_of.items())})
+def _pair_index(sc: SelfClearance) -> dict[tuple[int, int], list[int]]:
+    """Pair indices of each (geom, geom) of the clearance, both orders: their enclosures' pair
+    and the pairs of balls held where the two touched (:func:`contact_balls`); an overlap of
+    the two geoms counts for each."""
+    pair_of: dict[tuple[int, int], list[int]] = {}
+    for k, (a, b) in enumerate(zip(sc.geom[sc.first].tolist(), sc.geom[sc.second].tolist(), strict=True)):
+        pair_of.setdefault((a, b), []).append(k)
+        if b != a:
+            pair_of.setdefault((b, a), []).append(k)
     return pair_of
 
 

@@ -91,6 +91,8 @@ class SelfClearance:
         safe_margin: (P,) the margin each pair goes back to where its real geoms touch
             (:mod:`retarget.selfcheck`); ``margin`` may be smaller (a first solve that lets the
             loose enclosures overlap). None: the same as ``margin``.
+        balls: how many of the capsules, the last ones, are balls held where two geoms touch
+            (:meth:`with_balls`), not enclosures of a geom.
     """
 
     node: np.ndarray
@@ -104,6 +106,7 @@ class SelfClearance:
     safe_margin: np.ndarray | None = None
     looseness: np.ndarray | None = None
     relaxed_pairs: SelfClearance | None = None
+    balls: int = 0
 
     def relaxed(self, fraction: float, most: float) -> SelfClearance:
         """A copy in which each pair with a margin of at least 0 may come closer by
@@ -152,6 +155,28 @@ class SelfClearance:
             looseness=grow(self.looseness, np.zeros(len(first))),
             relaxed_pairs=None,
         )
+
+    def with_balls(
+        self, node: np.ndarray, centre: np.ndarray, radius: np.ndarray, geom: np.ndarray, margin: float
+    ) -> SelfClearance:
+        """A copy with Q pairs of balls kept ``margin`` (m) apart too: ``node`` (Q, 2) the tree
+        nodes they ride on, ``centre`` (Q, 2, 3) in those nodes' frames, ``radius`` (Q, 2) m,
+        ``geom`` (Q, 2) the geoms they lie in (:func:`retarget.selfcheck.contact_balls`: two
+        geoms whose enclosures do not see where they touch). The balls are capsules of zero
+        length appended after the others; the pairs after the others too."""
+        c = len(self.node)
+        q = len(node)
+        grown = replace(
+            self,
+            node=np.concatenate([self.node, np.asarray(node, dtype=int).ravel()]),
+            p0=np.concatenate([self.p0, np.asarray(centre).reshape(-1, 3)]),
+            p1=np.concatenate([self.p1, np.asarray(centre).reshape(-1, 3)]),
+            radius=np.concatenate([self.radius, np.asarray(radius, dtype=np.float64).ravel()]),
+            geom=np.concatenate([self.geom, np.asarray(geom, dtype=int).ravel()]),
+            balls=self.balls + 2 * q,
+        )
+        index = c + np.arange(2 * q).reshape(q, 2)
+        return grown.with_pairs(index[:, 0], index[:, 1], margin)
 
     def select_pairs(self, keep: np.ndarray) -> SelfClearance:
         """A copy with the pairs where ``keep`` (P,) bool is true (their margins and looseness)."""

@@ -22,12 +22,15 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from controlmm.motion.container import resample
 from retarget import RobotModel, load_robot, retarget_motion, robot_mjcf, robot_mjcf_path
+from retarget.capsules import robot_capsules
 from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
 from retarget.human import size_ratio
-from retarget.kinematics import quat_to_mat
+from retarget.kinematics import KinematicTree, quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
 from retarget.retarget_motion import _keypoint_error, _rung_kept, _solve_clear_of_self, _with_room
 from retarget.selfcheck import (
+    BALL_MARGIN,
+    BALL_RADIUS,
     CHECK_DEPTH,
     OTHER_DEPTH,
     OUTPUT_SELF,
@@ -36,12 +39,13 @@ from retarget.selfcheck import (
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
+    contact_balls,
     overlap_frames,
     overlap_gaps,
     pair_depths,
     penetration_depths,
 )
-from retarget.selfcollision import capsule_distances
+from retarget.selfcollision import SelfClearance, capsule_distances
 from retarget.solver_config import SolverConfig
 from retarget.targets import build_targets
 
@@ -456,3 +460,55 @@ def test_the_output_check_also_solves_from_the_room_the_first_solves_found():
     assert roomier is not None and _with_room(safe, safe) is None
     n = len(handed_on.margin)
     assert np.array_equal(roomier.margin[:n], np.maximum(safe.margin[:n], handed_on.margin))
+
+
+_CYLINDER_HIPS = """<mujoco><compiler angle="degree"/><worldbody>
+<body name="pelvis" pos="0 0 1"><freejoint/><inertial pos="0 0 0" mass="5" diaginertia="0.1 0.1 0.1"/>
+<body name="hip_l" pos="0 0.085 0"><joint name="yaw_l" axis="0 0 1" range="-60 60"/>
+<geom type="cylinder" size="0.06 0.07" euler="90 0 0"/></body>
+<body name="hip_r" pos="0 -0.085 0"><joint name="yaw_r" axis="0 0 1" range="-60 60"/>
+<geom type="cylinder" size="0.06 0.07" euler="90 0 0"/></body>
+</body></worldbody></mujoco>"""
+"""Kuavo S45's hips (GMR's file): a cylinder across each, 6 cm in radius and 14 cm long, the
+flat ends 3 cm apart; a hip yaw turns each about its centre."""
+
+
+def test_balls_at_a_contact_see_what_the_enclosing_capsules_miss():
+    """Turning the hips toes-out swings the back rims of the two cylinders into each other
+    (MuJoCo: 2.4 mm at 20 degrees, 7 at 25) while their enclosing capsules, which reach 6 cm
+    past the flat ends, move apart: the solver cannot see the contact. contact_balls puts a
+    ball in each cylinder at the contact; those part and overlap as the rims do."""
+    model = mujoco.MjModel.from_xml_string(_CYLINDER_HIPS)
+    tree = KinematicTree(model)
+    caps = robot_capsules(model, tree)
+    sc = SelfClearance(
+        caps.node, caps.p0, caps.p1, caps.radius, np.array([0]), np.array([1]), caps.geom, np.array([-0.095])
+    )
+    data = mujoco.MjData(model)
+
+    def pose(deg: float) -> np.ndarray:
+        return np.array([0, 0, 1, 1, 0, 0, 0, np.radians(deg), -np.radians(deg)])
+
+    def overlap(deg: float) -> float:
+        data.qpos[:] = pose(deg)
+        mujoco.mj_forward(model, data)
+        return max([-float(c.dist) for c in data.contact[: data.ncon]], default=-np.inf)
+
+    def distances(clearance: SelfClearance, deg: float) -> np.ndarray:
+        q = pose(deg)[None]
+        return capsule_distances(tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:]), clearance)[0][0]
+
+    assert overlap(0.0) == -np.inf and overlap(25.0) > OTHER_DEPTH
+    assert distances(sc, 25.0)[0] > distances(sc, 0.0)[0] + 0.01  # the enclosures part
+    node, centre, radius, geom = contact_balls(model, tree, pose(25.0)[None], sc)
+    assert node.shape == (1, 2) and np.array_equal(geom[0], caps.geom) and radius.min() >= BALL_RADIUS
+    for k in range(2):  # each ball lies in its cylinder (in its body's frame, axis along y)
+        assert np.hypot(centre[0, k, 0], centre[0, k, 2]) <= 0.06 and abs(centre[0, k, 1]) <= 0.07
+    balls = sc.with_balls(node, centre, radius, geom, BALL_MARGIN)
+    assert balls.balls == 2 and balls.num_pairs == 2 and balls.margin[1] == BALL_MARGIN
+    for deg in (20.0, 25.0, 30.0):  # the balls overlap as deep as the rims
+        assert abs(distances(balls, deg)[1] + overlap(deg)) < 0.001, deg
+    assert distances(balls, 0.0)[1] > 0.02  # and are apart where the cylinders are
+    # A ball pair already held there is not held twice; apart, none is found.
+    assert contact_balls(model, tree, pose(25.0)[None], balls)[0].shape == (0, 2)
+    assert contact_balls(model, tree, pose(10.0)[None], sc)[0].shape == (0, 2)
