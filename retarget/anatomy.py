@@ -56,6 +56,9 @@ SAME_ANCHOR = 1e-3
 SOLE_BAND = 0.015
 """A link whose collision geometry comes this close (fraction of the robot's height) to the
 floor in the rest pose stands on it: the foot above a toe link is the foot."""
+BARE_FOOT = 0.005
+"""A jointed link below a foot whose origin lies this much (m) lower than the foot's lowest
+collision point: the leg goes on below its geometry (feet without collision geoms)."""
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
@@ -353,6 +356,16 @@ def _foot_above_toes(
         body = parent
 
 
+def _bare_link_below(model: mujoco.MjModel, data: mujoco.MjData, foot: int, lowest: float) -> int | None:
+    """A jointed link below ``foot`` whose origin lies ``BARE_FOOT`` lower than ``lowest`` (the
+    foot's lowest collision point, m, world z in the rest pose ``data``); None without one (a toe
+    joint sits above the sole)."""
+    for b in range(foot + 1, model.nbody):
+        if model.body_jntnum[b] and foot in ancestors(model, b) and data.xpos[b][2] < lowest - BARE_FOOT:
+            return b
+    return None
+
+
 def _subtree(model: mujoco.MjModel, body: int, bodies: list[int]) -> list[int]:
     return [b for b in bodies if body in ancestors(model, b)]
 
@@ -410,6 +423,14 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
         )
     for side in feet:  # a toe link below the foot: the foot is the link its sole is on
         feet[side] = _foot_above_toes(model, feet[side], root, low, floor_z + SOLE_BAND * height)
+        bare = _bare_link_below(model, data, feet[side], feet_z[side])
+        if bare is not None:
+            raise ControlMMError(
+                f"{name} has a {side} leg that goes on below its collision geometry: link "
+                f"'{model.body(bare).name}' lies {100 * (feet_z[side] - data.xpos[bare][2]):.1f} cm lower "
+                f"than the lowest geom of '{model.body(feet[side]).name}' and has none to stand on "
+                "(give the foot a collision geom)"
+            )
     pelvis = common_ancestor(model, [feet["left"], feet["right"]])
     if pelvis in (feet["left"], feet["right"]) or pelvis == 0:
         raise ControlMMError(f"{name} has no two legs: its feet are not on two separate chains")

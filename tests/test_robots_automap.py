@@ -253,6 +253,13 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
     ball_joint = _write(
         tmp_path / "balljoint.xml", re.sub(r'\s*<joint name="shoulder_[yz]_l"[^>]*/>', "", shoulder)
     )
+    # feet and toes that collide with nothing: the shins are the lowest collision geometry
+    lines, body = [], ""
+    for line in humanoid.splitlines():
+        body = line.split('name="')[1].split('"')[0] if "<body " in line else body
+        bare = "<geom " in line and body.startswith(("foot_", "toes_"))
+        lines.append(line.replace("<geom ", '<geom contype="0" conaffinity="0" ') if bare else line)
+    bare_feet = _write(tmp_path / "barefeet.xml", "\n".join(lines))
     bad_body = json.loads((Path(__file__).parents[1] / "retarget/mappings/t1.json").read_text())
     bad_body["keypoints"]["left_knee"]["body"] = "Knee_Left"
     bad_mapping = _write(tmp_path / "bad.json", json.dumps(bad_body))
@@ -262,6 +269,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (no_free, "no free joint"),
         (broken, "does not load"),
         (ball, "no two legs"),
+        (bare_feet, "left leg that goes on below its collision geometry: link 'foot_l'"),
         (scene, r"2 free joints \(on root, prop\)"),
         (ball_joint, "joint 'shoulder_l' is a mjJNT_BALL joint; the retargeter supports hinge and slide"),
         (bad_mapping, "body 'Knee_Left'"),
@@ -275,6 +283,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (("retarget", src, "--robot", broken, "--out", tmp_path / "r"), "does not load"),
         (("retarget", src, "--robot", bad_mapping, "--out", tmp_path / "r"), "body 'Knee_Left'"),
         (("robots", "map", ball, "--out", tmp_path / "m.json"), "no two legs"),
+        (("robots", "map", bare_feet, "--out", tmp_path / "m.json"), "has none to stand on"),
         (("robots", "map", scene, "--out", tmp_path / "m.json"), "not a scene with loose bodies"),
         (
             ("retarget", src, "--robot", ball_joint, "--out", tmp_path / "r"),
@@ -285,7 +294,16 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         err = done.stderr.strip()
         assert done.returncode == 2 and needle in err and len(err.splitlines()) == 1, (argv, err)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        ["nofree.xml", "broken.xml", "ball.xml", "scene.xml", "balljoint.xml", "bad.json", "m.npy"]
+        [
+            "nofree.xml",
+            "broken.xml",
+            "ball.xml",
+            "barefeet.xml",
+            "scene.xml",
+            "balljoint.xml",
+            "bad.json",
+            "m.npy",
+        ]
     )
 
 
