@@ -42,6 +42,7 @@ from retarget.selfcheck import (
     OTHER_DEPTH,
     OUTPUT_FAR_DEPTH,
     OUTPUT_FIT_GIVE,
+    OUTPUT_NEAR_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
     OUTPUT_SPEED,
@@ -381,6 +382,14 @@ class _Solved:
     frames: int
 
 
+def _gives_up_a_pass(depth: np.ndarray, error: float, error2: float) -> bool:
+    """Whether a solve whose keypoints end ``error2`` (m, mean) from their targets would give up
+    the motion for the last millimetres of the one kept (``depth`` (P,) m: its pairs' deepest
+    overlaps, within OUTPUT_FAR_DEPTH: it passes ``controlmm validate``; ``error`` m): further
+    than selfcheck.OUTPUT_NEAR_GIVE beyond it."""
+    return depth.max(initial=0.0) <= OUTPUT_FAR_DEPTH and error2 > error + OUTPUT_NEAR_GIVE
+
+
 def _keypoint_error(rm: RobotModel, rep: Replay, reference: np.ndarray) -> float:
     """Mean distance (m) of the robot's keypoints in the frames of ``rep`` to ``reference``
     (T, K, 3), the targets at the output rate."""
@@ -475,8 +484,11 @@ def _output_rungs(
                 continue
             solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
             clear = depth2.max() <= OTHER_DEPTH
-            if _keypoint_error(rm, rep2, reference) > most_error:  # gives up the motion
+            error2 = _keypoint_error(rm, rep2, reference)
+            if error2 > most_error:  # gives up the motion
                 far_but_clear = far_but_clear or (solved if clear else None)
+                continue
+            if _gives_up_a_pass(best.depth, _keypoint_error(rm, best.rep, reference), error2):
                 continue
             best = solved
             if clear:

@@ -27,12 +27,21 @@ from retarget.compare import robot_keypoints, similarity_fit, stance_foot_speed
 from retarget.human import size_ratio
 from retarget.kinematics import KinematicTree, quat_to_mat
 from retarget.metrics import replay, trajectory_metrics
-from retarget.retarget_motion import _keypoint_error, _rung_kept, _solve_clear_of_self, _with_room
+from retarget.retarget_motion import (
+    _gives_up_a_pass,
+    _keypoint_error,
+    _rung_kept,
+    _solve_clear_of_self,
+    _with_room,
+)
 from retarget.selfcheck import (
     BALL_MARGIN,
     BALL_RADIUS,
     CHECK_DEPTH,
     OTHER_DEPTH,
+    OUTPUT_FAR_DEPTH,
+    OUTPUT_FIT_GIVE,
+    OUTPUT_NEAR_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
     OUTPUT_SPEED,
@@ -512,3 +521,16 @@ def test_balls_at_a_contact_see_what_the_enclosing_capsules_miss():
     # A ball pair already held there is not held twice; apart, none is found.
     assert contact_balls(model, tree, pose(25.0)[None], balls)[0].shape == (0, 2)
     assert contact_balls(model, tree, pose(10.0)[None], sc)[0].shape == (0, 2)
+
+
+def test_a_solve_that_passes_is_not_traded_for_one_that_gives_up_the_motion():
+    """Once the solve kept overlaps no deeper than validate's 5 mm, a clear one is kept only
+    within OUTPUT_NEAR_GIVE of its keypoint distance (ToddlerBot clapping: 4.1 mm kept, then a
+    clear solve that fitted the human at 6.1 cm instead of 2.9); a solve that fails validate
+    may still be traded within OUTPUT_FIT_GIVE."""
+    passing = np.array([0.0, 0.0041, 0.001])
+    failing = np.array([0.0, OUTPUT_FAR_DEPTH + 0.001])
+    assert OUTPUT_NEAR_GIVE < OUTPUT_FIT_GIVE
+    assert _gives_up_a_pass(passing, 0.03, 0.03 + OUTPUT_NEAR_GIVE + 0.001)
+    assert not _gives_up_a_pass(passing, 0.03, 0.03 + OUTPUT_NEAR_GIVE - 0.001)
+    assert not _gives_up_a_pass(failing, 0.03, 0.03 + OUTPUT_FIT_GIVE - 0.001)
