@@ -264,32 +264,47 @@ def contact_balls(
     qpos = np.asarray(qpos, dtype=np.float64)
     pair_of = _pair_index(sc)
     data = mujoco.MjData(model)
-    found: dict[tuple[int, int], list[tuple[float, int, int]]] = {}  # (overlap, frame, contact)
-    for frame in range(len(qpos)):
-        for i, g1, g2, overlap in _contacts(model, data, qpos[frame], depth):
+    found: dict[tuple[int, int], list[tuple[float, int, np.ndarray, np.ndarray]]] = {}
+    for frame in range(len(qpos)):  # (overlap, frame, contact point, normal) per geom pair
+        data.qpos[:] = qpos[frame]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_collision(model, data)
+        for con in data.contact[: data.ncon]:
+            g1, g2 = int(con.geom[0]), int(con.geom[1])
             exact = int(model.geom_type[g1]) in _OWN_CAPSULE and int(model.geom_type[g2]) in _OWN_CAPSULE
-            if (g1, g2) in pair_of and not exact:
-                found.setdefault((g1, g2), []).append((overlap, frame, i))
+            if con.dist < -depth and (g1, g2) in pair_of and not exact:
+                found.setdefault((g1, g2), []).append(
+                    (-float(con.dist), frame, con.pos.copy(), con.frame[:3].copy())
+                )
     taken: dict[int, list[np.ndarray]] = {}  # ball centres per geom, in its body's frame
     for c in range(len(sc.geom) - sc.balls, len(sc.geom)):
         taken.setdefault(int(sc.geom[c]), []).append(sc.p0[c])
     node, centre, radius, geom = [], [], [], []
     for (g1, g2), hits in found.items():
         enclosures = sc.select_pairs(np.arange(sc.num_pairs) == pair_of[(g1, g2)][0])
+        nodes = [tree.node_of_body(int(model.geom_bodyid[g])) for g in (g1, g2)]
         kept = 0
-        for overlap, frame, i in sorted(hits, reverse=True):
+        for overlap, frame, pos, normal in sorted(hits, key=lambda hit: -hit[0]):
+            if kept == BALLS_PER_PAIR:
+                break
             q = qpos[frame : frame + 1]
             poses = tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
-            if kept == BALLS_PER_PAIR or capsule_distances(poses, enclosures)[0][0, 0] < enclosures.margin[0]:
-                continue  # enough, or the enclosures are within their margin there: they push already
+            if capsule_distances(poses, enclosures)[0][0, 0] < enclosures.margin[0]:
+                continue  # the enclosures are within their margin there: they push already
+            # Tangent inside each geom at its deepest point (``pos`` lies halfway between the two
+            # surfaces, the normal points from the first geom to the second), in its body's frame.
             r = max(BALL_RADIUS, overlap)
-            local = _balls_at(model, data, qpos[frame], i, overlap, r)
+            inward = (0.5 * overlap - r) * normal
+            local = [
+                poses.rot[0, n].T @ (world - poses.pos[0, n])
+                for n, world in zip(nodes, (pos + inward, pos - inward), strict=True)
+            ]
             pairs = list(zip((g1, g2), local, strict=True))
             if any(np.linalg.norm(p - at) < r for g, at in pairs for p in taken.get(g, [])):
                 continue  # a ball held there already
             for g, at in pairs:
                 taken.setdefault(g, []).append(at)
-            node.append([tree.node_of_body(int(model.geom_bodyid[g])) for g in (g1, g2)])
+            node.append(nodes)
             centre.append(local)
             radius.append([r, r])
             geom.append([g1, g2])
@@ -300,39 +315,6 @@ def contact_balls(
         np.array(radius).reshape(-1, 2),
         np.array(geom, dtype=int).reshape(-1, 2),
     )
-
-
-def _contacts(
-    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, depth: float
-) -> list[tuple[int, int, int, float]]:
-    """(contact index, geom, geom, overlap m) of the contacts of one frame ``qpos`` (nq,)
-    deeper than ``depth``, by ``mj_collision`` (the model's exclusions honoured)."""
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_collision(model, data)
-    dist = data.contact.dist[: data.ncon]
-    return [
-        (int(i), int(data.contact.geom[i][0]), int(data.contact.geom[i][1]), float(-dist[i]))
-        for i in np.flatnonzero(dist < -depth)
-    ]
-
-
-def _balls_at(
-    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, i: int, overlap: float, r: float
-) -> list[np.ndarray]:
-    """Centres (3,) in their bodies' frames of two balls of radius ``r`` (m), one in each geom
-    of contact ``i`` of frame ``qpos`` (nq,), tangent inside it at its deepest point (MuJoCo:
-    ``pos`` halfway between the two surfaces, the normal from the first geom to the second)."""
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_collision(model, data)
-    con = data.contact[i]
-    inward = (0.5 * overlap - r) * con.frame[:3]
-    out = []
-    for g, world in zip(con.geom, (con.pos + inward, con.pos - inward), strict=True):
-        b = int(model.geom_bodyid[g])
-        out.append(data.xmat[b].reshape(3, 3).T @ (world - data.xpos[b]))
-    return out
 
 
 def pair_depths(
