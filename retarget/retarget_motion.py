@@ -438,7 +438,8 @@ def _output_rungs(
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
     # each tightened by its own plain solve, with balls where enclosures miss a contact
     ladders: dict[str, SelfClearance] = {"safe": _with_contact_balls(rm, best.qpos, clearance)}
-    best.depth = _output_overlap(rm, best.qpos, ladders["safe"])  # the balls' pairs too
+    if ladders["safe"] is not clearance:  # the balls' pairs count too
+        best.depth = _output_overlap(rm, best.qpos, ladders["safe"])
     plain: dict[str, np.ndarray] = {}
     plain_qpos: dict[str, np.ndarray] = {}
     gaps: dict[str, np.ndarray] = {}
