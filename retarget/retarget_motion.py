@@ -330,10 +330,14 @@ def _joint_speeds(qpos: np.ndarray, fps: float) -> np.ndarray:
     return np.abs(np.diff(q, axis=0)).max(axis=0, initial=0.0) * fps
 
 
-def _with_contact_balls(rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance) -> SelfClearance:
+def _with_contact_balls(
+    rm: RobotModel, qpos: np.ndarray, clearance: SelfClearance, inside_rest_overlap: bool = False
+) -> SelfClearance:
     """``clearance`` with balls held where two of its pairs' geoms overlap in ``qpos`` (T, nq)
     and an enclosure does not see it (:func:`retarget.selfcheck.contact_balls`)."""
-    node, centre, radius, geom = contact_balls(rm.model, rm.tree, qpos, clearance)
+    node, centre, radius, geom = contact_balls(
+        rm.model, rm.tree, qpos, clearance, inside_rest_overlap=inside_rest_overlap
+    )
     return clearance.with_balls(node, centre, radius, geom, BALL_MARGIN) if len(node) else clearance
 
 
@@ -428,8 +432,14 @@ def _output_rungs(
     third time, plainly, on a ladder of its own that starts from at least those margins:
     ToddlerBot's elbow, 5.3 mm in its box chest in a carry, came back 25 mm deep from the safe
     margins (28 frames over 5 mm; 0 from that room), while from that room the CMU humanoid's
-    feet slid in a crouch that the safe ladder clears. Returns (the solve kept, solves so far,
-    the self-clearance of the safe ladder with any pairs added)."""
+    feet slid in a crouch that the safe ladder clears. Where two geoms touch while their
+    enclosures, which overlap at rest, lie inside their (negative) margin, each output-rate rung
+    also solves twice (plainly and with the stiffer locks) on a "held" ladder that keeps balls
+    there (selfcheck.contact_balls, ``inside_rest_overlap``) and gives its room to the balls,
+    not to those enclosures (``SelfClearance.tightened``, ``keep_seen``): Kuavo's hip
+    cylinders in corpus clip 000015, 5.45 mm deep in 9 frames after the safe ladder's three
+    rungs, clear on the x30 rung. Returns (the solve kept, solves so far, the self-clearance of
+    the safe ladder with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
     dense_targets = build_targets(rm, dense, fps, transform, config)  # the output rate's
     reference = dense_targets.kp_pos  # (T, K, 3)
@@ -440,6 +450,9 @@ def _output_rungs(
     ladders: dict[str, SelfClearance] = {"safe": _with_contact_balls(rm, best.qpos, clearance)}
     if ladders["safe"] is not clearance:  # the balls' pairs count too
         best.depth = _output_overlap(rm, best.qpos, ladders["safe"])
+    held = _with_contact_balls(rm, best.qpos, clearance, inside_rest_overlap=True)
+    if held.seen_by_balls().any():  # enclosures that overlap at rest, blind to a contact
+        ladders["held"] = held
     plain: dict[str, np.ndarray] = {}
     plain_qpos: dict[str, np.ndarray] = {}
     gaps: dict[str, np.ndarray] = {}
@@ -452,10 +465,16 @@ def _output_rungs(
             candidates = [(replace(config, self_midpoints=True), best.targets, "safe", True)]
         else:
             cfg2 = replace(config, w_self=config.w_self * stiffness)
+            stiff_targets = stiffer_locks(rm, dense_targets, stiffness)
             candidates = [
                 (cfg2, dense_targets, "safe", True),
-                (cfg2, stiffer_locks(rm, dense_targets, stiffness), "safe", False),
+                (cfg2, stiff_targets, "safe", False),
                 *([(cfg2, dense_targets, "room", True)] if "room" in ladders else []),
+                *(
+                    [(cfg2, dense_targets, "held", True), (cfg2, stiff_targets, "held", False)]
+                    if "held" in ladders
+                    else []
+                ),
             ]
         for cfg2, targets2, ladder, is_plain in candidates:
             sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
@@ -495,9 +514,12 @@ def _output_rungs(
             if clear:
                 return best, solves, ladders["safe"]
         if stiffness is not None:  # the output-rate rungs go on as they would without it:
-            for ladder in ladders:  # the plain solves' pairs get more room
-                tight = ladders[ladder].tightened(plain[ladder], OTHER_DEPTH, gaps[ladder])
-                ladders[ladder] = _with_contact_balls(rm, plain_qpos[ladder], tight)
+            for ladder in ladders:  # the plain solves' pairs get more room (balls, on "held")
+                blind = ladder == "held"
+                tight = ladders[ladder].tightened(plain[ladder], OTHER_DEPTH, gaps[ladder], keep_seen=blind)
+                ladders[ladder] = _with_contact_balls(
+                    rm, plain_qpos[ladder], tight, inside_rest_overlap=blind
+                )
     clearance = ladders["safe"]
     if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
         return far_but_clear, solves, clearance

@@ -247,11 +247,14 @@ def contact_balls(
     qpos: np.ndarray,
     sc: SelfClearance,
     depth: float = OTHER_DEPTH,
+    inside_rest_overlap: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Balls (:meth:`SelfClearance.with_balls`) where two geoms that ``sc`` keeps apart overlap
     deeper than ``depth`` (m) in frames of ``qpos`` (T, nq) and one of them is not its own
     capsule (a cylinder, box or mesh: its enclosure may not see the contact), where their
-    enclosures are outside their pair's margin (inside it they are pushed apart already). Kuavo's thighs
+    enclosures are outside their pair's margin (inside it they are pushed apart already) or,
+    with ``inside_rest_overlap``, inside a negative one (enclosures that overlap at rest do
+    not see the contact wherever they are). Kuavo's thighs
     are cylinders across the hips, 14 cm long with flat ends 3 cm apart; their enclosing
     capsules reach 6 cm past those ends, overlap by 9 cm at rest, and a hip yaw that swings
     the rims together moves them apart. Per contact (MuJoCo's, the normal from the first geom
@@ -289,7 +292,8 @@ def contact_balls(
                 break
             q = qpos[frame : frame + 1]
             poses = tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
-            if capsule_distances(poses, enclosures)[0][0, 0] < enclosures.margin[0]:
+            inside = capsule_distances(poses, enclosures)[0][0, 0] < enclosures.margin[0]
+            if inside and not (inside_rest_overlap and enclosures.margin[0] < 0.0):
                 continue  # the enclosures are within their margin there: they push already
             # Tangent inside each geom at its deepest point (``pos`` lies halfway between the two
             # surfaces, the normal points from the first geom to the second), in its body's frame.

@@ -523,6 +523,42 @@ def test_balls_at_a_contact_see_what_the_enclosing_capsules_miss():
     assert contact_balls(model, tree, pose(10.0)[None], sc)[0].shape == (0, 2)
 
 
+def test_enclosures_that_overlap_at_rest_leave_a_contact_to_the_held_ladders_balls():
+    """Kuavo's hip capsules overlap by 9 cm at rest (a negative margin): within that margin they
+    still do not see the rims touch. The output check's "held" ladder takes balls there too and
+    gives its more room to them, not to the enclosures, whose growing margin pressed the rims
+    together (corpus clip 000015: 6.4, 7.0, 7.8 mm); the safe ladder goes on as before."""
+    model = mujoco.MjModel.from_xml_string(_CYLINDER_HIPS)
+    tree = KinematicTree(model)
+    caps = robot_capsules(model, tree)
+    q = np.array([[0, 0, 1, 1, 0, 0, 0, np.radians(25.0), -np.radians(25.0)]])
+    poses = tree.forward(q[:, :3], quat_to_mat(q[:, 3:7]), q[:, 7:])
+
+    def clearance(margin: float) -> SelfClearance:
+        first, second = np.array([0]), np.array([1])
+        return SelfClearance(
+            caps.node, caps.p0, caps.p1, caps.radius, first, second, caps.geom, np.array([margin])
+        )
+
+    gap = float(capsule_distances(poses, clearance(0.0))[0][0, 0])
+    assert gap < -0.05  # the capsules overlap deeply where the rims touch
+    inside = clearance(gap + 0.01)  # inside a negative margin
+    assert contact_balls(model, tree, q, inside)[0].shape == (0, 2)  # the safe ladder: none
+    node, centre, radius, geom = contact_balls(model, tree, q, inside, inside_rest_overlap=True)
+    assert node.shape == (1, 2)
+    assert contact_balls(model, tree, q, clearance(0.0), inside_rest_overlap=True)[0].shape == (0, 2)
+    assert not inside.seen_by_balls().any()
+    balls = inside.with_balls(node, centre, radius, geom, BALL_MARGIN)
+    assert balls.seen_by_balls().tolist() == [True, False]
+    deep = np.array([0.006, 0.006])
+    assert balls.tightened(deep, OTHER_DEPTH).margin[0] > balls.margin[0]  # the safe ladder's way
+    held = balls.tightened(deep, OTHER_DEPTH, keep_seen=True)
+    assert held.margin[0] == balls.margin[0] and held.margin[1] > balls.margin[1]
+    apart = clearance(0.01).with_balls(node, centre, radius, geom, BALL_MARGIN)  # apart at rest
+    assert not apart.seen_by_balls().any()
+    assert apart.tightened(deep, OTHER_DEPTH, keep_seen=True).margin[0] > 0.01
+
+
 def test_a_solve_that_passes_is_not_traded_for_one_that_gives_up_the_motion():
     """Once the solve kept overlaps no deeper than validate's 5 mm, a clear one is kept only
     within OUTPUT_NEAR_GIVE of its keypoint distance (ToddlerBot clapping: 4.1 mm kept, then a
