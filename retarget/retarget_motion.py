@@ -451,7 +451,7 @@ def _output_rungs(
     if ladders["safe"] is not clearance:  # the balls' pairs count too
         best.depth = _output_overlap(rm, best.qpos, ladders["safe"])
     held = _with_contact_balls(rm, best.qpos, clearance, inside_rest_overlap=True)
-    if held.seen_by_balls().any():  # enclosures that overlap at rest, blind to a contact
+    if held.balls > ladders["safe"].balls and held.seen_by_balls().any():  # blind enclosures
         ladders["held"] = held
     plain: dict[str, np.ndarray] = {}
     plain_qpos: dict[str, np.ndarray] = {}
