@@ -150,9 +150,9 @@ class SelfClearance:
         see where their geoms touch, and more room for them can press the geoms together:
         Kuavo's hip cylinders, whose capsules overlap by 9 cm at rest, had their rims 6.4, 7.0
         and 7.8 mm into each other as their margin grew with the output check's rungs."""
-        ball = self.first >= len(self.node) - self.balls
-        if not self.balls or not ball.any():
-            return np.zeros(len(self.first), dtype=bool)
+        ball = self.first >= len(self.node) - self.balls  # the balls are the last capsules
+        if not ball.any():
+            return ball
         geoms = np.sort(np.stack([self.geom[self.first], self.geom[self.second]], axis=1), axis=1)
         held = {(int(a), int(b)) for a, b in geoms[ball]}
         shared = np.array([(int(a), int(b)) in held for a, b in geoms])
