@@ -32,6 +32,9 @@ SWEEP_POINTS = 49
 """Values of each trunk joint swept over its range."""
 BISECTIONS = 10
 """Halvings of the factor that shrinks the narrowed ranges together."""
+TOGETHER_MOST = 6
+"""Most narrowed joints whose ends are checked in every combination (3^n poses); more keep
+each its own interval."""
 CLEAR_DEPTH = 0.002
 """Metres two of the robot's geoms may overlap in a swept pose (the solver's own tolerance,
 :data:`retarget.selfcollision.SWEEP_DEPTH`); ``controlmm validate`` fails 5 mm."""
@@ -60,9 +63,11 @@ def trunk_joints(a: Anatomy) -> list[int]:
     ]
 
 
-def _deepest(model: mujoco.MjModel, data: mujoco.MjData, trunk: np.ndarray) -> float:
+def _deepest(
+    model: mujoco.MjModel, data: mujoco.MjData, trunk: np.ndarray, other: np.ndarray | None = None
+) -> float:
     """Deepest overlap (m, 0 for none) of two of the trunk's bodies (``trunk``: (nbody,) bool)
-    in ``data``'s pose."""
+    in ``data``'s pose; with ``other`` ((nbody,) bool), of a trunk body and an other one."""
     mujoco.mj_kinematics(model, data)
     mujoco.mj_collision(model, data)
     n = data.ncon
@@ -70,17 +75,21 @@ def _deepest(model: mujoco.MjModel, data: mujoco.MjData, trunk: np.ndarray) -> f
         return 0.0
     geoms = data.contact.geom[:n]
     bodies = model.geom_bodyid[geoms]
-    ours = trunk[bodies[:, 0]] & trunk[bodies[:, 1]] & (bodies[:, 0] != bodies[:, 1])
+    if other is None:
+        ours = trunk[bodies[:, 0]] & trunk[bodies[:, 1]] & (bodies[:, 0] != bodies[:, 1])
+    else:
+        ours = (trunk[bodies[:, 0]] & other[bodies[:, 1]]) | (other[bodies[:, 0]] & trunk[bodies[:, 1]])
     dist = data.contact.dist[:n][ours]
     return float(max(0.0, -dist.min())) if dist.size else 0.0
 
 
 def _clear_interval(
-    m: mujoco.MjModel, data: mujoco.MjData, j: int, bodies: np.ndarray
+    m: mujoco.MjModel, data: mujoco.MjData, j: int, bodies: np.ndarray, other: np.ndarray | None = None
 ) -> tuple[float, float, float] | None:
     """(lower, rest, upper): the interval of joint ``j``'s range around its rest value in
-    which, swept alone (every other joint at rest), no two of ``bodies`` ((nbody,) bool)
-    overlap deeper than CLEAR_DEPTH; None where the whole range is clear or the rest is not."""
+    which, swept alone (every other joint at rest), no two of ``bodies`` ((nbody,) bool; with
+    ``other``, none of them and one of ``other``) overlap deeper than CLEAR_DEPTH; None where
+    the whole range is clear or the rest is not."""
     adr = int(m.jnt_qposadr[j])
     lo, hi = (float(v) for v in m.jnt_range[j])
     rest = float(np.clip(m.qpos0[adr], lo, hi))
@@ -89,7 +98,7 @@ def _clear_interval(
     for k, v in enumerate(values):
         data.qpos[:] = m.qpos0
         data.qpos[adr] = v
-        ok[k] = _deepest(m, data, bodies) <= CLEAR_DEPTH
+        ok[k] = _deepest(m, data, bodies, other) <= CLEAR_DEPTH
     at = int(np.flatnonzero(values == rest)[0])
     if not ok[at] or ok.all():
         return None
@@ -103,8 +112,36 @@ def _clear_interval(
 
 
 def clear_ranges(a: Anatomy) -> dict[str, tuple[float, float]]:
-    """Joint name -> (lower, upper) rad: :func:`trunk_ranges` and :func:`middle_ranges`."""
-    return {**trunk_ranges(a), **middle_ranges(a)}
+    """Joint name -> (lower, upper) rad: :func:`trunk_ranges`, :func:`middle_ranges` and
+    :func:`wrist_ranges`."""
+    return {**trunk_ranges(a), **middle_ranges(a), **wrist_ranges(a)}
+
+
+def wrist_ranges(a: Anatomy) -> dict[str, tuple[float, float]]:
+    """Joint name -> (lower, upper) rad for each named wrist joint (an arm's joints on the
+    bodies past its forearm, the elbow's body) that, swept alone, folds the hand (those
+    bodies) into the forearm within its range: the interval around rest where they stay
+    clear, shrunk together until every combination of their ends is clear too. An SMPL
+    humanoid's wrist, three hinges of +-180 degrees, folds its hand's box 10 mm into its
+    forearm's capsule at 130 degrees. Fingers meeting each other or a thumb are the solver's
+    (a hand's branching links are kept apart), not a range's."""
+    m = a.model
+    data = mujoco.MjData(m)
+    out: dict[str, tuple[float, float]] = {}
+    for arm in a.arms.values():
+        hand = [b for b in range(m.nbody) if arm.middle_body in ancestors(m, b) and b != arm.middle_body]
+        if not hand:
+            continue
+        forearm, bodies = np.zeros(m.nbody, dtype=bool), np.zeros(m.nbody, dtype=bool)
+        forearm[arm.middle_body], bodies[hand] = True, True
+        joints = [
+            j
+            for b in hand
+            for j in range(int(m.body_jntadr[b]), int(m.body_jntadr[b] + m.body_jntnum[b]))
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and m.jnt_limited[j] and m.joint(j).name
+        ]
+        out |= _narrowed_together(m, data, joints, forearm, bodies)
+    return out
 
 
 def middle_ranges(a: Anatomy) -> dict[str, tuple[float, float]]:
@@ -137,24 +174,39 @@ def trunk_ranges(a: Anatomy) -> dict[str, tuple[float, float]]:
     m = a.model
     trunk = np.zeros(m.nbody, dtype=bool)
     trunk[trunk_bodies(a)] = True
-    data = mujoco.MjData(m)
+    joints = [j for j in trunk_joints(a) if m.joint(j).name]
+    return _narrowed_together(m, mujoco.MjData(m), joints, trunk)
+
+
+def _narrowed_together(
+    m: mujoco.MjModel,
+    data: mujoco.MjData,
+    joints: list[int],
+    bodies: np.ndarray,
+    other: np.ndarray | None = None,
+) -> dict[str, tuple[float, float]]:
+    """Joint name -> (lower, upper) rad for each of ``joints`` whose range, swept alone, lets
+    two of ``bodies`` ((nbody,) bool; with ``other``, one of them and one of ``other``) overlap
+    (:func:`_clear_interval`). Each alone clear,
+    they may not be together (a spine of two rolling links): the ranges shrink towards rest
+    by one factor until every combination of their ends and rest values is clear."""
 
     def clear(adr: list[int], values: np.ndarray) -> bool:
         data.qpos[:] = m.qpos0
         data.qpos[adr] = values
-        return _deepest(m, data, trunk) <= CLEAR_DEPTH
+        return _deepest(m, data, bodies, other) <= CLEAR_DEPTH
 
     narrowed: dict[int, tuple[float, float, float]] = {}  # qpos address -> (lower, rest, upper)
     names: dict[int, str] = {}
-    for j in trunk_joints(a):
-        found = _clear_interval(m, data, j, trunk) if m.joint(j).name else None
+    for j in joints:
+        found = _clear_interval(m, data, j, bodies, other)
         if found is not None:
             narrowed[int(m.jnt_qposadr[j])] = found
             names[int(m.jnt_qposadr[j])] = m.joint(j).name
     if not narrowed:
         return {}
-    # Each alone clear, they may not be together (a spine of two rolling links): the ranges
-    # shrink towards rest by one factor until every combination of their ends is clear.
+    if len(narrowed) > TOGETHER_MOST:  # 3^n poses: each keeps its own interval
+        return {names[k]: (lw, hg) for k, (lw, _, hg) in narrowed.items()}
     adr = list(narrowed)
     lo, rest, hi = (np.array(v) for v in zip(*narrowed.values(), strict=True))
     corners = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=len(adr))))  # (3^n, n)

@@ -72,3 +72,65 @@ def test_waist_joints_are_kept_where_the_trunk_geoms_leave_them_clear(tmp_path, 
 @pytest.mark.parametrize("robot", ["g1", "h1", "t1", "apollo"])
 def test_a_trunk_clear_over_its_ranges_keeps_them(robot):
     assert "ranges" not in infer_mapping(robot)
+
+
+def _wide_wrists_xml() -> str:
+    """The plain capsule humanoid with wrists that turn +-170 degrees: the hand's sphere folds
+    back into the forearm's capsule (an SMPL humanoid's wrists and hands turn +-180)."""
+    xml = capsule_humanoid_xml("plain")
+    for side in ("l", "r"):
+        for axis, vec in (("x", "1 0 0"), ("y", "0 1 0")):
+            old = f'<joint name="hand_{axis}_{side}" axis="{vec}" range="-60 60"/>'
+            assert old in xml
+            xml = xml.replace(old, old.replace('range="-60 60"', 'range="-170 170"'))
+    return xml
+
+
+def _hand_forearm_overlap(model: mujoco.MjModel, qpos: np.ndarray, side: str) -> float:
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    forearm = model.body(f"forearm_{side}").id
+    hand = {b for b in range(model.nbody) if b != forearm and forearm in _ancestors(model, b)}
+    deep = [
+        -c.dist
+        for c in data.contact[: data.ncon]
+        if {int(model.geom_bodyid[c.geom1]), int(model.geom_bodyid[c.geom2])} & {forearm}
+        and {int(model.geom_bodyid[c.geom1]), int(model.geom_bodyid[c.geom2])} & hand
+    ]
+    return max(deep, default=0.0)
+
+
+def _ancestors(model: mujoco.MjModel, body: int) -> list[int]:
+    out = []
+    while body > 0:
+        out.append(body)
+        body = int(model.body_parentid[body])
+    return out
+
+
+def test_wrists_are_kept_where_the_hand_stays_out_of_the_forearm(tmp_path):
+    path = tmp_path / "wide_wrists.xml"
+    path.write_text(_wide_wrists_xml())
+    ranges = infer_mapping(path)["ranges"]
+    assert set(ranges) == {"hand_x_l", "hand_y_l", "hand_x_r", "hand_y_r"}
+    model = mujoco.MjModel.from_xml_path(str(path))
+    for side in ("l", "r"):
+        names = [f"hand_x_{side}", f"hand_y_{side}"]
+        adr = [int(model.joint(n).qposadr[0]) for n in names]
+        for lo, hi in (ranges[n] for n in names):  # narrowed, still a wrist's range
+            assert -np.pi < lo < -np.radians(60) and np.radians(60) < hi < np.pi
+        for ends in itertools.product(*(ranges[n] for n in names)):
+            q = model.qpos0.copy()
+            q[adr] = ends
+            assert _hand_forearm_overlap(model, q, side) <= CLEAR_DEPTH
+        q = model.qpos0.copy()
+        q[adr[0]] = np.radians(170)
+        assert _hand_forearm_overlap(model, q, side) > 0.005
+    # the plain humanoid's own wrists (+-60 degrees) and every packaged robot's are clear
+    assert "ranges" not in infer_mapping(_write(tmp_path / "plain.xml", capsule_humanoid_xml("plain")))
+
+
+def _write(path, text: str):
+    path.write_text(text)
+    return path
