@@ -43,12 +43,17 @@ Peers run in their own virtual environments, never imported here:
   clips when holosoma exported them. Without that Python the figures it gave on 012314 in an
   earlier session (docs/BENCHMARKS.md) are listed, labelled recorded.
 
+``--solver FIELD=VALUE`` (repeatable) sets a :class:`retarget.SolverConfig` field for our runs
+over each robot's mapping, e.g. ``--solver foot_roll=0`` (flat contact feet).
+
 A peer that cannot run is reported, never faked.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
+import dataclasses
 import json
 import platform
 import subprocess
@@ -68,7 +73,7 @@ from controlmm.corpus import CorpusConfig, make_clip, plan_clips  # noqa: E402
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
 from controlmm.motion.skeleton import JOINT_INDEX  # noqa: E402
-from retarget import load_robot, retarget_motion  # noqa: E402
+from retarget import SolverConfig, load_robot, retarget_motion  # noqa: E402
 from retarget.compare import (  # noqa: E402
     joint_jerk_rms,
     resample_human,
@@ -162,14 +167,15 @@ def measure(robot_name: str, qpos: np.ndarray, human: np.ndarray, seconds: float
     }
 
 
-def ours(robot: str, motion: Motion, repeats: int) -> tuple[np.ndarray, float]:
+def ours(robot: str, motion: Motion, repeats: int, solver: dict | None = None) -> tuple[np.ndarray, float]:
     """Our qpos at FPS for a motion (at its own rate) and the best wall time of ``repeats``
-    runs (the robot loaded once before)."""
+    runs (the robot loaded once before); ``solver``: SolverConfig fields over the mapping's."""
+    config = SolverConfig(**{**load_robot(robot).mapping.solver, **(solver or {})})
     retarget_motion(Motion(joints=motion.joints[:10], fps=motion.fps), robot, fps=FPS, metrics=False)  # load
     best, qpos = float("inf"), np.zeros(0)
     for _ in range(repeats):
         start = time.perf_counter()
-        qpos = retarget_motion(motion, robot, fps=FPS, metrics=False).qpos
+        qpos = retarget_motion(motion, robot, fps=FPS, metrics=False, config=config).qpos
         best = min(best, time.perf_counter() - start)
     return qpos, best
 
@@ -329,6 +335,19 @@ def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> d
     }
 
 
+def solver_overrides(items: list[str]) -> dict:
+    """``--solver FIELD=VALUE`` items -> {field: value} (values as Python literals), or a one-
+    line error naming a field that SolverConfig does not have."""
+    fields = {f.name for f in dataclasses.fields(SolverConfig)}
+    out = {}
+    for item in items:
+        key, _, value = item.partition("=")
+        if key not in fields or not value:
+            raise SystemExit(f"--solver {item!r}: expected FIELD=VALUE with a SolverConfig field")
+        out[key] = ast.literal_eval(value)
+    return out
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robots", default="all", help="comma-separated packaged robots (default: all)")
@@ -348,7 +367,15 @@ def main() -> int:
         help="Python of GMR's environment (see above); without it GMR's recorded figures are listed",
     )
     p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
+    p.add_argument(
+        "--solver",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="a SolverConfig field for our runs over each robot's mapping (e.g. foot_roll=0; repeatable)",
+    )
     args = p.parse_args()
+    solver = solver_overrides(args.solver)
     robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
     motions = human_motions(args.corpus, args.clips, args.families)
     per: dict[str, dict[str, dict]] = {}
@@ -359,7 +386,7 @@ def main() -> int:
     for robot in robots:
         per[f"ours/{robot}"] = {}
         for name, (motion, joints) in motions.items():
-            qpos, seconds = ours(robot, motion, args.repeats)
+            qpos, seconds = ours(robot, motion, args.repeats, solver)
             per[f"ours/{robot}"][name] = measure(robot, qpos, joints, seconds, len(joints))
         runs = per[f"ours/{robot}"]
         rows.append(
@@ -395,7 +422,10 @@ def main() -> int:
                 per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
                 for name, (joints, q_peer, s_peer) in demo.items():
                     qpos, seconds = ours(
-                        "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), args.repeats
+                        "g1",
+                        Motion(joints=on_floor(joints).astype(np.float32), fps=FPS),
+                        args.repeats,
+                        solver,
                     )
                     per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
                     per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))

@@ -286,6 +286,7 @@ def feet_targets(
     ori_kp: list[int],
     ori_rot: np.ndarray,
     ori_w: np.ndarray,
+    roll: float = 1.0,
 ) -> np.ndarray:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
@@ -330,7 +331,7 @@ def feet_targets(
         theta = np.where(heel & toe, 0.0, pitch)
         theta = np.where(toe & ~heel, np.maximum(theta, 0.0), theta)
         theta = np.where(heel & ~toe, np.minimum(theta, 0.0), theta)
-        theta = np.where(contact, theta, pitch)
+        theta = np.where(contact, roll * theta, pitch)
         # The flags switch within a frame; the pitch must not: smooth it over ~0.1 s (the
         # pivot follows its sign, and both pivots are on the floor when it is 0).
         if len(theta) > 2:

@@ -85,3 +85,6 @@ class SolverConfig:
     human's joint positions (:func:`retarget.targets.fit_limbs_to_human`)."""
     human_arm_share: float = 1.0
     """The same for the elbow and wrist targets (from the robot's own shoulders)."""
+    foot_roll: float = 1.0
+    """Share (0-1) of the human foot's pitch with which a contact foot rolls over its heel or
+    toe (:func:`retarget.foot_targets.feet_targets`; 0: flat while the human's foot is down)."""

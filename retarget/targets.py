@@ -289,6 +289,7 @@ def build_targets(
             ori_kp,
             ori_rot_a,
             ori_w_a,
+            config.foot_roll,
         )
     separate_locks(robot, kp_pos, world, frames["pelvis"], runs, lock_xy)
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from controlmm.motion import Motion
-from retarget import load_robot, retarget_motion
-from retarget.compare import stance_foot_speed, stance_sole_speed
+from retarget import SolverConfig, load_robot, retarget_motion
+from retarget.compare import resample_human, similarity_fit, stance_foot_speed, stance_sole_speed
 
 
 @pytest.fixture(scope="module")
@@ -38,3 +38,27 @@ def test_rolling_feet_move_their_bodies_not_their_soles(clip):
     body = stance_foot_speed(robot, qpos, 30.0, motion.joints, 20.0)
     sole = stance_sole_speed(robot, qpos, 30.0, motion.joints, 20.0)
     assert 0 < sole < 0.6 * body, (sole, body)
+
+
+def test_flat_contact_feet_move_their_bodies_less_than_rolling_ones(clip):
+    """``SolverConfig.foot_roll`` 0: the contact feet stay flat while the human's foot is down
+    instead of rolling over the heel or toe with it, so their bodies (the ankles) move less
+    over the planted soles; the soles stay as still and the fit stays close."""
+    motion, rolling = clip
+    robot = load_robot("g1")
+    flat = retarget_motion(motion, "g1", fps=30.0, metrics=False, config=SolverConfig(foot_roll=0.0)).qpos
+    body = {
+        k: stance_foot_speed(robot, q, 30.0, motion.joints, 20.0)
+        for k, q in (("roll", rolling), ("flat", flat))
+    }
+    sole = {
+        k: stance_sole_speed(robot, q, 30.0, motion.joints, 20.0)
+        for k, q in (("roll", rolling), ("flat", flat))
+    }
+    assert body["flat"] < 0.8 * body["roll"], body
+    assert sole["flat"] < 1.2 * sole["roll"], sole
+    human = resample_human(motion.joints, 20.0, len(flat), 30.0)
+    fit = {
+        k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("flat", flat))
+    }
+    assert fit["flat"] < fit["roll"] + 0.005, fit
