@@ -279,6 +279,10 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
     )
 
 
+SHARES = ("human_leg_share", "human_arm_share", "foot_roll")
+"""Solver settings that are shares, from 0 to 1."""
+
+
 def _parse_solver(spec, source: str) -> dict:
     """Validated SolverConfig overrides from the mapping's ``solver`` object."""
     if not isinstance(spec, dict):
@@ -304,6 +308,10 @@ def _parse_solver(spec, source: str) -> dict:
             out[key] = levels
         elif key == "exact_acceleration":
             out[key] = bool(value)
+        elif key in SHARES:
+            out[key] = _number(value, f"{source}: solver {key}")
+            if out[key] > 1.0:
+                raise ControlMMError(f"{source}: solver {key} must be a number from 0 to 1; got {value!r}")
         elif allowed[key].type in ("int", int):
             out[key] = int(_number(value, f"{source}: solver {key}"))
         else:

@@ -134,6 +134,10 @@ def test_bad_inputs_raise_one_line_errors(tmp_path, short_motion):
             retarget_motion(short_motion, fps=fps)
     with pytest.raises(ControlMMError, match="unknown solver setting 'iterations'"):
         load_robot(_mapping_file(tmp_path, solver={"iterations": 3}))
+    for roll in (1.5, -0.2, "flat"):
+        with pytest.raises(ControlMMError, match="solver foot_roll must be a"):
+            load_robot(_mapping_file(tmp_path, solver={"foot_roll": roll}))
+    assert load_robot(_mapping_file(tmp_path, solver={"foot_roll": 0})).mapping.solver == {"foot_roll": 0.0}
     with pytest.raises(ControlMMError, match="orientation"):
         load_robot(_mapping_with(tmp_path, left_knee={"body": "Shank_Left", "orientation_weight": 1.0}))
 
