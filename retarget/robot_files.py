@@ -12,7 +12,9 @@ declare none and collide through explicit ``<pair>`` elements of their scene fil
 (Menagerie's Apptronik Apollo). For those, :func:`declare_collisions` turns the geoms of
 Menagerie's collision group (3) into colliders that touch the floor and obstacles but not
 each other (``contype`` 1, ``conaffinity`` 0), and adds the robot-robot pairs that the
-packaged robot's own scene declares (thighs, shins, arms against the pelvis).
+packaged robot's own scene declares (thighs, shins, arms against the pelvis). A scene file
+given as the robot keeps its robot-robot pairs but not those naming its own floor
+(:func:`drop_floor_pairs`).
 
 Bodies whose collision geoms already overlap in the robot's rest pose (``qpos0``; for example
 convex hulls of meshes around a knee and the ankle two links below it) are a property of the
@@ -100,6 +102,7 @@ def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
     declare_collisions(spec, robot_scene(packaged) if packaged else None)
+    drop_floor_pairs(spec)
     if packaged is None:  # the packaged robots have none (tests/test_robots_automap.py checks it)
         stat = path.stat()
         for name1, name2 in _rest_contacts(str(path), stat.st_mtime_ns, stat.st_size):
@@ -141,16 +144,30 @@ def exclude_rest_contacts(spec: mujoco.MjSpec) -> list[tuple[str, str]]:
     return sorted(pairs)
 
 
+def drop_floor_pairs(spec: mujoco.MjSpec) -> int:
+    """Delete the ``<pair>`` elements that name a geom of the world body (a scene file's floor,
+    passed as the robot: Menagerie's ``scene.xml`` of the Apollo, the G1's ``scene_mjx.xml``).
+    Only the robot's body tree is attached to a scene, whose floor the retargeter and the
+    checks find themselves; an explicit pair (no margin) would hide the feet's contacts with
+    it from the checks' near-contact sensing (``controlmm validate`` then reads a standing
+    robot as floating). Returns how many were deleted."""
+    world = {g.name for g in spec.worldbody.geoms if g.name}
+    floor = [p for p in spec.pairs if p.geomname1 in world or p.geomname2 in world]
+    for pair in floor:
+        spec.delete(pair)
+    return len(floor)
+
+
 def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
     """Give an MJCF without colliders its collision group's geoms as colliders (in place).
 
-    Only when no geom has ``contype``/``conaffinity`` set: the geoms of group
-    ``COLLISION_GROUP`` get ``contype`` 1 and ``conaffinity`` 0 (they touch the floor and the
-    obstacles, whose ``conaffinity`` is set, but not each other), and the robot-robot
-    ``<pair>`` elements of ``scene`` (the robot's own scene MJCF) are added. Returns whether
-    anything changed.
+    Only when no geom of the robot (the world body's own, a scene's floor, do not count) has
+    ``contype``/``conaffinity`` set: the geoms of group ``COLLISION_GROUP`` get ``contype`` 1
+    and ``conaffinity`` 0 (they touch the floor and the obstacles, whose ``conaffinity`` is
+    set, but not each other), and the robot-robot ``<pair>`` elements of ``scene`` (the robot's
+    own scene MJCF) are added. Returns whether anything changed.
     """
-    geoms = list(spec.geoms)
+    geoms = [g for g in spec.geoms if g.parent != spec.worldbody]
     if any(g.contype or g.conaffinity for g in geoms) or not geoms:
         return False
     group = [g for g in geoms if g.group == COLLISION_GROUP]

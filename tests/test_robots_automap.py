@@ -371,3 +371,24 @@ def test_a_robot_given_by_its_scene_file_joins_any_scene():
         by_file, by_name = load_scene(name, robot=str(path)), load_scene(name, robot="g1")
         assert len(by_file.robot_geom_ids) == len(by_name.robot_geom_ids) > 0
         assert by_file.model.nq == by_name.model.nq and by_file.model.nu == by_name.model.nu
+
+
+@pytest.mark.parametrize("scene_file", ["apollo:scene.xml", "g1:scene_mjx.xml"])
+def test_a_scene_file_whose_feet_touch_the_floor_through_pairs_stands_on_any_floor(scene_file, sample_joints):
+    """Menagerie's Apollo scene and G1 MJX scene collide only through ``<pair>`` elements, the
+    feet's with the scene's own floor among them: given as the robot, their colliders are
+    declared from the collision group (a floor geom with contype does not count as the
+    robot's), the floor pairs are dropped (only the body tree joins a scene, whose floor the
+    checks sense with margins), and the robot stands (this read as floating in validate, and
+    the G1 MJX scene had "no collision geometry")."""
+    robot, name = scene_file.split(":")
+    path = robot_scene(robot).parent / name
+    floor = {g.name for g in mujoco.MjSpec.from_file(str(path)).worldbody.geoms}
+    assert any({p.geomname1, p.geomname2} & floor for p in mujoco.MjSpec.from_file(str(path)).pairs)
+    spec = load_robot_spec(str(path))
+    assert not any({p.geomname1, p.geomname2} & floor for p in spec.pairs)
+    motion = Motion(joints=sample_joints[:40].astype(np.float64), fps=20.0)
+    traj = retarget_motion(motion, str(path), fps=30.0, metrics=False)
+    report = check_trajectory(load_scene("empty", robot=str(path)), traj.qpos, traj.fps)
+    assert "floating" not in report.stats["error_kinds"]
+    assert report.stats["self_collision_frames"] == 0
