@@ -187,9 +187,9 @@ def _narrowed_together(
 ) -> dict[str, tuple[float, float]]:
     """Joint name -> (lower, upper) rad for each of ``joints`` whose range, swept alone, lets
     two of ``bodies`` ((nbody,) bool; with ``other``, one of them and one of ``other``) overlap
-    (:func:`_clear_interval`). Each alone clear,
-    they may not be together (a spine of two rolling links): the ranges shrink towards rest
-    by one factor until every combination of their ends and rest values is clear."""
+    (:func:`_clear_interval`). Each alone clear, they may not be together (a spine of two
+    rolling links): the ranges shrink towards rest by one factor until every combination of
+    their ends and rest values is clear (up to ``TOGETHER_MOST`` joints)."""
 
     def clear(adr: list[int], values: np.ndarray) -> bool:
         data.qpos[:] = m.qpos0

@@ -294,7 +294,9 @@ def feet_targets(
     foot is flat, and otherwise pitches with the human foot about its heel pivot (toe up: a
     heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
     (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
-    Returns (T,) the contact run each frame's lock belongs to (-1 where the foot is not locked).
+    ``roll`` (``SolverConfig.foot_roll``) scales that pitch (0: the foot stays flat while the
+    human's is down). Returns (T,) the contact run each frame's lock belongs to (-1 where the
+    foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     same_node = foot_keypoints(robot, side)
