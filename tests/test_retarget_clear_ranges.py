@@ -14,6 +14,7 @@ from robot_checks import independent_check
 
 from retarget import infer_mapping, retarget_motion
 from retarget.clear_ranges import CLEAR_DEPTH
+from retarget.robot_files import ancestors
 
 
 def _box_trunk_xml() -> str:
@@ -91,7 +92,7 @@ def _hand_forearm_overlap(model: mujoco.MjModel, qpos: np.ndarray, side: str) ->
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
     forearm = model.body(f"forearm_{side}").id
-    hand = {b for b in range(model.nbody) if b != forearm and forearm in _ancestors(model, b)}
+    hand = {b for b in range(model.nbody) if b != forearm and forearm in ancestors(model, b)}
     deep = [
         -c.dist
         for c in data.contact[: data.ncon]
@@ -99,14 +100,6 @@ def _hand_forearm_overlap(model: mujoco.MjModel, qpos: np.ndarray, side: str) ->
         and {int(model.geom_bodyid[c.geom1]), int(model.geom_bodyid[c.geom2])} & hand
     ]
     return max(deep, default=0.0)
-
-
-def _ancestors(model: mujoco.MjModel, body: int) -> list[int]:
-    out = []
-    while body > 0:
-        out.append(body)
-        body = int(model.body_parentid[body])
-    return out
 
 
 def test_wrists_are_kept_where_the_hand_stays_out_of_the_forearm(tmp_path):
