@@ -342,9 +342,14 @@ def solver_overrides(items: list[str]) -> dict:
     out = {}
     for item in items:
         key, _, value = item.partition("=")
-        if key not in fields or not value:
-            raise SystemExit(f"--solver {item!r}: expected FIELD=VALUE with a SolverConfig field")
-        out[key] = ast.literal_eval(value)
+        try:
+            if key not in fields:
+                raise ValueError(key)
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise SystemExit(
+                f"--solver {item!r}: expected FIELD=VALUE with a SolverConfig field and a Python literal"
+            ) from None
     return out
 
 
