@@ -12,7 +12,8 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
 2. **Arms**: the ends of the other jointed chains that lie clearly to one side (the head's
    chain stays near the midline); per side, the common ancestor of those ends is the hand
    (a hand with fingers has several ends). **Torso**: the hands' common ancestor. Robots whose
-   only chains are the legs have no arms (a legs-only robot retargets pelvis and legs).
+   only chains are the legs have no arms (a legs-only robot retargets pelvis and legs). Arms
+   whose geometry reaches the floor in the rest pose are a quadruped's: refused.
 3. **Head**: the highest other jointed end near the midline (else the head is part of the torso).
 4. **Joints of a limb** (:func:`limb_anatomy`): the middle joint (knee / elbow) is the hinge
    past the first quarter of the limb whose axis crosses the limb; the joints before it form the
@@ -57,6 +58,9 @@ SOLE_BAND = 0.015
 """A link whose collision geometry comes this close (fraction of the robot's height) to the
 floor in the rest pose stands on it: the foot above a toe link is the foot."""
 BARE_FOOT = 0.005
+ARM_ABOVE_FLOOR = 0.15
+"""An arm whose collision geometry comes nearer the floor than this fraction of the robot's
+height in the rest pose stands on it: four limbs on the floor are a quadruped's."""
 """A jointed link below a foot whose origin lies this much (m) lower than the foot's lowest
 collision point: the leg goes on below its geometry (feet without collision geoms)."""
 
@@ -293,15 +297,17 @@ def _after_upper_twist(
     across: list[int],
 ) -> int:
     """Of the hinges across the limb (``across``: indices into ``joints``, in order), the
-    knee / elbow: the first, unless no twist (a hinge along the limb) comes before it, one
-    follows it, and the next one across past that twist sits nearer the limb's middle; then
+    knee / elbow: the first, unless no twist (a hinge along the limb, not at its start) comes
+    before it, one follows it, and the next one across past that twist sits nearer the limb's middle; then
     that one. Atlas's clavicle joint sits 25 cm above its shoulder-roll hinge, so that hinge
     comes a third of the way along the arm, before the upper arm's twist and the elbow."""
     direction = (tip - start) / length
     hinge = [model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE for j in joints]
     twists = [i for i in range(len(joints)) if hinge[i] and abs(float(axes[i] @ direction)) >= 1.0 - ALONG]
     first = across[0]
-    if any(t < first for t in twists):
+    # A twist where the limb starts turns the whole limb (loco-mujoco's Atlas: its clavicle's
+    # yaw, vertical with the arm hanging), not the upper arm below the shoulder.
+    if any(t < first and np.linalg.norm(anchors[t] - start) > SAME_ANCHOR for t in twists):
         return first
     twist = next((t for t in twists if t > first), None)
     if twist is None:
@@ -375,7 +381,8 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
 
     Raises:
         ControlMMError: one line naming what is missing: no floating base, no collision
-            geometry, no two legs (two feet on either side of the midline).
+            geometry, no two legs (two feet on either side of the midline); or arms that
+            reach the floor (a quadruped).
     """
     root = free_root(model)
     if root is None:
@@ -464,6 +471,15 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
                 arms, torso = {}, None
                 break
             arms[side] = _arm(model, data, side, arm_bodies, _subtree(model, hand, bodies))
+    for side, limb in arms.items():
+        arm = set(_subtree(model, limb.bodies[0], bodies))
+        reach_down = [low[g][0] - floor_z for g in low if int(model.geom_bodyid[g]) in arm]
+        if reach_down and min(reach_down) < ARM_ABOVE_FLOOR * height:
+            raise ControlMMError(
+                f"{name} stands on four limbs: its {side} arm ('{model.body(limb.bodies[-1]).name}') "
+                f"comes within {100 * min(reach_down):.1f} cm of the floor in the rest pose, where a "
+                f"humanoid's hands stay above {ARM_ABOVE_FLOOR:.0%} of its height (a quadruped?)"
+            )
     arm_set = {b for limb in arms.values() for b in limb.bodies}
     shoulder_z = np.mean([a.root[2] for a in arms.values()]) if arms else -np.inf
     heads = [e for e in ends if e not in arm_set and not arm_set & set(ancestors(model, e))]

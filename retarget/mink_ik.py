@@ -20,6 +20,7 @@ import numpy as np
 
 from controlmm.errors import ControlMMError
 from retarget.reference import initial_guess
+from retarget.robot_files import read_robot_mjcf
 from retarget.robot_model import RobotModel
 from retarget.solver import Solution
 from retarget.solver_config import SolverConfig
@@ -38,7 +39,7 @@ def _mink() -> ModuleType:
 
 def _model_with_sites(robot: RobotModel) -> mujoco.MjModel:
     """The robot MJCF with one site per keypoint (``kp_<joint>``) at its offset."""
-    spec = mujoco.MjSpec.from_file(str(robot.mjcf))
+    spec = read_robot_mjcf(robot.mjcf)
     for name, node, off in zip(robot.keypoint_names, robot.nodes, robot.offsets, strict=True):
         body = robot.model.body(int(robot.tree.node_body[node])).name
         spec.body(body).add_site(name=f"kp_{name}", pos=off.tolist())

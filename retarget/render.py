@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from controlmm.errors import ControlMMError
 from controlmm.video import write_video
+from retarget.robot_files import read_robot_mjcf
 from retarget.robots import robot_scene
 from retarget.trajectory import RobotTrajectory
 
@@ -32,7 +33,7 @@ def _scene_model(traj: RobotTrajectory) -> mujoco.MjModel:
     if robot.mapping.source.startswith("packaged:"):
         model = mujoco.MjModel.from_xml_path(str(robot_scene(robot.mapping.robot)))
     else:
-        spec = mujoco.MjSpec.from_file(str(robot.mjcf))
+        spec = read_robot_mjcf(robot.mjcf)
         light = spec.worldbody.add_light(pos=[0, 0, 3.0], dir=[0, 0, -1])
         if hasattr(mujoco, "mjtLightType"):  # MuJoCo >= 3.3: a light's type replaced ``directional``
             light.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL

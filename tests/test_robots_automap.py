@@ -260,6 +260,19 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         bare = "<geom " in line and body.startswith(("foot_", "toes_"))
         lines.append(line.replace("<geom ", '<geom contype="0" conaffinity="0" ') if bare else line)
     bare_feet = _write(tmp_path / "barefeet.xml", "\n".join(lines))
+    # four capsule legs under a box: a quadruped standing on its "arms"
+    legs = "".join(
+        f'<body name="{n}_thigh" pos="{x} {y} 0"><joint name="{n}_hip" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0 0 -0.15" size="0.02"/>'
+        f'<body name="{n}_calf" pos="0 0 -0.15"><joint name="{n}_knee" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0 0 -0.15" size="0.02"/></body></body>'
+        for n, x, y in (("FL", 0.2, 0.1), ("FR", 0.2, -0.1), ("RL", -0.2, 0.1), ("RR", -0.2, -0.1))
+    )
+    quadruped = _write(
+        tmp_path / "quadruped.xml",
+        '<mujoco><worldbody><body name="base" pos="0 0 0.32"><freejoint/>'
+        f'<geom type="box" size="0.25 0.12 0.05"/>{legs}</body></worldbody></mujoco>',
+    )
     bad_body = json.loads((Path(__file__).parents[1] / "retarget/mappings/t1.json").read_text())
     bad_body["keypoints"]["left_knee"]["body"] = "Knee_Left"
     bad_mapping = _write(tmp_path / "bad.json", json.dumps(bad_body))
@@ -269,6 +282,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (no_free, "no free joint"),
         (broken, "does not load"),
         (ball, "no two legs"),
+        (quadruped, "stands on four limbs: its left arm"),
         (bare_feet, "left leg that goes on below its collision geometry: link 'foot_l'"),
         (scene, r"2 free joints \(on root, prop\)"),
         (ball_joint, "joint 'shoulder_l' is a mjJNT_BALL joint; the retargeter supports hinge and slide"),
@@ -283,6 +297,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (("retarget", src, "--robot", broken, "--out", tmp_path / "r"), "does not load"),
         (("retarget", src, "--robot", bad_mapping, "--out", tmp_path / "r"), "body 'Knee_Left'"),
         (("robots", "map", ball, "--out", tmp_path / "m.json"), "no two legs"),
+        (("robots", "map", quadruped, "--out", tmp_path / "m.json"), "stands on four limbs"),
         (("robots", "map", bare_feet, "--out", tmp_path / "m.json"), "has none to stand on"),
         (("robots", "map", scene, "--out", tmp_path / "m.json"), "not a scene with loose bodies"),
         (
@@ -301,6 +316,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
             "barefeet.xml",
             "scene.xml",
             "balljoint.xml",
+            "quadruped.xml",
             "bad.json",
             "m.npy",
         ]

@@ -23,7 +23,7 @@ from retarget.automap import RIGID_POSTURE
 from retarget.compare import robot_keypoints, similarity_fit
 from retarget.geoms import geom_points
 from retarget.rest_frame import rest_root_quat
-from retarget.robot_files import free_root
+from retarget.robot_files import compile_robot, free_root
 from retarget.selfcheck import unpaired_overlaps
 from retarget.selfcollision import REST_SLACK, SELF_MARGIN, capsule_distances
 from retarget.soles import FOOT_POINTS_MOST
@@ -437,3 +437,83 @@ def test_a_robot_given_by_path_renders_with_mujoco(tmp_path, humanoids, motion):
     )
     assert done.returncode == 0, done.stderr
     assert "(mujoco)" in done.stdout and (tmp_path / "a.mp4").stat().st_size > 500, done.stdout
+
+
+def _root_joints(text: str, joints: str) -> str:
+    """``text`` with the root's free joint replaced by ``joints`` and, around them, a motor and
+    a position sensor on the root's first slide (a file driving or reading its floating base)."""
+    text = text.replace('<freejoint name="root"/>', joints, 1)
+    extra = '<actuator><motor joint="root_x"/></actuator><sensor><jointpos joint="root_x"/></sensor>'
+    return text.replace("</mujoco>", f"{extra}\n</mujoco>", 1)
+
+
+def test_a_floating_base_written_as_joints_retargets_as_a_free_joint(tmp_path, humanoids, motion):
+    """Three slides and three hinges (loco-mujoco's Talos, Atlas) or three slides and a ball
+    (humanoid-gym's XBot-L) on the root body are a floating base: read as one free joint, the
+    robot retargets exactly as the file written with ``<freejoint/>`` does; a keyframe's root
+    pose is carried over. A bare-joint body beside the robot (Unitree's g1_23dof.xml keeps six
+    spare joints on massless bodies 20 m up) is dropped. Three joints of a planar walker are
+    no floating base: the one-line error stays."""
+    plain = humanoids["plain"].read_text()
+    slides = "".join(
+        f'<joint name="root_{a}" type="slide" axis="{v}"/>'
+        for a, v in zip("xyz", ("1 0 0", "0 1 0", "0 0 1"), strict=True)
+    )
+    hinges = "".join(
+        f'<joint name="root_{a}" axis="{v}"/>'
+        for a, v in zip(("yaw", "pitch", "roll"), ("0 0 1", "0 1 0", "1 0 0"), strict=True)
+    )
+    files = {
+        "hinges": _root_joints(plain, slides + hinges),
+        "ball": _root_joints(plain, slides + '<joint name="root_ball" type="ball"/>'),
+        "spare": plain.replace(
+            "</worldbody>",
+            '<body name="spare" pos="0 0 20"><inertial pos="0 0 0" mass="1e-3" diaginertia="1 1 1"/>'
+            '<joint name="spare_joint"/></body></worldbody><actuator><motor joint="spare_joint"/></actuator>',
+            1,
+        ),
+    }
+    reference = compile_robot(humanoids["plain"])
+    joint_names = [reference.joint(j).name for j in range(1, reference.njnt)]
+    src = tmp_path / "clip.npy"
+    np.save(src, motion.joints[:40])
+    done = cli("retarget", src, "--robot", humanoids["plain"], "--fps", 30, "--out", tmp_path / "plain")
+    assert done.returncode == 0, done.stderr
+    with np.load(tmp_path / "plain.npz") as data:
+        expected = data["qpos"]
+    for name, text in files.items():
+        path = tmp_path / f"{name}.xml"
+        path.write_text(text)
+        model = compile_robot(path)
+        assert model.nq == reference.nq and model.nu == 0, (name, model.nq, model.nu)
+        assert [model.joint(j).name for j in range(1, model.njnt)] == joint_names, name
+        done = cli("retarget", src, "--robot", path, "--fps", 30, "--out", tmp_path / name)
+        assert done.returncode == 0, done.stderr
+        with np.load(tmp_path / f"{name}.npz") as data:
+            np.testing.assert_allclose(data["qpos"], expected, atol=1e-9, err_msg=name)
+    # A keyframe's root joints become the free joint's pose: 10, 20, -30 cm and 90 degrees of yaw.
+    key = np.zeros(reference.nq - 7 + 6)
+    key[:4] = [0.1, 0.2, -0.3, np.pi / 2]
+    key[6] = 0.25  # the first joint below the root keeps its value
+    keyed = tmp_path / "keyed.xml"
+    keyed.write_text(
+        files["hinges"].replace(
+            "</mujoco>", f'<keyframe><key qpos="{" ".join(map(str, key))}"/></keyframe></mujoco>'
+        )
+    )
+    qpos = compile_robot(keyed).key_qpos[0]
+    np.testing.assert_allclose(qpos[:3], reference.qpos0[:3] + [0.1, 0.2, -0.3], atol=1e-9)
+    np.testing.assert_allclose(np.abs(qpos[3:7]), [np.sqrt(0.5), 0, 0, np.sqrt(0.5)], atol=1e-9)
+    assert qpos[7] == 0.25 and not qpos[8:].any()
+    planar = tmp_path / "planar.xml"
+    planar.write_text(
+        plain.replace(
+            '<freejoint name="root"/>',
+            '<joint name="root_x" type="slide" axis="1 0 0"/><joint name="root_z" type="slide" axis="0 0 1"/>'
+            '<joint name="root_pitch" axis="0 1 0"/>',
+        )
+    )
+    done = cli("robots", "map", planar, "--out", tmp_path / "planar.json")
+    assert (
+        done.returncode == 2 and "no free joint" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    )
