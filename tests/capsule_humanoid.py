@@ -46,10 +46,16 @@ def _quat(rot: np.ndarray) -> np.ndarray:
 
 
 def _limb(
-    side: str, sign: float, forearm_roll: bool = False, clavicle_drop: float = 0.0, rigid_hand: str = ""
+    side: str,
+    sign: float,
+    forearm_roll: bool = False,
+    clavicle_drop: float = 0.0,
+    rigid_hand: str = "",
+    clavicle_yaw: bool = False,
 ) -> tuple[list, list]:
     """(arm, leg) bodies of one side: (name, pos, joints [(name, axis, range)], geoms) nested;
-    ``forearm_roll``, ``clavicle_drop``, ``rigid_hand``: see :func:`capsule_humanoid_xml`."""
+    ``forearm_roll``, ``clavicle_drop``, ``rigid_hand``, ``clavicle_yaw``: see
+    :func:`capsule_humanoid_xml`."""
     s = sign
     finger = (
         "fingers_" + side,
@@ -108,7 +114,7 @@ def _limb(
         [("capsule", (0, 0, -0.04, 0, 0, -0.24), 0.04)],
         [forearm],
     )
-    clavicle_axes = ((0, 0, 1), (1, 0, 0)) if not clavicle_drop else ((0, 1, 0), (1, 0, 0))
+    clavicle_axes = ((0, 0, 1), (1, 0, 0)) if not clavicle_drop or clavicle_yaw else ((0, 1, 0), (1, 0, 0))
     clavicle = (
         "clavicle_" + side,
         (0, s * 0.05, 0.25 + clavicle_drop),
@@ -172,6 +178,7 @@ def capsule_humanoid_xml(
     bare_forearms: bool = False,
     clavicle_drop: float = 0.0,
     rigid_hand: str = "",
+    clavicle_yaw: bool = False,
 ) -> str:
     """The MJCF text (see the module docstring); ``forearm_roll``: the arms end as the older
     G1's do, an elbow, then a link that only rolls about the forearm 8 cm past it and carries
@@ -182,7 +189,9 @@ def capsule_humanoid_xml(
     hinge), not about the hanging arm; ``rigid_hand``: hands without joints or fingers, a
     mitten 24 cm long (GMR's T1 file, its wrist joints left out): ``"inline"`` attached on the
     forearm's line 26 cm past the elbow, ``"aside"`` attached 10 cm in front of that line and
-    reaching back below the forearm (ToddlerBot's hand hangs off a gear 34 degrees aside)."""
+    reaching back below the forearm (ToddlerBot's hand hangs off a gear 34 degrees aside);
+    ``clavicle_yaw``: with ``clavicle_drop``, the first clavicle joint turns about the vertical,
+    the hanging arm's own direction (loco-mujoco's Atlas: its clavicle's yaw)."""
     # world: where the file puts an intended (Z up, facing +X) vector; root_rot: the root
     # body's frame; local: the intended vector in the root's frame.
     world = {"plain": np.eye(3), "turned": _rot_z(-90), "lying": _LAID}[style]
@@ -211,7 +220,10 @@ def capsule_humanoid_xml(
         return "\n".join(lines)
 
     arms, legs = zip(
-        *(_limb(side, s, forearm_roll, clavicle_drop, rigid_hand) for side, s in (("l", 1.0), ("r", -1.0))),
+        *(
+            _limb(side, s, forearm_roll, clavicle_drop, rigid_hand, clavicle_yaw)
+            for side, s in (("l", 1.0), ("r", -1.0))
+        ),
         strict=True,
     )
     head = (
