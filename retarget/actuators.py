@@ -4,6 +4,8 @@
   each joint: its ``actuatorfrcrange``, or the force range of the motors driving it (times
   their gear), or for a plain motor (no bias, fixed gain) its control range times gain and
   gear; the smallest of those that apply, NaN where the model states none.
+* :func:`joint_speed_limits`: the fastest each joint may turn (rad/s): published figures for
+  the G1 and H1, 3 pi (GMR's IK velocity limit) for the others.
 * :func:`damping_share`: joint damping over that limit (s/rad): the share of the motor a joint
   moving at 1 rad/s spends on its own damping (MuJoCo's passive force ``-damping * qvel``,
   which the actuators must overcome in simulation). A joint with damping 200 N m s/rad and a
@@ -16,6 +18,64 @@ from collections.abc import Sequence
 
 import mujoco
 import numpy as np
+
+PUBLISHED_VELOCITY_LIMITS: dict[str, float] = {
+    # Unitree G1 (29 DoF), rad/s: whole_body_tracking robots/g1.py `velocity_limit_sim`
+    # (= Unitree's G1 URDF `velocity` attributes); Menagerie's MJCF has none.
+    **{
+        f"{s}_{j}": v
+        for s in ("left", "right")
+        for j, v in (
+            ("hip_pitch_joint", 32.0),
+            ("hip_roll_joint", 20.0),
+            ("hip_yaw_joint", 32.0),
+            ("knee_joint", 20.0),
+            ("ankle_pitch_joint", 37.0),
+            ("ankle_roll_joint", 37.0),
+            ("shoulder_pitch_joint", 37.0),
+            ("shoulder_roll_joint", 37.0),
+            ("shoulder_yaw_joint", 37.0),
+            ("elbow_joint", 37.0),
+            ("wrist_roll_joint", 37.0),
+            ("wrist_pitch_joint", 22.0),
+            ("wrist_yaw_joint", 22.0),
+        )
+    },
+    "waist_yaw_joint": 32.0,
+    "waist_roll_joint": 37.0,
+    "waist_pitch_joint": 37.0,
+    # Unitree H1 (19 DoF), rad/s: unitree_ros robots/h1_description/urdf/h1.urdf `velocity`
+    # attributes; Menagerie names the joints without the `_joint` suffix.
+    **{
+        f"{s}_{j}": v
+        for s in ("left", "right")
+        for j, v in (
+            ("hip_yaw", 23.0),
+            ("hip_roll", 23.0),
+            ("hip_pitch", 23.0),
+            ("knee", 14.0),
+            ("ankle", 9.0),
+            ("shoulder_pitch", 9.0),
+            ("shoulder_roll", 9.0),
+            ("shoulder_yaw", 20.0),
+            ("elbow", 20.0),
+        )
+    },
+    "torso": 23.0,
+}
+"""Published joint velocity limits (rad/s) by MJCF joint name (G1 and H1 of Menagerie)."""
+
+DEFAULT_VELOCITY_LIMIT = 3.0 * np.pi
+"""rad/s for joints without a published limit: GMR's IK velocity limit (3 pi)."""
+
+
+def joint_speed_limits(names: Sequence[str]) -> np.ndarray:
+    """(J,) the speed limit (rad/s; m/s for a slide) of each joint named: its published one
+    (``PUBLISHED_VELOCITY_LIMITS``, a namespace prefix such as ``robot/`` ignored), else
+    ``DEFAULT_VELOCITY_LIMIT``. ``controlmm validate`` checks the same ones (sim.config)."""
+    return np.array(
+        [PUBLISHED_VELOCITY_LIMITS.get(n.rsplit("/", 1)[-1], DEFAULT_VELOCITY_LIMIT) for n in names]
+    )
 
 
 def joint_torque_limits(model: mujoco.MjModel, joints: Sequence[int] | np.ndarray) -> np.ndarray:

@@ -27,6 +27,7 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion import load_motion
 from controlmm.motion.container import Motion, resample
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
+from retarget.actuators import joint_speed_limits
 from retarget.feet import hold_feet_between_frames, lift_swing_feet
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
@@ -59,6 +60,7 @@ from retarget.selfcheck import (
 from retarget.selfcollision import SelfClearance
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
+from retarget.speed_rungs import SPEED_SOLVES, speed_gain, speed_ratios
 from retarget.targets import Targets, build_targets, stiffer_locks
 from retarget.trajectory import RobotTrajectory
 
@@ -526,6 +528,50 @@ def _output_rungs(
     return best, solves, clearance
 
 
+def _speed_rungs(
+    rm: RobotModel,
+    config: SolverConfig,
+    solver: str,
+    clearance: SelfClearance | None,
+    kept: _Solved,
+    fps: float,
+) -> tuple[_Solved, int]:
+    """Solve again where ``kept`` turns a joint past its speed limit between two output frames
+    (:mod:`retarget.speed_rungs`): that joint's velocity weight SPEED_STEP times stiffer around
+    there, up to SPEED_SOLVES times, on the targets ``kept`` was solved for (at their own rate)
+    with the self-clearance in use; a solve is kept if it is slower against the limits at its
+    worst, has no more output frames with two geoms overlapping deeper than OUTPUT_FAR_DEPTH
+    and slides no planted foot further than ``kept`` and OUTPUT_SLIP. Returns (the solve kept,
+    solves made)."""
+    limits = joint_speed_limits(rm.tree.joint_names)
+    ratios = speed_ratios(kept.qpos, fps, limits)
+    if ratios.max(initial=0.0) <= 1.0:
+        return kept, 0
+    targets = kept.targets
+    robot = rm if clearance is None else rm.with_self_clearance(clearance)
+    frames = overlap_frames(rm.model, kept.qpos)
+    slip = _stance_slip(rm, kept.rep, targets, fps)
+    gain, solves, last = None, 0, ratios
+    for _ in range(SPEED_SOLVES):  # each step from the last solve's speeds, kept or not
+        gain = speed_gain(last, fps, len(targets.kp_pos), targets.fps, gain)
+        targets2 = replace(targets, speed_gain=gain)
+        sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
+            robot, targets2, config, solver, targets.fps, fps
+        )
+        solves += 1
+        ratios2 = last = speed_ratios(qpos2, fps, limits)
+        frames2, slip2 = overlap_frames(rm.model, qpos2), _stance_slip(rm, rep2, targets, fps)
+        if ratios2.max() >= ratios.max() or frames2 > frames or slip2 > max(slip, OUTPUT_SLIP):
+            continue
+        depth2 = _output_overlap(rm, qpos2, clearance)
+        speed2 = _joint_speeds(qpos2, fps)
+        kept = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
+        ratios, frames, slip = ratios2, frames2, slip2
+        if ratios.max() <= 1.0:
+            break
+    return kept, solves
+
+
 def _with_room(clearance: SelfClearance, room: SelfClearance) -> SelfClearance | None:
     """``clearance`` with each of the pairs it shares with ``room`` (its first pairs, in the
     same order) kept at least as far apart as there; None where that keeps none further apart
@@ -597,24 +643,27 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     sol, qpos, rep, lift, swing_lift, solves, clearance, room = _solve_clear_of_self(
         rm, targets, config, solver, src_fps, fps
     )
+    out = _Solved(sol, qpos, rep, lift, swing_lift, targets, np.zeros(0), 0.0, _joint_speeds(qpos, fps), 0)
     if clearance is not None:
         clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
-        depth = _output_overlap(rm, qpos, clearance)
-        out = _Solved(sol, qpos, rep, lift, swing_lift, targets, depth, 0.0, _joint_speeds(qpos, fps), 0)
+        out.depth = _output_overlap(rm, qpos, clearance)
         if out.depth.max(initial=0.0) > OTHER_DEPTH:
             out.slip = _stance_slip(rm, rep, targets, fps)
             out.frames = overlap_frames(rm.model, qpos)
             out, solves, clearance = _output_rungs(
                 rm, config, solver, transform, joints, fps, clearance, out, solves, room
             )
-        sol, qpos, rep, lift, swing_lift, targets = (
-            out.sol,
-            out.qpos,
-            out.rep,
-            out.lift,
-            out.swing_lift,
-            out.targets,
-        )
+    speed_solves = 0
+    if solver != "mink" and config.speed_limits:
+        out, speed_solves = _speed_rungs(rm, config, solver, clearance, out, fps)
+    sol, qpos, rep, lift, swing_lift, targets = (
+        out.sol,
+        out.qpos,
+        out.rep,
+        out.lift,
+        out.swing_lift,
+        out.targets,
+    )
     times = np.arange(len(qpos)) / fps
     near = np.clip(np.rint(times * targets.fps).astype(int), 0, len(targets.stance["left"]) - 1)
     stance = np.stack([targets.stance["left"][near], targets.stance["right"][near]], axis=1)
@@ -630,6 +679,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         "floor_lift_max_mm": round(lift * 1000, 3),
         "swing_lift_max_mm": round(swing_lift * 1000, 3),
         "self_clearance_solves": solves,
+        "speed_limit_solves": speed_solves,
     }
     traj = RobotTrajectory(
         robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:") else rm.mapping.source),

@@ -31,6 +31,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
+from retarget.actuators import DEFAULT_VELOCITY_LIMIT
 from retarget.geoms import excluded_body_pairs
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
 from retarget.selfcollision import REST_SLACK, SELF_MARGIN, SelfClearance, capsule_distances, close_pairs
@@ -76,10 +77,10 @@ did not).
 Solves at the output rate hold planted feet less tightly than the resampled ones (no
 pinning between frames: 0.8-1.3 cm a frame against 0.1-0.3 on G1's stoop 000005 and H1's
 000012), so "no more than before" alone would keep their overlaps."""
-OUTPUT_SPEED = 3.0 * np.pi
+OUTPUT_SPEED = DEFAULT_VELOCITY_LIMIT
 """...and only if it turns no joint faster than before and than this (rad/s; the speed limit
-``controlmm validate`` applies to joints without a published one, sim.config's
-DEFAULT_VELOCITY_LIMIT, which this layer may not import): the room the stiffer solves give a pair
+``controlmm validate`` applies to joints without a published one,
+:data:`retarget.actuators.DEFAULT_VELOCITY_LIMIT`): the room the stiffer solves give a pair
 may spin an unobserved joint (an SMPL humanoid's free wrist sitting down, corpus clip 000012
 at 30 fps: 5.8 times its speed limit)."""
 OUTPUT_FIT_GIVE = 0.02

@@ -59,6 +59,11 @@ class SolverConfig:
     locked feet pull the legs."""
     self_clearance: bool = True
     """Keep the arms clear of the trunk, the legs and each other (:mod:`retarget.selfcollision`)."""
+    speed_limits: bool = True
+    """Keep every joint within its speed limit between output frames
+    (:func:`retarget.actuators.joint_speed_limits`, the ones ``controlmm validate`` checks):
+    ``retarget_motion`` solves again with a too-fast joint's velocity term stiffer there
+    (:mod:`retarget.speed_rungs`). False tracks the human however fast."""
     self_midpoints: bool = False
     """Keep them clear halfway between consecutive frames too (:mod:`retarget.midpoints`): an
     arm swinging past a hip between two frames would pass through it in the output's frames.

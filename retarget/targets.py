@@ -72,6 +72,9 @@ class Targets:
         stance: {"left"|"right": (T,) bool} human stance frames.
         lock: {"left"|"right": (T,) float in [0, 1]} how locked each foot is.
         clearance: {"left"|"right": (T,)} minimum height (m) of the foot's collision points.
+        speed_gain: (T, nj) or None: a factor on the velocity term's weight of each joint
+            between a frame and the next (the larger of the two frames'), where the output
+            turned a joint past its speed limit (:func:`retarget.retarget_motion`).
     """
 
     fps: float
@@ -90,6 +93,7 @@ class Targets:
     stance: dict[str, np.ndarray]
     lock: dict[str, np.ndarray]
     clearance: dict[str, np.ndarray]
+    speed_gain: np.ndarray | None = None
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
@@ -333,6 +337,7 @@ def take_frames(targets: Targets, idx: np.ndarray, fps: float) -> Targets:
         stance={k: pick(v) for k, v in targets.stance.items()},
         lock={k: pick(v) for k, v in targets.lock.items()},
         clearance={k: pick(v) for k, v in targets.clearance.items()},
+        speed_gain=None if targets.speed_gain is None else pick(targets.speed_gain),
     )
 
 

@@ -11,57 +11,9 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Literal
 
 from controlmm.errors import ControlMMError
+from retarget.actuators import DEFAULT_VELOCITY_LIMIT, PUBLISHED_VELOCITY_LIMITS
 
 SelfCollisionMode = Literal["model", "capsules", "off"]
-
-PUBLISHED_VELOCITY_LIMITS: dict[str, float] = {
-    # Unitree G1 (29 DoF), rad/s: whole_body_tracking robots/g1.py `velocity_limit_sim`
-    # (= Unitree's G1 URDF `velocity` attributes); Menagerie's MJCF has none.
-    **{
-        f"{s}_{j}": v
-        for s in ("left", "right")
-        for j, v in (
-            ("hip_pitch_joint", 32.0),
-            ("hip_roll_joint", 20.0),
-            ("hip_yaw_joint", 32.0),
-            ("knee_joint", 20.0),
-            ("ankle_pitch_joint", 37.0),
-            ("ankle_roll_joint", 37.0),
-            ("shoulder_pitch_joint", 37.0),
-            ("shoulder_roll_joint", 37.0),
-            ("shoulder_yaw_joint", 37.0),
-            ("elbow_joint", 37.0),
-            ("wrist_roll_joint", 37.0),
-            ("wrist_pitch_joint", 22.0),
-            ("wrist_yaw_joint", 22.0),
-        )
-    },
-    "waist_yaw_joint": 32.0,
-    "waist_roll_joint": 37.0,
-    "waist_pitch_joint": 37.0,
-    # Unitree H1 (19 DoF), rad/s: unitree_ros robots/h1_description/urdf/h1.urdf `velocity`
-    # attributes; Menagerie names the joints without the `_joint` suffix.
-    **{
-        f"{s}_{j}": v
-        for s in ("left", "right")
-        for j, v in (
-            ("hip_yaw", 23.0),
-            ("hip_roll", 23.0),
-            ("hip_pitch", 23.0),
-            ("knee", 14.0),
-            ("ankle", 9.0),
-            ("shoulder_pitch", 9.0),
-            ("shoulder_roll", 9.0),
-            ("shoulder_yaw", 20.0),
-            ("elbow", 20.0),
-        )
-    },
-    "torso": 23.0,
-}
-"""Published joint velocity limits (rad/s) by MJCF joint name (G1 and H1 of Menagerie)."""
-
-DEFAULT_VELOCITY_LIMIT = 3.0 * math.pi
-"""rad/s for joints without a published limit: GMR's IK velocity limit (3 pi)."""
 
 
 @dataclass(frozen=True)

@@ -77,7 +77,9 @@ def default_costs(
         if c.self_midpoints:
             terms.append(MidpointClearanceCost(robot.self_clearance, c.w_self, span))
     terms += [
-        VelocityCost(ref_x, span, targets.fps, c.w_vel_root, joint_speed_weights(robot, c)),
+        VelocityCost(
+            ref_x, span, targets.fps, c.w_vel_root, joint_speed_weights(robot, c), targets.speed_gain
+        ),
         AccelerationCost(ref_x, span, targets.fps, c.w_acc_root, c.w_acc_joint, c.exact_acceleration),
     ]
     return terms

@@ -17,14 +17,23 @@ class VelocityCost(CostTerm[TermValue]):
     lag = 1
 
     def __init__(
-        self, ref_x: np.ndarray, span: np.ndarray, fps: float, root: float, joint: float | np.ndarray
+        self,
+        ref_x: np.ndarray,
+        span: np.ndarray,
+        fps: float,
+        root: float,
+        joint: float | np.ndarray,
+        gain: np.ndarray | None = None,
     ) -> None:
         """``ref_x`` (T, n): reference of x; ``span`` (T,) int: span of each frame; ``fps``:
         frame rate; ``root``, ``joint`` (a number or one per joint): weights at 20 fps
-        (rescaled by (fps / 20)^2)."""
+        (rescaled by (fps / 20)^2); ``gain`` (T, nj): a factor on each joint's weight, the
+        larger of a pair's two frames' (``Targets.speed_gain``)."""
         self.ref_x = ref_x
         w = coordinate_weights(ref_x.shape[1], root, joint) * (fps / REFERENCE_FPS) ** 2
         self.weight = coupled_pairs(span)[:, None] * w  # (T - 1, n)
+        if gain is not None and len(gain) > 1:
+            self.weight[:, 6:] *= np.maximum(gain[:-1], gain[1:])
 
     def evaluate(self, cfg: Configuration) -> TermValue:
         d1 = np.diff(temporal_values(cfg, self.ref_x), axis=0)
