@@ -444,6 +444,10 @@ def _output_rungs(
     the safe ladder with any pairs added)."""
     dense = resample(joints, best.targets.fps, fps)
     dense_targets = build_targets(rm, dense, fps, transform, config)  # the output rate's
+    if best.targets.speed_gain is not None:  # the speed rungs' gains, at the output's frames
+        near = np.clip(np.rint(np.arange(len(dense)) / fps * best.targets.fps).astype(int), 0, None)
+        gain = best.targets.speed_gain[np.minimum(near, len(best.targets.speed_gain) - 1)]
+        dense_targets = replace(dense_targets, speed_gain=gain)
     reference = dense_targets.kp_pos  # (T, K, 3)
     most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
     far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
@@ -528,47 +532,71 @@ def _output_rungs(
     return best, solves, clearance
 
 
-def _speed_rungs(
+def _solve_checked(
     rm: RobotModel,
+    targets: Targets,
     config: SolverConfig,
     solver: str,
-    clearance: SelfClearance | None,
-    kept: _Solved,
+    transform: HumanToWorld,
+    joints: np.ndarray,
     fps: float,
+) -> tuple[_Solved, int]:
+    """Solve ``targets`` (at the motion's rate; ``joints`` (T, 22, 3) the motion) clear of self
+    (:func:`_solve_clear_of_self`) and, where the output frames still overlap, through the
+    output check (:func:`_output_rungs`). Returns (the solve kept, solves made)."""
+    src_fps = targets.fps
+    sol, qpos, rep, lift, swing_lift, solves, clearance, room = _solve_clear_of_self(
+        rm, targets, config, solver, src_fps, fps
+    )
+    out = _Solved(sol, qpos, rep, lift, swing_lift, targets, np.zeros(0), 0.0, _joint_speeds(qpos, fps), 0)
+    if clearance is not None:
+        clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
+        out.depth = _output_overlap(rm, qpos, clearance)
+        if out.depth.max(initial=0.0) > OTHER_DEPTH:
+            out.slip = _stance_slip(rm, rep, targets, fps)
+            out.frames = overlap_frames(rm.model, qpos)
+            out, solves, _ = _output_rungs(
+                rm, config, solver, transform, joints, fps, clearance, out, solves, room
+            )
+    return out, solves
+
+
+def _speed_rungs(
+    rm: RobotModel,
+    targets: Targets,
+    config: SolverConfig,
+    solver: str,
+    transform: HumanToWorld,
+    joints: np.ndarray,
+    fps: float,
+    kept: _Solved,
 ) -> tuple[_Solved, int]:
     """Solve again where ``kept`` turns a joint past its speed limit between two output frames
     (:mod:`retarget.speed_rungs`): that joint's velocity weight SPEED_STEP times stiffer around
-    there, up to SPEED_SOLVES times, on the targets ``kept`` was solved for (at their own rate)
-    with the self-clearance in use; a solve is kept if it is slower against the limits at its
-    worst, has no more output frames with two geoms overlapping deeper than OUTPUT_FAR_DEPTH
-    and slides no planted foot further than ``kept`` and OUTPUT_SLIP. Returns (the solve kept,
-    solves made)."""
+    there, up to SPEED_SOLVES times, each time through the whole self-clearance check
+    (:func:`_solve_checked`: a solve with other velocity weights may bring two links together
+    that the first one's check kept apart); a solve is kept if it is slower against the
+    limits at its worst, has no more output frames with two geoms overlapping deeper than
+    OUTPUT_FAR_DEPTH and slides no planted foot further than ``kept`` and OUTPUT_SLIP.
+    ``targets``: the motion's, at its rate. Returns (the solve kept, solves made)."""
     limits = joint_speed_limits(rm.tree.joint_names)
     ratios = speed_ratios(kept.qpos, fps, limits)
     if ratios.max(initial=0.0) <= 1.0:
         return kept, 0
-    targets = kept.targets
-    robot = rm if clearance is None else rm.with_self_clearance(clearance)
     frames = overlap_frames(rm.model, kept.qpos)
-    slip = _stance_slip(rm, kept.rep, targets, fps)
+    slip = _stance_slip(rm, kept.rep, kept.targets, fps)
     gain, solves, last = None, 0, ratios
     for _ in range(SPEED_SOLVES):  # each step from the last solve's speeds, kept or not
-        gain = speed_gain(last, fps, len(targets.kp_pos), targets.fps, gain)
-        targets2 = replace(targets, speed_gain=gain)
-        sol2, _, qpos2, rep2, lift2, swing_lift2 = _solve_and_resample(
-            robot, targets2, config, solver, targets.fps, fps
-        )
-        solves += 1
-        ratios2 = last = speed_ratios(qpos2, fps, limits)
-        frames2, slip2 = overlap_frames(rm.model, qpos2), _stance_slip(rm, rep2, targets, fps)
-        if ratios2.max() >= ratios.max() or frames2 > frames or slip2 > max(slip, OUTPUT_SLIP):
-            continue
-        depth2 = _output_overlap(rm, qpos2, clearance)
-        speed2 = _joint_speeds(qpos2, fps)
-        kept = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
-        ratios, frames, slip = ratios2, frames2, slip2
-        if ratios.max() <= 1.0:
+        if last.max(initial=0.0) <= 1.0:
             break
+        gain = speed_gain(last, fps, len(targets.kp_pos), targets.fps, gain)
+        out, n = _solve_checked(rm, replace(targets, speed_gain=gain), config, solver, transform, joints, fps)
+        solves += n
+        last = speed_ratios(out.qpos, fps, limits)
+        frames2, slip2 = overlap_frames(rm.model, out.qpos), _stance_slip(rm, out.rep, out.targets, fps)
+        if last.max() >= ratios.max() or frames2 > frames or slip2 > max(slip, OUTPUT_SLIP):
+            continue
+        kept, ratios, frames, slip = out, last, frames2, slip2
     return kept, solves
 
 
@@ -640,22 +668,10 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
-    sol, qpos, rep, lift, swing_lift, solves, clearance, room = _solve_clear_of_self(
-        rm, targets, config, solver, src_fps, fps
-    )
-    out = _Solved(sol, qpos, rep, lift, swing_lift, targets, np.zeros(0), 0.0, _joint_speeds(qpos, fps), 0)
-    if clearance is not None:
-        clearance = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
-        out.depth = _output_overlap(rm, qpos, clearance)
-        if out.depth.max(initial=0.0) > OTHER_DEPTH:
-            out.slip = _stance_slip(rm, rep, targets, fps)
-            out.frames = overlap_frames(rm.model, qpos)
-            out, solves, clearance = _output_rungs(
-                rm, config, solver, transform, joints, fps, clearance, out, solves, room
-            )
+    out, solves = _solve_checked(rm, targets, config, solver, transform, joints, fps)
     speed_solves = 0
     if solver != "mink" and config.speed_limits:
-        out, speed_solves = _speed_rungs(rm, config, solver, clearance, out, fps)
+        out, speed_solves = _speed_rungs(rm, targets, config, solver, transform, joints, fps, out)
     sol, qpos, rep, lift, swing_lift, targets = (
         out.sol,
         out.qpos,
