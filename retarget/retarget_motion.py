@@ -5,7 +5,8 @@ scale :func:`robot_scale`), build targets (:mod:`retarget.targets`), solve all f
 motion's rate (:mod:`retarget.solver`), resample to the requested rate
 (:mod:`retarget.resample`) with pinned feet held between the solver's frames, lift frames
 whose feet would touch below the floor, check the arms' self-clearance on the real geoms and
-solve again with safe margins where they touch (:mod:`retarget.selfcheck`), and measure the
+solve again with safe margins where they touch (:mod:`retarget.selfcheck`), solve again where
+a joint turns faster than its speed limit (:mod:`retarget.speed_rungs`), and measure the
 result with MuJoCo (:mod:`retarget.metrics`).
 """
 
