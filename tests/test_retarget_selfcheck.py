@@ -30,8 +30,10 @@ from retarget.metrics import replay, trajectory_metrics
 from retarget.retarget_motion import (
     _gives_up_a_pass,
     _keypoint_error,
+    _output_overlap,
     _rung_kept,
     _solve_clear_of_self,
+    _with_relaxed_pairs,
     _with_room,
 )
 from retarget.selfcheck import (
@@ -202,6 +204,36 @@ def test_an_overlap_between_the_calibration_poses_is_found():
     truth = _contact_depths(rm.model, qpos)[(min(a, b), max(a, b))]
     assert truth > OTHER_DEPTH
     assert penetration_depths(rm.model, rm.tree, qpos, sc)[k] == pytest.approx(truth)
+
+
+def test_a_grown_clearance_still_sees_the_trunk_against_a_shoulder():
+    """A clearance grown by the output check (a pair or balls added) no longer carries the
+    relaxed solves' trunk-shoulder pairs; where the output has a shoulder in the torso deeper
+    than OTHER_DEPTH, the robot's own pair for it is added back, so the rungs see and clear it
+    (Unitree R1's upper arm 8.9 mm in its torso in corpus clip 000000 went unseen). G1's right
+    shoulder-roll link 8.5 mm inside its torso (a pair only the relaxed solves keep)."""
+    rm = load_robot("g1")
+    relaxed = rm.self_clearance.relaxed_pairs
+    q = rm.rest_q.copy()
+    q[rm.tree.joint_names.index("right_shoulder_pitch_joint")] = -1.0
+    q[rm.tree.joint_names.index("right_shoulder_roll_joint")] = 0.3
+    qpos = np.concatenate([[0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0], q])[None]
+    grown = rm.self_clearance.with_pairs(np.array([0]), np.array([1]), 0.01)
+    assert grown.relaxed_pairs is None
+    seen = _with_relaxed_pairs(rm, qpos, grown)
+    new = np.arange(grown.num_pairs, seen.num_pairs)
+    bodies = [
+        {
+            rm.model.body(int(rm.model.geom_bodyid[relaxed.geom[c]])).name
+            for c in (seen.first[k], seen.second[k])
+        }
+        for k in new
+    ]
+    shoulder = [
+        k for k, b in zip(new, bodies, strict=True) if b == {"right_shoulder_roll_link", "torso_link"}
+    ]
+    assert shoulder, bodies
+    assert _output_overlap(rm, qpos, seen)[shoulder].max() > OTHER_DEPTH
 
 
 def test_the_stoop_fits_closer_and_stays_clear_of_itself(stoop):
