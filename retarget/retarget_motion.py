@@ -511,17 +511,40 @@ def _output_rungs(
                 ladders[ladder], plain[ladder], plain_qpos[ladder] = measured, depth2, qpos2
                 gaps[ladder] = overlap_gaps(rm.model, rm.tree, qpos2, measured)
             speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
-            if not _rung_kept(
-                best.depth,
-                best.slip,
-                depth2,
-                slip2,
-                stiffness is None,
-                best.speed,
-                speed2,
-                best.frames,
-                frames2,
-            ):
+            midpoint = stiffness is None
+            kept = _rung_kept(
+                best.depth, best.slip, depth2, slip2, midpoint, best.speed, speed2, best.frames, frames2
+            )
+            if (
+                not kept
+                and config.speed_limits
+                and _rung_kept(
+                    best.depth, best.slip, depth2, slip2, midpoint, None, None, best.frames, frames2
+                )
+            ):  # refused for its speed alone: solved again with its too-fast joints slower
+                allowed = np.maximum(best.speed, OUTPUT_SPEED)
+                slower = _slower_rung(rm, ladders[ladder], targets2, cfg2, solver, fps, qpos2, allowed)
+                if slower is not None:
+                    sol2, qpos2, rep2, lift2, swing_lift2, targets2, n = slower
+                    solves += n
+                    measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladders[ladder]))
+                    depth2, slip2 = (
+                        _output_overlap(rm, qpos2, measured),
+                        _stance_slip(rm, rep2, targets2, fps),
+                    )
+                    speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
+                    kept = _rung_kept(
+                        best.depth,
+                        best.slip,
+                        depth2,
+                        slip2,
+                        midpoint,
+                        best.speed,
+                        speed2,
+                        best.frames,
+                        frames2,
+                    )
+            if not kept:
                 continue
             solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
             clear = depth2.max() <= OTHER_DEPTH
@@ -613,6 +636,34 @@ def _speed_rungs(
             continue
         kept, ratios, frames, slip = out, last, frames2, slip2
     return kept, solves
+
+
+def _slower_rung(
+    rm: RobotModel,
+    clearance: SelfClearance,
+    targets: Targets,
+    config: SolverConfig,
+    solver: str,
+    fps: float,
+    qpos: np.ndarray,
+    allowed: np.ndarray,
+) -> tuple[Solution, np.ndarray, Replay, float, float, Targets, int] | None:
+    """A rung's solve (output ``qpos`` (T, nq)) again with the velocity weight of each joint
+    faster than ``allowed`` (nj,) rad/s SPEED_STEP times stiffer there (as the speed rungs do,
+    :mod:`retarget.speed_rungs`), up to SPEED_SOLVES times, until none is: (solution, output
+    qpos, replay, floor lift, swing lift, targets, solves), or None. Apollo lying down (the
+    corpus's lie-down 000052 at 30 fps): the x10 rung cleared its thighs (9.9 -> 1.0 mm) but
+    turned a hip at 10.6 rad/s and was refused."""
+    gain = targets.speed_gain
+    for solves in range(1, SPEED_SOLVES + 1):
+        gain = speed_gain(speed_ratios(qpos, fps, allowed), fps, len(targets.kp_pos), targets.fps, gain)
+        targets = replace(targets, speed_gain=gain)
+        sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
+            rm.with_self_clearance(clearance), targets, config, solver, targets.fps, fps
+        )
+        if speed_ratios(qpos, fps, allowed).max(initial=0.0) <= 1.0:
+            return sol, qpos, rep, lift, swing_lift, targets, solves
+    return None
 
 
 def _with_room(clearance: SelfClearance, room: SelfClearance) -> SelfClearance | None:

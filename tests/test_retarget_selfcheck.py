@@ -602,3 +602,21 @@ def test_a_solve_that_passes_is_not_traded_for_one_that_gives_up_the_motion():
     assert _gives_up_a_pass(passing, 0.03, 0.03 + OUTPUT_NEAR_GIVE + 0.001)
     assert not _gives_up_a_pass(passing, 0.03, 0.03 + OUTPUT_NEAR_GIVE - 0.001)
     assert not _gives_up_a_pass(failing, 0.03, 0.03 + OUTPUT_FIT_GIVE - 0.001)
+
+
+def test_a_rung_refused_for_its_speed_alone_is_solved_again_slower():
+    """Apollo lying down (the corpus's lie-down 000052 at 30 fps): its thighs 9.9 mm into each
+    other in 6 frames after the output check's first rungs; the x10 rung cleared them (1.0 mm)
+    but turned a hip at 10.6 rad/s, past 3 pi, and was refused. Solved again with that hip's
+    velocity term stiffer there, it is kept: no frame past 5 mm, no joint past 3 pi rad/s or
+    past its range, and the check passes self-collision and joint speed."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[52]
+    assert spec.family == "lie_down"
+    motion = Motion(joints=make_clip(spec)[1], fps=20.0)
+    rm = load_robot("apollo")
+    traj = retarget_motion(motion, rm, fps=30.0)
+    assert overlap_frames(rm.model, traj.qpos) == 0
+    assert np.abs(np.diff(traj.qpos[:, 7:], axis=0)).max() * 30.0 <= OUTPUT_SPEED
+    assert traj.metrics["joint_limit_violations"] == 0
+    report = sim.check_trajectory(scenes.load_scene("empty", robot="apollo"), traj.qpos, traj.fps)
+    assert report.stats["self_collision_frames"] == 0 and report.stats["joint_velocity_violations"] == 0
