@@ -466,6 +466,7 @@ def _output_rungs(
     reference = dense_targets.kp_pos  # (T, K, 3)
     most_error = _keypoint_error(rm, best.rep, reference) + OUTPUT_FIT_GIVE
     far_but_clear: _Solved | None = None  # kept only if no solve clears within OUTPUT_FIT_GIVE
+    too_fast: list[tuple[SolverConfig, Targets, SelfClearance, np.ndarray, bool]] = []
     rungs: list[float | None] = [*([] if config.self_midpoints else [None]), *OUTPUT_SELF]
     # each tightened by its own plain solve, with balls where enclosures miss a contact
     ladders: dict[str, SelfClearance] = {"safe": _with_contact_balls(rm, best.qpos, clearance)}
@@ -515,35 +516,10 @@ def _output_rungs(
             kept = _rung_kept(
                 best.depth, best.slip, depth2, slip2, midpoint, best.speed, speed2, best.frames, frames2
             )
-            if (
-                not kept
-                and config.speed_limits
-                and _rung_kept(
-                    best.depth, best.slip, depth2, slip2, midpoint, None, None, best.frames, frames2
-                )
-            ):  # refused for its speed alone: solved again with its too-fast joints slower
-                allowed = np.maximum(best.speed, OUTPUT_SPEED)
-                slower = _slower_rung(rm, ladders[ladder], targets2, cfg2, solver, fps, qpos2, allowed)
-                if slower is not None:
-                    sol2, qpos2, rep2, lift2, swing_lift2, targets2, n = slower
-                    solves += n
-                    measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladders[ladder]))
-                    depth2, slip2 = (
-                        _output_overlap(rm, qpos2, measured),
-                        _stance_slip(rm, rep2, targets2, fps),
-                    )
-                    speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
-                    kept = _rung_kept(
-                        best.depth,
-                        best.slip,
-                        depth2,
-                        slip2,
-                        midpoint,
-                        best.speed,
-                        speed2,
-                        best.frames,
-                        frames2,
-                    )
+            if not kept and _rung_kept(
+                best.depth, best.slip, depth2, slip2, midpoint, None, None, best.frames, frames2
+            ):  # refused for its speed alone: a last resort (below)
+                too_fast.append((cfg2, targets2, ladders[ladder], qpos2, midpoint))
             if not kept:
                 continue
             solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
@@ -564,6 +540,31 @@ def _output_rungs(
                 ladders[ladder] = _with_contact_balls(
                     rm, plain_qpos[ladder], tight, inside_rest_overlap=blind
                 )
+    # Rungs refused for their speed alone, where every rung left geoms deeper than
+    # OUTPUT_FAR_DEPTH in some output frame and none cleared them further from the motion:
+    # each solved again with its too-fast joints slower (_slower_rung) and weighed as the
+    # rungs are, until one is kept clear.
+    last_resort = config.speed_limits and far_but_clear is None
+    for cfg2, targets2, ladder_clearance, qpos2, midpoint in too_fast if last_resort else []:
+        if best.frames == 0:
+            break
+        allowed = np.maximum(best.speed, OUTPUT_SPEED)
+        slower = _slower_rung(rm, ladder_clearance, targets2, cfg2, solver, fps, qpos2, allowed)
+        if slower is None:
+            continue
+        sol2, qpos2, rep2, lift2, swing_lift2, targets2, n = slower
+        solves += n
+        measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladder_clearance))
+        depth2, slip2 = _output_overlap(rm, qpos2, measured), _stance_slip(rm, rep2, targets2, fps)
+        speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
+        if (
+            not _rung_kept(
+                best.depth, best.slip, depth2, slip2, midpoint, best.speed, speed2, best.frames, frames2
+            )
+            or _keypoint_error(rm, rep2, reference) > most_error
+        ):
+            continue
+        best = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
     clearance = ladders["safe"]
     if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
         return far_but_clear, solves, clearance
@@ -653,7 +654,11 @@ def _slower_rung(
     :mod:`retarget.speed_rungs`), up to SPEED_SOLVES times, until none is: (solution, output
     qpos, replay, floor lift, swing lift, targets, solves), or None. Apollo lying down (the
     corpus's lie-down 000052 at 30 fps): the x10 rung cleared its thighs (9.9 -> 1.0 mm) but
-    turned a hip at 10.6 rad/s and was refused."""
+    turned a hip at 10.6 rad/s and was refused. Tried only once every rung has been, where the
+    one kept still fails the check and no rung cleared it further from the motion (G1 with
+    hands sitting down, corpus clip 000012, ends with such a one, 6.4 cm from its targets, and
+    passes `controlmm validate`; a slower solve 4.4 cm from them left a wrist 1 % past its
+    torque limit, which the rungs do not weigh)."""
     gain = targets.speed_gain
     for solves in range(1, SPEED_SOLVES + 1):
         gain = speed_gain(speed_ratios(qpos, fps, allowed), fps, len(targets.kp_pos), targets.fps, gain)
