@@ -403,6 +403,41 @@ class _Solved:
     frames: int
 
 
+def _weighed(
+    rm: RobotModel,
+    clearance: SelfClearance,
+    sol: Solution,
+    qpos: np.ndarray,
+    rep: Replay,
+    lift: float,
+    swing_lift: float,
+    targets: Targets,
+    fps: float,
+) -> tuple[_Solved, SelfClearance]:
+    """A rung's solve (output ``qpos`` (T, nq) at ``fps``) as the output check weighs it, and
+    the clearance it is measured with: ``clearance`` with the trunk-shoulder pairs and the
+    unpaired geoms it overlaps on (:func:`_with_relaxed_pairs`, :func:`_with_unpaired`)."""
+    measured = _with_unpaired(rm, qpos, _with_relaxed_pairs(rm, qpos, clearance))
+    depth, slip = _output_overlap(rm, qpos, measured), _stance_slip(rm, rep, targets, fps)
+    speed, frames = _joint_speeds(qpos, fps), overlap_frames(rm.model, qpos)
+    return _Solved(sol, qpos, rep, lift, swing_lift, targets, depth, slip, speed, frames), measured
+
+
+def _kept_over(best: _Solved, new: _Solved, midpoint: bool, speed: bool = True) -> bool:
+    """:func:`_rung_kept` of ``new`` over ``best`` (``speed`` False: its joints' speeds not weighed)."""
+    return _rung_kept(
+        best.depth,
+        best.slip,
+        new.depth,
+        new.slip,
+        midpoint,
+        best.speed if speed else None,
+        new.speed if speed else None,
+        best.frames,
+        new.frames,
+    )
+
+
 def _gives_up_a_pass(depth: np.ndarray, error: float, error2: float) -> bool:
     """Whether a solve whose keypoints end ``error2`` (m, mean) from their targets would give up
     the motion for the last millimetres of the one kept (``depth`` (P,) m: its pairs' deepest
@@ -505,25 +540,19 @@ def _output_rungs(
             solves += 1
             # Pairs found overlapping are kept apart from then on; those the stiff-lock solve
             # finds count in its own check only (the rungs go on as they would without it).
-            measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladders[ladder]))
-            depth2 = _output_overlap(rm, qpos2, measured)
-            slip2 = _stance_slip(rm, rep2, targets2, fps)
-            if is_plain:
-                ladders[ladder], plain[ladder], plain_qpos[ladder] = measured, depth2, qpos2
-                gaps[ladder] = overlap_gaps(rm.model, rm.tree, qpos2, measured)
-            speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
-            midpoint = stiffness is None
-            kept = _rung_kept(
-                best.depth, best.slip, depth2, slip2, midpoint, best.speed, speed2, best.frames, frames2
+            solved, measured = _weighed(
+                rm, ladders[ladder], sol2, qpos2, rep2, lift2, swing_lift2, targets2, fps
             )
-            if not kept and _rung_kept(
-                best.depth, best.slip, depth2, slip2, midpoint, None, None, best.frames, frames2
-            ):  # refused for its speed alone: a last resort (below)
-                too_fast.append((cfg2, targets2, ladders[ladder], qpos2, midpoint))
+            if is_plain:
+                ladders[ladder], plain[ladder], plain_qpos[ladder] = measured, solved.depth, qpos2
+                gaps[ladder] = overlap_gaps(rm.model, rm.tree, qpos2, measured)
+            midpoint = stiffness is None
+            kept = _kept_over(best, solved, midpoint)
+            if not kept and _kept_over(best, solved, midpoint, speed=False):
+                too_fast.append((cfg2, targets2, ladders[ladder], qpos2, midpoint))  # a last resort (below)
             if not kept:
                 continue
-            solved = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
-            clear = depth2.max() <= OTHER_DEPTH
+            clear = solved.depth.max() <= OTHER_DEPTH
             error2 = _keypoint_error(rm, rep2, reference)
             if error2 > most_error:  # gives up the motion
                 far_but_clear = far_but_clear or (solved if clear else None)
@@ -554,17 +583,9 @@ def _output_rungs(
             continue
         sol2, qpos2, rep2, lift2, swing_lift2, targets2, n = slower
         solves += n
-        measured = _with_unpaired(rm, qpos2, _with_relaxed_pairs(rm, qpos2, ladder_clearance))
-        depth2, slip2 = _output_overlap(rm, qpos2, measured), _stance_slip(rm, rep2, targets2, fps)
-        speed2, frames2 = _joint_speeds(qpos2, fps), overlap_frames(rm.model, qpos2)
-        if (
-            not _rung_kept(
-                best.depth, best.slip, depth2, slip2, midpoint, best.speed, speed2, best.frames, frames2
-            )
-            or _keypoint_error(rm, rep2, reference) > most_error
-        ):
-            continue
-        best = _Solved(sol2, qpos2, rep2, lift2, swing_lift2, targets2, depth2, slip2, speed2, frames2)
+        solved, _ = _weighed(rm, ladder_clearance, sol2, qpos2, rep2, lift2, swing_lift2, targets2, fps)
+        if _kept_over(best, solved, midpoint) and _keypoint_error(rm, rep2, reference) <= most_error:
+            best = solved
     clearance = ladders["safe"]
     if far_but_clear is not None and best.depth.max(initial=0.0) > OUTPUT_FAR_DEPTH:
         return far_but_clear, solves, clearance
