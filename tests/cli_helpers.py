@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 
@@ -15,6 +17,15 @@ def run_cli(argv: list[str]) -> int:
         return main(argv)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 1
+
+
+def in_process(*args: object) -> subprocess.CompletedProcess:
+    """``controlmm ARGS`` run in this process (:func:`run_cli`), its exit status and output
+    captured like :func:`console`'s, without a new interpreter's seconds of imports."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = run_cli([str(a) for a in args])
+    return subprocess.CompletedProcess(["controlmm", *map(str, args)], code, out.getvalue(), err.getvalue())
 
 
 def one_line_error(capsys, argv: list[str], *needles: str) -> str:

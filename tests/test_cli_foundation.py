@@ -5,6 +5,7 @@ import sys
 
 import numpy as np
 import pytest
+from cli_helpers import in_process
 
 from controlmm.cli.main import SUBCOMMANDS
 from controlmm.motion.bvh import read_bvh
@@ -34,11 +35,11 @@ def test_version_and_help(capsys):
 
 def test_convert_features_to_npz_and_bvh(tmp_path, humanml3d_dir, sample_joints):
     src = humanml3d_dir / "new_joint_vecs" / "012314.npy"
-    res = run("convert", src, tmp_path / "m.npz")
+    res = in_process("convert", src, tmp_path / "m.npz")
     assert res.returncode == 0, res.stderr
     with np.load(tmp_path / "m.npz") as data:
         assert np.abs(data["joints"] - sample_joints).max() < 1e-4
-    res = run("convert", src, tmp_path / "m.bvh")
+    res = in_process("convert", src, tmp_path / "m.bvh")
     assert res.returncode == 0, res.stderr
     joints, _ = read_bvh(tmp_path / "m.bvh")
     assert np.linalg.norm(joints - sample_joints, axis=-1).max() < 0.01
@@ -49,7 +50,7 @@ def test_plot_png_and_animation(tmp_path, humanml3d_dir):
     short = tmp_path / "short.npy"
     np.save(short, np.load(src)[:30])
     for name in ("m.png", "m.gif", "m.mp4"):
-        res = run("plot", short, "--out", tmp_path / name)
+        res = in_process("plot", short, "--out", tmp_path / name)
         assert res.returncode == 0, res.stderr
         assert (tmp_path / name).stat().st_size > 1000
     assert (tmp_path / "m.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -82,7 +83,7 @@ def test_bad_input_exits_2_with_one_line(tmp_path, make_args, needle):
     np.save(tmp_path / "ok.npy", np.zeros((5, 22, 3)))
     (tmp_path / "ok.txt").write_text("x")
     before = set(tmp_path.iterdir())
-    res = run(*make_args(tmp_path))
+    res = in_process(*make_args(tmp_path))
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0], res.stderr

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 import pytest
 from capsule_humanoid import capsule_humanoid_xml
-from cli_helpers import console as cli
+from cli_helpers import console, in_process as cli
 from robot_checks import independent_check
 
 from controlmm.corpus.dataset import ClipSpec, make_clip
@@ -95,7 +95,7 @@ def test_outside_humanoid_by_path_through_the_cli(tmp_path, motion):
     src = tmp_path / "clip.npy"
     np.save(src, motion.joints)
     prefix = tmp_path / "out"
-    done = cli("retarget", src, "--robot", path, "--fps", 30, "--out", prefix)
+    done = console("retarget", src, "--robot", path, "--fps", 30, "--out", prefix)  # as a user runs it
     assert done.returncode == 0, done.stderr
     with np.load(f"{prefix}.npz") as data:
         qpos = data["qpos"]

@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 import pytest
 from capsule_humanoid import STYLES, capsule_humanoid_xml
-from cli_helpers import console as cli
+from cli_helpers import console, in_process as cli
 from robot_checks import independent_check
 from scipy.spatial.transform import Rotation
 
@@ -426,7 +426,7 @@ def test_a_robot_given_by_path_renders_with_mujoco(tmp_path, humanoids, motion):
     np.save(src, motion.joints[:12])
     small = ("--render-width", "64", "--render-height", "48", "--render-fps", "10")
     env = {**os.environ, "MUJOCO_GL": "egl"}
-    done = cli(
+    done = console(
         "retarget",
         src,
         "--robot",

@@ -245,7 +245,9 @@ def test_the_page_plans_and_draws_the_robot_in_the_scene(studio, browser, tmp_pa
     before = browser.execute_script("return window.studio.viewer.time")
     time.sleep(0.6)
     assert browser.execute_script("return window.studio.viewer.time") != before
-    browser.find_element(By.ID, "play").click()
+    # pause through the page: a WebDriver click waits for the playing headless renderer (~15 s)
+    browser.execute_script("document.getElementById('play').click()")
+    assert browser.find_element(By.ID, "play").text == "play"
 
 
 @pytest.mark.slow
