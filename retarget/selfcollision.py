@@ -22,7 +22,10 @@ robot's collision geoms (:class:`SelfClearance`):
   push a thumb out of a shin into the fingers;
 * the left leg's geoms (feet included) are paired with the right leg's (crossing steps,
   hips turned out, feet placed close together), and in each leg the links above the knee
-  with the links below the knee's own (a deep crouch), with the same margins;
+  with the links below the knee's own (a deep crouch), with the same margins; the knee's own
+  link (the shin) against its foot below the ankle link only where their real geoms touch
+  within the ankle joints' ranges (bone meshes: loco-mujoco's skeleton), calibrated by a
+  sweep as the trunk's pairs below;
 * the trunk (the pelvis and the bodies above it up to the shoulders) against the links above
   each knee (a deep stoop or crouch folds the trunk onto the hips), but for a parent and its
   child. Where their enclosures come closer than ``SELF_MARGIN`` in the rest pose (a pelvis
@@ -446,6 +449,28 @@ def build_self_clearance(
                     if bj in lower:
                         first.append(i)
                         second.append(j)
+    # The shin against its own foot below the ankle link (loco-mujoco's skeleton: its tibia
+    # mesh onto its heel bone as the ankle flexes), where the model does not exclude the pair;
+    # calibrated on the real geoms by a sweep of the ankle's joints, and dropped where they
+    # never touch within the joints' ranges (robots built not to).
+    shin_pairs: list[int] = []  # indices into first/second
+    for side in ("left", "right"):
+        if f"{side}_knee" not in keypoint_nodes:
+            continue
+        knee = int(tree.node_body[keypoint_nodes[f"{side}_knee"]])
+        below = {b for b in leg if knee in ancestors(b) and int(parent[b]) != knee and b != knee}
+        for i, bi in enumerate(body_of):
+            if bi != knee:
+                continue
+            for j, bj in enumerate(body_of):
+                if (
+                    bj in below
+                    and frozenset((bi, bj)) not in excluded
+                    and _collides(m, int(geom[i]), int(geom[j]))
+                ):
+                    shin_pairs.append(len(first))
+                    first.append(i)
+                    second.append(j)
 
     # The trunk against the thighs (a deep stoop or crouch folds the trunk onto the hips): the
     # trunk bodies the leg hangs from (the pelvis) against the links above each knee, but for a
@@ -557,6 +582,10 @@ def build_self_clearance(
                 keep[k] = False  # never touching in the sweep, or not sweepable
             else:
                 margin[k] = min(swept, margin[k])
+    for k in shin_pairs:
+        swept = swept_margin(model, tree, sc, k)
+        keep[k] = swept is not None
+        margin[k] = min(margin[k], TRUNK_MARGIN, np.inf if swept is None else swept)
     loose_radius = np.where(mesh, np.asarray(radius), 0.0)
     looseness = loose_radius[np.asarray(first)] + loose_radius[np.asarray(second)]
     looseness[arm_pairs : arm_pairs + len(hand_pairs)] = 0.0
@@ -590,17 +619,18 @@ def build_self_clearance(
 
 
 SWEEP_STEPS = 9
-"""Values per joint of the sweep that calibrates a trunk-thigh pair (:func:`swept_margin`)."""
+"""Values per joint of the sweep that calibrates a pair (:func:`swept_margin`)."""
 SWEEP_DEPTH = 0.002
 """Metres deep the swept geoms must overlap to count as touching (the solver's own tolerance)."""
 SWEEP_JOINTS = 4
-"""Most joints between a trunk body and a thigh link that :func:`swept_margin` sweeps."""
+"""Most joints between the two bodies of a pair that :func:`swept_margin` sweeps."""
 SWEEP_SLACK = 0.002
 """Metres added to the largest capsule distance at which the swept geoms touch."""
 
 
 def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, k: int) -> float | None:
-    """The margin of pair ``k`` (a trunk body and a link of the leg below it) from its real geoms.
+    """The margin of pair ``k`` (a body and a link below it: a trunk body and a thigh link, a shin
+    and its foot) from its real geoms.
 
     Enclosing capsules of a pelvis and the hip link hanging below it overlap in every pose
     (G1's by 1-5 cm), so the rest pose's distance says nothing about contact. The joints

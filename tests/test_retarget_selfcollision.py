@@ -12,8 +12,11 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from capsule_humanoid import capsule_humanoid_xml
+from robot_checks import independent_check
 
-from retarget import load_robot
+from controlmm.motion import Motion
+from retarget import load_robot, retarget_motion
 from retarget.capsules import segment_distance
 from retarget.robots import PACKAGED_ROBOTS
 from retarget.selfcollision import SELF_MARGIN, capsule_distances
@@ -122,3 +125,68 @@ def test_capsule_pairs_never_farther_than_their_geoms(name):
             g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
             real = mujoco.mj_geomDistance(model, data, g1, g2, 10.0, None)
             assert dist[t, k] <= real + 1e-4, (name, t, k, dist[t, k], real)
+
+
+def _ankle_link_humanoid(heel_post: bool) -> str:
+    """The capsule humanoid with its ankle split as most robots' is (shin -> ankle-pitch link ->
+    foot), the foot optionally carrying a post that rises 20 cm behind the ankle, 1 cm clear of
+    the shin at rest: pointing the toes swings it into the shin (as loco-mujoco's skeleton swings
+    its heel bone into its tibia)."""
+    post = '<geom type="capsule" fromto="-0.08 0 -0.02 -0.08 0 0.2" size="0.02"/>' if heel_post else ""
+    lines, out, close_at = capsule_humanoid_xml("plain").splitlines(), [], None
+    for i, line in enumerate(lines):
+        indent = line[: len(line) - len(line.lstrip())]
+        if '<body name="foot_' in line:
+            side = line.split('name="foot_')[1][0]
+            pitch = lines[i + 1].strip()
+            assert pitch.startswith(f'<joint name="ankle_y_{side}"'), pitch
+            out += [line.replace(f'"foot_{side}"', f'"ankle_{side}"'), f"{indent}  {pitch}"]
+            out.append(f'{indent}  <inertial pos="0 0 0" mass="0.2" diaginertia="1e-4 1e-4 1e-4"/>')
+            out += [f'{indent}<body name="foot_{side}" pos="0 0 0">', f"{indent}  {post}"]
+            close_at = indent
+            continue
+        if line.strip().startswith('<joint name="ankle_y_'):
+            continue
+        out.append(line)
+        if close_at is not None and line == f"{close_at}</body>":
+            out.append(f"{close_at}</body>")
+            close_at = None
+    return "\n".join(out)
+
+
+def test_a_shin_is_kept_off_its_own_foot_only_where_they_can_touch(tmp_path, sample_joints):
+    """Pairs of a shin and its foot below the ankle link are kept where the real geoms touch
+    within the ankle joints' ranges (a heel post pointing the toes swings into the shin):
+    the retargeted real clip keeps them apart in MuJoCo's own contacts; G1's feet, which
+    cannot reach their shins, add no pair."""
+    pairs = {}
+    for post in (False, True):
+        path = tmp_path / f"post_{post}.xml"
+        path.write_text(_ankle_link_humanoid(post))
+        robot = load_robot(path)
+        sc, m = robot.self_clearance, robot.model
+        assert sc is not None
+        pairs[post] = {  # (side, which geom of the foot)
+            (side, int(sc.geom[sc.second[k]]) - m.body(f"foot_{side}").geomadr[0])
+            for k in range(sc.num_pairs)
+            for side in "lr"
+            if int(sc.geom[sc.first[k]]) == m.body(f"shin_{side}").geomadr[0]
+            and m.geom_bodyid[int(sc.geom[sc.second[k]])] == m.body(f"foot_{side}").id
+        }
+    # the post (each foot's second geom) adds its pair; the foot's capsule reaches the shin too
+    assert pairs[True] - pairs[False] == {("l", 1), ("r", 1)}, pairs
+    g1 = load_robot("g1")  # its knee and ankle-roll meshes never touch within its ankle's ranges
+    shin_foot = {
+        (
+            g1.model.body(int(g1.capsules.body[g1.self_clearance.first[k]])).name,
+            int(g1.capsules.body[g1.self_clearance.second[k]]),
+        )
+        for k in range(g1.self_clearance.num_pairs)
+    }
+    assert (
+        not {(f"{s}_knee_link", g1.model.body(f"{s}_ankle_roll_link").id) for s in ("left", "right")}
+        & shin_foot
+    )
+    traj = retarget_motion(Motion(joints=sample_joints.astype(np.float64), fps=20.0), str(path), fps=30.0)
+    limits, floor_depth, self_frames = independent_check(path, traj.qpos)
+    assert (limits, self_frames) == (0, 0) and floor_depth <= 0.005, (limits, floor_depth, self_frames)
