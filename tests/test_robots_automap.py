@@ -300,6 +300,7 @@ def test_bad_robot_files_are_one_line_errors(tmp_path, motion):
         (("robots", "map", quadruped, "--out", tmp_path / "m.json"), "stands on four limbs"),
         (("robots", "map", bare_feet, "--out", tmp_path / "m.json"), "has none to stand on"),
         (("robots", "map", scene, "--out", tmp_path / "m.json"), "not a scene with loose bodies"),
+        (("robots", "map", ball_joint, "--out", tmp_path / "m.json"), "joint 'shoulder_l' is a mjJNT_BALL"),
         (
             ("retarget", src, "--robot", ball_joint, "--out", tmp_path / "r"),
             "joint 'shoulder_l' is a mjJNT_BALL",
