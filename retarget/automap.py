@@ -32,7 +32,6 @@ from retarget.anatomy import Anatomy, Limb, find_anatomy
 from retarget.clear_ranges import clear_ranges
 from retarget.geoms import collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_OFFSETS
-from retarget.kinematics import KinematicTree
 from retarget.mapping import DEFAULT_WEIGHTS, MAPPING_FORMAT, Mapping, parse_mapping
 from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path
 
@@ -82,12 +81,11 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
 
     ``"robot"`` holds the MJCF's absolute path. Raises ControlMMError (one line) for an MJCF
     that does not compile, has no floating base, a joint the retargeter cannot move (a ball
-    joint: Digit's closed-chain rods) or no two legs.
+    joint: Digit's closed-chain rods; :func:`retarget.robot_files.compile_robot`) or no two legs.
     """
     path = robot_mjcf_path(robot)
     model = compile_robot(path)
     a = anatomy if anatomy is not None else find_anatomy(model, f"robot MJCF '{path.name}'")
-    KinematicTree(model)  # refuses joints other than hinges and slides, as retargeting would
     m = a.model
     hips = np.mean([leg.root for leg in a.legs.values()], axis=0)
     scale = (hips[2] - a.floor_z) / HUMAN_HIP_HEIGHT

@@ -127,6 +127,23 @@ class Poses:
         )
 
 
+def check_joint_types(model: mujoco.MjModel, root_body: int) -> None:
+    """Raise ControlMMError (one line) for the first joint below the floating base's body
+    ``root_body`` that is neither a hinge nor a slide (a ball joint: Digit's closed-chain rods)."""
+    for j in range(model.njnt):
+        b = int(model.jnt_bodyid[j])
+        if (
+            b != root_body
+            and model.body_rootid[b] == root_body
+            and int(model.jnt_type[j]) not in (_HINGE, _SLIDE)
+        ):
+            kind = mujoco.mjtJoint(model.jnt_type[j]).name
+            raise ControlMMError(
+                f"joint '{model.joint(j).name}' is a {kind} joint; the retargeter "
+                "supports hinge and slide joints below the floating base"
+            )
+
+
 class KinematicTree:
     """The body tree of a MuJoCo model with a floating base, as arrays for batched FK."""
 
@@ -151,6 +168,7 @@ class KinematicTree:
         node_joint.append(-1)
         node_body.append(self.root_body)
         hinge_ids: list[int] = []
+        check_joint_types(model, self.root_body)
         for b in range(1, model.nbody):
             if b == self.root_body:
                 continue
@@ -164,12 +182,6 @@ class KinematicTree:
             if not joints:
                 joints = [-1]
             for k, j in enumerate(joints):
-                if j >= 0 and int(model.jnt_type[j]) not in (_HINGE, _SLIDE):
-                    kind = mujoco.mjtJoint(model.jnt_type[j]).name
-                    raise ControlMMError(
-                        f"joint '{model.joint(j).name}' is a {kind} joint; the retargeter "
-                        "supports hinge and slide joints below the floating base"
-                    )
                 node_parent.append(prev)
                 node_fpos.append(model.body_pos[b].copy() if k == 0 else np.zeros(3))
                 node_fquat.append(model.body_quat[b].copy() if k == 0 else np.array([1.0, 0, 0, 0]))

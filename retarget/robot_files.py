@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
+from retarget.kinematics import check_joint_types
 from retarget.mapping import load_mapping
 from retarget.robots import is_packaged, robot_mjcf, robot_scene
 
@@ -348,8 +349,9 @@ def compile_robot(robot: str | Path) -> mujoco.MjModel:
     """Compile a robot argument's MJCF (colliders declared) with one-line errors.
 
     Raises:
-        ControlMMError: unknown robot, a missing file, an MJCF that does not compile, or a
-            model without a free joint on a child of the world body (a floating base).
+        ControlMMError: unknown robot, a missing file, an MJCF that does not compile, a model
+            without a free joint on a child of the world body (a floating base), or with a joint
+            below it that is neither a hinge nor a slide.
     """
     spec = load_robot_spec(robot)
     path = robot_mjcf_path(robot)
@@ -357,7 +359,8 @@ def compile_robot(robot: str | Path) -> mujoco.MjModel:
         model = spec.compile()
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not compile: {_one_line(exc)}") from None
-    if free_root(model) is None:
+    root = free_root(model)
+    if root is None:
         raise ControlMMError(
             f"robot MJCF '{path.name}' has no free joint on a body of the world: a humanoid needs a "
             "floating base (<freejoint/> in its root body, or three slides and a ball or three hinges)"
@@ -372,4 +375,5 @@ def compile_robot(robot: str | Path) -> mujoco.MjModel:
             f"robot MJCF '{path.name}' has {len(free)} free joints (on {', '.join(free)}): a retargeting "
             "robot has one floating base; pass the robot's own MJCF, not a scene with loose bodies"
         )
+    check_joint_types(model, root)
     return model
