@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from retarget.broad_phase import candidates
 from retarget.capsules import segment_distance
 from retarget.kinematics import Poses
 from retarget.selfcollision import SelfClearance
@@ -67,7 +68,7 @@ def midpoint_pairs(poses: Poses, sc: SelfClearance, coupled: np.ndarray) -> Midp
     of the pairs that keep their margin at both frames.
 
     Broad phase as :func:`retarget.selfcollision.close_pairs` (an averaged capsule's segment is
-    no longer than the capsule's).
+    no longer than the capsule's; its centre lies as close to its cluster's averaged sphere centre).
     """
     t = np.flatnonzero(coupled)
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
@@ -75,8 +76,9 @@ def midpoint_pairs(poses: Poses, sc: SelfClearance, coupled: np.ndarray) -> Midp
     vector = np.einsum("tcij,cj->tci", rot, sc.segment)
     avg_start, avg_vector = 0.5 * (start[t] + start[t + 1]), 0.5 * (vector[t] + vector[t + 1])
     centre = avg_start + 0.5 * avg_vector
-    diff = centre[:, sc.first] - centre[:, sc.second]
-    fr, pr = np.nonzero(np.einsum("tpk,tpk->tp", diff, diff) < sc.reach_squared)
+    groups = sc.group_centres(poses)  # cluster spheres averaged over the two frames as well
+    node_centre = None if groups is None else 0.5 * (groups[t] + groups[t + 1])
+    fr, pr = candidates(sc.groups, centre, node_centre, sc.first, sc.second, sc.reach_squared)
     i, j = sc.first[pr], sc.second[pr]
     radii = sc.radius[i] + sc.radius[j]
     axis, pa, pb = segment_distance(avg_start[fr, i], avg_vector[fr, i], avg_start[fr, j], avg_vector[fr, j])

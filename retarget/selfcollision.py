@@ -31,7 +31,7 @@ robot's collision geoms (:class:`SelfClearance`):
   child. Where their enclosures come closer than ``SELF_MARGIN`` in the rest pose (a pelvis
   and the hip link hanging below it) the rest pose says nothing about contact: the margin is
   calibrated on the real geoms by a sweep of the joints between them
-  (:func:`swept_margin`); a pair whose geoms never touch in the sweep, or that cannot be swept
+  (:func:`swept_margins`); a pair whose geoms never touch in the sweep, or that cannot be swept
   (the trunk body not above the leg link, too many joints between them), is dropped;
 * on robots with meshes, also the trunk against each arm's shoulder links (the chain from
   the trunk down to the shoulder keypoint), calibrated the same way: the first solve of
@@ -56,6 +56,7 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
+from retarget.broad_phase import PairGroups, candidates, pair_groups
 from retarget.capsules import Capsules, segment_distance
 from retarget.geoms import FloorPoints, excluded_body_pairs
 from retarget.kinematics import KinematicTree, Poses
@@ -240,6 +241,21 @@ class SelfClearance:
         bound = self.bound
         return (bound[self.first] + bound[self.second] + self.margin) ** 2
 
+    @functools.cached_property
+    def groups(self) -> PairGroups:
+        """The pairs grouped by capsule clusters (the first level of :func:`close_pairs`' broad phase)."""
+        return pair_groups(
+            self.node, self.mid, self.bound, self.first, self.second, np.sqrt(self.reach_squared)
+        )
+
+    def group_centres(self, poses: Poses) -> np.ndarray | None:
+        """(T, N, 3) world centres of the cluster spheres of :attr:`groups` in ``poses`` (None
+        where the groups are not used)."""
+        g = self.groups
+        if not g.grouped:
+            return None
+        return poses.pos[:, g.node] + np.einsum("tnij,nj->tni", poses.rot[:, g.node], g.centre)
+
     @property
     def num_pairs(self) -> int:
         return int(self.first.size)
@@ -275,12 +291,12 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
     """The (frame, pair) entries closer than their margin.
 
     Broad phase: a sphere around each capsule (segment midpoint, half length + radius);
-    only entries whose spheres come within the margin get the segment distance.
+    only entries whose spheres come within the margin get the segment distance, and only
+    the pairs whose clusters' spheres come that close get that test (:mod:`retarget.broad_phase`).
     """
     rot, pos = poses.rot[:, sc.node], poses.pos[:, sc.node]
     mid = pos + np.einsum("tcij,cj->tci", rot, sc.mid)
-    diff = mid[:, sc.first] - mid[:, sc.second]
-    fr, pr = np.nonzero(np.einsum("tpk,tpk->tp", diff, diff) < sc.reach_squared)
+    fr, pr = candidates(sc.groups, mid, sc.group_centres(poses), sc.first, sc.second, sc.reach_squared)
     i, j = sc.first[pr], sc.second[pr]
 
     def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -572,20 +588,22 @@ def build_self_clearance(
     keep[hand_pairs] = rest_dist[0, hand_pairs] >= SELF_MARGIN + REST_SLACK
     keep[spine_pairs] = rest_dist[0, spine_pairs] >= SELF_MARGIN + REST_SLACK
     margin[spine_pairs] = TRUNK_MARGIN
+    # Trunk pairs whose enclosures are close at rest, and the shin pairs: calibrated on the
+    # real geometry.
+    calibrate = [k for k in trunk_pairs if rest_dist[0, k] - REST_SLACK < TRUNK_MARGIN]
+    swept = swept_margins(model, tree, sc, calibrate + shin_pairs)
     for k in trunk_pairs:
         margin[k] = min(margin[k], TRUNK_MARGIN)
-        if (
-            rest_dist[0, k] - REST_SLACK < TRUNK_MARGIN
-        ):  # enclosures close at rest: calibrate on the real geometry
-            swept = swept_margin(model, tree, sc, k)
-            if swept is None:
+        if k in swept:
+            found = swept[k]
+            if found is None:
                 keep[k] = False  # never touching in the sweep, or not sweepable
             else:
-                margin[k] = min(swept, margin[k])
+                margin[k] = min(found, margin[k])
     for k in shin_pairs:
-        swept = swept_margin(model, tree, sc, k)
-        keep[k] = swept is not None
-        margin[k] = min(margin[k], TRUNK_MARGIN, np.inf if swept is None else swept)
+        found = swept[k]
+        keep[k] = found is not None
+        margin[k] = min(margin[k], TRUNK_MARGIN, np.inf if found is None else found)
     loose_radius = np.where(mesh, np.asarray(radius), 0.0)
     looseness = loose_radius[np.asarray(first)] + loose_radius[np.asarray(second)]
     looseness[arm_pairs : arm_pairs + len(hand_pairs)] = 0.0
@@ -619,61 +637,94 @@ def build_self_clearance(
 
 
 SWEEP_STEPS = 9
-"""Values per joint of the sweep that calibrates a pair (:func:`swept_margin`)."""
+"""Values per joint of the sweep that calibrates a pair (:func:`swept_margins`)."""
 SWEEP_DEPTH = 0.002
 """Metres deep the swept geoms must overlap to count as touching (the solver's own tolerance)."""
 SWEEP_JOINTS = 4
-"""Most joints between the two bodies of a pair that :func:`swept_margin` sweeps."""
+"""Most joints between the two bodies of a pair that :func:`swept_margins` sweeps."""
 SWEEP_SLACK = 0.002
 """Metres added to the largest capsule distance at which the swept geoms touch."""
 
 
-def swept_margin(model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, k: int) -> float | None:
-    """The margin of pair ``k`` (a body and a link below it: a trunk body and a thigh link, a shin
-    and its foot) from its real geoms.
+def swept_margins(
+    model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, pairs: list[int]
+) -> dict[int, float | None]:
+    """The margin of each pair of ``pairs`` (a body and a link below it: a trunk body and a thigh
+    link, a shin and its foot) from its real geoms.
 
     Enclosing capsules of a pelvis and the hip link hanging below it overlap in every pose
     (G1's by 1-5 cm), so the rest pose's distance says nothing about contact. The joints
     between the two bodies (at most ``SWEEP_JOINTS``) are swept over their ranges
     (``SWEEP_STEPS`` values each, +-pi for unlimited ones), the geoms' own distance measured
-    by MuJoCo (``mj_geomDistance``, convex hulls for meshes): the margin is the largest
-    capsule distance of a pose where they overlap by more than ``SWEEP_DEPTH``, plus
-    ``SWEEP_SLACK`` (the grid is coarse: off it, overlaps up to about 8 mm may stay above the
-    margin, checked in the tests; ``controlmm validate`` allows 5 mm). None: no swept pose
-    makes them touch, or the pair cannot be swept (the trunk body is not above the leg link,
-    or more than ``SWEEP_JOINTS`` joints lie between them).
+    by MuJoCo (``mj_geomDistance``, convex hulls for meshes) where their capsules overlap
+    (the capsules enclose them): the margin is the largest capsule distance of a pose where
+    they overlap by more than ``SWEEP_DEPTH``, plus ``SWEEP_SLACK`` (the grid is coarse: off
+    it, overlaps up to about 8 mm may stay above the margin, checked in the tests;
+    ``controlmm validate`` allows 5 mm). None: no swept pose makes them touch, or the pair
+    cannot be swept (the trunk body is not above the leg link, or more than ``SWEEP_JOINTS``
+    joints lie between them). The pairs of one body pair share their sweep (a body split
+    into convex pieces has hundreds of pairs with the next).
     """
-    trunk_body = int(tree.node_body[sc.node[sc.first[k]]])
+    out: dict[int, float | None] = {}
+    by_bodies: dict[tuple[int, int], list[int]] = {}
+    for k in sorted(pairs):
+        key = (int(tree.node_body[sc.node[sc.first[k]]]), int(tree.node_body[sc.node[sc.second[k]]]))
+        by_bodies.setdefault(key, []).append(k)
+    data = mujoco.MjData(model)
+    for (trunk_body, link), ks in by_bodies.items():
+        joints = _joints_between(model, trunk_body, link)
+        if joints is None or len(joints) > SWEEP_JOINTS:
+            out.update(dict.fromkeys(ks))
+            continue
+        col = [int(np.flatnonzero(tree.joint_ids == j)[0]) for j in joints]
+        lo = np.clip(tree.lower[col], -np.pi, np.pi)
+        hi = np.clip(tree.upper[col], -np.pi, np.pi)
+        grid = np.stack(
+            np.meshgrid(*(np.linspace(a, b_, SWEEP_STEPS) for a, b_ in zip(lo, hi, strict=True))), -1
+        ).reshape(-1, len(col))
+        q = np.tile(tree.qpos0, (len(grid), 1))
+        q[:, col] = grid
+        n = len(q)
+        poses = tree.forward(np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), q)
+        first, second = sc.first[ks], sc.second[ks]
+        capsule = np.stack(
+            [_sweep_distances(poses, sc, int(i), int(j)) for i, j in zip(first, second, strict=True)], axis=1
+        )  # (n, K)
+        adr = model.jnt_qposadr[joints]
+        g1, g2 = sc.geom[first], sc.geom[second]
+        touching = np.zeros_like(capsule, dtype=bool)
+        # The capsules enclose the geoms: the geoms overlap only where the capsules overlap as deep.
+        near = capsule < -SWEEP_DEPTH
+        for t in np.flatnonzero(near.any(axis=1)):
+            data.qpos[:] = model.qpos0
+            data.qpos[adr] = grid[t]
+            mujoco.mj_kinematics(model, data)
+            for p in np.flatnonzero(near[t]):
+                dist = mujoco.mj_geomDistance(model, data, int(g1[p]), int(g2[p]), 0.05, None)
+                touching[t, p] = dist < -SWEEP_DEPTH
+        for c, k in enumerate(ks):
+            out[k] = float(capsule[touching[:, c], c].max()) + SWEEP_SLACK if touching[:, c].any() else None
+    return out
+
+
+def _joints_between(model: mujoco.MjModel, above: int, below: int) -> list[int] | None:
+    """The joints from body ``below`` up to (not including) body ``above``; None where
+    ``above`` is not an ancestor of ``below``."""
     joints: list[int] = []
-    b = int(tree.node_body[sc.node[sc.second[k]]])
-    while b != trunk_body:
+    b = below
+    while b != above:
         if b <= 0:
             return None
         joints += range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b]))
         b = int(model.body_parentid[b])
-    if len(joints) > SWEEP_JOINTS:
-        return None
-    col = [int(np.flatnonzero(tree.joint_ids == j)[0]) for j in joints]
-    lo = np.clip(tree.lower[col], -np.pi, np.pi)
-    hi = np.clip(tree.upper[col], -np.pi, np.pi)
-    grid = np.stack(
-        np.meshgrid(*(np.linspace(a, b_, SWEEP_STEPS) for a, b_ in zip(lo, hi, strict=True))), -1
-    ).reshape(-1, len(col))
-    q = np.tile(tree.qpos0, (len(grid), 1))
-    q[:, col] = grid
-    n = len(q)
-    root_pos, root_rot = np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1))
-    one = sc.select_pairs(np.arange(sc.num_pairs) == k)
-    capsule, _, _ = capsule_distances(tree.forward(root_pos, root_rot, q), one)
-    data = mujoco.MjData(model)
-    adr = model.jnt_qposadr[joints]
-    g1, g2 = int(sc.geom[sc.first[k]]), int(sc.geom[sc.second[k]])
-    touching = np.zeros(n, dtype=bool)
-    for t in range(n):
-        data.qpos[:] = model.qpos0
-        data.qpos[adr] = grid[t]
-        mujoco.mj_kinematics(model, data)
-        touching[t] = mujoco.mj_geomDistance(model, data, g1, g2, 0.05, None) < -SWEEP_DEPTH
-    if not touching.any():
-        return None
-    return float(capsule[touching, 0].max()) + SWEEP_SLACK
+    return joints
+
+
+def _sweep_distances(poses: Poses, sc: SelfClearance, i: int, j: int) -> np.ndarray:
+    """(T,) signed distance of capsules ``i`` and ``j`` of ``sc`` in ``poses``."""
+    c = [i, j]
+    rot, pos = poses.rot[:, sc.node[c]], poses.pos[:, sc.node[c]]
+    start = pos + np.einsum("tcij,cj->tci", rot, sc.p0[c])  # as capsule_distances computes them
+    end = pos + np.einsum("tcij,cj->tci", rot, sc.p1[c])
+    axis, _, _ = segment_distance(start[:, 0], end[:, 0] - start[:, 0], start[:, 1], end[:, 1] - start[:, 1])
+    return axis - sc.radius[i] - sc.radius[j]
