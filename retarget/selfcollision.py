@@ -299,9 +299,18 @@ def close_pairs(poses: Poses, sc: SelfClearance) -> ClosePairs:
     fr, pr = candidates(sc.groups, mid, sc.group_centres(poses), sc.first, sc.second, sc.reach_squared)
     i, j = sc.first[pr], sc.second[pr]
 
-    def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r, o = rot[fr, c], pos[fr, c]
-        return o + np.einsum("eij,ej->ei", r, sc.p0[c]), np.einsum("eij,ej->ei", r, sc.segment[c])
+    if fr.size > mid.shape[0] * mid.shape[1]:  # more entries than capsules: every segment once
+        start = pos + np.einsum("tcij,cj->tci", rot, sc.p0)
+        vector = np.einsum("tcij,cj->tci", rot, sc.segment)
+
+        def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return start[fr, c], vector[fr, c]
+
+    else:
+
+        def ends(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            r, o = rot[fr, c], pos[fr, c]
+            return o + np.einsum("eij,ej->ei", r, sc.p0[c]), np.einsum("eij,ej->ei", r, sc.segment[c])
 
     a0, da = ends(i)
     b0, db = ends(j)
