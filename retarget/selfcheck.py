@@ -391,15 +391,21 @@ class _PairIndex:
 
     def get(self, g1: int, g2: int) -> np.ndarray | None:
         """The pairs (ascending) of geoms ``g1``, ``g2`` (either order); None: not paired."""
+        if not (0 <= g1 < self.span and 0 <= g2 < self.span):  # a geom of none of the pairs
+            return None
         key = g1 * self.span + g2
         lo, hi = np.searchsorted(self.keys, [key, key + 1])
         return self.pair[lo:hi] if hi > lo else None
 
     def contains(self, g1: np.ndarray, g2: np.ndarray) -> np.ndarray:
         """(N,) bool: geoms ``g1``, ``g2`` (N,) are paired."""
-        key = np.asarray(g1, dtype=np.int64) * self.span + np.asarray(g2, dtype=np.int64)
-        at = np.minimum(np.searchsorted(self.keys, key), max(len(self.keys) - 1, 0))
-        return self.keys[at] == key if len(self.keys) else np.zeros(len(key), dtype=bool)
+        g1, g2 = np.asarray(g1, dtype=np.int64), np.asarray(g2, dtype=np.int64)
+        inside = (g1 >= 0) & (g1 < self.span) & (g2 >= 0) & (g2 < self.span)
+        key = g1 * self.span + g2
+        if not len(self.keys):
+            return np.zeros(len(key), dtype=bool)
+        at = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
+        return inside & (self.keys[at] == key)
 
 
 def _pair_index(sc: SelfClearance) -> _PairIndex:

@@ -50,6 +50,7 @@ from retarget.selfcheck import (
     RELAX_FRACTION,
     RELAX_MOST,
     RELAXED_SOLVES,
+    _pair_index,
     contact_balls,
     overlap_frames,
     overlap_gaps,
@@ -620,3 +621,29 @@ def test_a_rung_refused_for_its_speed_alone_is_solved_again_slower():
     assert traj.metrics["joint_limit_violations"] == 0
     report = sim.check_trajectory(scenes.load_scene("empty", robot="apollo"), traj.qpos, traj.fps)
     assert report.stats["self_collision_frames"] == 0 and report.stats["joint_velocity_violations"] == 0
+
+
+def test_the_geom_pair_index_names_each_pair_of_geoms_and_nothing_else():
+    """The sorted index of geom pairs (a robot split into convex pieces has 455,000 pairs)
+    answers as a dict of the pairs would, both orders, for every two geoms of the model and
+    for ids beyond them (MuJoCo's contacts name the floor and the scene's geoms too)."""
+    robot = load_robot("g1")
+    sc = robot.self_clearance
+    assert sc is not None
+    expected: dict[tuple[int, int], list[int]] = {}
+    for k, (a, b) in enumerate(zip(sc.geom[sc.first].tolist(), sc.geom[sc.second].tolist(), strict=True)):
+        expected.setdefault((a, b), []).append(k)
+        if a != b:
+            expected.setdefault((b, a), []).append(k)
+    index = _pair_index(sc)
+    ids = range(-1, robot.model.ngeom + 3 * int(sc.geom.max()))
+    for a in ids:
+        for b in ids:
+            found = index.get(a, b)
+            assert (None if found is None else found.tolist()) == expected.get((a, b)), (a, b)
+    g1, g2 = np.meshgrid(np.array(ids), np.array(ids), indexing="ij")
+    contains = index.contains(g1.ravel(), g2.ravel())
+    assert contains.tolist() == [
+        (int(a), int(b)) in expected for a, b in zip(g1.ravel(), g2.ravel(), strict=True)
+    ]
+    assert contains.sum() == len(expected)
