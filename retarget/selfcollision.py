@@ -702,8 +702,9 @@ def swept_margins(
         adr = model.jnt_qposadr[joints]
         g1, g2 = sc.geom[first], sc.geom[second]
         touching = np.zeros_like(capsule, dtype=bool)
-        # The capsules enclose the geoms: the geoms overlap only where the capsules overlap as deep.
-        near = capsule < -SWEEP_DEPTH
+        # The capsules enclose the geoms: the geoms overlap only where the capsules overlap (as
+        # deep but for a flat cylinder's, fit to 16 points of each rim: SWEEP_DEPTH of slack).
+        near = capsule < 0.0
         for t in np.flatnonzero(near.any(axis=1)):
             data.qpos[:] = model.qpos0
             data.qpos[adr] = grid[t]
