@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 GROUPED = 8
-"""Mean pairs per group from which the two-level test is used."""
+"""Mean pairs per group from which the two-level test is used (fewer: no groups)."""
 CLUSTER = 8
 """Most capsules of one node in one sphere (a node with more gets several)."""
 
@@ -37,7 +37,6 @@ class PairGroups:
         reach: (G,) m, the cluster-sphere distance below which a pair of the group may be
             within its own reach.
         order: (P,) pair indices sorted by group; start: (G + 1,) each group's slice of it.
-        grouped: whether :func:`candidates` uses the groups (``GROUPED`` pairs per group).
     """
 
     node: np.ndarray
@@ -48,7 +47,6 @@ class PairGroups:
     reach: np.ndarray
     order: np.ndarray
     start: np.ndarray
-    grouped: bool
 
 
 def pair_groups(
@@ -58,16 +56,14 @@ def pair_groups(
     first: np.ndarray,
     second: np.ndarray,
     reach: np.ndarray,
-) -> PairGroups:
+) -> PairGroups | None:
     """Groups of the pairs ``first``, ``second`` (P,) of capsules on tree nodes ``node`` (C,),
     their sphere centres ``mid`` (C, 3) in the node frames and radii ``bound`` (C,), each pair
-    within reach below a centre distance ``reach`` (P,) m: by the clusters of :func:`_clusters`."""
+    within reach below a centre distance ``reach`` (P,) m: by the clusters of :func:`_clusters`.
+    None where the groups would hold fewer than ``GROUPED`` pairs each."""
     node_pairs = len(np.unique(node[first] * (int(node.max(initial=0)) + 1) + node[second]))
-    if len(first) < GROUPED * max(node_pairs, 1):  # fewer pairs than clusters could group
-        empty = np.zeros(0, dtype=int)
-        return PairGroups(
-            empty, np.zeros((0, 3)), np.zeros(0), empty, empty, np.zeros(0), empty, empty, False
-        )
+    if len(first) < GROUPED * max(node_pairs, 1):  # the clusters' groups are at least as many
+        return None
     cluster, used = _clusters(node, mid)
     centre = np.zeros((len(used), 3))
     radius = np.zeros(len(used))
@@ -86,9 +82,9 @@ def pair_groups(
     extra = reach - bound[first] - bound[second]
     group_extra = np.maximum.reduceat(extra[order], start[:-1]) if len(order) else np.zeros(0)
     ga, gb = keys // len(used), keys % len(used)
-    reach_g = radius[ga] + radius[gb] + group_extra
-    grouped = len(order) >= GROUPED * max(len(keys), 1)
-    return PairGroups(used, centre, radius, ga, gb, reach_g, order, start, grouped)
+    if len(order) < GROUPED * max(len(keys), 1):
+        return None
+    return PairGroups(used, centre, radius, ga, gb, radius[ga] + radius[gb] + group_extra, order, start)
 
 
 def _clusters(node: np.ndarray, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +111,7 @@ def _clusters(node: np.ndarray, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def candidates(
-    groups: PairGroups,
+    groups: PairGroups | None,
     mid: np.ndarray,
     centre: np.ndarray | None,
     first: np.ndarray,
@@ -126,13 +122,12 @@ def candidates(
     by frame then pair.
 
     Args:
-        groups: :func:`pair_groups` of the pairs.
+        groups: :func:`pair_groups` of the pairs (None: every pair is tested).
         mid: (T, C, 3) world centres of the capsules' spheres; centre: (T, N, 3) world
-            centres of the cluster spheres in the same frames (needed only where
-            ``groups.grouped``).
+            centres of the cluster spheres in the same frames (None without groups).
         first, second: (P,) the pairs' capsules; reach2: (P,) their squared reach.
     """
-    if not groups.grouped or centre is None:
+    if groups is None or centre is None:
         d = mid[:, first] - mid[:, second]
         frame, pair = np.nonzero(np.einsum("tpk,tpk->tp", d, d) < reach2)
         return frame, pair

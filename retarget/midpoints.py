@@ -76,9 +76,9 @@ def midpoint_pairs(poses: Poses, sc: SelfClearance, coupled: np.ndarray) -> Midp
     vector = np.einsum("tcij,cj->tci", rot, sc.segment)
     avg_start, avg_vector = 0.5 * (start[t] + start[t + 1]), 0.5 * (vector[t] + vector[t + 1])
     centre = avg_start + 0.5 * avg_vector
-    groups = sc.group_centres(poses)  # cluster spheres averaged over the two frames as well
-    node_centre = None if groups is None else 0.5 * (groups[t] + groups[t + 1])
-    fr, pr = candidates(sc.groups, centre, node_centre, sc.first, sc.second, sc.reach_squared)
+    clusters = sc.group_centres(poses)  # the cluster spheres averaged over the two frames as well
+    cluster_centre = None if clusters is None else 0.5 * (clusters[t] + clusters[t + 1])
+    fr, pr = candidates(sc.groups, centre, cluster_centre, sc.first, sc.second, sc.reach_squared)
     i, j = sc.first[pr], sc.second[pr]
     radii = sc.radius[i] + sc.radius[j]
     axis, pa, pb = segment_distance(avg_start[fr, i], avg_vector[fr, i], avg_start[fr, j], avg_vector[fr, j])

@@ -242,17 +242,18 @@ class SelfClearance:
         return (bound[self.first] + bound[self.second] + self.margin) ** 2
 
     @functools.cached_property
-    def groups(self) -> PairGroups:
-        """The pairs grouped by capsule clusters (the first level of :func:`close_pairs`' broad phase)."""
+    def groups(self) -> PairGroups | None:
+        """The pairs grouped by capsule clusters (the first level of :func:`close_pairs`' broad
+        phase; None where too few pairs share their clusters to gain from it)."""
         return pair_groups(
             self.node, self.mid, self.bound, self.first, self.second, np.sqrt(self.reach_squared)
         )
 
     def group_centres(self, poses: Poses) -> np.ndarray | None:
         """(T, N, 3) world centres of the cluster spheres of :attr:`groups` in ``poses`` (None
-        where the groups are not used)."""
+        without groups)."""
         g = self.groups
-        if not g.grouped:
+        if g is None:
             return None
         return poses.pos[:, g.node] + np.einsum("tnij,nj->tni", poses.rot[:, g.node], g.centre)
 

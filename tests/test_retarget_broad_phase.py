@@ -53,12 +53,13 @@ def g1_poses():
 def test_split_capsules_are_grouped_and_every_close_entry_found(g1_poses, pieces):
     robot, poses = g1_poses
     sc = robot.self_clearance
-    assert sc is not None and not sc.groups.grouped  # one capsule per geom: the one-level test
+    assert sc is not None and sc.groups is None  # one capsule per geom: the one-level test
     split = _split(sc, pieces)
+    groups = split.groups
+    assert groups is not None
     if pieces > CLUSTER:  # every node several clusters
-        assert len(split.groups.node) >= 2 * len(np.unique(split.node))
-    assert split.groups.grouped
-    assert len(split.groups.first) < split.num_pairs / 8
+        assert len(groups.node) >= 2 * len(np.unique(split.node))
+    assert len(groups.first) < split.num_pairs / 8
     dist, _, _ = capsule_distances(poses, split)  # (T, P): the reference
     frame, pair = np.nonzero(dist < split.margin)
     close = close_pairs(poses, split)
