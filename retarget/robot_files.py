@@ -28,12 +28,12 @@ import functools
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from retarget.kinematics import check_joint_types
 from retarget.mapping import load_mapping
 from retarget.robots import is_packaged, robot_mjcf, robot_scene
+from retarget.spec_edits import drop_closed_chain_rods, drop_placeholder_bodies, free_floating_base
 
 COLLISION_GROUP = 3
 """Geom group of collision geoms in MuJoCo Menagerie models (visual geoms: groups 1-2)."""
@@ -94,8 +94,8 @@ def free_root(model: mujoco.MjModel) -> int | None:
 
 def read_robot_mjcf(path: str | Path) -> mujoco.MjSpec:
     """A robot MJCF file's ``mujoco.MjSpec`` with a floating base written as joints made a free
-    joint (:func:`free_floating_base`) and bodies that only hold joints beside the robot
-    removed (:func:`drop_placeholder_bodies`).
+    joint, bodies that only hold joints beside the robot removed and the passive rods of closed
+    chains removed (:mod:`retarget.spec_edits`).
 
     Raises:
         InputFileError: the file does not parse.
@@ -106,147 +106,8 @@ def read_robot_mjcf(path: str | Path) -> mujoco.MjSpec:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
     free_floating_base(spec)
     drop_placeholder_bodies(spec)
+    drop_closed_chain_rods(spec)
     return spec
-
-
-def _six_dof(joints: list[mujoco.MjsJoint]) -> bool:
-    """Whether a body's ``joints`` move it freely: three slides along independent axes and a
-    ball, or three hinges whose consecutive axes are not parallel (Euler angles)."""
-    kind = mujoco.mjtJoint
-    slides = [np.asarray(j.axis, dtype=float) for j in joints if j.type == kind.mjJNT_SLIDE]
-    hinges = [np.asarray(j.axis, dtype=float) for j in joints if j.type == kind.mjJNT_HINGE]
-    balls = sum(j.type == kind.mjJNT_BALL for j in joints)
-    if len(joints) != 6 - 2 * balls or len(slides) != 3 or (balls, len(hinges)) not in ((1, 0), (0, 3)):
-        return False
-    unit = [a / max(float(np.linalg.norm(a)), 1e-12) for a in slides + hinges]
-    if abs(float(np.linalg.det(np.array(unit[:3])))) < 1e-3:
-        return False
-    return all(float(np.linalg.norm(np.cross(a, b))) > 1e-3 for a, b in zip(unit[3:], unit[4:], strict=False))
-
-
-def _remove_joints(
-    spec: mujoco.MjSpec, model: mujoco.MjModel, joints: list[int], root: int | None = None
-) -> list[tuple[mujoco.MjsKey, np.ndarray, np.ndarray, np.ndarray]]:
-    """Prepare the removal of ``joints`` (ids in ``model``, the spec compiled) from ``spec``:
-    delete the actuators and sensors on them and empty the keyframes, returning each one's
-    (key, qpos, qvel, ctrl) without those joints' entries; with ``root`` (a body id) its qpos
-    starts with that body's world pose (x y z, w x y z) and its qvel with 6 zeros, the layout
-    of the free joint that replaces ``joints``. The caller deletes the joints (or their
-    bodies), then sets the keyframes (:func:`_set_keys`)."""
-    names = {model.joint(j).name for j in joints}
-    size = {int(mujoco.mjtJoint.mjJNT_BALL): (4, 3), int(mujoco.mjtJoint.mjJNT_FREE): (7, 6)}
-    qdrop: list[int] = []
-    vdrop: list[int] = []
-    for j in joints:
-        nq, nv = size.get(int(model.jnt_type[j]), (1, 1))
-        qdrop.extend(range(model.jnt_qposadr[j], model.jnt_qposadr[j] + nq))
-        vdrop.extend(range(model.jnt_dofadr[j], model.jnt_dofadr[j] + nv))
-    on = [
-        i
-        for i, a in enumerate(spec.actuators)
-        if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in names
-    ]
-    data = mujoco.MjData(model)
-    keys = []
-    for key in spec.keys:
-        qpos, qvel, ctrl = (np.asarray(x, dtype=float) for x in (key.qpos, key.qvel, key.ctrl))
-        if len(qpos) == model.nq:
-            kept = np.delete(qpos, qdrop)
-            if root is not None:
-                data.qpos[:] = qpos
-                mujoco.mj_kinematics(model, data)
-                kept = np.concatenate([data.xpos[root], data.xquat[root], kept])
-            qpos = kept
-        if len(qvel) == model.nv:
-            qvel = np.concatenate([np.zeros(6 if root is not None else 0), np.delete(qvel, vdrop)])
-        if len(ctrl) == model.nu:
-            ctrl = np.delete(ctrl, on)
-        keys.append((key, qpos, qvel, ctrl))
-        key.qpos, key.qvel, key.ctrl = [], [], []
-    for item in [spec.actuators[i] for i in on] + [
-        x for x in spec.sensors if x.objtype == mujoco.mjtObj.mjOBJ_JOINT and x.objname in names
-    ]:
-        spec.delete(item)
-    return keys
-
-
-def _set_keys(keys: list[tuple[mujoco.MjsKey, np.ndarray, np.ndarray, np.ndarray]]) -> None:
-    for key, qpos, qvel, ctrl in keys:
-        key.qpos, key.qvel, key.ctrl = qpos, qvel, ctrl
-
-
-def free_floating_base(spec: mujoco.MjSpec) -> str | None:
-    """Write a floating base given as joints as one free joint named ``floating_base`` (in place).
-
-    Some humanoid MJCFs move their root body with three slides and a ball (humanoid-gym's
-    XBot-L) or three slides and three hinges (loco-mujoco's Talos and Atlas) instead of a
-    ``<freejoint/>``. Where no body of the world has a free joint and exactly one has such
-    joints (and only those), they are replaced by a free joint, the body placed where those
-    joints put it in ``qpos0``; keyframes are converted (the root's pose from their joints,
-    its velocity zero), actuators and sensors on the removed joints dropped. Trajectories
-    then use the free joint's layout (position, quaternion w x y z, then the other joints).
-    Returns the body's name, or None where nothing changed (a file that does not compile
-    is left as it is: :func:`compile_robot` reports it).
-    """
-    bodies = list(spec.worldbody.bodies)
-    if any(j.type == mujoco.mjtJoint.mjJNT_FREE for b in bodies for j in b.joints):
-        return None
-    roots = [b for b in bodies if _six_dof(list(b.joints))]
-    if len(roots) != 1:
-        return None
-    body = roots[0]
-    body.name = body.name or "floating_base_body"
-    try:
-        model = spec.compile()
-    except ValueError:
-        return None
-    bid = model.body(body.name).id
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) == bid], bid)
-    for joint in list(body.joints):
-        spec.delete(joint)
-    body.pos, body.quat = data.xpos[bid].copy(), data.xquat[bid].copy()
-    body.add_freejoint(name="floating_base")
-    _set_keys(keys)
-    return body.name
-
-
-def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
-    """Delete the bodies of the world that hold joints but no geometry, beside a robot with a
-    free joint (in place): Unitree's ``g1_23dof.xml`` keeps the 29-DoF G1's six missing waist
-    and wrist joints on massless bodies 20 m above the world, so that its actuators keep the
-    29-DoF layout; they move nothing of the robot. Their actuators, sensors and keyframe
-    entries go with them. Returns their names."""
-    bodies = list(spec.worldbody.bodies)
-    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for b in bodies for j in b.joints):
-        return []
-
-    def tree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
-        return [body, *[d for c in body.bodies for d in tree(c)]]
-
-    loose = [
-        b
-        for b in bodies
-        if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)
-        and any(len(list(d.joints)) for d in tree(b))
-        and not any(len(list(d.geoms)) for d in tree(b))
-    ]
-    if not loose:
-        return []
-    try:
-        model = spec.compile()
-    except ValueError:
-        return []
-    ids = {model.body(d.name).id for b in loose for d in tree(b) if d.name}
-    if len(ids) != sum(len(tree(b)) for b in loose):  # an unnamed body among them: leave them
-        return []
-    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
-    names = [b.name for b in loose]
-    for body in loose:
-        spec.delete(body)
-    _set_keys(keys)
-    return names
 
 
 def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:

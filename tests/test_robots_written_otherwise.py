@@ -520,3 +520,60 @@ def test_a_floating_base_written_as_joints_retargets_as_a_free_joint(tmp_path, h
     assert (
         done.returncode == 2 and "no free joint" in done.stderr and len(done.stderr.strip().splitlines()) == 1
     )
+
+
+def _with_rods(text: str, tied: bool = True) -> str:
+    """``text`` with a rod on a ball joint behind each thigh whose lower end a ``<connect>``
+    pins to the shin (with ``tied``), as Digit's and Cassie's achilles rods; an exclude, a
+    sensor on a site of the rod and a sensor on the knee."""
+    for side in "lr":
+        rod = (
+            f'<body name="rod_{side}" pos="-0.07 0 -0.05"><joint name="rod_{side}" type="ball"/>'
+            f'<geom type="capsule" fromto="0 0 0 0 0 -0.38" size="0.008"/>'
+            f'<site name="rod_end_{side}" pos="0 0 -0.38"/></body>'
+        )
+        text = text.replace(f'<body name="shin_{side}"', f'{rod}<body name="shin_{side}"', 1)
+    connect = "".join(f'<connect body1="rod_{s}" body2="shin_{s}" anchor="0 0 -0.38"/>' for s in "lr")
+    sensors = '<framepos objtype="site" objname="rod_end_l"/><jointpos joint="knee_l"/>'
+    extra = (f"<equality>{connect}</equality>" if tied else "") + (
+        f'<contact><exclude body1="rod_l" body2="shin_l"/></contact><sensor>{sensors}</sensor>'
+    )
+    return text.replace("</mujoco>", f"{extra}\n</mujoco>", 1)
+
+
+def test_the_rods_of_closed_chains_are_dropped(tmp_path, humanoids, motion):
+    """Digit's and Cassie's legs close loops through passive rods on ball joints, pinned to
+    another link by a ``<connect>``: the rods, their constraints, the exclude and the sensor
+    naming them and their keyframe entries go, and the robot retargets exactly as the file
+    without them does. A ball joint that closes no loop is still refused in one line."""
+    plain = humanoids["plain"].read_text()
+    reference = compile_robot(humanoids["plain"])
+    rods = _with_rods(plain)
+    model = mujoco.MjModel.from_xml_string(rods)
+    assert model.nq == reference.nq + 8 and model.neq == 2 and model.nsensor == 2
+    key = np.concatenate([model.qpos0[:7], np.zeros(model.nq - 7)])
+    key[7:] = 0.1 * np.arange(1, model.nq - 6)
+    path = tmp_path / "rods.xml"
+    path.write_text(
+        rods.replace("</mujoco>", f'<keyframe><key qpos="{" ".join(map(str, key))}"/></keyframe></mujoco>')
+    )
+    dropped = compile_robot(path)
+    assert dropped.nq == reference.nq and dropped.neq == 0 and dropped.nsensor == 1
+    assert [dropped.joint(j).name for j in range(dropped.njnt)] == [
+        reference.joint(j).name for j in range(reference.njnt)
+    ]
+    rod_qpos = [model.jnt_qposadr[model.joint(f"rod_{s}").id] + np.arange(4) for s in "lr"]
+    np.testing.assert_array_equal(dropped.key_qpos[0], np.delete(key, np.concatenate(rod_qpos)))
+    src = tmp_path / "clip.npy"
+    np.save(src, motion.joints[:40])
+    for name in ("plain", "rods"):
+        robot = humanoids["plain"] if name == "plain" else path
+        done = cli("retarget", src, "--robot", robot, "--fps", 30, "--out", tmp_path / name)
+        assert done.returncode == 0, done.stderr
+    with np.load(tmp_path / "plain.npz") as a, np.load(tmp_path / "rods.npz") as b:
+        np.testing.assert_allclose(b["qpos"], a["qpos"], atol=1e-9)
+    loose = tmp_path / "loose.xml"
+    loose.write_text(_with_rods(plain, tied=False))
+    done = cli("robots", "map", loose, "--out", tmp_path / "loose.json")
+    err = done.stderr.strip()
+    assert done.returncode == 2 and "joint 'rod_l' is a mjJNT_BALL" in err and len(err.splitlines()) == 1, err

@@ -1,0 +1,228 @@
+"""Edits of a robot's ``mujoco.MjSpec`` that make a humanoid MJCF written otherwise retargetable.
+
+:func:`retarget.robot_files.read_robot_mjcf` applies them to every robot file, in this order:
+
+- :func:`free_floating_base`: a floating base written as three slides and a ball or three
+  hinges becomes one free joint;
+- :func:`drop_placeholder_bodies`: bodies beside the robot that hold joints but no geometry go;
+- :func:`drop_closed_chain_rods`: the passive rods of closed chains (a ball joint at one end,
+  an equality constraint at the other) go with their constraints.
+
+Each keeps the file's keyframes, actuators and sensors consistent with the joints it removes;
+trajectories then use the edited model's ``qpos`` layout (the free joint's position and
+quaternion w x y z, then the remaining joints in MJCF order; the JSON beside each trajectory
+names them).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+
+def _six_dof(joints: list[mujoco.MjsJoint]) -> bool:
+    """Whether a body's ``joints`` move it freely: three slides along independent axes and a
+    ball, or three hinges whose consecutive axes are not parallel (Euler angles)."""
+    kind = mujoco.mjtJoint
+    slides = [np.asarray(j.axis, dtype=float) for j in joints if j.type == kind.mjJNT_SLIDE]
+    hinges = [np.asarray(j.axis, dtype=float) for j in joints if j.type == kind.mjJNT_HINGE]
+    balls = sum(j.type == kind.mjJNT_BALL for j in joints)
+    if len(joints) != 6 - 2 * balls or len(slides) != 3 or (balls, len(hinges)) not in ((1, 0), (0, 3)):
+        return False
+    unit = [a / max(float(np.linalg.norm(a)), 1e-12) for a in slides + hinges]
+    if abs(float(np.linalg.det(np.array(unit[:3])))) < 1e-3:
+        return False
+    return all(float(np.linalg.norm(np.cross(a, b))) > 1e-3 for a, b in zip(unit[3:], unit[4:], strict=False))
+
+
+def _remove_joints(
+    spec: mujoco.MjSpec, model: mujoco.MjModel, joints: list[int], root: int | None = None
+) -> list[tuple[mujoco.MjsKey, np.ndarray, np.ndarray, np.ndarray]]:
+    """Prepare the removal of ``joints`` (ids in ``model``, the spec compiled) from ``spec``:
+    delete the actuators and sensors on them and empty the keyframes, returning each one's
+    (key, qpos, qvel, ctrl) without those joints' entries; with ``root`` (a body id) its qpos
+    starts with that body's world pose (x y z, w x y z) and its qvel with 6 zeros, the layout
+    of the free joint that replaces ``joints``. The caller deletes the joints (or their
+    bodies), then sets the keyframes (:func:`_set_keys`)."""
+    names = {model.joint(j).name for j in joints}
+    size = {int(mujoco.mjtJoint.mjJNT_BALL): (4, 3), int(mujoco.mjtJoint.mjJNT_FREE): (7, 6)}
+    qdrop: list[int] = []
+    vdrop: list[int] = []
+    for j in joints:
+        nq, nv = size.get(int(model.jnt_type[j]), (1, 1))
+        qdrop.extend(range(model.jnt_qposadr[j], model.jnt_qposadr[j] + nq))
+        vdrop.extend(range(model.jnt_dofadr[j], model.jnt_dofadr[j] + nv))
+    on = [
+        i
+        for i, a in enumerate(spec.actuators)
+        if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in names
+    ]
+    data = mujoco.MjData(model)
+    keys = []
+    for key in spec.keys:
+        qpos, qvel, ctrl = (np.asarray(x, dtype=float) for x in (key.qpos, key.qvel, key.ctrl))
+        if len(qpos) == model.nq:
+            kept = np.delete(qpos, qdrop)
+            if root is not None:
+                data.qpos[:] = qpos
+                mujoco.mj_kinematics(model, data)
+                kept = np.concatenate([data.xpos[root], data.xquat[root], kept])
+            qpos = kept
+        if len(qvel) == model.nv:
+            qvel = np.concatenate([np.zeros(6 if root is not None else 0), np.delete(qvel, vdrop)])
+        if len(ctrl) == model.nu:
+            ctrl = np.delete(ctrl, on)
+        keys.append((key, qpos, qvel, ctrl))
+        key.qpos, key.qvel, key.ctrl = [], [], []
+    for item in [spec.actuators[i] for i in on] + [
+        x for x in spec.sensors if x.objtype == mujoco.mjtObj.mjOBJ_JOINT and x.objname in names
+    ]:
+        spec.delete(item)
+    return keys
+
+
+def _set_keys(keys: list[tuple[mujoco.MjsKey, np.ndarray, np.ndarray, np.ndarray]]) -> None:
+    for key, qpos, qvel, ctrl in keys:
+        key.qpos, key.qvel, key.ctrl = qpos, qvel, ctrl
+
+
+def free_floating_base(spec: mujoco.MjSpec) -> str | None:
+    """Write a floating base given as joints as one free joint named ``floating_base`` (in place).
+
+    Some humanoid MJCFs move their root body with three slides and a ball (humanoid-gym's
+    XBot-L) or three slides and three hinges (loco-mujoco's Talos and Atlas) instead of a
+    ``<freejoint/>``. Where no body of the world has a free joint and exactly one has such
+    joints (and only those), they are replaced by a free joint, the body placed where those
+    joints put it in ``qpos0``; keyframes are converted (the root's pose from their joints,
+    its velocity zero), actuators and sensors on the removed joints dropped. Trajectories
+    then use the free joint's layout (position, quaternion w x y z, then the other joints).
+    Returns the body's name, or None where nothing changed (a file that does not compile
+    is left as it is: :func:`compile_robot` reports it).
+    """
+    bodies = list(spec.worldbody.bodies)
+    if any(j.type == mujoco.mjtJoint.mjJNT_FREE for b in bodies for j in b.joints):
+        return None
+    roots = [b for b in bodies if _six_dof(list(b.joints))]
+    if len(roots) != 1:
+        return None
+    body = roots[0]
+    body.name = body.name or "floating_base_body"
+    try:
+        model = spec.compile()
+    except ValueError:
+        return None
+    bid = model.body(body.name).id
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) == bid], bid)
+    for joint in list(body.joints):
+        spec.delete(joint)
+    body.pos, body.quat = data.xpos[bid].copy(), data.xquat[bid].copy()
+    body.add_freejoint(name="floating_base")
+    _set_keys(keys)
+    return body.name
+
+
+def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
+    """Delete the bodies of the world that hold joints but no geometry, beside a robot with a
+    free joint (in place): Unitree's ``g1_23dof.xml`` keeps the 29-DoF G1's six missing waist
+    and wrist joints on massless bodies 20 m above the world, so that its actuators keep the
+    29-DoF layout; they move nothing of the robot. Their actuators, sensors and keyframe
+    entries go with them. Returns their names."""
+    bodies = list(spec.worldbody.bodies)
+    if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for b in bodies for j in b.joints):
+        return []
+
+    def tree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
+        return [body, *[d for c in body.bodies for d in tree(c)]]
+
+    loose = [
+        b
+        for b in bodies
+        if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)
+        and any(len(list(d.joints)) for d in tree(b))
+        and not any(len(list(d.geoms)) for d in tree(b))
+    ]
+    if not loose:
+        return []
+    try:
+        model = spec.compile()
+    except ValueError:
+        return []
+    ids = {model.body(d.name).id for b in loose for d in tree(b) if d.name}
+    if len(ids) != sum(len(tree(b)) for b in loose):  # an unnamed body among them: leave them
+        return []
+    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
+    names = [b.name for b in loose]
+    for body in loose:
+        spec.delete(body)
+    _set_keys(keys)
+    return names
+
+
+def _subtree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
+    return [body, *[d for c in body.bodies for d in _subtree(c)]]
+
+
+def _equality_bodies(spec: mujoco.MjSpec, eq: mujoco.MjsEquality) -> set[str]:
+    """The names of the bodies an equality constraint ties (through a body or a site), or
+    of the bodies of the joints it couples."""
+    kind = mujoco.mjtObj
+    names = [n for n in (eq.name1, eq.name2) if n]
+    if eq.objtype == kind.mjOBJ_BODY:
+        return set(names)
+    out = set()
+    for name in names:
+        element = spec.site(name) if eq.objtype == kind.mjOBJ_SITE else spec.joint(name)
+        if element is not None:
+            out.add(element.parent.name)
+    return out
+
+
+def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
+    """Delete the passive rods of the robot's closed kinematic chains (in place).
+
+    Digit's and Cassie's legs close loops through rods: a body hanging on a ball joint whose
+    far end an equality constraint (``<connect>``) pins to another link (Digit's achilles and
+    toe rods, Cassie's achilles rods). The retargeter moves open chains of hinges and slides:
+    such a rod's orientation is not a degree of freedom of the motion but follows from the
+    links it joins, and left at rest it would sweep through the shin. Each body below the
+    floating base with a ball joint and an equality tying its subtree to a body outside it is
+    deleted with its subtree, those equalities, the ``<exclude>`` and ``<pair>`` elements and
+    sensors that name it, and its joints' actuators and keyframe entries; the rods' geometry
+    then no longer takes part in the collision checks. A ball joint that closes no loop (a ball
+    shoulder) stays and is refused by :func:`retarget.kinematics.check_joint_types`. Returns
+    the deleted bodies' names.
+    """
+    roots = [b for b in spec.worldbody.bodies if any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)]
+    if len(roots) != 1:
+        return []
+    rods: list[mujoco.MjsBody] = []
+    inside: set[str] = set()
+    ties = [(eq, _equality_bodies(spec, eq)) for eq in spec.equalities]
+    for body in _subtree(roots[0])[1:]:
+        if body.name in inside or not any(j.type == mujoco.mjtJoint.mjJNT_BALL for j in body.joints):
+            continue
+        names = {b.name for b in _subtree(body)}
+        if "" in names or not any(tied & names and tied - names for _, tied in ties):
+            continue
+        rods.append(body)
+        inside |= names
+    if not rods:
+        return []
+    try:
+        model = spec.compile()
+    except ValueError:
+        return []
+    ids = {model.body(name).id for name in inside}
+    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
+    geoms = {model.geom(g).name for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids} - {""}
+    sites = {model.site(s).name for s in range(model.nsite) if int(model.site_bodyid[s]) in ids} - {""}
+    doomed: list[object] = [eq for eq, tied in ties if tied & inside]
+    doomed += [x for x in spec.excludes if x.bodyname1 in inside or x.bodyname2 in inside]
+    doomed += [p for p in spec.pairs if p.geomname1 in geoms or p.geomname2 in geoms]
+    doomed += [s for s in spec.sensors if s.objname in inside | sites | geoms or s.refname in inside | sites]
+    for item in doomed + rods:
+        spec.delete(item)
+    _set_keys(keys)
+    return [b.name for b in rods]
