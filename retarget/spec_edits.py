@@ -123,6 +123,11 @@ def free_floating_base(spec: mujoco.MjSpec) -> str | None:
     return body.name
 
 
+def _subtree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
+    """``body`` and every body below it."""
+    return [body, *[d for c in body.bodies for d in _subtree(c)]]
+
+
 def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
     """Delete the bodies of the world that hold joints but no geometry, beside a robot with a
     free joint (in place): Unitree's ``g1_23dof.xml`` keeps the 29-DoF G1's six missing waist
@@ -133,15 +138,12 @@ def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
     if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for b in bodies for j in b.joints):
         return []
 
-    def tree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
-        return [body, *[d for c in body.bodies for d in tree(c)]]
-
     loose = [
         b
         for b in bodies
         if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)
-        and any(len(list(d.joints)) for d in tree(b))
-        and not any(len(list(d.geoms)) for d in tree(b))
+        and any(len(list(d.joints)) for d in _subtree(b))
+        and not any(len(list(d.geoms)) for d in _subtree(b))
     ]
     if not loose:
         return []
@@ -149,8 +151,8 @@ def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
         model = spec.compile()
     except ValueError:
         return []
-    ids = {model.body(d.name).id for b in loose for d in tree(b) if d.name}
-    if len(ids) != sum(len(tree(b)) for b in loose):  # an unnamed body among them: leave them
+    ids = {model.body(d.name).id for b in loose for d in _subtree(b) if d.name}
+    if len(ids) != sum(len(_subtree(b)) for b in loose):  # an unnamed body among them: leave them
         return []
     keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
     names = [b.name for b in loose]
@@ -160,23 +162,20 @@ def drop_placeholder_bodies(spec: mujoco.MjSpec) -> list[str]:
     return names
 
 
-def _subtree(body: mujoco.MjsBody) -> list[mujoco.MjsBody]:
-    return [body, *[d for c in body.bodies for d in _subtree(c)]]
-
-
 def _equality_bodies(spec: mujoco.MjSpec, eq: mujoco.MjsEquality) -> set[str]:
-    """The names of the bodies an equality constraint ties (through a body or a site), or
-    of the bodies of the joints it couples."""
-    kind = mujoco.mjtObj
+    """The names of the bodies an equality constraint ties: a ``<connect>`` or ``<weld>``
+    through bodies or sites, a ``<joint>`` coupling through its joints' bodies (a tendon
+    coupling ties none)."""
     names = [n for n in (eq.name1, eq.name2) if n]
-    if eq.objtype == kind.mjOBJ_BODY:
-        return set(names)
-    out = set()
-    for name in names:
-        element = spec.site(name) if eq.objtype == kind.mjOBJ_SITE else spec.joint(name)
-        if element is not None:
-            out.add(element.parent.name)
-    return out
+    if eq.type == mujoco.mjtEq.mjEQ_JOINT:
+        elements = [spec.joint(n) for n in names]
+    elif eq.type in (mujoco.mjtEq.mjEQ_CONNECT, mujoco.mjtEq.mjEQ_WELD):
+        if eq.objtype != mujoco.mjtObj.mjOBJ_SITE:
+            return set(names)
+        elements = [spec.site(n) for n in names]
+    else:
+        return set()
+    return {e.parent.name for e in elements if e is not None}
 
 
 def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
@@ -187,9 +186,9 @@ def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
     toe rods, Cassie's achilles rods). The retargeter moves open chains of hinges and slides:
     such a rod's orientation is not a degree of freedom of the motion but follows from the
     links it joins, and left at rest it would sweep through the shin. Each body below the
-    floating base with a ball joint and an equality tying its subtree to a body outside it is
-    deleted with its subtree, those equalities, the ``<exclude>`` and ``<pair>`` elements and
-    sensors that name it, and its joints' actuators and keyframe entries; the rods' geometry
+    floating base without bodies below it, with a ball joint and an equality tying it to
+    another body, is deleted with those equalities, the ``<exclude>`` and ``<pair>`` elements
+    and sensors that name it, and its joints' actuators and keyframe entries; the rods' geometry
     then no longer takes part in the collision checks. A ball joint that closes no loop (a ball
     shoulder) stays and is refused by :func:`retarget.kinematics.check_joint_types`. Returns
     the deleted bodies' names.
@@ -197,23 +196,22 @@ def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
     roots = [b for b in spec.worldbody.bodies if any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)]
     if len(roots) != 1:
         return []
-    rods: list[mujoco.MjsBody] = []
-    inside: set[str] = set()
     ties = [(eq, _equality_bodies(spec, eq)) for eq in spec.equalities]
-    for body in _subtree(roots[0])[1:]:
-        if body.name in inside or not any(j.type == mujoco.mjtJoint.mjJNT_BALL for j in body.joints):
-            continue
-        names = {b.name for b in _subtree(body)}
-        if "" in names or not any(tied & names and tied - names for _, tied in ties):
-            continue
-        rods.append(body)
-        inside |= names
+    rods = [
+        body
+        for body in _subtree(roots[0])[1:]
+        if body.name
+        and not list(body.bodies)
+        and any(j.type == mujoco.mjtJoint.mjJNT_BALL for j in body.joints)
+        and any(body.name in tied and len(tied) > 1 for _, tied in ties)
+    ]
     if not rods:
         return []
     try:
         model = spec.compile()
     except ValueError:
         return []
+    inside = {b.name for b in rods}
     ids = {model.body(name).id for name in inside}
     keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
     geoms = {model.geom(g).name for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids} - {""}
