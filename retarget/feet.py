@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from retarget.geoms import FloorPoints
 from retarget.kinematics import Poses, quat_to_mat, so3_exp, so3_log
 from retarget.robot_model import RobotModel
-from retarget.selfcheck import pair_depths
+from retarget.selfcheck import pair_overlaps
 from retarget.selfcollision import capsule_distances
 from retarget.targets import Targets
 
@@ -376,7 +376,7 @@ def _self_closer(
     their capsules come :data:`LIFT_SELF_TOLERANCE` closer inside their margin (Apollo's thigh
     lifted into the other in a turn); the others apart at rest (meshes, boxes: a capsule
     around them may overlap where the geoms do not) where their real geoms overlap that much
-    deeper, measured by MuJoCo (:func:`retarget.selfcheck.pair_depths`: G1's hip lifted into
+    deeper, measured by MuJoCo (:func:`retarget.selfcheck.pair_overlaps`: G1's hip lifted into
     its hand in a stoop, corpus clip 000005, 2.7 cm). Pairs whose enclosures overlap at rest
     (a trunk and a hip link) do not count: OP3's hip-pitch links press 2-4 mm further into its
     trunk mesh whenever a crouching walk lifts a foot, and its feet skimmed the floor."""
@@ -393,19 +393,28 @@ def _self_closer(
     quat = Rotation.from_matrix(root_rot[moved]).as_quat()[:, [3, 0, 1, 2]]
     root = np.concatenate([root_pos[moved], quat], axis=1)
 
-    def real(q: np.ndarray) -> np.ndarray:  # (F, P') overlaps of the other pairs' geoms
-        return pair_depths(robot.model, robot.tree, np.concatenate([root, q[moved]], axis=1), geoms)
+    def real(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # overlaps of the other pairs' geoms
+        frame, pair, depth = pair_overlaps(
+            robot.model, robot.tree, np.concatenate([root, q[moved]], axis=1), geoms
+        )
+        return frame * geoms.num_pairs + pair, depth  # keys ascending
 
     before, _, _ = capsule_distances(poses.take(moved), capsules)
     allowed = np.minimum(before, capsules.margin) - LIFT_SELF_TOLERANCE  # (F, P)
-    deepest = real(q_in) + LIFT_SELF_TOLERANCE if geoms.num_pairs else None
+    deepest = real(q_in) if geoms.num_pairs else None
 
     def closer(q: np.ndarray) -> np.ndarray:
         lifted = robot.tree.forward(root_pos[moved], root_rot[moved], q[moved])
         after, _, _ = capsule_distances(lifted, capsules)
         bad: np.ndarray = (after < allowed).any(axis=1)
         if deepest is not None:
-            bad |= (real(q) > deepest).any(axis=1)
+            (was_key, was), (key, depth) = deepest, real(q)
+            old = np.zeros(len(key))  # each overlap's depth before the lift (0: none)
+            if len(key) and len(was_key):
+                at = np.minimum(np.searchsorted(was_key, key), len(was_key) - 1)
+                hit = was_key[at] == key
+                old[hit] = was[at[hit]]
+            bad[key[depth > old + LIFT_SELF_TOLERANCE] // geoms.num_pairs] = True
         return bad
 
     return closer

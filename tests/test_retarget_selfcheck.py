@@ -54,7 +54,7 @@ from retarget.selfcheck import (
     contact_balls,
     overlap_frames,
     overlap_gaps,
-    pair_depths,
+    pair_overlaps,
     penetration_depths,
 )
 from retarget.selfcollision import SelfClearance, capsule_distances
@@ -157,7 +157,12 @@ def test_a_pair_overlapping_gets_room_from_where_its_capsules_were(loose_stoop):
     margin plus the depth pushes nothing apart."""
     rm, q = loose_stoop
     sc = rm.self_clearance
-    per = pair_depths(rm.model, rm.tree, q, sc)  # (T, P)
+    per = np.zeros((len(q), sc.num_pairs))  # (T, P)
+    frame, pair, depth = pair_overlaps(rm.model, rm.tree, q, sc)
+    per[frame, pair] = depth
+    assert len(frame) == len(set(zip(frame, pair, strict=True))) and np.all(
+        np.diff(frame * sc.num_pairs + pair) > 0
+    )
     gaps = overlap_gaps(rm.model, rm.tree, q, sc)
     hit = per.max(axis=0) > 0
     assert hit.sum() >= 3 and np.all(np.isneginf(gaps[~hit]))
