@@ -270,7 +270,7 @@ def lift_swing_feet(
         f = robot.feet[side]
         leg = leg_joints(robot, side)
         lo, hi = robot.lower[leg], robot.upper[leg]
-        h, _ = _lowest(poses, f)
+        h, _ = lowest_floor_point(poses, f)
         pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
         # Like the simulation check, a foot moves when every sole point low in both frames
         # does: a point high above the floor that stays put (a heel strike's lifted toe) does
@@ -302,7 +302,13 @@ def lift_swing_feet(
         goal = np.zeros((len(idx), 6))
         goal[:, 2] = rise[idx]
         dq = np.zeros((t_len, len(leg)))
-        dq[idx] = _limited_step(jac, goal, q[np.ix_(idx, leg)], lo, hi)
+        dq[idx], short = _limited_step(jac, goal, q[np.ix_(idx, leg)], lo, hi)
+        stuck = idx[short]
+        if stuck.size:
+            level = h[stuck] + rise[stuck]
+            dq[stuck] = _turned_lift(
+                robot, side, root_pos[stuck], root_rot[stuck], q[stuck], dq[stuck], level
+            )
         dq = gaussian_filter1d(dq, sigma=r / 2.0, axis=0, mode="nearest")
         q[:, leg] = np.clip(q[:, leg] + dq, lo, hi)
     if worst > 0.0:
@@ -422,17 +428,30 @@ def _self_closer(
 
 LIMITED_ROTATION_WEIGHT = 0.05
 """Metres per radian of a lifted foot's orientation change once a leg joint is at its limit."""
+LIFT_SOLE_BAND = 0.005
+"""Sole points up to this much (m) above where a lifted foot's lowest point must go are held
+at that height (once a leg joint is at its limit): turning the foot must not lower them."""
 
 
 def _limited_step(
-    jac: np.ndarray, goal: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray, passes: int = 3
-) -> np.ndarray:
-    """Damped least-squares joint step (F, n) towards ``goal`` (F, 6) through ``jac`` (F, 6, n)
+    jac: np.ndarray,
+    goal: np.ndarray,
+    q: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    weights: np.ndarray | None = None,
+    passes: int = 3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Damped least-squares joint step (F, n) towards ``goal`` (F, R) through ``jac`` (F, R, n)
     from ``q`` (F, n) within [lo, hi]: a joint the step would push past its limit (a hip pitch
-    already at its stop) is taken out of that frame's solve and the others make up for it."""
+    already at its stop) is taken out of that frame's solve and the others make up for it.
+    Without row ``weights`` (F, R) the rows are a foot's position and rotation (R = 6), and
+    short of a joint the rise comes first: the rotation gives way (0.05 m/rad). Returns the
+    step and (F,) which frames were short of a joint."""
     free = np.ones(q.shape, dtype=bool)
     step: np.ndarray = np.zeros(q.shape)
-    rows = np.ones(jac.shape[:2])  # (F, 6) row weights
+    rows = np.ones(jac.shape[:2]) if weights is None else weights
+    short = np.zeros(len(q), dtype=bool)
     for _ in range(passes):
         masked = jac * free[:, None, :] * rows[..., None]
         jt = np.swapaxes(masked, 1, 2)
@@ -442,12 +461,75 @@ def _limited_step(
         if not past.any():
             break
         free &= ~past
-        # Short of a joint, the rise comes first: the foot's orientation gives way (0.05 m/rad).
-        rows[past.any(axis=1), 3:] = LIMITED_ROTATION_WEIGHT
-    return step
+        short |= past.any(axis=1)
+        if weights is None:
+            rows[short, 3:] = LIMITED_ROTATION_WEIGHT
+    return step, short
 
 
-def _lowest(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
+def _turned_lift(
+    robot: RobotModel,
+    side: str,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    q: np.ndarray,
+    dq: np.ndarray,
+    level: np.ndarray,
+) -> np.ndarray:
+    """The lift of frames whose leg is short of a joint: (F, nl) ``dq`` (the step that raises the
+    foot's origin), or where that leaves the lowest sole point more than SWING_TOLERANCE below
+    ``level`` (F,) and below SKIM_HEIGHT (where the simulation check would take the foot for a
+    standing one) and a turn of the foot gets it there, that turn: the sole points below
+    ``level`` (and up to LIFT_SOLE_BAND above) rise to it, the lowest keeps its horizontal place
+    and the foot's orientation gives way; where neither gets it higher, no step. A crouching
+    walk's swing foot with its knee at the stop (Fourier GR1T2), pointing its toe down, lifts its
+    toe by turning at the ankle.
+    root_pos (F, 3), root_rot (F, 3, 3), q (F, nj)."""
+    tree, f, leg = robot.tree, robot.feet[side], leg_joints(robot, side)
+    lo, hi = robot.lower[leg], robot.upper[leg]
+
+    def reached(step: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        moved = q[rows].copy()
+        moved[:, leg] = np.clip(moved[:, leg] + step, lo, hi)
+        return lowest_floor_point(tree.forward(root_pos[rows], root_rot[rows], moved), f)[0]
+
+    every = np.arange(len(q))
+    before = reached(dq, every)
+    enough = np.minimum(level, SKIM_HEIGHT) - SWING_TOLERANCE
+    fail = np.flatnonzero(before < enough)
+    if not fail.size:
+        return dq
+    sub = tree.forward(root_pos[fail], root_rot[fail], q[fail])
+    node = np.array([f.node])
+    sole = sub.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", sub.rot[:, f.node], f.points)  # (F', P, 3)
+    need = level[fail, None] - (sole[..., 2] - f.radius)  # (F', P) rise of each point to the level
+    jz = tree.point_jacobian(sub, np.full(sole.shape[1], f.node), sole, rows=(2,))[:, :, 0][..., 6 + leg]
+    low = lowest_floor_point(sub, f)[1][:, None, :]
+    jxy = tree.point_jacobian(sub, node, low, rows=(0, 1))[:, 0][..., 6 + leg]
+    jr = tree.rotation_jacobian(sub, node)[:, 0][..., 6 + leg]
+    jac = np.concatenate([jxy, jz, jr], axis=1)  # (F', 2 + P + 3, nl)
+    goal = np.concatenate([np.zeros((len(fail), 2)), need, np.zeros((len(fail), 3))], axis=1)
+    weights = np.concatenate(
+        [
+            np.ones((len(fail), 2)),
+            (need > -LIFT_SOLE_BAND).astype(float),
+            np.full((len(fail), 3), LIMITED_ROTATION_WEIGHT),
+        ],
+        axis=1,
+    )
+    turn, _ = _limited_step(jac, goal, q[np.ix_(fail, leg)], lo, hi, weights)
+    out = dq.copy()
+    turned = reached(turn, fail)
+    higher = (turned > before[fail]) & (turned >= enough[fail])
+    out[fail[higher]] = turn[higher]
+    # Neither raising the lowest point, the foot stays as it was (the origin's rise, all the leg
+    # could give, swung G1's flat foot 17 cm with its knee at the stop).
+    still = np.maximum(turned, before[fail]) <= reached(np.zeros_like(turn), fail)
+    out[fail[still]] = 0.0
+    return out
+
+
+def lowest_floor_point(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
     """Height (T,) of a foot's lowest collision point above z = 0 and that point (T, 3)."""
     pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
     low = pts[..., 2] - f.radius

@@ -4,6 +4,7 @@ a planted one, and a foot turns towards a bent knee whose toes point away from i
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -13,6 +14,8 @@ from controlmm.motion import Motion
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget import load_robot, retarget_motion, robot_scale
 from retarget.compare import similarity_fit
+from retarget.feet import lift_swing_feet, lowest_floor_point
+from retarget.robots import robot_mjcf
 from retarget.solver_config import SolverConfig
 from retarget.targets import build_targets, stiffer_locks
 
@@ -195,3 +198,47 @@ def test_stiffer_locks_weigh_only_the_planted_feet(g1, sample_joints):
     np.testing.assert_array_equal(stiff.kp_weight[:, others], targets.kp_weight[:, others])
     np.testing.assert_array_equal(stiff.kp_pos, targets.kp_pos)
     assert stiff.kp_weight is not targets.kp_weight  # the targets given are left alone
+
+
+@pytest.mark.parametrize(("ankle_pitch", "lifted"), [(-0.25, True), (-0.6, False)])
+def test_a_foot_with_its_knee_at_the_stop_lifts_its_toe_by_turning(tmp_path, ankle_pitch, lifted):
+    """A crouching walk's swing foot skims the floor with its knee at the stop (Fourier GR1T2,
+    corpus crouch walk: 9 mm up at 3 m/s, read as a stance foot sliding). G1 with knees that
+    stop at 1.2 rad, the ankle under the hip, the toe 5 mm up and moving at 1 m/s: pointing the
+    toe down, the foot lifts it by turning at the ankle, above the check's 1 cm and where it was
+    (the rise of the foot's origin alone, all the leg could give, lowered the toe 1.7 mm and
+    moved it 6 cm); flat, no turn raises the sole and the foot stays as it was."""
+    src = robot_mjcf("g1")
+    spec = mujoco.MjSpec.from_file(str(src))
+    spec.meshdir = str(src.parent / "assets")
+    for side in ("left", "right"):
+        spec.joint(f"{side}_knee_joint").range = [-0.087, 1.2]
+    path = tmp_path / "g1_short_knees.xml"
+    path.write_text(spec.to_xml())
+    robot = load_robot(path)
+    index = {robot.model.joint(int(j)).name: i for i, j in enumerate(robot.tree.joint_ids)}
+    frames, fps = 30, 50.0
+    q = np.zeros((frames, robot.tree.nj))
+    for name, angle in (
+        ("left_knee_joint", 1.2),
+        ("left_hip_pitch_joint", -0.6),
+        ("left_ankle_pitch_joint", ankle_pitch),
+        ("right_knee_joint", 1.2),
+        ("right_hip_pitch_joint", -1.2),
+    ):
+        q[:, index[name]] = angle
+    root_rot = np.repeat(np.eye(3)[None], frames, axis=0)
+    root_pos = np.zeros((frames, 3))
+    root_pos[:, 0] = np.arange(frames) / fps
+    foot = robot.feet["left"]
+    root_pos[:, 2] = 0.005 - lowest_floor_point(robot.tree.forward(root_pos, root_rot, q), foot)[0]
+    h0, p0 = lowest_floor_point(robot.tree.forward(root_pos, root_rot, q), foot)
+    none = np.zeros(frames)
+    out, _ = lift_swing_feet(robot, root_pos, root_rot, q, {"left": none, "right": none}, fps)
+    h1, p1 = lowest_floor_point(robot.tree.forward(root_pos, root_rot, out), foot)
+    assert np.all(out[:, index["left_knee_joint"]] == 1.2)
+    assert np.abs(p1 - p0)[:, :2].max() < 0.002
+    if lifted:
+        assert h1.min() > 0.010
+    else:
+        np.testing.assert_allclose(h1, h0, atol=1e-6)
