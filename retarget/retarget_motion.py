@@ -29,7 +29,7 @@ from controlmm.motion import load_motion
 from controlmm.motion.container import Motion, resample
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.actuators import joint_speed_limits
-from retarget.feet import hold_feet_between_frames, lift_swing_feet
+from retarget.feet import hold_feet_between_frames
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
 from retarget.metrics import Replay, foot_steps, geom_lowest_z, replay, replay_keypoints, trajectory_metrics
@@ -62,6 +62,7 @@ from retarget.selfcollision import SelfClearance
 from retarget.solver import Solution, solve
 from retarget.solver_config import SolverConfig
 from retarget.speed_rungs import SPEED_SOLVES, speed_gain, speed_ratios
+from retarget.swing_lift import lift_swing_feet
 from retarget.targets import Targets, build_targets, stiffer_locks
 from retarget.trajectory import RobotTrajectory
 

@@ -14,9 +14,9 @@ from controlmm.motion import Motion
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget import load_robot, retarget_motion, robot_scale
 from retarget.compare import similarity_fit
-from retarget.feet import lift_swing_feet, lowest_floor_point
 from retarget.robots import robot_mjcf
 from retarget.solver_config import SolverConfig
+from retarget.swing_lift import lift_swing_feet, lowest_floor_point
 from retarget.targets import build_targets, stiffer_locks
 
 FPS = 20.0
