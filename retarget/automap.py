@@ -81,7 +81,8 @@ def infer_mapping(robot: str | Path, anatomy: Anatomy | None = None) -> dict:
 
     ``"robot"`` holds the MJCF's absolute path. Raises ControlMMError (one line) for an MJCF
     that does not compile, has no floating base, a joint the retargeter cannot move (a ball
-    joint: Digit's closed-chain rods; :func:`retarget.robot_files.compile_robot`) or no two legs.
+    joint that closes no loop: a ball shoulder; :func:`retarget.robot_files.compile_robot`) or no two
+    legs.
     """
     path = robot_mjcf_path(robot)
     model = compile_robot(path)

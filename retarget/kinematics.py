@@ -129,7 +129,8 @@ class Poses:
 
 def check_joint_types(model: mujoco.MjModel, root_body: int) -> None:
     """Raise ControlMMError (one line) for the first joint below the floating base's body
-    ``root_body`` that is neither a hinge nor a slide (a ball joint: Digit's closed-chain rods)."""
+    ``root_body`` that is neither a hinge nor a slide (a ball shoulder; the ball-jointed rods of
+    closed chains are dropped before: :func:`retarget.spec_edits.drop_closed_chain_rods`)."""
     for j in range(model.njnt):
         b = int(model.jnt_bodyid[j])
         if (
