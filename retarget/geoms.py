@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from retarget.kinematics import quat_to_mat
+from retarget.kinematics import Poses, quat_to_mat
 
 
 @dataclass(frozen=True)
@@ -28,6 +28,11 @@ class FloorPoints:
     points: np.ndarray  # (P, 3)
     radius: np.ndarray  # (P,)
     geoms: tuple[int, ...]
+
+    def world(self, poses: Poses) -> np.ndarray:
+        """The points in the world (T, P, 3) in each of ``poses``."""
+        rot = poses.rot[:, self.node]
+        return poses.pos[:, self.node, None, :] + np.einsum("tij,pj->tpi", rot, self.points)
 
 
 def geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:

@@ -212,8 +212,7 @@ class RobotModel:
     def foot_lowest(self, poses: Poses, side: str) -> np.ndarray:
         """Lowest z (m) of a foot's collision points per frame, (T,)."""
         f = self.feet[side]
-        pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
-        return (pts[..., 2] - f.radius).min(axis=1)
+        return (f.world(poses)[..., 2] - f.radius).min(axis=1)
 
     # -- derived quantities ----------------------------------------------------------------
     def _auto_scale(self) -> float:

@@ -77,7 +77,7 @@ def lift_swing_feet(
         leg = leg_joints(robot, side)
         lo, hi = robot.lower[leg], robot.upper[leg]
         h, _ = lowest_floor_point(poses, f)
-        pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
+        pts = f.world(poses)
         # Like the simulation check, a foot moves when every sole point low in both frames
         # does: a point high above the floor that stays put (a heel strike's lifted toe) does
         # not make the landing heel slow.
@@ -307,7 +307,7 @@ def _turned_lift(
         return dq
     sub = tree.forward(root_pos[fail], root_rot[fail], q[fail])
     node = np.array([f.node])
-    sole = sub.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", sub.rot[:, f.node], f.points)  # (F', P, 3)
+    sole = f.world(sub)  # (F', P, 3)
     need = level[fail, None] - (sole[..., 2] - f.radius)  # (F', P) rise of each point to the level
     jz = tree.point_jacobian(sub, np.full(sole.shape[1], f.node), sole, rows=(2,))[:, :, 0][..., 6 + leg]
     low = lowest_floor_point(sub, f)[1][:, None, :]
@@ -337,7 +337,7 @@ def _turned_lift(
 
 def lowest_floor_point(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
     """Height (T,) of a foot's lowest collision point above z = 0 and that point (T, 3)."""
-    pts = poses.pos[:, f.node, None, :] + np.einsum("tij,pj->tpi", poses.rot[:, f.node], f.points)
+    pts = f.world(poses)
     low = pts[..., 2] - f.radius
     i = np.argmin(low, axis=1)
     t = np.arange(len(low))
