@@ -669,9 +669,9 @@ def swept_margins(
     they overlap by more than ``SWEEP_DEPTH``, plus ``SWEEP_SLACK`` (the grid is coarse: off
     it, overlaps up to about 8 mm may stay above the margin, checked in the tests;
     ``controlmm validate`` allows 5 mm). None: no swept pose makes them touch, or the pair
-    cannot be swept (the trunk body is not above the leg link, or more than ``SWEEP_JOINTS``
-    joints lie between them). The pairs of one body pair share their sweep (a body split
-    into convex pieces has hundreds of pairs with the next).
+    cannot be swept (more than ``SWEEP_JOINTS`` joints lie between them: on the paths from
+    the two bodies up to their common ancestor). The pairs of one body pair share their sweep
+    (a body split into convex pieces has hundreds of pairs with the next).
     """
     out: dict[int, float | None] = {}
     by_bodies: dict[tuple[int, int], list[int]] = {}
@@ -681,7 +681,7 @@ def swept_margins(
     data = mujoco.MjData(model)
     for (trunk_body, link), ks in by_bodies.items():
         joints = _joints_between(model, trunk_body, link)
-        if joints is None or len(joints) > SWEEP_JOINTS:
+        if len(joints) > SWEEP_JOINTS:
             out.update(dict.fromkeys(ks))
             continue
         col = [int(np.flatnonzero(tree.joint_ids == j)[0]) for j in joints]
@@ -716,14 +716,22 @@ def swept_margins(
     return out
 
 
-def _joints_between(model: mujoco.MjModel, above: int, below: int) -> list[int] | None:
-    """The joints from body ``below`` up to (not including) body ``above``; None where
-    ``above`` is not an ancestor of ``below``."""
+def _joints_between(model: mujoco.MjModel, first: int, second: int) -> list[int]:
+    """The joints that move body ``second`` relative to body ``first``: those of the bodies
+    from each up to (not including) their deepest common ancestor (the trunk body above a
+    thigh link; the pelvis for a waist link and a hip link hanging from it side by side)."""
+    above, b = set(), first
+    while b > 0:
+        above.add(b)
+        b = int(model.body_parentid[b])
     joints: list[int] = []
-    b = below
-    while b != above:
-        if b <= 0:
-            return None
+    b = second
+    while b > 0 and b not in above:
+        joints += range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b]))
+        b = int(model.body_parentid[b])
+    common = b
+    b = first
+    while b != common and b > 0:
         joints += range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b]))
         b = int(model.body_parentid[b])
     return joints

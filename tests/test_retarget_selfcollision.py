@@ -19,7 +19,7 @@ from controlmm.motion import Motion
 from retarget import load_robot, retarget_motion
 from retarget.capsules import segment_distance
 from retarget.robots import PACKAGED_ROBOTS
-from retarget.selfcollision import SELF_MARGIN, capsule_distances
+from retarget.selfcollision import SELF_MARGIN, _joints_between, capsule_distances
 
 
 def _trunk_thigh_pairs(name: str) -> list[int]:
@@ -190,3 +190,29 @@ def test_a_shin_is_kept_off_its_own_foot_only_where_they_can_touch(tmp_path, sam
     traj = retarget_motion(Motion(joints=sample_joints.astype(np.float64), fps=20.0), str(path), fps=30.0)
     limits, floor_depth, self_frames = independent_check(path, traj.qpos)
     assert (limits, self_frames) == (0, 0) and floor_depth <= 0.005, (limits, floor_depth, self_frames)
+
+
+def test_a_pair_in_side_by_side_branches_is_swept_through_both():
+    """A waist link and a hip link hanging side by side from the pelvis (iRonCub's torso_1 and
+    l_hip_2) are moved by the joints of both branches: the calibration sweeps those (it took
+    the pair for unsweepable and dropped it: the hips went 16 mm into the waist in a stoop)."""
+    model = load_robot("g1").model
+    body = {model.body(b).name: b for b in range(model.nbody)}
+
+    def names(first: str, second: str) -> set[str]:
+        return {model.joint(j).name for j in _joints_between(model, body[first], body[second])}
+
+    assert names("torso_link", "left_hip_roll_link") == {
+        "waist_yaw_joint",
+        "waist_roll_joint",
+        "waist_pitch_joint",
+        "left_hip_pitch_joint",
+        "left_hip_roll_joint",
+    }
+    assert names("pelvis", "left_knee_link") == {
+        "left_hip_pitch_joint",
+        "left_hip_roll_joint",
+        "left_hip_yaw_joint",
+        "left_knee_joint",
+    }
+    assert names("left_knee_link", "left_knee_link") == set()
