@@ -111,9 +111,16 @@ def lift_swing_feet(
         dq[idx], short = _limited_step(jac, goal, q[np.ix_(idx, leg)], lo, hi)
         stuck = idx[short]
         if stuck.size:
-            level = h[stuck] + rise[stuck]
             dq[stuck] = _turned_lift(
-                robot, side, root_pos[stuck], root_rot[stuck], q[stuck], dq[stuck], level
+                robot,
+                side,
+                sub.take(np.flatnonzero(short)),
+                root_pos[stuck],
+                root_rot[stuck],
+                q[stuck],
+                dq[stuck],
+                h[stuck],
+                rise[stuck],
             )
         dq = gaussian_filter1d(dq, sigma=r / 2.0, axis=0, mode="nearest")
         q[:, leg] = np.clip(q[:, leg] + dq, lo, hi)
@@ -276,21 +283,23 @@ def _limited_step(
 def _turned_lift(
     robot: RobotModel,
     side: str,
+    poses: Poses,
     root_pos: np.ndarray,
     root_rot: np.ndarray,
     q: np.ndarray,
     dq: np.ndarray,
-    level: np.ndarray,
+    height: np.ndarray,
+    rise: np.ndarray,
 ) -> np.ndarray:
     """The lift of frames whose leg is short of a joint: (F, nl) ``dq`` (the step that raises the
-    foot's origin), or where that leaves the lowest sole point more than SWING_TOLERANCE below
-    ``level`` (F,) and below SKIM_HEIGHT (where the simulation check would take the foot for a
-    standing one) and a turn of the foot gets it there, that turn: the sole points below
-    ``level`` (and up to LIFT_SOLE_BAND above) rise to it, the lowest keeps its horizontal place
-    and the foot's orientation gives way; where neither gets it higher, no step. A crouching
-    walk's swing foot with its knee at the stop (Fourier GR1T2), pointing its toe down, lifts its
-    toe by turning at the ankle.
-    root_pos (F, 3), root_rot (F, 3, 3), q (F, nj)."""
+    foot's origin), or where that leaves the lowest sole point (``height`` (F,) in ``poses``,
+    those of ``q``) more than SWING_TOLERANCE below its level ``height + rise`` and below
+    SKIM_HEIGHT (where the simulation check would take the foot for a standing one) and a turn
+    of the foot gets it there, that turn: the sole points below the level (and up to
+    LIFT_SOLE_BAND above) rise to it, the lowest keeps its horizontal place and the foot's
+    orientation gives way; where neither gets it higher, no step. A crouching walk's swing foot
+    with its knee at the stop (Fourier GR1T2), pointing its toe down, lifts its toe by turning
+    at the ankle. root_pos (F, 3), root_rot (F, 3, 3), q (F, nj)."""
     tree, f, leg = robot.tree, robot.feet[side], leg_joints(robot, side)
     lo, hi = robot.lower[leg], robot.upper[leg]
 
@@ -299,13 +308,13 @@ def _turned_lift(
         moved[:, leg] = np.clip(moved[:, leg] + step, lo, hi)
         return lowest_floor_point(tree.forward(root_pos[rows], root_rot[rows], moved), f)[0]
 
-    every = np.arange(len(q))
-    before = reached(dq, every)
+    level = height + rise
+    before = reached(dq, np.arange(len(q)))
     enough = np.minimum(level, SKIM_HEIGHT) - SWING_TOLERANCE
     fail = np.flatnonzero(before < enough)
     if not fail.size:
         return dq
-    sub = tree.forward(root_pos[fail], root_rot[fail], q[fail])
+    sub = poses.take(fail)
     node = np.array([f.node])
     sole = f.world(sub)  # (F', P, 3)
     need = level[fail, None] - (sole[..., 2] - f.radius)  # (F', P) rise of each point to the level
@@ -330,7 +339,7 @@ def _turned_lift(
     out[fail[higher]] = turn[higher]
     # Neither raising the lowest point, the foot stays as it was (the origin's rise, all the leg
     # could give, swung G1's flat foot 17 cm with its knee at the stop).
-    still = np.maximum(turned, before[fail]) <= reached(np.zeros_like(turn), fail)
+    still = np.maximum(turned, before[fail]) <= height[fail]
     out[fail[still]] = 0.0
     return out
 
