@@ -333,11 +333,16 @@ def feet_targets(
         theta = np.where(heel & toe, 0.0, pitch)
         theta = np.where(toe & ~heel, np.maximum(theta, 0.0), theta)
         theta = np.where(heel & ~toe, np.minimum(theta, 0.0), theta)
-        theta = np.where(contact, roll * theta, pitch)
         # The flags switch within a frame; the pitch must not: smooth it over ~0.1 s (the
-        # pivot follows its sign, and both pivots are on the floor when it is 0).
+        # pivot follows its sign, and both pivots are on the floor when it is 0). The swing's
+        # pitch that the smoothing carries into a contact's first and last frames is scaled
+        # like the contact's own, so that ``roll`` 0 keeps the foot flat for the whole contact.
+        held = np.where(contact, theta, 0.0)
+        swing = np.where(contact, 0.0, pitch)
         if len(theta) > 2:
-            theta = gaussian_filter1d(theta, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
+            held = gaussian_filter1d(held, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
+            swing = gaussian_filter1d(swing, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
+        theta = roll * held + np.where(contact, roll, 1.0) * swing
         c_heel, c_toe = foot_pivots(robot, side)
         pivot = np.where((theta > 0)[:, None], c_toe, c_heel)  # (T, 3) node frame
         height = flat_height + STANCE_CLEARANCE

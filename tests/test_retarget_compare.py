@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget import SolverConfig, load_robot, retarget_motion
 from retarget.compare import resample_human, similarity_fit, stance_foot_speed, stance_sole_speed
+from retarget.targets import build_targets
 
 
 @pytest.fixture(scope="module")
@@ -62,3 +64,26 @@ def test_flat_contact_feet_move_their_bodies_less_than_rolling_ones(clip):
         k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("flat", flat))
     }
     assert fit["flat"] < fit["roll"] + 0.005, fit
+
+
+def test_flat_contact_feet_are_flat_to_the_contacts_last_frame(sample_joints):
+    """``foot_roll`` 0: every frame of every contact, its first and last included, asks for a
+    flat foot (the smoothed pitch of the swing before and after does not reach into it), while
+    the default rolls the foot with the human's at some contact frames."""
+    robot = load_robot("g1")
+    transform = HumanToWorld(scale=robot.scale)
+    pitch = {}
+    for roll in (0.0, 1.0):
+        targets = build_targets(robot, sample_joints, 20.0, transform, SolverConfig(foot_roll=roll))
+        tilt = []
+        for side in ("left", "right"):
+            k = robot.keypoint_index(f"{side}_ankle")
+            o = int(np.flatnonzero(targets.ori_kp == k)[0])
+            # a flat foot's rotation is a turn about the vertical times its flat rotation
+            level = targets.ori_rot[:, o] @ robot.foot_flat_rot[side].T
+            contact = targets.stance[side]
+            assert contact.sum() > 20
+            tilt.append(np.arccos(np.clip(level[contact, 2, 2], -1.0, 1.0)))
+        pitch[roll] = np.concatenate(tilt)
+    assert pitch[0.0].max() < 1e-6, pitch[0.0].max()
+    assert pitch[1.0].max() > 0.1, pitch[1.0].max()
