@@ -35,7 +35,7 @@ from controlmm.errors import ControlMMError
 from retarget.geoms import aabb_corners, geom_points
 from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND, HUMAN_UPPER_ARM
 from retarget.rest_frame import rest_root_quat
-from retarget.robot_files import ancestors, free_root
+from retarget.robot_files import ancestors, free_root, jointed_link, welded_below
 
 MIDDLE_RANGE = (0.25, 0.85)
 """Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
@@ -430,6 +430,7 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
         )
     for side in feet:  # a toe link below the foot: the foot is the link its sole is on
         feet[side] = _foot_above_toes(model, feet[side], root, low, floor_z + SOLE_BAND * height)
+        feet[side] = jointed_link(model, feet[side])  # not a cleat welded below it
         bare = _bare_link_below(model, data, feet[side], feet_z[side])
         if bare is not None:
             raise ControlMMError(
@@ -546,7 +547,7 @@ def _arm(
     wrist = limb.middle + WRIST_SHARE * (best - limb.middle)
     upper = max(float(np.linalg.norm(limb.middle - limb.root)), 1e-9)
     candidates = [wrist]
-    for b in _rigid_below(model, limb.end_body):
+    for b in welded_below(model, limb.end_body):
         out = data.xpos[b] - limb.middle
         on_line = float(out @ along) >= (1.0 - ALONG) * float(np.linalg.norm(out)) > 0.0
         # ...with a hand past it: its tip at least half a human hand away, against the upper arm
@@ -559,13 +560,3 @@ def _arm(
         return abs(float(np.linalg.norm(point - limb.middle)) / upper - HUMAN_FOREARM / HUMAN_UPPER_ARM)
 
     return replace(limb, end=min(candidates, key=off_human))
-
-
-def _rigid_below(model: mujoco.MjModel, body: int) -> list[int]:
-    """The bodies below ``body`` joined to it without a joint (directly or through such bodies)."""
-    out: list[int] = []
-    for b in range(body + 1, model.nbody):  # children have larger ids than their parents
-        parent = int(model.body_parentid[b])
-        if model.body_jntnum[b] == 0 and (parent == body or parent in out):
-            out.append(b)
-    return out

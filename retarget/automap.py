@@ -33,7 +33,7 @@ from retarget.clear_ranges import clear_ranges
 from retarget.geoms import collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_OFFSETS
 from retarget.mapping import DEFAULT_WEIGHTS, MAPPING_FORMAT, Mapping, parse_mapping
-from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path
+from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path, welded_below
 
 SOLE_MARGIN = 0.005
 """The toe point stays this far (m) inside the sole's front edge and above its bottom."""
@@ -61,13 +61,15 @@ def _point(anatomy: Anatomy, body: int, world: np.ndarray) -> dict:
 
 
 def _sole_front(anatomy: Anatomy, leg: Limb) -> tuple[float, float]:
-    """The foot's sole: its front x (m, world) and its bottom z, in the rest pose."""
+    """The foot's sole (its link's collision geoms and those of bodies welded below it): its
+    front x (m, world) and its bottom z, in the rest pose."""
     m = anatomy.model
     pts = []
-    for g in collision_geoms(m, leg.end_body):
-        p, r = geom_points(m, g)
-        world = anatomy.xpos[leg.end_body] + p @ anatomy.xmat[leg.end_body].T
-        pts.append(np.c_[world, r])
+    for b in (leg.end_body, *welded_below(m, leg.end_body)):
+        for g in collision_geoms(m, b):
+            p, r = geom_points(m, g)
+            world = anatomy.xpos[b] + p @ anatomy.xmat[b].T
+            pts.append(np.c_[world, r])
     if not pts:
         return float(leg.end[0]), anatomy.floor_z
     allp = np.concatenate(pts)

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 
 from retarget.geoms import collision_geoms
-from retarget.robot_files import ancestors
+from retarget.robot_files import ancestors, jointed_link
 
 QUARTER_TURN = np.pi / 2
 """Facing is rounded to a multiple of this (rad): a foot's toe-out or asymmetric toes never
@@ -101,9 +101,10 @@ def _toe_reach(
 ) -> float:
     """How far (m) along ``direction`` the sole of ``foot``'s leg (its collision geoms within
     SOLE_BAND of the floor) reaches beyond the ankle (the highest body of the leg whose origin
-    is within ANKLE_BAND of the robot's height above the floor)."""
-    ankle = foot
-    for b in ancestors(model, foot):
+    is within ANKLE_BAND of the robot's height above the floor; at least the foot's own link,
+    so that collision geoms in bodies welded below it, a foot's cleats, count together)."""
+    ankle = jointed_link(model, foot)
+    for b in ancestors(model, ankle):
         if data.xpos[b][2] - floor > ANKLE_BAND * height:
             break
         ankle = b

@@ -33,7 +33,12 @@ from controlmm.errors import ControlMMError, InputFileError
 from retarget.kinematics import check_joint_types
 from retarget.mapping import load_mapping
 from retarget.robots import is_packaged, robot_mjcf, robot_scene
-from retarget.spec_edits import drop_closed_chain_rods, drop_placeholder_bodies, free_floating_base
+from retarget.spec_edits import (
+    drop_closed_chain_rods,
+    drop_placeholder_bodies,
+    free_floating_base,
+    servo_ranges,
+)
 
 COLLISION_GROUP = 3
 """Geom group of collision geoms in MuJoCo Menagerie models (visual geoms: groups 1-2)."""
@@ -76,6 +81,25 @@ def ancestors(model: mujoco.MjModel, body: int) -> list[int]:
     return out
 
 
+def jointed_link(model: mujoco.MjModel, body: int) -> int:
+    """The link ``body`` belongs to: ``body`` or, through bodies without joints (welded to their
+    parents: a foot's cleats or sole plates), the nearest ancestor with one (the world body 0
+    when none has)."""
+    while body > 0 and model.body_jntnum[body] == 0:
+        body = int(model.body_parentid[body])
+    return body
+
+
+def welded_below(model: mujoco.MjModel, body: int) -> list[int]:
+    """The bodies below ``body`` joined to it without a joint (directly or through such bodies)."""
+    out: list[int] = []
+    for b in range(body + 1, model.nbody):  # children have larger ids than their parents
+        parent = int(model.body_parentid[b])
+        if model.body_jntnum[b] == 0 and (parent == body or parent in out):
+            out.append(b)
+    return out
+
+
 def free_root(model: mujoco.MjModel) -> int | None:
     """The body holding the model's floating base (a free joint on a child of the world), or None.
 
@@ -94,8 +118,9 @@ def free_root(model: mujoco.MjModel) -> int | None:
 
 def read_robot_mjcf(path: str | Path) -> mujoco.MjSpec:
     """A robot MJCF file's ``mujoco.MjSpec`` with a floating base written as joints made a free
-    joint, bodies that only hold joints beside the robot removed and the passive rods of closed
-    chains removed (:mod:`retarget.spec_edits`).
+    joint, bodies that only hold joints beside the robot removed, the passive rods of closed
+    chains removed and joints without a range given their position servo's
+    (:mod:`retarget.spec_edits`).
 
     Raises:
         InputFileError: the file does not parse.
@@ -107,6 +132,7 @@ def read_robot_mjcf(path: str | Path) -> mujoco.MjSpec:
     free_floating_base(spec)
     drop_placeholder_bodies(spec)
     drop_closed_chain_rods(spec)
+    servo_ranges(spec)
     return spec
 
 

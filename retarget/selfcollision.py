@@ -657,8 +657,8 @@ SWEEP_SLACK = 0.002
 def swept_margins(
     model: mujoco.MjModel, tree: KinematicTree, sc: SelfClearance, pairs: list[int]
 ) -> dict[int, float | None]:
-    """The margin of each pair of ``pairs`` (a body and a link below it: a trunk body and a thigh
-    link, a shin and its foot) from its real geoms.
+    """The margin of each pair of ``pairs`` (two bodies a few joints apart: a trunk body and a
+    thigh link, a shin and its foot, a waist link beside a hip) from its real geoms.
 
     Enclosing capsules of a pelvis and the hip link hanging below it overlap in every pose
     (G1's by 1-5 cm), so the rest pose's distance says nothing about contact. The joints
@@ -670,8 +670,9 @@ def swept_margins(
     it, overlaps up to about 8 mm may stay above the margin, checked in the tests;
     ``controlmm validate`` allows 5 mm). None: no swept pose makes them touch, or the pair
     cannot be swept (more than ``SWEEP_JOINTS`` joints lie between them: on the paths from
-    the two bodies up to their common ancestor). The pairs of one body pair share their sweep
-    (a body split into convex pieces has hundreds of pairs with the next).
+    the two bodies up to their common ancestor) or need not be (no joint between them). The
+    pairs of one body pair share their sweep (a body split into convex pieces has hundreds of
+    pairs with the next).
     """
     out: dict[int, float | None] = {}
     by_bodies: dict[tuple[int, int], list[int]] = {}
@@ -679,9 +680,9 @@ def swept_margins(
         key = (int(tree.node_body[sc.node[sc.first[k]]]), int(tree.node_body[sc.node[sc.second[k]]]))
         by_bodies.setdefault(key, []).append(k)
     data = mujoco.MjData(model)
-    for (trunk_body, link), ks in by_bodies.items():
-        joints = _joints_between(model, trunk_body, link)
-        if len(joints) > SWEEP_JOINTS:
+    for (body1, body2), ks in by_bodies.items():
+        joints = _joints_between(model, body1, body2)
+        if not joints or len(joints) > SWEEP_JOINTS:  # none: welded together, they never move
             out.update(dict.fromkeys(ks))
             continue
         col = [int(np.flatnonzero(tree.joint_ids == j)[0]) for j in joints]

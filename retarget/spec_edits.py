@@ -6,7 +6,9 @@
   hinges becomes one free joint;
 - :func:`drop_placeholder_bodies`: bodies beside the robot that hold joints but no geometry go;
 - :func:`drop_closed_chain_rods`: the passive rods of closed chains (a ball joint at one end,
-  an equality constraint at the other) go with their constraints.
+  an equality constraint at the other) go with their constraints;
+- :func:`servo_ranges`: a joint without a range that a position servo drives takes the
+  servo's control range.
 
 Each keeps the file's keyframes, actuators and sensors consistent with the joints it removes;
 trajectories then use the edited model's ``qpos`` layout (the free joint's position and
@@ -36,11 +38,16 @@ def _six_dof(joints: list[mujoco.MjsJoint]) -> bool:
 
 
 def _remove_joints(
-    spec: mujoco.MjSpec, model: mujoco.MjModel, joints: list[int], root: int | None = None
+    spec: mujoco.MjSpec,
+    model: mujoco.MjModel,
+    joints: list[int],
+    root: int | None = None,
+    actuators: tuple[int, ...] = (),
 ) -> list[tuple[mujoco.MjsKey, np.ndarray, np.ndarray, np.ndarray]]:
     """Prepare the removal of ``joints`` (ids in ``model``, the spec compiled) from ``spec``:
-    delete the actuators and sensors on them and empty the keyframes, returning each one's
-    (key, qpos, qvel, ctrl) without those joints' entries; with ``root`` (a body id) its qpos
+    delete the actuators and sensors on them (and the ``actuators`` given, ids in ``model``)
+    and empty the keyframes, returning each one's (key, qpos, qvel, ctrl) without those
+    joints' and actuators' entries; with ``root`` (a body id) its qpos
     starts with that body's world pose (x y z, w x y z) and its qvel with 6 zeros, the layout
     of the free joint that replaces ``joints``. The caller deletes the joints (or their
     bodies), then sets the keyframes (:func:`_set_keys`)."""
@@ -52,11 +59,14 @@ def _remove_joints(
         nq, nv = size.get(int(model.jnt_type[j]), (1, 1))
         qdrop.extend(range(model.jnt_qposadr[j], model.jnt_qposadr[j] + nq))
         vdrop.extend(range(model.jnt_dofadr[j], model.jnt_dofadr[j] + nv))
-    on = [
-        i
-        for i, a in enumerate(spec.actuators)
-        if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in names
-    ]
+    on = sorted(
+        {
+            i
+            for i, a in enumerate(spec.actuators)
+            if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in names
+        }
+        | set(actuators)
+    )
     data = mujoco.MjData(model)
     keys = []
     for key in spec.keys:
@@ -196,7 +206,8 @@ def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
     roots = [b for b in spec.worldbody.bodies if any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints)]
     if len(roots) != 1:
         return []
-    ties = [(eq, _equality_bodies(spec, eq)) for eq in spec.equalities]
+    # A rod pinned to the world closes no loop within the robot.
+    ties = [(eq, _equality_bodies(spec, eq) - {"world"}) for eq in spec.equalities]
     rods = [
         body
         for body in _subtree(roots[0])[1:]
@@ -213,14 +224,112 @@ def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
         return []
     inside = {b.name for b in rods}
     ids = {model.body(name).id for name in inside}
-    keys = _remove_joints(spec, model, [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids])
-    geoms = {model.geom(g).name for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids} - {""}
-    sites = {model.site(s).name for s in range(model.nsite) if int(model.site_bodyid[s]) in ids} - {""}
+    joints = [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in ids]
+    site_ids = [s for s in range(model.nsite) if int(model.site_bodyid[s]) in ids]
+    geom_ids = [g for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids]
+    # Tendons through the rods (a site or geom on their path, a rod joint in their sum) go
+    # too, and so do the actuators that pull on them or on a rod's site.
+    through = {(int(mujoco.mjtWrap.mjWRAP_JOINT), j) for j in joints}
+    through |= {(int(mujoco.mjtWrap.mjWRAP_SITE), s) for s in site_ids}
+    through |= {(int(mujoco.mjtWrap.mjWRAP_SPHERE), g) for g in geom_ids}
+    through |= {(int(mujoco.mjtWrap.mjWRAP_CYLINDER), g) for g in geom_ids}
+    tendons = [
+        t
+        for t in range(model.ntendon)
+        for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t])
+        if (int(model.wrap_type[w]), int(model.wrap_objid[w])) in through
+    ]
+    pulled = {(int(mujoco.mjtTrn.mjTRN_SITE), s) for s in site_ids} | {
+        (int(mujoco.mjtTrn.mjTRN_TENDON), t) for t in tendons
+    }
+    actuators = tuple(
+        a
+        for a in range(model.nu)
+        if (int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])) in pulled
+    )
+    keys = _remove_joints(spec, model, joints, actuators=actuators)
+    obj = mujoco.mjtObj
+    named = {
+        obj.mjOBJ_BODY: inside,
+        obj.mjOBJ_XBODY: inside,
+        obj.mjOBJ_SITE: {model.site(s).name for s in site_ids} - {""},
+        obj.mjOBJ_GEOM: {model.geom(g).name for g in geom_ids} - {""},
+        obj.mjOBJ_TENDON: {model.tendon(t).name for t in tendons} - {""},
+    }
+
+    def on_rod(kind: mujoco.mjtObj, name: str) -> bool:
+        return name in named.get(kind, set())
+
     doomed: list[object] = [eq for eq, tied in ties if tied & inside]
     doomed += [x for x in spec.excludes if x.bodyname1 in inside or x.bodyname2 in inside]
-    doomed += [p for p in spec.pairs if p.geomname1 in geoms or p.geomname2 in geoms]
-    doomed += [s for s in spec.sensors if s.objname in inside | sites | geoms or s.refname in inside | sites]
+    doomed += [
+        p for p in spec.pairs if on_rod(obj.mjOBJ_GEOM, p.geomname1) or on_rod(obj.mjOBJ_GEOM, p.geomname2)
+    ]
+    doomed += [x for x in spec.sensors if on_rod(x.objtype, x.objname) or on_rod(x.reftype, x.refname)]
+    doomed += [spec.tendons[t] for t in tendons]  # the spec's tendons in the model's order
     for item in doomed + rods:
         spec.delete(item)
     _set_keys(keys)
     return [b.name for b in rods]
+
+
+def _position_servo(model: mujoco.MjModel, a: int) -> bool:
+    """Whether actuator ``a`` is a position servo on one joint (``<position>``: force
+    kp * (ctrl - gear * q) - kv * velocity), so that its control is the joint's target."""
+    return bool(
+        model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+        and model.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
+        and model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
+        and model.actuator_gainprm[a, 0] > 0
+        and model.actuator_biasprm[a, 0] == 0
+        and np.isclose(model.actuator_biasprm[a, 1], -model.actuator_gainprm[a, 0])
+    )
+
+
+def servo_ranges(spec: mujoco.MjSpec) -> list[str]:
+    """Give each hinge or slide joint without a range the control range of the position servo
+    that drives it (in place).
+
+    Files written for position control (Rhoban's Sigmaban: ``<position ctrlrange=...>`` on
+    joints that have no ``range``) keep the joint's reach in the servo: a pose outside the
+    control range cannot be commanded, so the retargeter and the checks treat it as the
+    joint's range (``ctrlrange`` divided by the gear; the union where several servos drive
+    one joint). Joints with a range of their own keep it, and so do those whose rest position
+    lies outside the servo's range. Returns the joints given a range.
+    """
+    kind, limited = mujoco.mjtJoint, mujoco.mjtLimited
+    free = {
+        j.name
+        for j in spec.joints
+        if j.type in (kind.mjJNT_HINGE, kind.mjJNT_SLIDE)
+        and (
+            j.limited == limited.mjLIMITED_FALSE
+            or (j.limited == limited.mjLIMITED_AUTO and j.range[0] >= j.range[1])
+        )
+    }
+    if not any(a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target in free for a in spec.actuators):
+        return []  # nothing to do: no compile (a large robot's takes seconds)
+    try:
+        model = spec.compile()
+    except ValueError:
+        return []  # reported by retarget.robot_files.compile_robot
+    found: dict[str, tuple[float, float]] = {}
+    moving = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    for a in range(model.nu):
+        j = int(model.actuator_trnid[a, 0])
+        gear = float(model.actuator_gear[a, 0])
+        if not (_position_servo(model, a) and model.actuator_ctrllimited[a] and gear != 0.0):
+            continue
+        name = model.joint(j).name
+        if model.jnt_limited[j] or int(model.jnt_type[j]) not in moving or not name:
+            continue
+        lo, hi = sorted(float(c) / gear for c in model.actuator_ctrlrange[a])
+        if lo <= float(model.qpos0[model.jnt_qposadr[j]]) <= hi and hi > lo:  # the rest pose within
+            old = found.get(name, (lo, hi))
+            found[name] = (min(old[0], lo), max(old[1], hi))
+    for name, (lo, hi) in found.items():
+        joint = spec.joint(name)
+        scale = 180.0 / np.pi if spec.compiler.degree and joint.type == mujoco.mjtJoint.mjJNT_HINGE else 1.0
+        joint.range = [lo * scale, hi * scale]
+        joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+    return sorted(found)

@@ -56,7 +56,8 @@ def lift_swing_feet(
     ~0.2 s (never below the need) and the leg's joints translate the foot straight up by it,
     its orientation and horizontal place unchanged (one damped least-squares step per frame
     without the joints it would push past their limits, smoothed over time like the rise: a
-    smooth correction adds no jerk), limits kept.
+    smooth correction adds no jerk), limits kept. Where the leg is short of a joint and that
+    leaves the sole low, the foot turns instead, or gets no step (:func:`_turned_lift`).
 
     Args:
         robot: the robot; root_pos (T, 3), root_rot (T, 3, 3), q (T, nj) at ``fps``.
@@ -293,8 +294,9 @@ def _turned_lift(
 ) -> np.ndarray:
     """The lift of frames whose leg is short of a joint: (F, nl) ``dq`` (the step that raises the
     foot's origin), or where that leaves the lowest sole point (``height`` (F,) in ``poses``,
-    those of ``q``) more than SWING_TOLERANCE below its level ``height + rise`` and below
-    SKIM_HEIGHT (where the simulation check would take the foot for a standing one) and a turn
+    those of ``q``) more than SWING_TOLERANCE below its level ``height + rise`` and more than
+    SWING_TOLERANCE below SKIM_HEIGHT (where the simulation check would take the foot for a
+    standing one) and a turn
     of the foot gets it there, that turn: the sole points below the level (and up to
     LIFT_SOLE_BAND above) rise to it, the lowest keeps its horizontal place and the foot's
     orientation gives way; where neither gets it higher, no step. A crouching walk's swing foot

@@ -133,6 +133,51 @@ def test_inferred_mapping_reads_geometry_not_names(tmp_path):
     np.testing.assert_allclose(knee[:2], data.xanchor[g1.joint("left_knee_joint").id][:2], atol=1e-6)
 
 
+def _g1_on_plates(tmp_path: Path) -> Path:
+    """The G1 with each foot's collision spheres moved, unmoved in the world, into a body welded
+    below the foot (no joint) whose origin sits 20 cm ahead of the ankle and 15 cm above it, as
+    files put a foot's cleats or sole plate in bodies of their own at any origin."""
+    src = robot_mjcf("g1")
+    spec = mujoco.MjSpec.from_file(str(src))
+    spec.meshdir = str(src.parent / "assets")
+    offset = np.array([0.2, 0.0, 0.15])
+    for side in ("left", "right"):
+        foot = spec.body(f"{side}_ankle_roll_link")
+        plate = foot.add_body(name=f"{side}_plate", pos=offset)
+        for geom in [g for g in foot.geoms if g.contype or g.conaffinity]:
+            plate.add_geom(
+                type=geom.type,
+                size=geom.size,
+                pos=np.asarray(geom.pos) - offset,
+                contype=geom.contype,
+                conaffinity=geom.conaffinity,
+                group=geom.group,
+                friction=geom.friction,
+            )
+            spec.delete(geom)
+    for kind in (spec.actuators, spec.sensors, spec.keys):
+        for element in list(kind):
+            spec.delete(element)
+    path = tmp_path / "plates.xml"
+    path.write_text(spec.to_xml())
+    return path
+
+
+def test_feet_standing_on_welded_plates_are_the_feet_above_them(tmp_path):
+    """A foot's collision geometry in a body welded below it counts as the foot's: the robot is
+    read as facing the way its toes point (not the way the plate's own origin makes them seem
+    to point), its left leg is the +Y one and its ankles are the foot links, so the inferred
+    keypoints are the plain G1's."""
+    path = _g1_on_plates(tmp_path)
+    mapping = infer_mapping(path)
+    for side in ("left", "right"):
+        assert mapping["keypoints"][f"{side}_ankle"]["body"] == f"{side}_ankle_roll_link"
+    robot = load_robot(path)
+    plain = load_robot(robot_mjcf("g1"))
+    np.testing.assert_allclose(robot.rest_keypoints, plain.rest_keypoints, atol=1e-9)
+    assert robot.rest_keypoints[robot.keypoint_index("left_ankle")][1] > 0.05
+
+
 @pytest.mark.slow
 def test_inferred_mappings_fit_within_20_percent_of_the_reviewed(motion):
     for name in ROBOTS:

@@ -27,6 +27,7 @@ from retarget.robot_files import compile_robot, free_root
 from retarget.selfcheck import unpaired_overlaps
 from retarget.selfcollision import REST_SLACK, SELF_MARGIN, capsule_distances
 from retarget.soles import FOOT_POINTS_MOST
+from retarget.spec_edits import drop_closed_chain_rods
 
 
 @pytest.fixture(scope="module")
@@ -577,3 +578,92 @@ def test_the_rods_of_closed_chains_are_dropped(tmp_path, humanoids, motion):
     done = cli("robots", "map", loose, "--out", tmp_path / "loose.json")
     err = done.stderr.strip()
     assert done.returncode == 2 and "joint 'rod_l' is a mjJNT_BALL" in err and len(err.splitlines()) == 1, err
+
+
+def test_joints_without_a_range_take_their_position_servos(tmp_path, humanoids, motion):
+    """A file written for position control leaves the joints' ranges to its servos
+    (``<position ctrlrange=...>`` on joints without ``range``, as Rhoban's Sigmaban): each such
+    joint takes its servo's control range over its gear, in the file's angle unit; a joint
+    with a range of its own keeps it, and a servo range that leaves out the rest pose is not
+    taken. The retargeted motion stays within the servos' ranges."""
+    reference = compile_robot(humanoids["plain"])
+    spec = mujoco.MjSpec.from_string(humanoids["plain"].read_text())
+    servos = {}
+    for joint in spec.joints:
+        if joint.type != mujoco.mjtJoint.mjJNT_HINGE:
+            continue
+        j = reference.joint(joint.name).id
+        lo, hi = reference.jnt_range[j]
+        gear = 2.0 if joint.name == "knee_l" else 1.0
+        if joint.name == "spine_x":  # keeps its own range, whatever its servo's
+            ctrl = (-3.0, 3.0)
+        elif joint.name == "spine_y":  # a servo range without the rest pose: not taken
+            ctrl = (0.1, 0.4)
+            joint.limited, joint.range = mujoco.mjtLimited.mjLIMITED_FALSE, [0.0, 0.0]
+        else:
+            ctrl = (gear * lo, gear * hi)
+            joint.limited, joint.range = mujoco.mjtLimited.mjLIMITED_AUTO, [0.0, 0.0]
+        spec.add_actuator(
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            target=joint.name,
+            gear=[gear, 0, 0, 0, 0, 0],
+            ctrlrange=list(ctrl),
+            ctrllimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+        ).set_to_position(kp=50.0)
+        servos[joint.name] = (ctrl[0] / gear, ctrl[1] / gear)
+    path = tmp_path / "servos.xml"
+    path.write_text(spec.to_xml())
+    raw = mujoco.MjModel.from_xml_path(str(path))
+    assert int(raw.jnt_limited.sum()) == 1  # spine_x only, as written
+    model = compile_robot(path)
+    for name in servos:
+        j = model.joint(name).id
+        if name == "spine_y":
+            assert not model.jnt_limited[j]
+        else:
+            assert model.jnt_limited[j]
+            np.testing.assert_allclose(
+                model.jnt_range[j], reference.jnt_range[reference.joint(name).id], rtol=1e-5, atol=1e-6
+            )
+    qpos = retarget_motion(motion, path, fps=30.0, metrics=False).qpos
+    for name, (lo, hi) in servos.items():
+        if name in ("spine_x", "spine_y"):
+            continue
+        q = qpos[:, model.jnt_qposadr[model.joint(name).id]]
+        assert lo - 1e-6 <= q.min() and q.max() <= hi + 1e-6, (name, q.min(), q.max(), lo, hi)
+
+
+def test_what_acts_on_or_reads_a_rod_goes_with_it_and_nothing_else(tmp_path, humanoids):
+    """Dropping the rods also drops a tendon through a rod's site, the actuators pulling on it
+    and on the site (the keyframe's controls keep the others'), and only the sensors on the
+    rods' own elements: a kept tendon that shares a rod's name keeps its sensor. A rod pinned
+    to the world closes no loop within the robot and stays (then refused as a ball joint)."""
+    text = _with_rods(humanoids["plain"].read_text())
+    extra = (
+        '<tendon><spatial name="pull"><site site="rod_end_l"/><site site="hip_site_l"/></spatial>'
+        '<fixed name="rod_l"><joint joint="knee_l" coef="1"/></fixed></tendon>'
+        '<actuator><motor name="on_tendon" tendon="pull"/><motor name="on_site" site="rod_end_l"/>'
+        '<motor name="on_knee" joint="knee_r"/></actuator>'
+        '<sensor><tendonpos name="kept" tendon="rod_l"/></sensor>'
+        '<keyframe><key ctrl="1 2 3"/></keyframe>'
+    )
+    text = text.replace(
+        '<body name="shin_l"', '<site name="hip_site_l" pos="0 0.05 0"/><body name="shin_l"', 1
+    )
+    path = tmp_path / "acted.xml"
+    path.write_text(text.replace("</mujoco>", f"{extra}\n</mujoco>", 1))
+    model = compile_robot(path)
+    assert [model.actuator(a).name for a in range(model.nu)] == ["on_knee"]
+    np.testing.assert_array_equal(model.key_ctrl[0], [3.0])
+    assert [model.tendon(t).name for t in range(model.ntendon)] == ["rod_l"]
+    assert "kept" in [model.sensor(i).name for i in range(model.nsensor)]
+    pinned = tmp_path / "pinned.xml"
+    pinned.write_text(
+        _with_rods(humanoids["plain"].read_text(), tied=False).replace(
+            "</mujoco>",
+            '<equality><connect body1="rod_l" body2="world" anchor="0 0 -0.38"/></equality></mujoco>',
+            1,
+        )
+    )
+    spec = mujoco.MjSpec.from_file(str(pinned))
+    assert drop_closed_chain_rods(spec) == []
