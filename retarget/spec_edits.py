@@ -236,8 +236,10 @@ def drop_closed_chain_rods(spec: mujoco.MjSpec) -> list[str]:
     tendons = [
         t
         for t in range(model.ntendon)
-        for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t])
-        if (int(model.wrap_type[w]), int(model.wrap_objid[w])) in through
+        if any(
+            (int(model.wrap_type[w]), int(model.wrap_objid[w])) in through
+            for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t])
+        )
     ]
     pulled = {(int(mujoco.mjtTrn.mjTRN_SITE), s) for s in site_ids} | {
         (int(mujoco.mjtTrn.mjTRN_TENDON), t) for t in tendons
@@ -277,9 +279,9 @@ def _position_servo(model: mujoco.MjModel, a: int) -> bool:
     """Whether actuator ``a`` is a position servo on one joint (``<position>``: force
     kp * (ctrl - gear * q) - kv * velocity), so that its control is the joint's target."""
     return bool(
-        model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
-        and model.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
-        and model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
+        int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+        and int(model.actuator_gaintype[a]) == int(mujoco.mjtGain.mjGAIN_FIXED)
+        and int(model.actuator_biastype[a]) == int(mujoco.mjtBias.mjBIAS_AFFINE)
         and model.actuator_gainprm[a, 0] > 0
         and model.actuator_biasprm[a, 0] == 0
         and np.isclose(model.actuator_biasprm[a, 1], -model.actuator_gainprm[a, 0])
