@@ -9,7 +9,9 @@ Motions: the real HumanML3D clip 012314 resampled to 30 fps (the rate both peers
 the first ``--clips`` clips of ``--corpus`` (a ``controlmm corpus`` folder), with ``--families``
 one generated clip of each of the corpus's families (no files needed), and, when
 holosoma-retargeting is available, the real OMOMO mocap clips it ships (SMPL-H: its first 22
-joints are HumanML3D's), fed to each retargeter in its own format.
+joints are HumanML3D's), fed to each retargeter in its own format. Without holosoma's
+environment but with its package installed here (``pip install --no-deps holosoma-retargeting``,
+the ``mocap-demo`` extra), ours runs on those clips alone, read from the package's data.
 
 Per trajectory, measured the same way for every retargeter (:mod:`retarget.compare`, the
 simulation check of ``controlmm validate`` on the ``empty`` scene):
@@ -54,6 +56,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import importlib.util
 import json
 import platform
 import subprocess
@@ -72,6 +75,8 @@ from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
 from controlmm.corpus import CorpusConfig, make_clip, plan_clips  # noqa: E402
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
+from controlmm.motion.formats.arrays import position_array, read_arrays  # noqa: E402
+from controlmm.motion.formats.smpl import INTERMIMIC_FPS, smpl_body_joints  # noqa: E402
 from controlmm.motion.skeleton import JOINT_INDEX  # noqa: E402
 from retarget import SolverConfig, load_robot, retarget_motion  # noqa: E402
 from retarget.compare import (  # noqa: E402
@@ -227,6 +232,24 @@ def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tup
                     float(out[f"{name}__seconds"]),
                 )
     return results, demo, "holosoma-retargeting 0.1.0 (own environment, mujoco 3.3.7)"
+
+
+def package_omomo() -> dict[str, np.ndarray]:
+    """name -> HumanML3D joints (T, 22, 3), Y up, at FPS, of the OMOMO clips in the installed
+    holosoma-retargeting package's demo data (``pip install --no-deps holosoma-retargeting``, the
+    ``mocap-demo`` extra; read as data, the package never imported), as its loader gives them
+    (their first 22 SMPL-H joints, Z up, 30 fps); {} without the package."""
+    spec = importlib.util.find_spec("holosoma_retargeting")
+    if spec is None or not spec.submodule_search_locations:
+        return {}
+    folder = Path(list(spec.submodule_search_locations)[0]) / "demo_data" / "OMOMO_new"
+    out = {}
+    for path in sorted(folder.glob("*.pt")):
+        body, _ = smpl_body_joints(position_array(read_arrays(path, ".pt"), str(path)).positions, str(path))
+        frames = int(np.floor((len(body) - 1) / INTERMIMIC_FPS * FPS)) + 1
+        zup = resample_human(body, INTERMIMIC_FPS, frames, FPS)
+        out[f"omomo {path.stem}"] = zup[..., [1, 2, 0]]  # the inverse of (x, y, z) -> (z, x, y)
+    return out
 
 
 def on_floor(joints: np.ndarray) -> np.ndarray:
@@ -438,6 +461,17 @@ def main() -> int:
                 groups["holosoma"] = _by_group(per["holosoma/g1"]) | {"omomo": per["holosoma/g1 omomo"]}
         else:
             notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
+            # Its package's OMOMO clips for ours alone, where the package is installed here.
+            omomo = package_omomo()
+            per["ours/g1 omomo"] = {}
+            for name, joints in omomo.items():
+                qpos, seconds = ours(
+                    "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), args.repeats, solver
+                )
+                per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
+            groups["controlmm"]["omomo"] = per["ours/g1 omomo"]
+            if omomo:
+                notes["holosoma"] += "; OMOMO clips read from its package installed here (ours only)"
         if args.gmr_python.is_file():
             feed = {k: joints for k, (_, joints) in motions.items()} | {
                 k: on_floor(v[0]) for k, v in demo.items()
