@@ -640,7 +640,8 @@ def test_what_acts_on_or_reads_a_rod_goes_with_it_and_nothing_else(tmp_path, hum
     to the world closes no loop within the robot and stays (then refused as a ball joint)."""
     text = _with_rods(humanoids["plain"].read_text())
     extra = (
-        '<tendon><spatial name="pull"><site site="rod_end_l"/><site site="hip_site_l"/><site site="rod_end_r"/></spatial>'
+        '<tendon><spatial name="pull"><site site="rod_end_l"/><site site="hip_site_l"/>'
+        '<site site="rod_end_r"/></spatial>'
         '<fixed name="rod_l"><joint joint="knee_l" coef="1"/></fixed></tendon>'
         '<actuator><motor name="on_tendon" tendon="pull"/><motor name="on_site" site="rod_end_l"/>'
         '<motor name="on_knee" joint="knee_r"/></actuator>'
