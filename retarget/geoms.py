@@ -34,6 +34,15 @@ class FloorPoints:
         rot = poses.rot[:, self.node]
         return poses.pos[:, self.node, None, :] + np.einsum("tij,pj->tpi", rot, self.points)
 
+    def lowest(self, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
+        """Height (T,) of the lowest collision point above z = 0 in each of ``poses`` and that
+        point's centre (T, 3)."""
+        pts = self.world(poses)
+        low = pts[..., 2] - self.radius
+        i = np.argmin(low, axis=1)
+        t = np.arange(len(low))
+        return low[t, i], pts[t, i]
+
 
 def geom_points(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
     """Support points (P, 3) in the body frame and radii (P,) of collision geom ``g``."""

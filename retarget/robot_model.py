@@ -211,8 +211,7 @@ class RobotModel:
 
     def foot_lowest(self, poses: Poses, side: str) -> np.ndarray:
         """Lowest z (m) of a foot's collision points per frame, (T,)."""
-        f = self.feet[side]
-        return (f.world(poses)[..., 2] - f.radius).min(axis=1)
+        return self.feet[side].lowest(poses)[0]
 
     # -- derived quantities ----------------------------------------------------------------
     def _auto_scale(self) -> float:

@@ -18,7 +18,6 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.spatial.transform import Rotation
 
 from retarget.feet import leg_joints
-from retarget.geoms import FloorPoints
 from retarget.kinematics import Poses
 from retarget.robot_model import RobotModel
 from retarget.selfcheck import pair_overlaps
@@ -77,8 +76,8 @@ def lift_swing_feet(
         f = robot.feet[side]
         leg = leg_joints(robot, side)
         lo, hi = robot.lower[leg], robot.upper[leg]
-        h, _ = lowest_floor_point(poses, f)
         pts = f.world(poses)
+        h = (pts[..., 2] - f.radius).min(axis=1)
         # Like the simulation check, a foot moves when every sole point low in both frames
         # does: a point high above the floor that stays put (a heel strike's lifted toe) does
         # not make the landing heel slow.
@@ -308,7 +307,7 @@ def _turned_lift(
     def reached(step: np.ndarray, rows: np.ndarray) -> np.ndarray:
         moved = q[rows].copy()
         moved[:, leg] = np.clip(moved[:, leg] + step, lo, hi)
-        return lowest_floor_point(tree.forward(root_pos[rows], root_rot[rows], moved), f)[0]
+        return f.lowest(tree.forward(root_pos[rows], root_rot[rows], moved))[0]
 
     level = height + rise
     before = reached(dq, np.arange(len(q)))
@@ -321,7 +320,7 @@ def _turned_lift(
     sole = f.world(sub)  # (F', P, 3)
     need = level[fail, None] - (sole[..., 2] - f.radius)  # (F', P) rise of each point to the level
     jz = tree.point_jacobian(sub, np.full(sole.shape[1], f.node), sole, rows=(2,))[:, :, 0][..., 6 + leg]
-    low = lowest_floor_point(sub, f)[1][:, None, :]
+    low = f.lowest(sub)[1][:, None, :]
     jxy = tree.point_jacobian(sub, node, low, rows=(0, 1))[:, 0][..., 6 + leg]
     jr = tree.rotation_jacobian(sub, node)[:, 0][..., 6 + leg]
     jac = np.concatenate([jxy, jz, jr], axis=1)  # (F', 2 + P + 3, nl)
@@ -344,12 +343,3 @@ def _turned_lift(
     still = np.maximum(turned, before[fail]) <= height[fail]
     out[fail[still]] = 0.0
     return out
-
-
-def lowest_floor_point(poses: Poses, f: FloorPoints) -> tuple[np.ndarray, np.ndarray]:
-    """Height (T,) of a foot's lowest collision point above z = 0 and that point (T, 3)."""
-    pts = f.world(poses)
-    low = pts[..., 2] - f.radius
-    i = np.argmin(low, axis=1)
-    t = np.arange(len(low))
-    return low[t, i], pts[t, i]

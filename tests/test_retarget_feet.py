@@ -16,7 +16,7 @@ from retarget import load_robot, retarget_motion, robot_scale
 from retarget.compare import similarity_fit
 from retarget.robots import robot_mjcf
 from retarget.solver_config import SolverConfig
-from retarget.swing_lift import lift_swing_feet, lowest_floor_point
+from retarget.swing_lift import lift_swing_feet
 from retarget.targets import build_targets, stiffer_locks
 
 FPS = 20.0
@@ -231,11 +231,11 @@ def test_a_foot_with_its_knee_at_the_stop_lifts_its_toe_by_turning(tmp_path, ank
     root_pos = np.zeros((frames, 3))
     root_pos[:, 0] = np.arange(frames) / fps
     foot = robot.feet["left"]
-    root_pos[:, 2] = 0.005 - lowest_floor_point(robot.tree.forward(root_pos, root_rot, q), foot)[0]
-    h0, p0 = lowest_floor_point(robot.tree.forward(root_pos, root_rot, q), foot)
+    root_pos[:, 2] = 0.005 - foot.lowest(robot.tree.forward(root_pos, root_rot, q))[0]
+    h0, p0 = foot.lowest(robot.tree.forward(root_pos, root_rot, q))
     none = np.zeros(frames)
     out, _ = lift_swing_feet(robot, root_pos, root_rot, q, {"left": none, "right": none}, fps)
-    h1, p1 = lowest_floor_point(robot.tree.forward(root_pos, root_rot, out), foot)
+    h1, p1 = foot.lowest(robot.tree.forward(root_pos, root_rot, out))
     assert np.all(out[:, index["left_knee_joint"]] == 1.2)
     assert np.abs(p1 - p0)[:, :2].max() < 0.002
     if lifted:
