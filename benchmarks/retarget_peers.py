@@ -252,6 +252,18 @@ def package_omomo() -> dict[str, np.ndarray]:
     return out
 
 
+def ours_on_mocap(clips: dict[str, np.ndarray], repeats: int, solver: dict) -> dict[str, dict]:
+    """Our G1 figures on recorded clips (name -> HumanML3D joints (T, 22, 3), Y up, at FPS),
+    each put on the floor first (:func:`on_floor`) and measured against the joints as given."""
+    out = {}
+    for name, joints in clips.items():
+        qpos, seconds = ours(
+            "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), repeats, solver
+        )
+        out[name] = measure("g1", qpos, joints, seconds, len(joints))
+    return out
+
+
 def on_floor(joints: np.ndarray) -> np.ndarray:
     """HumanML3D joints (T, 22, 3), Y up, with the lowest toe of the clip at height 0, as
     HumanML3D's preprocessing puts its clips (OMOMO's SMPL-H joints float 4-6 cm: the toe
@@ -447,28 +459,18 @@ def main() -> int:
                 per["holosoma/g1"] = {
                     k: measure("g1", q, motions[k][1], s, len(motions[k][1])) for k, (q, s) in results.items()
                 }
-                per["ours/g1 omomo"], per["holosoma/g1 omomo"] = {}, {}
-                for name, (joints, q_peer, s_peer) in demo.items():
-                    qpos, seconds = ours(
-                        "g1",
-                        Motion(joints=on_floor(joints).astype(np.float32), fps=FPS),
-                        args.repeats,
-                        solver,
-                    )
-                    per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
-                    per["holosoma/g1 omomo"][name] = measure("g1", q_peer, joints, s_peer, len(joints))
+                per["ours/g1 omomo"] = ours_on_mocap({k: v[0] for k, v in demo.items()}, args.repeats, solver)
+                per["holosoma/g1 omomo"] = {
+                    name: measure("g1", q_peer, joints, s_peer, len(joints))
+                    for name, (joints, q_peer, s_peer) in demo.items()
+                }
                 groups["controlmm"]["omomo"] = per["ours/g1 omomo"]
                 groups["holosoma"] = _by_group(per["holosoma/g1"]) | {"omomo": per["holosoma/g1 omomo"]}
         else:
             notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
             # Its package's OMOMO clips for ours alone, where the package is installed here.
             omomo = package_omomo()
-            per["ours/g1 omomo"] = {}
-            for name, joints in omomo.items():
-                qpos, seconds = ours(
-                    "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), args.repeats, solver
-                )
-                per["ours/g1 omomo"][name] = measure("g1", qpos, joints, seconds, len(joints))
+            per["ours/g1 omomo"] = ours_on_mocap(omomo, args.repeats, solver)
             groups["controlmm"]["omomo"] = per["ours/g1 omomo"]
             if omomo:
                 notes["holosoma"] += "; OMOMO clips read from its package installed here (ours only)"
