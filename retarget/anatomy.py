@@ -429,8 +429,8 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
             "on each side of its midline, +Y left)"
         )
     for side in feet:  # a toe link below the foot: the foot is the link its sole is on
-        feet[side] = _foot_above_toes(model, feet[side], root, low, floor_z + SOLE_BAND * height)
-        feet[side] = jointed_link(model, feet[side])  # not a cleat welded below it
+        link = jointed_link(model, feet[side])  # the foot, not a cleat welded below it
+        feet[side] = _foot_above_toes(model, link, root, low, floor_z + SOLE_BAND * height)
         bare = _bare_link_below(model, data, feet[side], feet_z[side])
         if bare is not None:
             raise ControlMMError(

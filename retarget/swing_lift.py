@@ -77,11 +77,12 @@ def lift_swing_feet(
         leg = leg_joints(robot, side)
         lo, hi = robot.lower[leg], robot.upper[leg]
         pts = f.world(poses)
-        h = (pts[..., 2] - f.radius).min(axis=1)
+        heights = pts[..., 2] - f.radius  # (T, P)
+        h = heights.min(axis=1)
         # Like the simulation check, a foot moves when every sole point low in both frames
         # does: a point high above the floor that stays put (a heel strike's lifted toe) does
         # not make the landing heel slow.
-        low = pts[..., 2] - f.radius < SKIM_HEIGHT  # (T, P)
+        low = heights < SKIM_HEIGHT  # (T, P)
         step = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=2) * fps  # (T-1, P)
         step = np.where(low[1:] & low[:-1], step, np.inf).min(axis=1, initial=np.inf)
         step = np.where(np.isfinite(step), step, 0.0)
