@@ -10,7 +10,8 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
    below the foot). **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
    bodies from the pelvis down to a foot.
 2. **Arms**: the ends of the other jointed chains that lie clearly to one side (the head's
-   chain stays near the midline); per side, the common ancestor of those ends is the hand
+   chain stays near the midline) and reach out as far as that side's farthest end about
+   (not a crank beside the torso); per side, the common ancestor of those ends is the hand
    (a hand with fingers has several ends). **Torso**: the hands' common ancestor. Robots whose
    only chains are the legs have no arms (a legs-only robot retargets pelvis and legs). Arms
    whose geometry reaches the floor in the rest pose are a quadruped's: refused.
@@ -47,6 +48,10 @@ above 1 - this."""
 SIDE_FRACTION = 0.3
 """A chain end belongs to an arm when it lies further from the midline than this fraction of
 the furthest such end; nearer ends are the head's (or other midline parts)."""
+ARM_REACH = 0.5
+"""...and when it lies at least this fraction as far from where the two sides' ends branch
+as the farthest end on its side: a short link beside the torso (LimX HU_D03's waist cranks,
+one hinge each, 11 cm from the torso's origin against the hands' 29 cm) is not a hand."""
 WRIST_SHARE = HUMAN_FOREARM / (HUMAN_FOREARM + HUMAN_HALF_HAND)
 """Where the wrist of an arm without wrist joints sits between its elbow (0) and its tip (1):
 the human forearm against the forearm plus half a hand."""
@@ -58,11 +63,11 @@ SOLE_BAND = 0.015
 """A link whose collision geometry comes this close (fraction of the robot's height) to the
 floor in the rest pose stands on it: the foot above a toe link is the foot."""
 BARE_FOOT = 0.005
+"""A jointed link below a foot whose origin lies this much (m) lower than the foot's lowest
+collision point: the leg goes on below its geometry (feet without collision geoms)."""
 ARM_ABOVE_FLOOR = 0.15
 """An arm whose collision geometry comes nearer the floor than this fraction of the robot's
 height in the rest pose stands on it: four limbs on the floor are a quadruped's."""
-"""A jointed link below a foot whose origin lies this much (m) lower than the foot's lowest
-collision point: the leg goes on below its geometry (feet without collision geoms)."""
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
@@ -464,6 +469,10 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
         for side, sign in (("left", 1.0), ("right", -1.0))
     }
     if sided["left"] and sided["right"]:
+        branch = data.xpos[common_ancestor(model, sided["left"] + sided["right"])]
+        for side, side_ends in sided.items():
+            far = {e: float(np.linalg.norm(data.xpos[e] - branch)) for e in side_ends}
+            sided[side] = [e for e in side_ends if far[e] >= ARM_REACH * max(far.values())]
         hands = {side: common_ancestor(model, sided[side]) for side in sided}
         torso = common_ancestor(model, list(hands.values()))
         for side, hand in hands.items():

@@ -178,6 +178,39 @@ def test_feet_standing_on_welded_plates_are_the_feet_above_them(tmp_path):
     assert robot.rest_keypoints[robot.keypoint_index("left_ankle")][1] > 0.05
 
 
+def _g1_with_cranks(tmp_path: Path) -> Path:
+    """The G1 with a short crank on each side of its torso (one hinge, a 4 cm capsule, 9 cm from
+    the torso's origin), as files write the levers of a parallel waist (LimX's HU_D03)."""
+    src = robot_mjcf("g1")
+    spec = mujoco.MjSpec.from_file(str(src))
+    spec.meshdir = str(src.parent / "assets")
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        crank = spec.body("torso_link").add_body(name=f"{side}_crank", pos=[0.0, sign * 0.08, 0.05])
+        crank.add_joint(name=f"{side}_crank_joint", axis=[0.0, 1.0, 0.0], range=[-1.0, 1.0])
+        crank.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.04, 0, 0], size=[0.01, 0, 0], mass=0.05
+        )
+    for kind in (spec.actuators, spec.sensors, spec.keys):
+        for element in list(kind):
+            spec.delete(element)
+    path = tmp_path / "cranks.xml"
+    path.write_text(spec.to_xml())
+    return path
+
+
+def test_short_links_beside_the_torso_are_not_the_hands(tmp_path):
+    """A crank beside the torso lies as far from the midline as the hands, but not as far out
+    from the torso: the arms are still the arms (they were lost: the hands' common ancestor
+    with the cranks was the torso, and the robot was read as legs only)."""
+    mapping = infer_mapping(_g1_with_cranks(tmp_path))
+    for side in ("left", "right"):
+        assert mapping["keypoints"][f"{side}_elbow"]["body"] == f"{side}_elbow_link"
+        assert mapping["keypoints"][f"{side}_wrist"]["body"] == f"{side}_wrist_yaw_link"
+    plain = load_robot(robot_mjcf("g1"))
+    robot = load_robot(tmp_path / "cranks.xml")
+    np.testing.assert_allclose(robot.rest_keypoints, plain.rest_keypoints, atol=1e-9)
+
+
 @pytest.mark.slow
 def test_inferred_mappings_fit_within_20_percent_of_the_reviewed(motion):
     for name in ROBOTS:
