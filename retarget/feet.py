@@ -205,7 +205,12 @@ def hold_feet_between_frames(
 
 
 def leg_joints(robot: RobotModel, side: str) -> np.ndarray:
-    """Indices (into q) of the joints between the trunk and one foot."""
+    """Indices (into q) of the joints between the trunk and one foot that move that foot
+    alone: a joint the MJCF couples to another (NAO's hip yaw-pitch, one motor for both hips)
+    is left to the solver, which keeps the coupling (:mod:`retarget.costs.coupling`)."""
     other = {"left": "right", "right": "left"}[side]
     anc = robot.tree.ancestor
-    return np.flatnonzero(anc[int(robot.feet[side].node)] & ~anc[int(robot.feet[other].node)])
+    leg = np.flatnonzero(anc[int(robot.feet[side].node)] & ~anc[int(robot.feet[other].node)])
+    if robot.couplings is not None:
+        leg = np.setdiff1d(leg, robot.couplings.joints)
+    return leg

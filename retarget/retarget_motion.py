@@ -185,6 +185,8 @@ def _solve_and_resample(
     clearance = {side: np.interp(times, src_times, targets.clearance[side]) for side in ("left", "right")}
     root_rot = Rotation.from_quat(qpos[:, [4, 5, 6, 3]]).as_matrix()
     qpos[:, 7:], swing_lift = lift_swing_feet(rm, qpos[:, :3], root_rot, qpos[:, 7:], clearance, fps)
+    if rm.couplings is not None:  # the MJCF's joint equalities exactly (the solver kept them closely)
+        qpos[:, 7:] = rm.couplings.project(qpos[:, 7:], rm.lower, rm.upper)
     qpos, rep, lift = lift_above_floor(rm, qpos, fps)
     return sol, qpos_in, qpos, rep, lift, swing_lift
 

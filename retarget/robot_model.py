@@ -21,6 +21,7 @@ from retarget.actuators import damping_share
 from retarget.automap import auto_mapping
 from retarget.bodyfloor import BodyFloor, build_body_floor
 from retarget.capsules import Capsules, robot_capsules
+from retarget.couplings import JointCouplings, joint_couplings
 from retarget.geoms import FloorPoints, collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_PELVIS_HEIGHT
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
@@ -159,6 +160,11 @@ class RobotModel:
             self.foot_flat_height[side] = float(-((f.points @ rot.T)[:, 2] - f.radius).min())
         self.scale = mapping.scale if mapping.scale is not None else self._auto_scale()
         self.body_joints = self._body_joints()
+
+    @functools.cached_property
+    def couplings(self) -> JointCouplings | None:
+        """The MJCF's joint equalities between the solver's joints (None without any)."""
+        return joint_couplings(self.model, self.tree.joint_ids)
 
     @functools.cached_property
     def capsules(self) -> Capsules:

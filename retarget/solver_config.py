@@ -75,6 +75,8 @@ class SolverConfig:
     """Metres per radian of orientation error (an error of 1 rad costs like 0.2 m)."""
     l_posture: float = 0.1
     """Metres per radian of posture error."""
+    w_coupling: float = 1.0e4
+    """Weight (per rad^2) of the MJCF's joint couplings (:mod:`retarget.costs.coupling`)."""
     w_floor: float = 100.0
     """Weight of the feet's floor/clearance term (per foot collision point)."""
     w_self: float = 100.0

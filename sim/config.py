@@ -31,6 +31,8 @@ class CheckConfig:
             MuJoCo's parent-child filter), ``"capsules"`` (every robot mesh collider replaced by
             a capsule fitted to it, same filters) or ``"off"``.
         joint_limit_tol_rad: allowed overshoot past a joint's range (rad or m for slides).
+        joint_coupling_tol_rad: allowed distance of a joint the MJCF couples to another
+            (``<equality><joint>``) from where the coupling puts it (rad or m for slides).
         velocity_limits: per-joint velocity limits (rad/s) overriding the published table.
         default_velocity_limit: limit for joints with no published or configured value.
         velocity_limit_factor: fraction of the limit that is allowed (1.0 = the limit itself).
@@ -78,6 +80,7 @@ class CheckConfig:
     self_collision_m: float = 0.005
     self_collision: SelfCollisionMode = "model"
     joint_limit_tol_rad: float = 1e-4
+    joint_coupling_tol_rad: float = 0.01
     velocity_limits: dict[str, float] = field(default_factory=dict)
     default_velocity_limit: float = DEFAULT_VELOCITY_LIMIT
     velocity_limit_factor: float = 1.0

@@ -10,6 +10,8 @@ floor_penetration      metres of the robot body's lowest collision point below t
 self_collision         metres of overlap; ``obstacle_geom`` names the *other robot body*
 joint_limit            radians (metres for slides) past the range of ``joint``
 joint_velocity         rad/s above the velocity limit of ``joint``
+joint_coupling         radians (metres for slides) ``joint`` is from where the MJCF's joint
+                       equality puts it (``<equality><joint>``: NAO's hips share one motor)
 foot_sliding           metres the stance foot slid over the range
 floating               metres between the robot's lowest point and the nearest support
 residual_force         non-physical root force needed, as a fraction of m g
@@ -44,6 +46,7 @@ KINDS = (
     "self_collision",
     "joint_limit",
     "joint_velocity",
+    "joint_coupling",
     "foot_sliding",
     "floating",
     "residual_force",
@@ -65,7 +68,8 @@ class Failure:
         obstacle_geom: the obstacle geom hit (penetration), the floor geom, or for
             ``self_collision`` the other robot body; None otherwise.
         depth: the worst value over the range (unit per kind, see the module docstring).
-        joint: the joint for joint_limit / joint_velocity / torque_limit failures.
+        joint: the joint for joint_limit / joint_velocity / joint_coupling / torque_limit
+            failures.
         severity: ``"error"`` (fails the report) or ``"warning"`` (reported only).
     """
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from retarget.couplings import joint_couplings
 from sim.config import CheckConfig
 from sim.failures import Failure, from_events, from_mask
 from sim.replay import Contacts, Replay, orient, replay
@@ -231,7 +232,7 @@ def _self_measures(
 def _joint_measures(
     world: CheckWorld, qpos: np.ndarray, half: np.ndarray, config: CheckConfig
 ) -> tuple[dict[str, np.ndarray], list[Failure]]:
-    """Joint-limit overshoot and margin, joint speed against velocity limits."""
+    """Joint-limit overshoot and margin, joint speed against velocity limits, joint couplings."""
     J = world.joints
     T = qpos.shape[0]
     position = qpos[:, J.qpos_adr]
@@ -253,6 +254,17 @@ def _joint_measures(
         failures += from_mask(
             "joint_velocity", ratio[:, j] > 1.0, speed[:, j] - limits[j], robot_body=J.bodies[j], joint=name
         )
+    couplings = world.derived(("couplings",), lambda: joint_couplings(world.model, J.ids))
+    if couplings is not None:  # the MJCF's joint equalities (a driven joint's residual)
+        off = np.abs(couplings.residual(position))
+        for e, j in enumerate(couplings.first):
+            failures += from_mask(
+                "joint_coupling",
+                off[:, e] > config.joint_coupling_tol_rad,
+                off[:, e],
+                robot_body=J.bodies[j],
+                joint=J.names[j],
+            )
     return {
         "joint_position": position,
         "joint_limit_violation": violation,

@@ -24,6 +24,7 @@ _PANEL_OF = {
     "torque_limit": 3,
     "joint_limit": 3,
     "joint_velocity": 3,
+    "joint_coupling": 3,
     "tracking_fall": 2,
 }
 

@@ -58,6 +58,7 @@ class Joints:
 
     names: tuple[str, ...]
     bodies: tuple[str, ...]
+    ids: np.ndarray
     qpos_adr: np.ndarray
     dof_adr: np.ndarray
     limited: np.ndarray
@@ -209,6 +210,7 @@ def _joints(model: mujoco.MjModel, robot_bodies: np.ndarray) -> Joints:
     return Joints(
         names=tuple(model.joint(j).name or f"joint{j}" for j in rows),
         bodies=tuple(model.body(int(model.jnt_bodyid[j])).name for j in rows),
+        ids=np.array(rows, dtype=np.int64),
         qpos_adr=np.array([model.jnt_qposadr[j] for j in rows], dtype=np.int64),
         dof_adr=dof_adr,
         limited=np.array([bool(model.jnt_limited[j]) for j in rows], dtype=bool),

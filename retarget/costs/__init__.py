@@ -12,6 +12,7 @@ import numpy as np
 from retarget.costs.acceleration import AccelerationCost
 from retarget.costs.base import Configuration, CostTerm, NormalEquations, SparseRows, TermValue
 from retarget.costs.body_floor import BodyFloorCost
+from retarget.costs.coupling import CouplingCost
 from retarget.costs.floor import FloorCost
 from retarget.costs.keypoints import KeypointCost
 from retarget.costs.orientations import OrientationCost
@@ -29,6 +30,7 @@ __all__ = [
     "BodyFloorCost",
     "Configuration",
     "CostTerm",
+    "CouplingCost",
     "FloorCost",
     "KeypointCost",
     "MidpointClearanceCost",
@@ -70,6 +72,8 @@ def default_costs(
         FloorCost(robot, targets, c.w_floor),
         PostureCost(robot, c.l_posture),
     ]
+    if robot.couplings is not None:
+        terms.append(CouplingCost(robot.couplings, c.w_coupling))
     if c.body_floor and robot.body_floor is not None:
         terms.append(BodyFloorCost(robot.body_floor, c.body_floor_weight, c.body_clearance))
     if c.self_clearance and robot.self_clearance is not None:
