@@ -73,6 +73,7 @@ sys.path.insert(0, str(ROOT))
 from peers.lafan1_bvh import write_lafan1_bvh  # noqa: E402
 
 from controlmm.corpus import CorpusConfig, make_clip, plan_clips  # noqa: E402
+from controlmm.errors import ControlMMError  # noqa: E402
 from controlmm.frames import HumanToWorld  # noqa: E402
 from controlmm.motion import Motion, load_motion  # noqa: E402
 from controlmm.motion.formats.arrays import position_array, read_arrays  # noqa: E402
@@ -424,6 +425,11 @@ def main() -> int:
         f"{platform.node()} {platform.processor() or platform.machine()}: {len(motions)} motions", flush=True
     )
     for robot in robots:
+        try:
+            load_robot(robot)
+        except ControlMMError as exc:  # a file that does not load: said in one line, the others go on
+            print(f"  {robot}: skipped: {exc}", flush=True)
+            continue
         per[f"ours/{robot}"] = {}
         for name, (motion, joints) in motions.items():
             qpos, seconds = ours(robot, motion, args.repeats, solver)

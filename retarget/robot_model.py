@@ -22,6 +22,7 @@ from retarget.automap import auto_mapping
 from retarget.bodyfloor import BodyFloor, build_body_floor
 from retarget.capsules import Capsules, robot_capsules
 from retarget.couplings import JointCouplings, joint_couplings
+from retarget.file_layout import FileLayout, file_layout
 from retarget.geoms import FloorPoints, collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_PELVIS_HEIGHT
 from retarget.kinematics import KinematicTree, Poses, quat_to_mat
@@ -165,6 +166,12 @@ class RobotModel:
     def couplings(self) -> JointCouplings | None:
         """The MJCF's joint equalities between the solver's joints (None without any)."""
         return joint_couplings(self.model, self.tree.joint_ids)
+
+    @functools.cached_property
+    def file_layout(self) -> FileLayout | None:
+        """How trajectories sit in the MJCF file's own qpos where reading it changed its joints
+        (:mod:`retarget.file_layout`); None where the file's qpos is the retargeter's."""
+        return file_layout(self.mjcf, self.model)
 
     @functools.cached_property
     def capsules(self) -> Capsules:

@@ -105,7 +105,8 @@ def free_floating_base(spec: mujoco.MjSpec) -> str | None:
     joints (and only those), they are replaced by a free joint, the body placed where those
     joints put it in ``qpos0``; keyframes are converted (the root's pose from their joints,
     its velocity zero), actuators and sensors on the removed joints dropped. Trajectories
-    then use the free joint's layout (position, quaternion w x y z, then the other joints).
+    then use the free joint's layout (position, quaternion w x y z, then the other joints);
+    their NPZ's ``qpos`` is put back in the file's own (:mod:`retarget.file_layout`).
     Returns the body's name, or None where nothing changed (a file that does not compile
     is left as it is: :func:`compile_robot` reports it).
     """

@@ -7,8 +7,11 @@
   the joint angles (rad) in MJCF (qpos) order. Numbers are written with 17 significant
   digits, so reading them back gives the same floats (joint limits hold exactly).
 * ``walk.npz``: ``fps`` (float), ``qpos`` (T, nq; MuJoCo order: xyz, quaternion **wxyz**,
-  joints), ``qvel`` (T, nv; ``mj_differentiatePos`` central differences, free-joint angular
-  velocity in the body frame as in MuJoCo), ``joint_names`` (nj,), ``body_names`` (B,),
+  joints; for a robot file whose joints the retargeter changed as it read it, a floating base
+  written as joints or the rods of closed chains, the file's own qpos, and the free-joint
+  rows the CSV has as ``qpos_floating``: :mod:`retarget.file_layout`), ``qvel`` (T, nv;
+  ``mj_differentiatePos`` central differences, free-joint angular velocity in the body frame
+  as in MuJoCo), ``joint_names`` (nj,), ``body_names`` (B,),
   ``body_pos_w`` (T, B, 3), ``body_quat_w`` (T, B, 4, wxyz) from ``mj_kinematics``, plus
   ``stance`` (T, 2: left, right human stance flags), ``robot`` and ``meta`` (the sidecar JSON).
 * ``walk.json``: robot, MJCF and mapping, source motion, scale and transform, fps, the CSV
@@ -115,11 +118,23 @@ class RobotTrajectory:
             "fps": self.fps,
             "frames": self.num_frames,
             "nq": int(self.qpos.shape[1]),
+            **self._file_nq(robot),
             "csv_columns": self.csv_columns(),
             "quaternion_order": {"csv": "xyzw", "npz_qpos": "wxyz", "npz_body_quat_w": "wxyz"},
             "joint_names": list(self.joint_names),
             "metrics": self.metrics,
             "solver": self.solver,
+        }
+
+    @staticmethod
+    def _file_nq(robot: RobotModel) -> dict[str, Any]:
+        """The sidecar's note of the file's own qpos where it differs (see the module)."""
+        layout = robot.file_layout
+        if layout is None:
+            return {}
+        return {
+            "nq_mjcf": int(layout.model.nq),
+            "npz_qpos": "the MJCF file's own qpos; qpos_floating: the free-joint rows of the CSV",
         }
 
     # -- files -----------------------------------------------------------------------------------
@@ -137,9 +152,10 @@ class RobotTrajectory:
             rows = np.concatenate([self.qpos[:, 0:3], self.qpos[:, [4, 5, 6, 3]], self.qpos[:, 7:]], axis=1)
             with atomic_open(paths["csv"], "w", encoding="ascii", newline="") as fh:
                 np.savetxt(fh, rows, fmt="%.17g", delimiter=",")
+        layout = self.robot_model().file_layout
         arrays: dict[str, np.ndarray] = {
             "fps": np.asarray(self.fps, dtype=np.float64),  # a 0-d array, as np.savez stores a scalar
-            "qpos": self.qpos,
+            "qpos": self.qpos if layout is None else layout.to_file(self.qpos),
             "qvel": self.qvel(),
             "joint_names": np.array(self.joint_names),
             "body_names": np.array(names),
@@ -148,6 +164,8 @@ class RobotTrajectory:
             "robot": np.array(self.robot),
             "meta": np.array(json.dumps(meta)),
         }
+        if layout is not None:
+            arrays["qpos_floating"] = self.qpos
         if self.stance is not None:
             arrays["stance"] = self.stance
         with atomic_path(paths["npz"]) as tmp:
@@ -166,7 +184,9 @@ class RobotTrajectory:
             raise InputFileError(f"trajectory file '{path}' does not exist")
         try:
             with np.load(path, allow_pickle=False) as data:
-                qpos = np.asarray(data["qpos"], dtype=np.float64)
+                qpos = np.asarray(
+                    data["qpos_floating" if "qpos_floating" in data else "qpos"], dtype=np.float64
+                )
                 fps = float(data["fps"])
                 joint_names = [str(x) for x in data["joint_names"]]
                 robot = str(data["robot"])

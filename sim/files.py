@@ -62,7 +62,9 @@ def load_qpos(
             found = ", ".join(data) if isinstance(data, dict) else "a single array"
             raise InputFileError(f"'{path}' has no 'qpos' array; found: {found or 'none'}")
         try:
-            qpos = np.asarray(data["qpos"], dtype=np.float64)
+            # a robot file whose joints the retargeter changed: the rows it checks against
+            # (retarget.file_layout; "qpos" is then the file's own layout)
+            qpos = np.asarray(data["qpos_floating" if "qpos_floating" in data else "qpos"], dtype=np.float64)
             file_fps = float(np.asarray(data["fps"]).reshape(-1)[0]) if "fps" in data else None
         except (ValueError, TypeError, IndexError) as exc:
             raise InputFileError(f"cannot read '{path}': {exc}") from None

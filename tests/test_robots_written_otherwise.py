@@ -494,7 +494,13 @@ def test_a_floating_base_written_as_joints_retargets_as_a_free_joint(tmp_path, h
         done = cli("retarget", src, "--robot", path, "--fps", 30, "--out", tmp_path / name)
         assert done.returncode == 0, done.stderr
         with np.load(tmp_path / f"{name}.npz") as data:
-            np.testing.assert_allclose(data["qpos"], expected, atol=1e-9, err_msg=name)
+            np.testing.assert_allclose(data["qpos_floating"], expected, atol=1e-9, err_msg=name)
+            in_file = data["qpos"]
+        # ...and "qpos" is the file's own: set into the file as written, every body is where
+        # the free joint's rows put it (the root joints solved, the spare joint at rest).
+        _same_bodies(mujoco.MjModel.from_xml_string(text), in_file, reference, expected, name)
+        checked = validate(tmp_path / f"{name}.npz", path)  # reads the rows it checks against
+        assert checked.returncode in (0, 1) and not checked.stderr.strip(), (name, checked.stderr)
     # A keyframe's root joints become the free joint's pose: 10, 20, -30 cm and 90 degrees of yaw.
     key = np.zeros(reference.nq - 7 + 6)
     key[:4] = [0.1, 0.2, -0.3, np.pi / 2]
@@ -520,6 +526,30 @@ def test_a_floating_base_written_as_joints_retargets_as_a_free_joint(tmp_path, h
     done = cli("robots", "map", planar, "--out", tmp_path / "planar.json")
     assert (
         done.returncode == 2 and "no free joint" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    )
+
+
+def _same_bodies(
+    model: mujoco.MjModel, qpos: np.ndarray, reference: mujoco.MjModel, expected: np.ndarray, name: str
+) -> None:
+    """Every body of ``reference`` at ``expected`` (T, its nq) is where ``model``'s body of the same
+    name is at ``qpos`` (T, its nq), to 1e-6 m and rad."""
+    assert qpos.shape == (len(expected), model.nq), (name, qpos.shape)
+    ours, theirs = mujoco.MjData(reference), mujoco.MjData(model)
+    for q_ref, q in zip(expected, qpos, strict=True):
+        ours.qpos[:], theirs.qpos[:] = q_ref, q
+        mujoco.mj_kinematics(reference, ours)
+        mujoco.mj_kinematics(model, theirs)
+        for b in range(1, reference.nbody):
+            other = model.body(reference.body(b).name).id
+            np.testing.assert_allclose(theirs.xpos[other], ours.xpos[b], atol=1e-6, err_msg=name)
+            np.testing.assert_allclose(theirs.xmat[other], ours.xmat[b], atol=1e-6, err_msg=name)
+
+
+def validate(trajectory: Path, robot: Path):
+    """``controlmm validate`` of a retargeted trajectory on an empty floor."""
+    return cli(
+        "validate", trajectory, "--robot", robot, "--out", trajectory.with_suffix(".report.json"), "--no-plot"
     )
 
 
@@ -572,7 +602,26 @@ def test_the_rods_of_closed_chains_are_dropped(tmp_path, humanoids, motion):
         done = cli("retarget", src, "--robot", robot, "--fps", 30, "--out", tmp_path / name)
         assert done.returncode == 0, done.stderr
     with np.load(tmp_path / "plain.npz") as a, np.load(tmp_path / "rods.npz") as b:
-        np.testing.assert_allclose(b["qpos"], a["qpos"], atol=1e-9)
+        np.testing.assert_allclose(b["qpos_floating"], a["qpos"], atol=1e-9)
+        plain_qpos, in_file = a["qpos"], b["qpos"]
+    # "qpos" is the file's own: its bodies where the plain robot's are, the rods turned towards
+    # their pins as far as their length lets them (closer than left at rest).
+    _same_bodies(model, in_file, reference, plain_qpos, "rods")
+    data = mujoco.MjData(model)
+    gaps = []
+    for qpos in in_file:
+        data.qpos[:] = qpos
+        mujoco.mj_forward(model, data)
+        closed = np.linalg.norm(data.efc_pos[data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY])
+        rods = np.delete(np.arange(model.nq), np.concatenate(rod_qpos))
+        data.qpos[:] = model.qpos0
+        data.qpos[rods] = qpos[rods]
+        mujoco.mj_forward(model, data)
+        at_rest = np.linalg.norm(data.efc_pos[data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY])
+        assert closed <= at_rest + 1e-9, (closed, at_rest)
+        gaps.append((closed, at_rest))
+    closed_mean, at_rest_mean = np.mean(gaps, axis=0)  # a rod of fixed length reaches a bent shin only so far
+    assert closed_mean < 0.95 * at_rest_mean, (closed_mean, at_rest_mean)
     loose = tmp_path / "loose.xml"
     loose.write_text(_with_rods(plain, tied=False))
     done = cli("robots", "map", loose, "--out", tmp_path / "loose.json")
