@@ -133,9 +133,10 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     mechanism only: the overwrite policy is :func:`check_output_file`'s.
     """
     path = Path(path)
-    _check_parent(path)
+    _check_parent(path, make_parents=True)
     if path.is_dir():
         raise ControlMMError(f"cannot write '{path}': it is a directory, expected a file")
+    _parent(path).mkdir(parents=True, exist_ok=True)  # `--out out/walk` in a fresh folder
     sweep_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=f".tmp{path.suffix}", dir=_parent(path))
     os.close(fd)
@@ -171,12 +172,13 @@ def write_text(path: str | os.PathLike[str], text: str) -> None:
 def check_output_file(path: str | os.PathLike[str], *, force: bool = False, flag: str = "--force") -> Path:
     """Check that ``path`` can be written as a new file; return it as a Path.
 
-    Raises a one-line :class:`ControlMMError` when its directory is missing or read-only,
-    when ``path`` is a directory, or when it exists and ``force`` is false (``flag`` is named
-    in that message).
+    Missing parent directories are fine (the writers make them: :func:`atomic_path`); raises
+    a one-line :class:`ControlMMError` when the nearest existing one is not a directory or is
+    read-only, when ``path`` is a directory, or when it exists and ``force`` is false (``flag``
+    is named in that message).
     """
     path = Path(path)
-    _check_parent(path)
+    _check_parent(path, make_parents=True)
     if path.is_dir():
         raise ControlMMError(f"'{path}' is a directory; expected a file name to write")
     if path.exists() and not force:

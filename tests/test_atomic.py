@@ -56,9 +56,13 @@ def test_atomic_dir_replaces_only_on_success(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [OUTPUT_MARKER, "c.txt"]
 
 
-def test_missing_directory_is_one_line_error(tmp_path):
-    with pytest.raises(ControlMMError, match="does not exist"):
-        write_text(tmp_path / "nope" / "x.txt", "x")
+def test_missing_directories_are_made_and_a_file_in_the_way_is_one_line_error(tmp_path):
+    write_text(tmp_path / "out" / "deeper" / "x.txt", "x")  # `--out out/walk` in a fresh folder
+    assert (tmp_path / "out" / "deeper" / "x.txt").read_text() == "x"
+    (tmp_path / "file").write_text("mine")
+    with pytest.raises(ControlMMError, match="is not a directory"):
+        write_text(tmp_path / "file" / "x.txt", "x")
+    assert (tmp_path / "file").read_text() == "mine"
 
 
 def test_a_users_directory_is_never_replaced_without_force(tmp_path):
@@ -142,8 +146,8 @@ def test_existing_output_files_need_force(tmp_path):
     check_output_file(out, force=True)
     with pytest.raises(ControlMMError, match="is a directory"):
         check_output_file(tmp_path)
-    with pytest.raises(ControlMMError, match="does not exist"):
-        check_output_file(tmp_path / "no" / "x.npz")
+    assert check_output_file(tmp_path / "no" / "x.npz") == tmp_path / "no" / "x.npz"
+    assert not (tmp_path / "no").exists()  # checked, not made: nothing written before the work
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
