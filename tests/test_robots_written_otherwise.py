@@ -530,10 +530,15 @@ def test_a_floating_base_written_as_joints_retargets_as_a_free_joint(tmp_path, h
 
 
 def _same_bodies(
-    model: mujoco.MjModel, qpos: np.ndarray, reference: mujoco.MjModel, expected: np.ndarray, name: str
+    model: mujoco.MjModel,
+    qpos: np.ndarray,
+    reference: mujoco.MjModel,
+    expected: np.ndarray,
+    name: str,
+    skip: tuple[str, ...] = (),
 ) -> None:
-    """Every body of ``reference`` at ``expected`` (T, its nq) is where ``model``'s body of the same
-    name is at ``qpos`` (T, its nq), to 1e-6 m and rad."""
+    """Every body of ``reference`` at ``expected`` (T, its nq) but ``skip`` is where ``model``'s
+    body of the same name is at ``qpos`` (T, its nq), to 1e-6 m and rad."""
     assert qpos.shape == (len(expected), model.nq), (name, qpos.shape)
     ours, theirs = mujoco.MjData(reference), mujoco.MjData(model)
     for q_ref, q in zip(expected, qpos, strict=True):
@@ -541,6 +546,8 @@ def _same_bodies(
         mujoco.mj_kinematics(reference, ours)
         mujoco.mj_kinematics(model, theirs)
         for b in range(1, reference.nbody):
+            if reference.body(b).name in skip:
+                continue
             other = model.body(reference.body(b).name).id
             np.testing.assert_allclose(theirs.xpos[other], ours.xpos[b], atol=1e-6, err_msg=name)
             np.testing.assert_allclose(theirs.xmat[other], ours.xmat[b], atol=1e-6, err_msg=name)
@@ -627,6 +634,46 @@ def test_the_rods_of_closed_chains_are_dropped(tmp_path, humanoids, motion):
     done = cli("robots", "map", loose, "--out", tmp_path / "loose.json")
     err = done.stderr.strip()
     assert done.returncode == 2 and "joint 'rod_l' is a mjJNT_BALL" in err and len(err.splitlines()) == 1, err
+
+
+def test_a_crank_turns_to_close_its_rods_loop_in_the_files_own_qpos(tmp_path, humanoids, motion):
+    """A crank on the shin (one hinge) drives the foot through a rod (a ball joint whose end a
+    ``<connect>`` pins to the heel), as LimX's HU_D03 drives its ankles: the rod is dropped for
+    the solve and the crank held at rest there, but the NPZ's ``qpos`` is the file's own, the
+    crank and rod turned so that the loop closes wherever the linkage reaches (ankle pitch
+    within 0.5 rad here), and the rest of the robot where the solve put it."""
+    linkage = (
+        '<body name="crank_l" pos="-0.06 0 -0.10"><joint name="crank_l" axis="0 1 0" range="-90 90"/>'
+        '<geom type="capsule" fromto="0 0 0 -0.08 0 0" size="0.01" contype="0" conaffinity="0"/>'
+        '<body name="rod_l" pos="-0.08 0 0"><joint name="rod_l" type="ball"/>'
+        '<geom type="capsule" fromto="0 0 0 0 0 -0.28" size="0.006" contype="0" conaffinity="0"/>'
+        "</body></body>"
+    )
+    foot = '<body name="foot_l" pos="0 0 -0.42">'
+    text = humanoids["plain"].read_text().replace(foot, linkage + foot, 1)
+    pin = '<equality><connect body1="rod_l" body2="foot_l" anchor="0 0 -0.28"/></equality>'
+    path = tmp_path / "crank.xml"
+    path.write_text(text.replace("</mujoco>", pin + "</mujoco>", 1))
+    model = mujoco.MjModel.from_xml_path(str(path))
+    traj = retarget_motion(Motion(joints=motion.joints[:80], fps=motion.fps), path, fps=30, metrics=False)
+    traj.save(tmp_path / "crank")
+    with np.load(tmp_path / "crank.npz") as data:
+        in_file, solved = data["qpos"], data["qpos_floating"]
+    np.testing.assert_array_equal(solved, traj.qpos)
+    edited = traj.robot_model().model
+    _same_bodies(model, in_file, edited, solved, "crank", skip=("crank_l",))  # the solve's crank is at rest
+    crank = in_file[:, model.jnt_qposadr[model.joint("crank_l").id]]
+    ankle = in_file[:, model.jnt_qposadr[model.joint("ankle_y_l").id]]
+    data_ = mujoco.MjData(model)
+    gaps = []
+    for qpos in in_file:
+        data_.qpos[:] = qpos
+        mujoco.mj_forward(model, data_)
+        gaps.append(np.linalg.norm(data_.efc_pos[data_.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY]))
+    reach = np.abs(ankle) < 0.5
+    assert reach.sum() > 40 and np.abs(ankle).max() > 0.3, ankle  # the ankle does pitch
+    assert max(np.asarray(gaps)[reach]) < 1e-6
+    assert np.ptp(crank) > 0.3  # the crank turned with the ankle
 
 
 def test_joints_without_a_range_take_their_position_servos(tmp_path, humanoids, motion):
