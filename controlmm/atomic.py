@@ -136,7 +136,10 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     _check_parent(path, make_parents=True)
     if path.is_dir():
         raise ControlMMError(f"cannot write '{path}': it is a directory, expected a file")
-    _parent(path).mkdir(parents=True, exist_ok=True)  # `--out out/walk` in a fresh folder
+    try:  # `--out out/walk` in a fresh folder
+        _parent(path).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ControlMMError(f"cannot write '{path}': {exc.strerror or exc}") from None
     sweep_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=f".tmp{path.suffix}", dir=_parent(path))
     os.close(fd)

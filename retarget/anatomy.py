@@ -10,7 +10,7 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
    below the foot). **Pelvis**: the feet's lowest common ancestor; a **leg** is the chain of
    bodies from the pelvis down to a foot.
 2. **Arms**: the ends of the other jointed chains that lie clearly to one side (the head's
-   chain stays near the midline) and reach out as far as that side's farthest end about
+   chain stays near the midline) and reach at least half as far as that side's farthest end
    (not a crank beside the torso); per side, the common ancestor of those ends is the hand
    (a hand with fingers has several ends). **Torso**: the hands' common ancestor. Robots whose
    only chains are the legs have no arms (a legs-only robot retargets pelvis and legs). Arms
@@ -50,8 +50,9 @@ SIDE_FRACTION = 0.3
 the furthest such end; nearer ends are the head's (or other midline parts)."""
 ARM_REACH = 0.5
 """...and when it lies at least this fraction as far from where the two sides' ends branch
-as the farthest end on its side: a short link beside the torso (LimX HU_D03's waist cranks,
-one hinge each, 11 cm from the torso's origin against the hands' 29 cm) is not a hand."""
+(their common ancestor's origin) as the farthest end on its side: a short link beside the
+torso (LimX HU_D03's waist cranks, one hinge each, about 11 cm from there against the hands'
+29 cm) is not a hand."""
 WRIST_SHARE = HUMAN_FOREARM / (HUMAN_FOREARM + HUMAN_HALF_HAND)
 """Where the wrist of an arm without wrist joints sits between its elbow (0) and its tip (1):
 the human forearm against the forearm plus half a hand."""

@@ -58,13 +58,15 @@ class JointCouplings:
         return c[:, 1] + 2 * c[:, 2] * x + 3 * c[:, 3] * x**2 + 4 * c[:, 4] * x**3
 
     def project(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-        """``q`` (T, nj) with every driven joint set to its coupling (within [lower, upper]),
-        one coupling after the other in file order (a chain of couplings resolves in it)."""
+        """``q`` (T, nj) with every driven joint set to its coupling, clipped to [lower, upper]
+        (exact where the driven joint's range allows it). A chain of couplings (a joint driving
+        one that drives another) resolves in as many passes as it has links, in any order."""
         out = np.array(q, dtype=np.float64)
-        for e, j in enumerate(self.first):
-            x = out[:, self.second[e]] - self.second_ref[e] if self.second[e] >= 0 else np.zeros(len(out))
-            value = self.first_ref[e] + np.polynomial.polynomial.polyval(x, self.poly[e])
-            out[:, j] = np.clip(value, lower[j], upper[j])
+        for _ in range(len(self.first)):
+            for e, j in enumerate(self.first):
+                x = out[:, self.second[e]] - self.second_ref[e] if self.second[e] >= 0 else np.zeros(len(out))
+                value = self.first_ref[e] + np.polynomial.polynomial.polyval(x, self.poly[e])
+                out[:, j] = np.clip(value, lower[j], upper[j])
         return out
 
 

@@ -14,6 +14,7 @@ residuals). Joints on bodies beside the robot stay at ``qpos0``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,11 +22,15 @@ import mujoco
 import numpy as np
 
 ITERATIONS = 30
-"""Gauss-Newton iterations per frame at most (a frame starts from the one before)."""
+"""Levenberg-Marquardt iterations per frame at most (a frame starts from the one before)."""
 TOLERANCE = 1e-16
 """Stop once the squared residual (m^2 and rad^2) is below this."""
 LOOSE = 1e-6
-"""A frame left with more squared residual than this did not close: the next starts afresh."""
+"""A frame left with more squared residual than this did not close: it is solved again from
+the rest pose, the better of the two kept."""
+STALL = 1e-4
+"""Stop once an accepted step lowers the squared residual by less than this fraction (a loop
+its linkage cannot close)."""
 MAX_STEP = 0.3
 """Largest change (rad or m) of one degree of freedom in one step."""
 
@@ -120,8 +125,12 @@ class FileLayout:
             mujoco.mj_integratePos(m, trial, dv, 1.0)
             trial[self.limited] = np.clip(trial[self.limited], self.lower, self.upper)
             r2, j2 = self._residual(d, trial, pos, goal_rot)
-            if float(r2 @ r2) < cost:
-                q, r, j, cost, mu = trial, r2, j2, float(r2 @ r2), max(mu / 10, 1e-9)
+            new = float(r2 @ r2)
+            if new < cost:
+                stalled = cost - new < STALL * cost
+                q, r, j, cost, mu = trial, r2, j2, new, max(mu / 10, 1e-9)
+                if stalled:
+                    break
             else:
                 mu *= 10
         return q, cost
@@ -147,12 +156,13 @@ def _qpos(m: mujoco.MjModel, j: int) -> list[int]:
     return list(range(int(m.jnt_qposadr[j]), int(m.jnt_qposadr[j]) + n))
 
 
-def _loop_joints(m: mujoco.MjModel, dropped: set[int]) -> set[int]:
+def _loop_joints(m: mujoco.MjModel, dropped: set[int], main: set[int]) -> set[int]:
     """The joints of the cranks that drive the dropped bodies (rods) of closed loops: going up
     from each rod, every jointed body whose other jointed bodies below are all rods (a crank
     on the shin whose rod drives the ankle, a lever on the trunk whose rod drives the waist),
-    up to the first body that carries more of the robot (the shin, the trunk): that main chain
-    stays as retargeted, the cranks turn to close the loops."""
+    up to the first body that carries more of the robot (the shin, the trunk) or that the
+    mapping follows (``main``: a foot a rod hangs from): that main chain stays as retargeted,
+    the cranks turn to close the loops."""
     jointed = {int(m.jnt_bodyid[j]) for j in range(m.njnt)}
     below: dict[int, set[int]] = {b: set() for b in range(m.nbody)}
     for b in range(m.nbody - 1, 0, -1):  # children have larger ids than their parents
@@ -161,16 +171,26 @@ def _loop_joints(m: mujoco.MjModel, dropped: set[int]) -> set[int]:
     out: set[int] = set()
     for rod in dropped:
         b = rod
-        while b != 0 and below[b] <= dropped:
+        while b != 0 and below[b] <= dropped and b not in main:
             out |= {j for j in range(m.njnt) if int(m.jnt_bodyid[j]) == b}
             b = int(m.body_parentid[b])
     return out
 
 
-def file_layout(path: str | Path, edited: mujoco.MjModel) -> FileLayout | None:
+def _file_root(m: mujoco.MjModel, name: str) -> int:
+    """The file's body named ``name``, or (a root body the edits had to name) the body of the
+    world whose subtree holds the most joints."""
+    if name in {m.body(b).name for b in range(m.nbody)}:
+        return m.body(name).id
+    children = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
+    return max(children, key=lambda b: int(np.sum(m.body_rootid[m.jnt_bodyid] == b)))
+
+
+def file_layout(path: str | Path, edited: mujoco.MjModel, main: Iterable[str] = ()) -> FileLayout | None:
     """The layout of the robot file ``path`` for trajectories of ``edited`` (the model the
     retargeter read from it); None where both have the same joints in the same order (every
-    file the edits leave alone), or where the file as given does not compile."""
+    file the edits leave alone), or where the file as given does not compile. ``main``: the
+    names of the bodies the mapping follows and their ancestors (never turned to close a loop)."""
     try:
         spec = mujoco.MjSpec.from_file(str(path))
         written = [(j.name, int(j.type)) for j in spec.joints]
@@ -183,7 +203,7 @@ def file_layout(path: str | Path, edited: mujoco.MjModel) -> FileLayout | None:
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     free = next(j for j in range(edited.njnt) if edited.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
     root_name = edited.body(int(edited.jnt_bodyid[free])).name
-    root = m.body(root_name).id
+    root = _file_root(m, root_name)
     src: list[int] = []
     dst: list[int] = []
     for name, j in ours.items():
@@ -191,12 +211,12 @@ def file_layout(path: str | Path, edited: mujoco.MjModel) -> FileLayout | None:
             src += _qpos(edited, j)
             dst += _qpos(m, theirs[name])
     copied = {theirs[n] for n in ours if n in theirs}
-    base = root_name and not any(
-        m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and j in copied for j in range(m.njnt)
-    )
+    base = not any(m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and j in copied for j in range(m.njnt))
     robot = {b for b in range(m.nbody) if m.body_rootid[b] == m.body_rootid[root]}
     moved = {j for j in range(m.njnt) if j not in copied and int(m.jnt_bodyid[j]) in robot}
-    moved |= _loop_joints(m, {int(m.jnt_bodyid[j]) for j in moved} - {root})
+    names = set(main)
+    keep = {b for b in range(m.nbody) if m.body(b).name in names}
+    moved |= _loop_joints(m, {int(m.jnt_bodyid[j]) for j in moved} - {root}, keep)
     solve = [dof for j in sorted(moved) for dof in _dofs(m, j)]
     limited = [j for j in sorted(moved) if m.jnt_limited[j] and m.jnt_type[j] in (2, 3)]
     return FileLayout(

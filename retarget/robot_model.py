@@ -171,7 +171,10 @@ class RobotModel:
     def file_layout(self) -> FileLayout | None:
         """How trajectories sit in the MJCF file's own qpos where reading it changed its joints
         (:mod:`retarget.file_layout`); None where the file's qpos is the retargeter's."""
-        return file_layout(self.mjcf, self.model)
+        m = self.model
+        followed = {int(self.tree.node_body[node]) for node in self.nodes}
+        main = {m.body(b).name for body in followed for b in ancestors(m, body)}
+        return file_layout(self.mjcf, m, main)
 
     @functools.cached_property
     def capsules(self) -> Capsules:

@@ -11,7 +11,8 @@
   written as joints or the rods of closed chains, the file's own qpos, and the free-joint
   rows the CSV has as ``qpos_floating``: :mod:`retarget.file_layout`), ``qvel`` (T, nv;
   ``mj_differentiatePos`` central differences, free-joint angular velocity in the body frame
-  as in MuJoCo), ``joint_names`` (nj,), ``body_names`` (B,),
+  as in MuJoCo; of ``qpos_floating`` where there is one, as the body arrays), ``joint_names``
+  (nj,), ``body_names`` (B,),
   ``body_pos_w`` (T, B, 3), ``body_quat_w`` (T, B, 4, wxyz) from ``mj_kinematics``, plus
   ``stance`` (T, 2: left, right human stance flags), ``robot`` and ``meta`` (the sidecar JSON).
 * ``walk.json``: robot, MJCF and mapping, source motion, scale and transform, fps, the CSV

@@ -70,7 +70,7 @@ def test_info():
         (lambda d: ["convert", d / "nan.npy", d / "o.npz"], "NaN"),
         (lambda d: ["convert", d / "ok.npy", d / "o.xyz"], "allowed"),
         (lambda d: ["convert", d / "ok.txt", d / "o.npz"], "allowed"),
-        (lambda d: ["convert", d / "ok.npy", d / "no_dir" / "o.npz"], "does not exist"),
+        (lambda d: ["convert", d / "ok.npy", d / "ok.txt" / "o.npz"], "is not a directory"),
         (lambda d: ["plot", d / "ok.npy", "--out", d / "o.jpg"], "allowed"),
         (lambda d: ["convert"], "required"),
     ],

@@ -97,9 +97,11 @@ def test_report_json_fields(failing_report, tmp_path):
 
 
 def test_save_is_atomic(failing_report, tmp_path):
-    with pytest.raises(ControlMMError, match="does not exist"):
-        failing_report.save(tmp_path / "missing" / "report.json")
-    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "a_file").write_text("mine")
+    with pytest.raises(ControlMMError, match="is not a directory"):
+        failing_report.save(tmp_path / "a_file" / "report.json")
+    assert [p.name for p in tmp_path.iterdir()] == ["a_file"]
+    (tmp_path / "a_file").unlink()
     target = tmp_path / "report.json"
     target.write_text("previous")
     failing_report.save(target)  # replaces the old file in one rename

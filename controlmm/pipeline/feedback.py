@@ -59,7 +59,6 @@ SMOOTH_KINDS = (
     "torque_limit",
     "joint_velocity",
     "joint_limit",
-    "joint_coupling",
     "tracking_fall",
     "tracking_error",
 )

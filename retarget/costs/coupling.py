@@ -28,12 +28,15 @@ class CouplingCost(CostTerm[TermValue]):
 
     def linearise(self, cfg: Configuration, value: TermValue, eq: NormalEquations) -> None:
         c = self.couplings
-        r = c.residual(cfg.q)
+        r = c.residual(cfg.q)  # (T, E); its Jacobian: +1 at the driven joint, -slope at the driver
         slope = c.slope(cfg.q)
+        w = self.weight
         for e in range(len(c.first)):
-            jac = np.zeros((len(r), eq.g.shape[1]))  # (T, n)
-            jac[:, 6 + c.first[e]] = 1.0
+            a, b = 6 + int(c.first[e]), 6 + int(c.second[e])
+            eq.h[:, a, a] += w
+            eq.g[:, a] += w * r[:, e]
             if c.second[e] >= 0:
-                jac[:, 6 + c.second[e]] -= slope[:, e]
-            eq.h += self.weight * jac[:, :, None] * jac[:, None, :]
-            eq.g += self.weight * jac * r[:, e : e + 1]
+                eq.h[:, a, b] -= w * slope[:, e]
+                eq.h[:, b, a] -= w * slope[:, e]
+                eq.h[:, b, b] += w * slope[:, e] ** 2
+                eq.g[:, b] -= w * slope[:, e] * r[:, e]
