@@ -13,7 +13,9 @@ lafan1       ``walk.csv``            Unitree LAFAN1-G1 rows (also BeyondMimic's 
                                      ``csv_to_npz`` ``--input_fps``)
 qpos         ``walk_qpos.csv``       raw MuJoCo ``qpos`` rows: no header; root x y z, root quaternion
                                      **qw qx qy qz (wxyz)**, joint angles in MJCF order; the
-                                     trajectory's rate (the layout of Kimodo's G1 CSV)
+                                     trajectory's rate (the layout of Kimodo's G1 CSV; for a robot
+                                     file the retargeter edits as it reads it, the free-joint rows,
+                                     the NPZ's ``qpos_floating``: :mod:`retarget.file_layout`)
 beyondmimic  ``walk_beyondmimic.npz``  BeyondMimic's motion file at **50 fps** (resampled: cubic splines
                                      for positions and joints, SLERP for the root): ``fps`` ([50]),
                                      ``joint_pos``, ``joint_vel`` (T, nj; MJCF joint order, as mjlab),
