@@ -6,10 +6,11 @@ hinges or a ball becomes one free joint, the passive rods of closed chains and j
 bodies beside the robot are dropped. Its trajectories then have another qpos than the file:
 a user (or a checker) who loads the file as given and sets ``data.qpos`` from them would not
 fit. :class:`FileLayout` writes them in the file's layout: the joints both have copied by
-name, the rest solved per frame from the file's own kinematics (Gauss-Newton on their
+name, the rest solved per frame from the file's own kinematics (Levenberg-Marquardt on their
 degrees of freedom, MuJoCo's Jacobians): the base joints put the root body where the free
-joint does, the rods close their loops (the ``<connect>`` and ``<weld>`` constraints' own
-residuals). Joints on bodies beside the robot stay at ``qpos0``.
+joint does, the rods and the cranks that drive them close their loops (the ``<connect>`` and
+``<weld>`` constraints' own residuals) as far as the linkage reaches. Joints on bodies beside
+the robot stay at ``qpos0``.
 """
 
 from __future__ import annotations
