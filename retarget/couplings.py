@@ -63,10 +63,7 @@ class JointCouplings:
         one that drives another) resolves in as many passes as it has links, in any order."""
         out = np.array(q, dtype=np.float64)
         for _ in range(len(self.first)):
-            for e, j in enumerate(self.first):
-                x = out[:, self.second[e]] - self.second_ref[e] if self.second[e] >= 0 else np.zeros(len(out))
-                value = self.first_ref[e] + np.polynomial.polynomial.polyval(x, self.poly[e])
-                out[:, j] = np.clip(value, lower[j], upper[j])
+            out[:, self.first] = np.clip(self.driven(out), lower[self.first], upper[self.first])
         return out
 
 

@@ -22,6 +22,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from retarget.spec_edits import joint_addresses
+
 ITERATIONS = 30
 """Levenberg-Marquardt iterations per frame at most (a frame starts from the one before)."""
 TOLERANCE = 1e-16
@@ -147,16 +149,6 @@ def _joints(m: mujoco.MjModel) -> dict[str, int]:
     return {m.joint(j).name: j for j in range(m.njnt) if m.joint(j).name}
 
 
-def _dofs(m: mujoco.MjModel, j: int) -> list[int]:
-    n = {0: 6, 1: 3}.get(int(m.jnt_type[j]), 1)
-    return list(range(int(m.jnt_dofadr[j]), int(m.jnt_dofadr[j]) + n))
-
-
-def _qpos(m: mujoco.MjModel, j: int) -> list[int]:
-    n = {0: 7, 1: 4}.get(int(m.jnt_type[j]), 1)
-    return list(range(int(m.jnt_qposadr[j]), int(m.jnt_qposadr[j]) + n))
-
-
 def _loop_joints(m: mujoco.MjModel, dropped: set[int], main: set[int]) -> set[int]:
     """The joints of the cranks that drive the dropped bodies (rods) of closed loops: going up
     from each rod, every jointed body whose other jointed bodies below are all rods (a crank
@@ -209,8 +201,8 @@ def file_layout(path: str | Path, edited: mujoco.MjModel, main: Iterable[str] = 
     dst: list[int] = []
     for name, j in ours.items():
         if name in theirs and m.jnt_type[theirs[name]] == edited.jnt_type[j]:
-            src += _qpos(edited, j)
-            dst += _qpos(m, theirs[name])
+            src += list(joint_addresses(edited, j)[0])
+            dst += list(joint_addresses(m, theirs[name])[0])
     copied = {theirs[n] for n in ours if n in theirs}
     base = not any(m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and j in copied for j in range(m.njnt))
     robot = {b for b in range(m.nbody) if m.body_rootid[b] == m.body_rootid[root]}
@@ -218,7 +210,7 @@ def file_layout(path: str | Path, edited: mujoco.MjModel, main: Iterable[str] = 
     names = set(main)
     keep = {b for b in range(m.nbody) if m.body(b).name in names}
     moved |= _loop_joints(m, {int(m.jnt_bodyid[j]) for j in moved} - {root}, keep)
-    solve = [dof for j in sorted(moved) for dof in _dofs(m, j)]
+    solve = [dof for j in sorted(moved) for dof in joint_addresses(m, j)[1]]
     limited = [j for j in sorted(moved) if m.jnt_limited[j] and m.jnt_type[j] in (2, 3)]
     return FileLayout(
         m,

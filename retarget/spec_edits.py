@@ -37,6 +37,15 @@ def _six_dof(joints: list[mujoco.MjsJoint]) -> bool:
     return all(float(np.linalg.norm(np.cross(a, b))) > 1e-3 for a, b in zip(unit[3:], unit[4:], strict=False))
 
 
+def joint_addresses(model: mujoco.MjModel, j: int) -> tuple[range, range]:
+    """The qpos and the dof addresses of joint ``j`` (a free joint 7 and 6, a ball 4 and 3,
+    a hinge or slide 1 each)."""
+    size = {int(mujoco.mjtJoint.mjJNT_BALL): (4, 3), int(mujoco.mjtJoint.mjJNT_FREE): (7, 6)}
+    nq, nv = size.get(int(model.jnt_type[j]), (1, 1))
+    qpos, dof = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j])
+    return range(qpos, qpos + nq), range(dof, dof + nv)
+
+
 def _remove_joints(
     spec: mujoco.MjSpec,
     model: mujoco.MjModel,
@@ -52,13 +61,12 @@ def _remove_joints(
     of the free joint that replaces ``joints``. The caller deletes the joints (or their
     bodies), then sets the keyframes (:func:`_set_keys`)."""
     names = {model.joint(j).name for j in joints}
-    size = {int(mujoco.mjtJoint.mjJNT_BALL): (4, 3), int(mujoco.mjtJoint.mjJNT_FREE): (7, 6)}
     qdrop: list[int] = []
     vdrop: list[int] = []
     for j in joints:
-        nq, nv = size.get(int(model.jnt_type[j]), (1, 1))
-        qdrop.extend(range(model.jnt_qposadr[j], model.jnt_qposadr[j] + nq))
-        vdrop.extend(range(model.jnt_dofadr[j], model.jnt_dofadr[j] + nv))
+        q_at, v_at = joint_addresses(model, j)
+        qdrop.extend(q_at)
+        vdrop.extend(v_at)
     on = sorted(
         {
             i
