@@ -22,7 +22,9 @@ simulation check of ``controlmm validate`` on the ``empty`` scene):
   collision geom below the floor (mm); self: frames with a self-collision deeper than 5 mm;
 * stance: mean horizontal speed of the foot bodies while the human's foot is in contact
   (cm/s); sole: the same for each foot's slowest sole point (a foot rolling over its toe
-  moves its body, not its sole: this is the sliding); jerk: joint jerk RMS (rad/s^3);
+  moves its body, not its sole: this is the sliding); flat: the foot bodies' speed while the
+  human's foot is in flat stance (heel and toe down and still: its heel strikes and toe-offs,
+  over which a rolling foot's body moves, left out); jerk: joint jerk RMS (rad/s^3);
 * frames/s: output frames (30 fps) per second of wall time (ours: best of ``--repeats`` runs
   once loaded; holosoma: one run of its script, loading included; GMR: one run of its
   per-frame retargeting once the BVH and the robot are loaded).
@@ -167,6 +169,7 @@ def measure(robot_name: str, qpos: np.ndarray, human: np.ndarray, seconds: float
         "errors": report.stats["error_kinds"],
         "stance_cm_s": 100 * stance_foot_speed(robot, qpos, FPS, human, FPS),
         "sole_cm_s": 100 * stance_sole_speed(robot, qpos, FPS, human, FPS),
+        "flat_cm_s": 100 * stance_foot_speed(robot, qpos, FPS, human, FPS, flat=True),
         "jerk": joint_jerk_rms(qpos, FPS),
         "fps": frames_in / seconds if seconds > 0 else float("nan"),
         "frames": int(len(qpos)),
@@ -322,6 +325,7 @@ def table(rows: list[dict], keys: list[str]) -> str:
         ("validate", "{}"),
         ("stance cm/s", "{:.2f}"),
         ("sole cm/s", "{:.2f}"),
+        ("flat cm/s", "{:.2f}"),
         ("jerk", "{:.0f}"),
         ("frames/s", "{:.0f}"),
     ]
@@ -337,6 +341,7 @@ def table(rows: list[dict], keys: list[str]) -> str:
         "validate": "validate",
         "stance cm/s": "stance_cm_s",
         "sole cm/s": "sole_cm_s",
+        "flat cm/s": "flat_cm_s",
         "jerk": "jerk",
         "frames/s": "fps",
     }
@@ -366,6 +371,7 @@ def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> d
         "validate": f"{sum(r['validate'] for r in results)}/{len(results)}",
         "stance_cm_s": float(np.mean([r["stance_cm_s"] for r in results])),
         "sole_cm_s": float(np.mean([r["sole_cm_s"] for r in results])),
+        "flat_cm_s": float(np.mean([r["flat_cm_s"] for r in results])),
         "jerk": float(np.mean([r["jerk"] for r in results])),
         "fps": float(sum(r["frames"] for r in results) / sum(r["frames"] / r["fps"] for r in results)),
     }

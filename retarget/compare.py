@@ -27,7 +27,7 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget.metrics import foot_steps, replay, replay_keypoints
 from retarget.robot_model import RobotModel
-from retarget.stance import detect_contacts
+from retarget.stance import detect_contacts, detect_stance
 
 FIT_JOINTS = (
     "pelvis",
@@ -114,19 +114,31 @@ def similarity_fit(
     )
 
 
-def human_contacts(human: np.ndarray, human_fps: float, frames: int, fps: float) -> np.ndarray:
-    """(frames, 2) the human's left / right foot contact at the trajectory's frames (nearest)."""
+def human_contacts(
+    human: np.ndarray, human_fps: float, frames: int, fps: float, flat: bool = False
+) -> np.ndarray:
+    """(frames, 2) the human's left / right foot contact at the trajectory's frames (nearest);
+    ``flat``: only its flat stance (:func:`retarget.stance.detect_stance`: heel and toe down
+    and still), without the heel strikes and toe-offs around it."""
     human = np.asarray(human, dtype=np.float64)
     near = np.clip(np.rint(np.arange(frames) / fps * human_fps).astype(int), 0, len(human) - 1)
+    if flat:
+        return np.stack([detect_stance(human, human_fps, side)[near] for side in ("left", "right")], axis=1)
     return np.stack([detect_contacts(human, human_fps, side)[0][near] for side in ("left", "right")], axis=1)
 
 
 def stance_foot_speed(
-    robot: RobotModel, qpos: np.ndarray, fps: float, human: np.ndarray, human_fps: float
+    robot: RobotModel,
+    qpos: np.ndarray,
+    fps: float,
+    human: np.ndarray,
+    human_fps: float,
+    flat: bool = False,
 ) -> float:
     """Mean horizontal speed (m/s) of the foot bodies between consecutive frames in which the
-    human's foot is in contact (0 without such frames)."""
-    return _stance_speed(robot, qpos, fps, human, human_fps, sole=False)
+    human's foot is in contact (``flat``: in flat stance, its heel strikes and toe-offs left
+    out) (0 without such frames)."""
+    return _stance_speed(robot, qpos, fps, human, human_fps, sole=False, flat=flat)
 
 
 def stance_sole_speed(
@@ -139,11 +151,17 @@ def stance_sole_speed(
 
 
 def _stance_speed(
-    robot: RobotModel, qpos: np.ndarray, fps: float, human: np.ndarray, human_fps: float, sole: bool
+    robot: RobotModel,
+    qpos: np.ndarray,
+    fps: float,
+    human: np.ndarray,
+    human_fps: float,
+    sole: bool,
+    flat: bool = False,
 ) -> float:
     """The stance speeds above: of the foot body's origin, or of its slowest floor point."""
     rep = replay(robot.model, qpos)
-    contact = human_contacts(human, human_fps, len(qpos), fps)
+    contact = human_contacts(human, human_fps, len(qpos), fps, flat)
     speeds = []
     for i, side in enumerate(("left", "right")):
         step = foot_steps(robot, rep, side, sole) * fps

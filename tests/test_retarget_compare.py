@@ -8,7 +8,13 @@ import pytest
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget import SolverConfig, load_robot, retarget_motion
-from retarget.compare import resample_human, similarity_fit, stance_foot_speed, stance_sole_speed
+from retarget.compare import (
+    human_contacts,
+    resample_human,
+    similarity_fit,
+    stance_foot_speed,
+    stance_sole_speed,
+)
 from retarget.targets import build_targets
 
 
@@ -40,6 +46,20 @@ def test_rolling_feet_move_their_bodies_not_their_soles(clip):
     body = stance_foot_speed(robot, qpos, 30.0, motion.joints, 20.0)
     sole = stance_sole_speed(robot, qpos, 30.0, motion.joints, 20.0)
     assert 0 < sole < 0.6 * body, (sole, body)
+
+
+def test_the_flat_stance_measure_leaves_out_the_heel_strikes_and_toe_offs(clip):
+    """``flat``: the human's flat-stance frames are a strict subset of its contact frames (the
+    heel strikes and toe-offs around them are left out), and over them the rolling feet's
+    bodies move slower than over every contact frame."""
+    motion, qpos = clip
+    robot = load_robot("g1")
+    contact = human_contacts(motion.joints, 20.0, len(qpos), 30.0)
+    flat = human_contacts(motion.joints, 20.0, len(qpos), 30.0, flat=True)
+    assert flat.any() and not np.any(flat & ~contact) and np.any(contact & ~flat)
+    every = stance_foot_speed(robot, qpos, 30.0, motion.joints, 20.0)
+    planted = stance_foot_speed(robot, qpos, 30.0, motion.joints, 20.0, flat=True)
+    assert 0 < planted < 0.7 * every, (planted, every)
 
 
 def test_flat_contact_feet_move_their_bodies_less_than_rolling_ones(clip):
