@@ -356,9 +356,16 @@ def table(rows: list[dict], keys: list[str]) -> str:
     return "\n".join(lines)
 
 
+def _mean_over_some(values: list[float]) -> float:
+    """The mean over the motions that have a figure (a stance speed is NaN for a motion in
+    which the human never stands that way), NaN when none has."""
+    some = [v for v in values if not np.isnan(v)]
+    return float(np.mean(some)) if some else float("nan")
+
+
 def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> dict:
     """One table row: means over motions (limits, self-collision frames: totals; floor: max;
-    validate: passed/total)."""
+    validate: passed/total; stance speeds: over the motions in which the human stands so)."""
     return {
         "retargeter": retargeter,
         "robot": robot,
@@ -369,9 +376,9 @@ def summarise(retargeter: str, robot: str, group: str, results: list[dict]) -> d
         "floor_mm": float(max(r["floor_mm"] for r in results)),
         "self_frames": int(sum(r["self_frames"] for r in results)),
         "validate": f"{sum(r['validate'] for r in results)}/{len(results)}",
-        "stance_cm_s": float(np.mean([r["stance_cm_s"] for r in results])),
-        "sole_cm_s": float(np.mean([r["sole_cm_s"] for r in results])),
-        "flat_cm_s": float(np.mean([r["flat_cm_s"] for r in results])),
+        "stance_cm_s": _mean_over_some([r["stance_cm_s"] for r in results]),
+        "sole_cm_s": _mean_over_some([r["sole_cm_s"] for r in results]),
+        "flat_cm_s": _mean_over_some([r["flat_cm_s"] for r in results]),
         "jerk": float(np.mean([r["jerk"] for r in results])),
         "fps": float(sum(r["frames"] for r in results) / sum(r["frames"] / r["fps"] for r in results)),
     }

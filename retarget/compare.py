@@ -137,7 +137,7 @@ def stance_foot_speed(
 ) -> float:
     """Mean horizontal speed (m/s) of the foot bodies between consecutive frames in which the
     human's foot is in contact (``flat``: in flat stance, its heel strikes and toe-offs left
-    out) (0 without such frames)."""
+    out) (NaN without such frames)."""
     return _stance_speed(robot, qpos, fps, human, human_fps, sole=False, flat=flat)
 
 
@@ -146,7 +146,7 @@ def stance_sole_speed(
 ) -> float:
     """Mean horizontal speed (m/s), between consecutive frames in which the human's foot is in
     contact, of each foot's slowest sole point (its floor points: heel and toe corners); a
-    foot pivoting on its toe or heel does not count as moving (0 without such frames)."""
+    foot pivoting on its toe or heel does not count as moving (NaN without such frames)."""
     return _stance_speed(robot, qpos, fps, human, human_fps, sole=True)
 
 
@@ -167,7 +167,7 @@ def _stance_speed(
         step = foot_steps(robot, rep, side, sole) * fps
         speeds.append(step[contact[1:, i] & contact[:-1, i]])
     all_speeds = np.concatenate(speeds)
-    return float(all_speeds.mean()) if all_speeds.size else 0.0
+    return float(all_speeds.mean()) if all_speeds.size else float("nan")
 
 
 def joint_jerk_rms(qpos: np.ndarray, fps: float) -> float:
