@@ -287,6 +287,7 @@ def feet_targets(
     ori_rot: np.ndarray,
     ori_w: np.ndarray,
     roll: float = 1.0,
+    roll_gain: float = 1.0,
 ) -> np.ndarray:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
@@ -295,8 +296,10 @@ def feet_targets(
     heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
     (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
     ``roll`` (``SolverConfig.foot_roll``) scales that pitch (0: the foot stays flat while the
-    human's is down). Returns (T,) the contact run each frame's lock belongs to (-1 where the
-    foot is not locked).
+    human's is down). The lock weight is LOCK_GAIN times the foot targets' own, and
+    ``roll_gain`` (``SolverConfig.roll_lock_gain``) times more where the human's foot is down
+    but not flat: a rolling foot keeps its pivot where it is. Returns (T,) the contact run
+    each frame's lock belongs to (-1 where the foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     same_node = foot_keypoints(robot, side)
@@ -364,13 +367,14 @@ def feet_targets(
             lock_rot[sel] = r_roll[sel]
             lock_node[sel] = origin - shift[sel]
     a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
+    gain = LOCK_GAIN * np.where(contact & ~(heel & toe), roll_gain, 1.0)  # (T,)
     for k in same_node:
         locked = lock_node + np.einsum("tij,j->ti", lock_rot, robot.offsets[k])
         kp_pos[:, k] = a * locked + (1 - a) * kp_pos[:, k]
-        kp_weight[:, k] *= 1 + alpha * (LOCK_GAIN - 1)
+        kp_weight[:, k] *= 1 + alpha * (gain - 1)
     if ka in ori_kp:
         o = ori_kp.index(ka)
         delta = so3_log(np.swapaxes(swing_rot, -1, -2) @ lock_rot)
         ori_rot[:, o] = swing_rot @ so3_exp(delta * alpha[:, None])
-        ori_w[:, o] *= 1 + alpha * (LOCK_GAIN - 1)
+        ori_w[:, o] *= 1 + alpha * (gain - 1)
     return owner_out

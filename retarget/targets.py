@@ -294,6 +294,7 @@ def build_targets(
             ori_rot_a,
             ori_w_a,
             config.foot_roll,
+            config.roll_lock_gain,
         )
     separate_locks(robot, kp_pos, world, frames["pelvis"], runs, lock_xy)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from controlmm.corpus import CorpusConfig, make_clip, plan_clips
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from retarget import SolverConfig, load_robot, retarget_motion
@@ -107,3 +108,25 @@ def test_flat_contact_feet_are_flat_to_the_contacts_last_frame(sample_joints):
         pitch[roll] = np.concatenate(tilt)
     assert pitch[0.0].max() < 1e-6, pitch[0.0].max()
     assert pitch[1.0].max() > 0.1, pitch[1.0].max()
+
+
+def test_rolling_feet_locked_harder_slide_less_over_heel_strikes_and_toe_offs():
+    """``SolverConfig.roll_lock_gain``: over the frames in which the human's foot is down but
+    not flat, the robot's rolling foot is locked ten times harder by default than in flat
+    stance; on a generated walk (the default corpus's first) the G1's soles slide at least
+    15 % less than with the locks as in flat stance, and the fit stays as close."""
+    spec = next(s for s in plan_clips(CorpusConfig(clips=9800, seed=0)) if s.family == "walk")
+    joints = make_clip(spec)[1].astype(np.float64)
+    motion = Motion(joints=joints, fps=20.0)
+    robot = load_robot("g1")
+    sole, fit = {}, {}
+    for gain in (1.0, SolverConfig().roll_lock_gain):
+        q = retarget_motion(
+            motion, "g1", fps=30.0, metrics=False, config=SolverConfig(roll_lock_gain=gain)
+        ).qpos
+        sole[gain] = stance_sole_speed(robot, q, 30.0, joints, 20.0)
+        fit[gain] = similarity_fit(robot, q, 30.0, resample_human(joints, 20.0, len(q), 30.0), 30.0).mean
+    default = SolverConfig().roll_lock_gain
+    assert default > 1.0
+    assert sole[default] < 0.85 * sole[1.0], sole
+    assert fit[default] < fit[1.0] + 0.003, fit
