@@ -95,9 +95,9 @@ class SolverConfig:
     foot_roll: float = 1.0
     """Share (0-1) of the human foot's pitch with which a contact foot rolls over its heel or
     toe (:func:`retarget.foot_targets.feet_targets`; 0: flat while the human's foot is down)."""
-    roll_lock_gain: float = 10.0
+    roll_lock_gain: float = 5.0
     """Further multiplier of a contact foot's lock weight over the frames in which the human's
     foot is down but not flat (heel strikes, toe-offs), where the robot's foot rolls over its
     heel or toe pivot (1: locked no harder than in flat stance). On the 21 motions of
-    ``benchmarks/retarget_peers.py --clips 20`` the soles slide 10-20 % less on five of the
+    ``benchmarks/retarget_peers.py --clips 20`` the soles slide 12-21 % less on five of the
     six packaged robots for the same fit (docs/BENCHMARKS.md, 2026-12-04)."""

@@ -112,9 +112,10 @@ def test_flat_contact_feet_are_flat_to_the_contacts_last_frame(sample_joints):
 
 def test_rolling_feet_locked_harder_slide_less_over_heel_strikes_and_toe_offs():
     """``SolverConfig.roll_lock_gain``: over the frames in which the human's foot is down but
-    not flat, the robot's rolling foot is locked ten times harder by default than in flat
+    not flat, the robot's rolling foot is locked five times harder by default than in flat
     stance; on a generated walk (the default corpus's first) the G1's soles slide at least
-    15 % less than with the locks as in flat stance, and the fit stays as close."""
+    10 % less (16 % when written) than with the locks as in flat stance, and the fit stays as
+    close."""
     spec = next(s for s in plan_clips(CorpusConfig(clips=9800, seed=0)) if s.family == "walk")
     joints = make_clip(spec)[1].astype(np.float64)
     motion = Motion(joints=joints, fps=20.0)
@@ -128,5 +129,5 @@ def test_rolling_feet_locked_harder_slide_less_over_heel_strikes_and_toe_offs():
         fit[gain] = similarity_fit(robot, q, 30.0, resample_human(joints, 20.0, len(q), 30.0), 30.0).mean
     default = SolverConfig().roll_lock_gain
     assert default > 1.0
-    assert sole[default] < 0.85 * sole[1.0], sole
+    assert sole[default] < 0.9 * sole[1.0], sole
     assert fit[default] < fit[1.0] + 0.003, fit
