@@ -21,6 +21,8 @@ PITCH_SMOOTH_SECONDS = 0.05
 """Gaussian sigma (s) of a contact foot's pitch (flat, heel strike, toe-off) over time."""
 LOCK_GAIN = 30.0
 """Weight multiplier of the foot targets during stance (locked feet)."""
+FULL_LEG_JOINTS = 6
+"""Joints a leg needs of its own to hold a rolling foot's pivot harder (``roll_gain``)."""
 FOOT_GAP = 0.02
 """Metres kept between the two feet's footprints (each grown by half of it on every side)."""
 KNEE_TWIST_DEG = 10.0
@@ -298,8 +300,11 @@ def feet_targets(
     ``roll`` (``SolverConfig.foot_roll``) scales that pitch (0: the foot stays flat while the
     human's is down). The lock weight is LOCK_GAIN times the foot targets' own, and
     ``roll_gain`` (``SolverConfig.roll_lock_gain``) times more where the human's foot is down
-    but not flat: a rolling foot keeps its pivot where it is. Returns (T,) the contact run
-    each frame's lock belongs to (-1 where the foot is not locked).
+    but not flat: a rolling foot keeps its pivot where it is. A leg of fewer than six joints
+    of its own (H1's, without an ankle roll) cannot hold a foot's place and turn at once, and
+    gets no such gain: a harder lock took the solve's room to keep H1-with-hands' links apart
+    (38 self-collision frames on the real clip). Returns (T,) the contact run each frame's
+    lock belongs to (-1 where the foot is not locked).
     """
     ka = robot.keypoint_index(f"{side}_ankle")
     same_node = foot_keypoints(robot, side)
@@ -367,6 +372,10 @@ def feet_targets(
             lock_rot[sel] = r_roll[sel]
             lock_node[sel] = origin - shift[sel]
     a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
+    anc = robot.tree.ancestor
+    other = robot.feet["right" if side == "left" else "left"].node
+    own_joints = int(np.count_nonzero(anc[int(robot.feet[side].node)] & ~anc[int(other)]))
+    roll_gain = roll_gain if own_joints >= FULL_LEG_JOINTS else 1.0
     gain = LOCK_GAIN * np.where(contact & ~(heel & toe), roll_gain, 1.0)  # (T,)
     for k in same_node:
         locked = lock_node + np.einsum("tij,j->ti", lock_rot, robot.offsets[k])

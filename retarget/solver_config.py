@@ -98,6 +98,7 @@ class SolverConfig:
     roll_lock_gain: float = 5.0
     """Further multiplier of a contact foot's lock weight over the frames in which the human's
     foot is down but not flat (heel strikes, toe-offs), where the robot's foot rolls over its
-    heel or toe pivot (1: locked no harder than in flat stance). On the 21 motions of
-    ``benchmarks/retarget_peers.py --clips 20`` the soles slide 12-21 % less on five of the
+    heel or toe pivot (1: locked no harder than in flat stance); legs of fewer than six joints
+    of their own get none (:data:`retarget.foot_targets.FULL_LEG_JOINTS`). On the 21 motions of
+    ``benchmarks/retarget_peers.py --clips 20`` the soles slide 12-21 % less on four of the
     six packaged robots for the same fit (docs/BENCHMARKS.md, 2026-12-04)."""

@@ -131,3 +131,19 @@ def test_rolling_feet_locked_harder_slide_less_over_heel_strikes_and_toe_offs():
     assert default > 1.0
     assert sole[default] < 0.9 * sole[1.0], sole
     assert fit[default] < fit[1.0] + 0.003, fit
+
+
+def test_legs_of_five_joints_get_no_harder_roll_lock(sample_joints):
+    """A leg with fewer than six joints of its own (H1's: no ankle roll) cannot hold a rolling
+    foot's place and turn at once: its lock weights are the same whatever ``roll_lock_gain``,
+    while the G1's (six) are raised over the heel strikes and toe-offs."""
+    joints = sample_joints.astype(np.float64)
+    for name, raised in (("h1", False), ("g1", True)):
+        robot = load_robot(name)
+        transform = HumanToWorld(scale=robot.scale)
+        weights = [
+            build_targets(robot, joints, 20.0, transform, SolverConfig(roll_lock_gain=g)).kp_weight
+            for g in (1.0, 5.0)
+        ]
+        assert bool(np.any(weights[1] > weights[0] * 1.5)) is raised, name
+        assert np.all(weights[1] >= weights[0])
