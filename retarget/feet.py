@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from retarget.foot_targets import FULL_LEG_JOINTS, leg_joints
 from retarget.kinematics import Poses, quat_to_mat, so3_exp, so3_log
 from retarget.robot_model import RobotModel
 from retarget.targets import Targets
@@ -44,7 +45,7 @@ def pin_stance_feet(
             continue
         k = robot.keypoint_index(f"{side}_ankle")
         leg = leg_joints(robot, side)
-        o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= 6) else None
+        o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= FULL_LEG_JOINTS) else None
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
         start = q[np.ix_(frames, leg)].copy()
         best = _pin_leg(
@@ -184,7 +185,7 @@ def hold_feet_between_frames(
             continue
         t = w[frames, None]
         goal_rot = None
-        if len(leg_joints(robot, side)) >= 6:
+        if len(leg_joints(robot, side)) >= FULL_LEG_JOINTS:
             ra, rb = src.rot[a, node], src.rot[b, node]
             goal_rot = ra @ so3_exp(t * so3_log(np.swapaxes(ra, -1, -2) @ rb))
         held[side] = (frames, (1 - t) * place[a] + t * place[b], goal_rot)
@@ -202,15 +203,3 @@ def hold_feet_between_frames(
             q[frames[ok, None], leg] + step[ok], robot.lower[leg], robot.upper[leg]
         )
     return q
-
-
-def leg_joints(robot: RobotModel, side: str) -> np.ndarray:
-    """Indices (into q) of the joints between the trunk and one foot that move that foot
-    alone: a joint the MJCF couples to another (NAO's hip yaw-pitch, one motor for both hips)
-    is left to the solver, which keeps the coupling (:mod:`retarget.costs.coupling`)."""
-    other = {"left": "right", "right": "left"}[side]
-    anc = robot.tree.ancestor
-    leg = np.flatnonzero(anc[int(robot.feet[side].node)] & ~anc[int(robot.feet[other].node)])
-    if robot.couplings is not None:
-        leg = np.setdiff1d(leg, robot.couplings.joints)
-    return leg

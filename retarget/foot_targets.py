@@ -22,7 +22,9 @@ PITCH_SMOOTH_SECONDS = 0.05
 LOCK_GAIN = 30.0
 """Weight multiplier of the foot targets during stance (locked feet)."""
 FULL_LEG_JOINTS = 6
-"""Joints a leg needs of its own to hold a rolling foot's pivot harder (``roll_gain``)."""
+"""Joints a leg needs of its own (:func:`leg_joints`) to hold a foot's place and turn at once:
+with fewer, a planted foot is held by its place alone (:mod:`retarget.feet`) and gets no
+harder roll lock (:func:`feet_targets`)."""
 FOOT_GAP = 0.02
 """Metres kept between the two feet's footprints (each grown by half of it on every side)."""
 KNEE_TWIST_DEG = 10.0
@@ -36,6 +38,18 @@ TURN_SMOOTH_SECONDS = 0.1
 KNEE_BEND_FULL = 0.16
 """Distance of the human's knee from its hip-ankle line, as a fraction of the leg's length,
 from which the knee's direction counts fully (less bent: proportionally less)."""
+
+
+def leg_joints(robot: RobotModel, side: str) -> np.ndarray:
+    """Indices (into q) of the joints between the trunk and one foot that move that foot
+    alone: a joint the MJCF couples to another (NAO's hip yaw-pitch, one motor for both hips)
+    is left to the solver, which keeps the coupling (:mod:`retarget.costs.coupling`)."""
+    other = {"left": "right", "right": "left"}[side]
+    anc = robot.tree.ancestor
+    leg = np.flatnonzero(anc[int(robot.feet[side].node)] & ~anc[int(robot.feet[other].node)])
+    if robot.couplings is not None:
+        leg = np.setdiff1d(leg, robot.couplings.joints)
+    return leg
 
 
 def knee_direction(world: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
@@ -372,10 +386,7 @@ def feet_targets(
             lock_rot[sel] = r_roll[sel]
             lock_node[sel] = origin - shift[sel]
     a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
-    anc = robot.tree.ancestor
-    other = robot.feet["right" if side == "left" else "left"].node
-    own_joints = int(np.count_nonzero(anc[int(robot.feet[side].node)] & ~anc[int(other)]))
-    roll_gain = roll_gain if own_joints >= FULL_LEG_JOINTS else 1.0
+    roll_gain = roll_gain if len(leg_joints(robot, side)) >= FULL_LEG_JOINTS else 1.0
     gain = LOCK_GAIN * np.where(contact & ~(heel & toe), roll_gain, 1.0)  # (T,)
     for k in same_node:
         locked = lock_node + np.einsum("tij,j->ti", lock_rot, robot.offsets[k])

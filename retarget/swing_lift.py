@@ -17,7 +17,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.spatial.transform import Rotation
 
-from retarget.feet import leg_joints
+from retarget.foot_targets import leg_joints
 from retarget.kinematics import Poses
 from retarget.robot_model import RobotModel
 from retarget.selfcheck import pair_overlaps
