@@ -68,7 +68,7 @@ class SolverConfig:
     """Keep them clear halfway between consecutive frames too (:mod:`retarget.midpoints`): an
     arm swinging past a hip between two frames would pass through it in the output's frames.
     ``retarget_motion`` solves again with it where its output frames self-collide."""
-    pin_iterations: int = 1
+    pin_iterations: int = 2
     """Gauss-Newton steps that move stance feet onto their locked targets afterwards (0: off)."""
     # Weights of the per-frame cost terms (appended: positional construction keeps its order).
     l_rot: float = 0.2

@@ -1,6 +1,7 @@
 """Foot targets (``retarget/foot_targets.py``) on G1's own footprints and the real HumanML3D
 clip 012314: the feet are spaced by their exact turned footprints, a swinging foot goes around
-a planted one, and a foot turns towards a bent knee whose toes point away from it."""
+a planted one, and a foot turns towards a bent knee whose toes point away from it; stance
+feet are pinned (``retarget/feet.py``) on the point of them that stays on the floor."""
 
 from __future__ import annotations
 
@@ -9,12 +10,15 @@ import numpy as np
 import pytest
 
 import retarget.foot_targets as ft
+from controlmm.corpus import CorpusConfig, make_clip, plan_clips
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget import load_robot, retarget_motion, robot_scale
 from retarget.compare import similarity_fit
+from retarget.feet import PIVOT_RISE, pin_points, pin_stance_feet
 from retarget.robots import robot_mjcf
+from retarget.solver import solve
 from retarget.solver_config import SolverConfig
 from retarget.swing_lift import lift_swing_feet
 from retarget.targets import build_targets, stiffer_locks
@@ -242,3 +246,36 @@ def test_a_foot_with_its_knee_at_the_stop_lifts_its_toe_by_turning(tmp_path, ank
         assert h1.min() > 0.010
     else:
         np.testing.assert_allclose(h1, h0, atol=1e-6)
+
+
+def test_a_rolling_foot_is_pinned_on_the_pivot_it_rolls_on(g1):
+    """On a generated walk (the default corpus's first), the G1's stance feet are pinned by
+    the heel or toe pivot they roll on where the targets roll them (heel strikes, toe-offs;
+    where the targets hold the foot flat, by its ankle keypoint unless the solve tilts it);
+    pinned, those pivots end within 1 mm of their places on average (1.3 mm when the ankle
+    keypoint was pinned instead) and at a third of the solve's own error."""
+    spec = next(s for s in plan_clips(CorpusConfig(clips=9800, seed=0)) if s.family == "walk")
+    joints = make_clip(spec)[1].astype(np.float64)
+    config = SolverConfig(pin_iterations=0)
+    targets = build_targets(g1, joints, FPS, HumanToWorld(scale=g1.scale), config)
+    sol = solve(g1, targets, config)
+    pinned = pin_stance_feet(g1, targets, sol.root_pos, sol.root_rot, sol.q, SolverConfig().pin_iterations)
+    for side in ("left", "right"):
+        frames = np.flatnonzero(targets.stance[side] & (targets.lock[side] >= 1.0))
+        args = (sol.root_pos[frames], sol.root_rot[frames], sol.q[frames])
+        point, goal = pin_points(g1, targets, side, frames, *args)
+        k = g1.keypoint_index(f"{side}_ankle")
+        node = int(g1.nodes[k])
+        on_pivot = np.linalg.norm(point - g1.offsets[k], axis=1) > 1e-9
+        heel, toe = ft.foot_pivots(g1, side)
+        rot = targets.ori_rot[frames, list(targets.ori_kp).index(k)]
+        rise = np.einsum("fij,j->fi", rot, heel - toe)[:, 2]  # > 0: the targets lift the heel
+        assert (rise > PIVOT_RISE).sum() > 10 and (rise < -PIVOT_RISE).sum() > 5, side
+        assert np.all(np.isclose(point[rise > PIVOT_RISE], toe).all(axis=1)), side
+        assert np.all(np.isclose(point[rise < -PIVOT_RISE], heel).all(axis=1)), side
+        error = {}
+        for name, q in (("solved", sol.q), ("pinned", pinned)):
+            poses = g1.tree.forward(sol.root_pos[frames], sol.root_rot[frames], q[frames])
+            place = np.einsum("fij,fj->fi", poses.rot[:, node], point) + poses.pos[:, node]
+            error[name] = float(np.linalg.norm(place - goal, axis=1)[on_pivot].mean())
+        assert error["pinned"] < 0.001 and error["pinned"] < error["solved"] / 3, (side, error)
