@@ -251,7 +251,8 @@ def test_a_foot_with_its_knee_at_the_stop_lifts_its_toe_by_turning(tmp_path, ank
 def test_a_rolling_foot_is_pinned_on_the_pivot_it_rolls_on(g1):
     """On a generated walk (the default corpus's first), the G1's stance feet are pinned by
     the heel or toe pivot they roll on where the targets roll them (heel strikes, toe-offs;
-    where the targets hold the foot flat, by its ankle keypoint unless the solve tilts it);
+    where the targets hold the foot level, by its ankle keypoint unless the solve tilts it,
+    and on a point between while one end is less than PIVOT_RISE up);
     pinned, those pivots end within 1 mm of their places on average (1.3 mm when the ankle
     keypoint was pinned instead) and at a third of the solve's own error."""
     spec = next(s for s in plan_clips(CorpusConfig(clips=9800, seed=0)) if s.family == "walk")
