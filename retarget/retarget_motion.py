@@ -44,6 +44,7 @@ from retarget.selfcheck import (
     OTHER_DEPTH,
     OUTPUT_FAR_DEPTH,
     OUTPUT_FIT_GIVE,
+    OUTPUT_LIFT,
     OUTPUT_NEAR_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
@@ -427,7 +428,9 @@ def _weighed(
 
 
 def _kept_over(best: _Solved, new: _Solved, midpoint: bool, speed: bool = True) -> bool:
-    """:func:`_rung_kept` of ``new`` over ``best`` (``speed`` False: its joints' speeds not weighed)."""
+    """:func:`_rung_kept` of ``new`` over ``best`` (``speed`` False: its joints' speeds not
+    weighed), and only if its output is lifted off the floor no more than that one's and than
+    ``OUTPUT_LIFT``."""
     return _rung_kept(
         best.depth,
         best.slip,
@@ -438,7 +441,7 @@ def _kept_over(best: _Solved, new: _Solved, midpoint: bool, speed: bool = True) 
         new.speed if speed else None,
         best.frames,
         new.frames,
-    )
+    ) and new.lift <= max(best.lift, OUTPUT_LIFT)
 
 
 def _gives_up_a_pass(depth: np.ndarray, error: float, error2: float) -> bool:
@@ -474,8 +477,9 @@ def _output_rungs(
     rate with a stiffer self-clearance (selfcheck.OUTPUT_SELF), each rung solved with the
     planted feet as they were and, unless that one is kept clear of every pair, with their
     locks as stiff as the self-clearance (:func:`retarget.targets.stiffer_locks`: the arms and
-    trunk give way, not the feet). A solve is kept if it overlaps less and slips no more than
-    the one kept (selfcheck.OUTPUT_SLIP) and its keypoints stay within
+    trunk give way, not the feet). A solve is kept if it overlaps less, slips no more than the
+    one kept (selfcheck.OUTPUT_SLIP), is lifted off the floor no more (selfcheck.OUTPUT_LIFT)
+    and its keypoints stay within
     selfcheck.OUTPUT_FIT_GIVE of the first solve's distance to the targets; a solve that
     clears every pair but gives up more of the motion is kept only where none clears within
     it and the closer one kept overlaps deeper than selfcheck.OUTPUT_FAR_DEPTH. Pairs that

@@ -90,6 +90,12 @@ by giving up more of the motion is kept only where no later solve clears within 
 humanoid's kneel at 50 fps: a 3x stiffer solve with the feet as stiff cleared a hand 2 cm in
 a thigh with its keypoints 3.6 cm further from their targets, the 10x one clears it 4 cm
 closer than the first solve)."""
+OUTPUT_LIFT = 0.01
+"""...and only if its output is lifted off the floor (:func:`retarget.retarget_motion.lift_above_floor`:
+some geom was below it) no more than before and than this (m): the whole robot goes up,
+planted feet hovering. A stiff-lock rung cleared the converted Valkyrie's squat (corpus clip
+000000 at 30 fps) with a geom 35 mm under the floor, and its fit went from 13.4 to 20.1 cm;
+refused, the next rung clears it at 13.1 cm."""
 OUTPUT_FAR_DEPTH = 0.005
 """...and then only where the closer solve kept still overlaps deeper than this (m: what
 ``controlmm validate`` fails); G1 with hands sitting down (corpus clip 65 at 30 fps) kept a
