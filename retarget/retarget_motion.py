@@ -309,6 +309,8 @@ def _rung_kept(
     speed2: np.ndarray | None = None,
     frames: int | None = None,
     frames2: int | None = None,
+    lift: float | None = None,
+    lift2: float | None = None,
 ) -> bool:
     """Whether the output check keeps a new solve (its pairs' deepest overlaps ``depth2`` (P2,)
     m, P2 >= P, its largest planted-foot step ``slip2`` m and its joints' top speeds ``speed2``
@@ -317,14 +319,17 @@ def _rung_kept(
     faster than that one and than ``OUTPUT_SPEED``, and has no more output frames in which
     two geoms overlap deeper than ``OUTPUT_FAR_DEPTH`` (``frames2`` against ``frames``:
     a shallower overlap spread over more frames fails more of ``controlmm validate``;
-    Kuavo's thighs on the real clip, 3 frames -> 57); the midpoint solve, which is to remove
-    sweeps between frames, also brings no pair deeper than before and than ``OTHER_DEPTH``
-    (pairs added since count from 0)."""
+    Kuavo's thighs on the real clip, 3 frames -> 57), and is lifted off the floor no more
+    than that one (``lift2`` against ``lift``, m) and than ``OUTPUT_LIFT``; the midpoint
+    solve, which is to remove sweeps between frames, also brings no pair deeper than before
+    and than ``OTHER_DEPTH`` (pairs added since count from 0)."""
     kept = depth2.max(initial=0.0) < depth.max(initial=0.0) and slip2 <= max(slip, OUTPUT_SLIP)
     if speed is not None and speed2 is not None:
         kept = kept and bool(np.all((speed2 <= speed) | (speed2 <= OUTPUT_SPEED)))
     if frames is not None and frames2 is not None:
         kept = kept and frames2 <= frames
+    if lift is not None and lift2 is not None:
+        kept = kept and lift2 <= max(lift, OUTPUT_LIFT)
     if midpoint:
         before = np.pad(depth, (0, len(depth2) - len(depth)))
         kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
@@ -428,9 +433,7 @@ def _weighed(
 
 
 def _kept_over(best: _Solved, new: _Solved, midpoint: bool, speed: bool = True) -> bool:
-    """:func:`_rung_kept` of ``new`` over ``best`` (``speed`` False: its joints' speeds not
-    weighed), and only if its output is lifted off the floor no more than that one's and than
-    ``OUTPUT_LIFT``."""
+    """:func:`_rung_kept` of ``new`` over ``best`` (``speed`` False: its joints' speeds not weighed)."""
     return _rung_kept(
         best.depth,
         best.slip,
@@ -441,7 +444,9 @@ def _kept_over(best: _Solved, new: _Solved, midpoint: bool, speed: bool = True) 
         new.speed if speed else None,
         best.frames,
         new.frames,
-    ) and new.lift <= max(best.lift, OUTPUT_LIFT)
+        best.lift,
+        new.lift,
+    )
 
 
 def _gives_up_a_pass(depth: np.ndarray, error: float, error2: float) -> bool:

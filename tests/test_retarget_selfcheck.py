@@ -43,6 +43,7 @@ from retarget.selfcheck import (
     OTHER_DEPTH,
     OUTPUT_FAR_DEPTH,
     OUTPUT_FIT_GIVE,
+    OUTPUT_LIFT,
     OUTPUT_NEAR_GIVE,
     OUTPUT_SELF,
     OUTPUT_SLIP,
@@ -401,7 +402,7 @@ def test_a_seated_robot_keeps_its_feet_planted_while_its_shoulders_leave_its_tor
 
 
 def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_more():
-    """The rule of the output check's solves (``OUTPUT_SLIP``, and for the midpoint solve no
+    """The rule of the output check's solves (``OUTPUT_SLIP``, ``OUTPUT_LIFT``, and for the midpoint solve no
     pair deeper than before and than ``OTHER_DEPTH``), on overlaps (m) of three pairs."""
     depth, slip = np.array([0.030, 0.006, 0.0]), 0.010
     assert _rung_kept(depth, slip, np.array([0.010, 0.006, 0.0]), 0.012, midpoint=False)
@@ -423,6 +424,10 @@ def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_m
     # Nor one with more frames overlapping deeper than OUTPUT_FAR_DEPTH (shallower but spread).
     assert _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 3)
     assert not _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 57)
+    # Nor one lifted off the floor (a geom below it) more than before and than OUTPUT_LIFT.
+    assert _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 3, 0.002, OUTPUT_LIFT)
+    assert _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 3, 0.03, 0.03)
+    assert not _rung_kept(depth, slip, less, slip, False, speed, speed, 3, 3, 0.002, 0.035)
 
 
 def test_the_output_check_measures_how_far_a_solve_gives_up_the_motion(stoop):
