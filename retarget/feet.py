@@ -105,7 +105,8 @@ def pin_stance_feet(
             continue
         k = robot.keypoint_index(f"{side}_ankle")
         leg = leg_joints(robot, side)
-        o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and len(leg) >= FULL_LEG_JOINTS) else None
+        full = len(leg) >= FULL_LEG_JOINTS  # orientation pinned, correction exact, steps damped
+        o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and full) else None
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
         start = q[np.ix_(frames, leg)].copy()
         point, goal = pin_points(robot, targets, side, frames, root_pos[frames], root_rot[frames], q[frames])
@@ -119,7 +120,7 @@ def pin_stance_feet(
             goal,
             goal_rot,
             iterations,
-            PIN_DAMPING if len(leg) >= FULL_LEG_JOINTS else STEP_DAMPING,
+            PIN_DAMPING if full else STEP_DAMPING,
         )
         # Correction over all frames: in stance, faded by the lock weight around it.
         # A frame whose leg would have to swing far (an unreachable lock: another IK branch)
@@ -129,7 +130,7 @@ def pin_stance_feet(
         taken = np.abs(change).max(axis=1) <= PIN_MAX_CHANGE
         delta[frames] = np.where(taken[:, None], change, 0.0)
         exact = np.zeros(len(q))
-        if len(leg) >= FULL_LEG_JOINTS:  # a five-joint leg's foot turns with the correction
+        if full:  # a five-joint leg's foot turns with its position-only correction: smoothed
             exact[frames[taken]] = 1.0
         near = np.flatnonzero((lock > 0) & ~np.isin(np.arange(len(q)), frames))
         if len(near):
