@@ -55,13 +55,11 @@ def pin_points(
     targets: Targets,
     side: str,
     frames: np.ndarray,
-    root_pos: np.ndarray,
-    root_rot: np.ndarray,
-    q: np.ndarray,
+    poses: Poses,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The point of the ``side`` foot that pinning puts in place at ``frames`` (F,) of the
-    solve (root_pos (F, 3), root_rot (F, 3, 3), q (F, nj)): (F, 3) in the foot's node frame,
-    and (F, 3) its place (m, world) in the targets.
+    solve (``poses``: its poses there): (F, 3) in the foot's node frame, and (F, 3) its place
+    (m, world) in the targets.
 
     A level foot is pinned by its ankle keypoint. A foot rolling over its toe or heel, in the
     targets or in the solve (whichever lifts one end of :func:`retarget.foot_targets.foot_pivots`
@@ -78,7 +76,6 @@ def pin_points(
     rot = targets.ori_rot[frames, list(targets.ori_kp).index(k)]  # (F, 3, 3) the node's target
     heel, toe = foot_pivots(robot, side)
     node = np.array([int(robot.nodes[k])])
-    poses = robot.tree.forward(root_pos, root_rot, q)
     solved = robot.tree.points(poses, np.repeat(node, 2), np.stack([heel, toe]))[..., 2]  # (F, 2)
     wanted = np.einsum("fij,pj->fpi", rot, np.stack([heel, toe]) - robot.offsets[k])[..., 2]
     rise = np.stack([wanted[:, 0] - wanted[:, 1], solved[:, 0] - solved[:, 1]])  # > 0: heel up
@@ -109,13 +106,15 @@ def pin_stance_feet(
         o = list(targets.ori_kp).index(k) if (k in targets.ori_kp and full) else None
         goal_rot = targets.ori_rot[frames, o] if o is not None else None
         start = q[np.ix_(frames, leg)].copy()
-        point, goal = pin_points(robot, targets, side, frames, root_pos[frames], root_rot[frames], q[frames])
+        solved = robot.tree.forward(root_pos[frames], root_rot[frames], q[frames])
+        point, goal = pin_points(robot, targets, side, frames, solved)
         best = _pin_leg(
             robot,
             side,
             root_pos[frames],
             root_rot[frames],
             q[frames],
+            solved,
             point,
             goal,
             goal_rot,
@@ -151,6 +150,7 @@ def _pin_leg(
     root_pos: np.ndarray,
     root_rot: np.ndarray,
     q: np.ndarray,
+    poses: Poses,
     point: np.ndarray,
     goal: np.ndarray,
     goal_rot: np.ndarray | None,
@@ -159,8 +159,8 @@ def _pin_leg(
 ) -> np.ndarray:
     """One leg's joints (F, nl) that bring the foot's ``point`` (F, 3, node frame) to ``goal``
     (F, 3) (and the foot to ``goal_rot`` (F, 3, 3) at PIN_L_ROT m/rad when given) for F
-    frames of root_pos (F, 3), root_rot (F, 3, 3), q (F, nj): damped Gauss-Newton, a step
-    that does not lower a frame's error undone, limits kept."""
+    frames of root_pos (F, 3), root_rot (F, 3, 3), q (F, nj) (``poses``: theirs): damped
+    Gauss-Newton, a step that does not lower a frame's error undone, limits kept."""
     leg = leg_joints(robot, side)
     lo, hi = robot.lower[leg], robot.upper[leg]
     cur = q[:, leg].copy()
@@ -168,8 +168,9 @@ def _pin_leg(
     best_cost = np.full(len(q), np.inf)
     base = q.copy()
     for it in range(iterations + 1):
-        base[:, leg] = cur
-        poses = robot.tree.forward(root_pos, root_rot, base)
+        if it:
+            base[:, leg] = cur
+            poses = robot.tree.forward(root_pos, root_rot, base)
         res, jac = _leg_residual(robot, side, poses, point, goal, goal_rot)
         cost = np.sum(res * res, axis=1)
         better = cost < best_cost

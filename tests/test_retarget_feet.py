@@ -263,8 +263,8 @@ def test_a_rolling_foot_is_pinned_on_the_pivot_it_rolls_on(g1):
     pinned = pin_stance_feet(g1, targets, sol.root_pos, sol.root_rot, sol.q, SolverConfig().pin_iterations)
     for side in ("left", "right"):
         frames = np.flatnonzero(targets.stance[side] & (targets.lock[side] >= 1.0))
-        args = (sol.root_pos[frames], sol.root_rot[frames], sol.q[frames])
-        point, goal = pin_points(g1, targets, side, frames, *args)
+        solved = g1.tree.forward(sol.root_pos[frames], sol.root_rot[frames], sol.q[frames])
+        point, goal = pin_points(g1, targets, side, frames, solved)
         k = g1.keypoint_index(f"{side}_ankle")
         node = int(g1.nodes[k])
         on_pivot = np.linalg.norm(point - g1.offsets[k], axis=1) > 1e-9
