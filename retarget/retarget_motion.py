@@ -29,6 +29,14 @@ from controlmm.motion import load_motion
 from controlmm.motion.container import Motion, resample
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
 from retarget.actuators import joint_speed_limits
+from retarget.balance import (
+    FIT_GIVE as BALANCE_FIT_GIVE,
+    GOAL as BALANCE_GOAL,
+    ankle_hinges,
+    ankle_load,
+    balance_shift,
+    shift_human,
+)
 from retarget.feet import hold_feet_between_frames
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
@@ -672,6 +680,68 @@ def _speed_rungs(
     return kept, solves
 
 
+def _balanced(
+    rm: RobotModel,
+    config: SolverConfig,
+    solver: str,
+    transform: HumanToWorld,
+    joints: np.ndarray,
+    src_fps: float,
+    fps: float,
+    kept: _Solved,
+) -> tuple[_Solved, int]:
+    """Solve again with the body moved where ``kept`` loads its stance ankles past their
+    motors (:mod:`retarget.balance`, over TRIGGER): the human's joints (``joints``, at
+    ``src_fps``) but the feet moved by the accumulated shift, through the self-clearance and
+    speed checks, up to ``config.balance_iterations`` times, each shift from the last solve's
+    load while it is over GOAL. A solve
+    is kept if its sustained load is lower, it has no more output frames with two geoms
+    overlapping deeper than OUTPUT_FAR_DEPTH, slides no planted foot further than ``kept``
+    and OUTPUT_SLIP, turns no joint further past its speed limit and keeps its keypoints
+    within BALANCE_FIT_GIVE of as close to the unmoved targets as ``kept``. Returns (the
+    solve kept, solves made)."""
+    ankles = ankle_hinges(rm)
+    load = ankle_load(rm, ankles, kept.rep, fps)
+    shift = balance_shift(rm, load, fps)
+    if shift is None:
+        return kept, 0
+    worst = float(load.sustained.max(initial=0.0))
+    limits = joint_speed_limits(rm.tree.joint_names)
+    speed = max(1.0, float(speed_ratios(kept.qpos, fps, limits).max(initial=0.0)))
+    frames = overlap_frames(rm.model, kept.qpos)
+    slip = _stance_slip(rm, kept.rep, kept.targets, fps)
+    reference = build_targets(rm, resample(joints, src_fps, fps), fps, transform, config).kp_pos
+    most_error = _keypoint_error(rm, kept.rep, reference) + BALANCE_FIT_GIVE
+    total = np.zeros((len(kept.qpos), 2))
+    solves = 0
+    for i in range(config.balance_iterations):  # each shift from the last solve's load
+        shift = balance_shift(rm, load, fps, BALANCE_GOAL) if i else shift
+        if shift is None:
+            break
+        total = total + shift
+        moved = shift_human(joints, src_fps, total, fps, transform)
+        targets = build_targets(rm, moved, src_fps, transform, config)
+        out, n = _solve_checked(rm, targets, config, solver, transform, moved, fps)
+        solves += n
+        if config.speed_limits:
+            out, n = _speed_rungs(rm, targets, config, solver, transform, moved, fps, out)
+            solves += n
+        load = ankle_load(rm, ankles, out.rep, fps)
+        worst2 = float(load.sustained.max(initial=0.0))
+        frames2, slip2 = overlap_frames(rm.model, out.qpos), _stance_slip(rm, out.rep, out.targets, fps)
+        speed2 = float(speed_ratios(out.qpos, fps, limits).max(initial=0.0))
+        if (
+            worst2 >= worst
+            or frames2 > frames
+            or slip2 > max(slip, OUTPUT_SLIP)
+            or speed2 > speed
+            or _keypoint_error(rm, out.rep, reference) > most_error
+        ):
+            continue
+        kept, worst, frames, slip = out, worst2, frames2, slip2
+    return kept, solves
+
+
 def _slower_rung(
     rm: RobotModel,
     clearance: SelfClearance,
@@ -772,10 +842,13 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
+    human_world = targets.human_world
     out, solves = _solve_checked(rm, targets, config, solver, transform, joints, fps)
-    speed_solves = 0
+    speed_solves = balance_solves = 0
     if solver != "mink" and config.speed_limits:
         out, speed_solves = _speed_rungs(rm, targets, config, solver, transform, joints, fps, out)
+    if solver != "mink" and config.balance_iterations > 0:
+        out, balance_solves = _balanced(rm, config, solver, transform, joints, src_fps, fps, out)
     sol, qpos, rep, lift, swing_lift, targets = (
         out.sol,
         out.qpos,
@@ -800,6 +873,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         "swing_lift_max_mm": round(swing_lift * 1000, 3),
         "self_clearance_solves": solves,
         "speed_limit_solves": speed_solves,
+        "balance_solves": balance_solves,
     }
     traj = RobotTrajectory(
         robot=str(rm.mapping.robot if rm.mapping.source.startswith("packaged:") else rm.mapping.source),
@@ -814,6 +888,6 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         model=rm,
     )
     if metrics:
-        traj.metrics = trajectory_metrics(rm, qpos, fps, targets.human_world, targets.fps, rep=rep)
+        traj.metrics = trajectory_metrics(rm, qpos, fps, human_world, targets.fps, rep=rep)
     traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)
     return traj

@@ -102,3 +102,7 @@ class SolverConfig:
     of their own get none (:data:`retarget.foot_targets.FULL_LEG_JOINTS`). On the 21 motions of
     ``benchmarks/retarget_peers.py --clips 20`` the soles slide 12-21 % less on four of the
     six packaged robots for the same fit (docs/BENCHMARKS.md, 2026-12-04)."""
+    balance_iterations: int = 3
+    """Solves at most with the body moved so that the stance ankles' motors can hold the
+    zero-moment point (:mod:`retarget.balance`; 0: off): H1's and T1's ankles are weak for
+    their mass, and the human's push-off loads them past their motors."""
