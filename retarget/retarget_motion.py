@@ -842,7 +842,7 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
     transform = transform if transform is not None else HumanToWorld(scale=rm.scale * size_ratio(joints))
     config = config if config is not None else SolverConfig(**rm.mapping.solver)
     targets = build_targets(rm, joints, src_fps, transform, config)
-    human_world = targets.human_world
+    human_world, human_fps = targets.human_world, targets.fps  # the unmoved human (balance)
     out, solves = _solve_checked(rm, targets, config, solver, transform, joints, fps)
     speed_solves = balance_solves = 0
     if solver != "mink" and config.speed_limits:
@@ -888,6 +888,6 @@ def _retarget(motion, robot, fps, transform, config, metrics, solver, check_scal
         model=rm,
     )
     if metrics:
-        traj.metrics = trajectory_metrics(rm, qpos, fps, human_world, targets.fps, rep=rep)
+        traj.metrics = trajectory_metrics(rm, qpos, fps, human_world, human_fps, rep=rep)
     traj.solver["total_seconds"] = round(time.perf_counter() - start, 4)
     return traj
