@@ -47,7 +47,7 @@ from scipy.sparse.linalg import spsolve
 from controlmm.frames import HumanToWorld
 from controlmm.motion.skeleton import JOINT_INDEX
 from retarget.actuators import joint_torque_limits
-from retarget.metrics import Replay, geom_lowest_z
+from retarget.metrics import Replay, foot_steps, geom_lowest_z
 from retarget.robot_model import RobotModel
 
 G = 9.81
@@ -76,6 +76,14 @@ MAX_SHIFT = 0.1
 FIT_GIVE = 0.01
 """Metres (mean over keypoints and frames) a balanced solve may move further from the
 unmoved targets than the first solve."""
+STANCE_HEIGHT = 0.01
+"""Metres above the floor within which a foot stands (``CheckConfig.stance_height_m``)."""
+SLIDE_SPEED = 0.2
+"""m/s a foot on the floor may slide (``controlmm validate``'s ``max_foot_slide_speed``): a
+balanced solve may not slide one faster, unless the first solve did."""
+HELD_BY_MODEL = 1.0
+"""A balanced solve whose load stays above this is dropped: it gives up fit and still asks
+more of the motors than they have."""
 APART = 0.7
 """In double support, an axis whose lever runs within acos(APART) of the line between the
 ankles is held by the support itself."""
@@ -218,6 +226,22 @@ def ankle_load(robot: RobotModel, ankles: Ankles, rep: Replay, fps: float) -> Lo
     sustained = uniform_filter1d(ratio, size=frames, mode="constant") if t_len > 1 else ratio.copy()
     supported = down["left"] | down["right"]
     return Load(ratio, sustained, excess, supported, height)
+
+
+def floor_slide(robot: RobotModel, rep: Replay) -> float:
+    """Largest horizontal step (m) between two replayed frames of a foot's slowest sole point
+    while the foot is within ``STANCE_HEIGHT`` of the floor in both, whatever the human's
+    foot does."""
+    worst = 0.0
+    for side in ("left", "right"):
+        geoms = list(robot.feet[side].geoms)
+        if not geoms or len(rep.xpos) < 2:
+            continue
+        down = geom_lowest_z(robot.model, rep, geoms).min(axis=1) < STANCE_HEIGHT
+        both = down[1:] & down[:-1]
+        if both.any():
+            worst = max(worst, float(foot_steps(robot, rep, side)[both].max()))
+    return worst
 
 
 def balance_shift(robot: RobotModel, load: Load, fps: float, above: float = TRIGGER) -> np.ndarray | None:

@@ -32,9 +32,12 @@ from retarget.actuators import joint_speed_limits
 from retarget.balance import (
     FIT_GIVE as BALANCE_FIT_GIVE,
     GOAL as BALANCE_GOAL,
+    HELD_BY_MODEL,
+    SLIDE_SPEED as BALANCE_SLIDE_SPEED,
     ankle_hinges,
     ankle_load,
     balance_shift,
+    floor_slide,
     shift_human,
 )
 from retarget.feet import hold_feet_between_frames
@@ -697,9 +700,11 @@ def _balanced(
     load while it is over GOAL. A solve
     is kept if its sustained load is lower, it has no more output frames with two geoms
     overlapping deeper than OUTPUT_FAR_DEPTH, slides no planted foot further than ``kept``
-    and OUTPUT_SLIP, turns no joint further past its speed limit and keeps its keypoints
-    within BALANCE_FIT_GIVE of as close to the unmoved targets as ``kept``. Returns (the
-    solve kept, solves made)."""
+    and OUTPUT_SLIP, slides no foot on the floor faster than ``kept`` and BALANCE_SLIDE_SPEED
+    (:func:`retarget.balance.floor_slide`: the check's stance is the robot's own), turns no
+    joint further past its speed limit and keeps its keypoints within BALANCE_FIT_GIVE of as
+    close to the unmoved targets as ``kept``; the first solve stays where the one kept still
+    loads the ankles over HELD_BY_MODEL. Returns (the solve kept, solves made)."""
     ankles = ankle_hinges(rm)
     load = ankle_load(rm, ankles, kept.rep, fps)
     shift = balance_shift(rm, load, fps)
@@ -710,10 +715,12 @@ def _balanced(
     speed = max(1.0, float(speed_ratios(kept.qpos, fps, limits).max(initial=0.0)))
     frames = overlap_frames(rm.model, kept.qpos)
     slip = _stance_slip(rm, kept.rep, kept.targets, fps)
+    slide = max(floor_slide(rm, kept.rep), BALANCE_SLIDE_SPEED / fps)
     reference = build_targets(rm, resample(joints, src_fps, fps), fps, transform, config).kp_pos
     most_error = _keypoint_error(rm, kept.rep, reference) + BALANCE_FIT_GIVE
     total = np.zeros((len(kept.qpos), 2))
     solves = 0
+    first = kept
     for i in range(config.balance_iterations):  # each shift from the last solve's load
         shift = balance_shift(rm, load, fps, BALANCE_GOAL) if i else shift
         if shift is None:
@@ -735,11 +742,12 @@ def _balanced(
             or frames2 > frames
             or slip2 > max(slip, OUTPUT_SLIP)
             or speed2 > speed
+            or floor_slide(rm, out.rep) > slide
             or _keypoint_error(rm, out.rep, reference) > most_error
         ):
             continue
         kept, worst, frames, slip = out, worst2, frames2, slip2
-    return kept, solves
+    return (kept if worst <= HELD_BY_MODEL else first), solves
 
 
 def _slower_rung(
