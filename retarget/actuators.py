@@ -9,7 +9,8 @@
 * :func:`damping_share`: joint damping over that limit (s/rad): the share of the motor a joint
   moving at 1 rad/s spends on its own damping (MuJoCo's passive force ``-damping * qvel``,
   which the actuators must overcome in simulation). A joint with damping 200 N m s/rad and a
-  120 N m motor (the Apollo's torso yaw) can turn no faster than 0.6 rad/s.
+  120 N m motor (the Apollo's torso yaw) can turn no faster than 0.6 rad/s
+  (:func:`damped_speed_limits`: the speed rungs keep joints under it).
 """
 
 from __future__ import annotations
@@ -119,3 +120,10 @@ def damping_share(model: mujoco.MjModel, joints: Sequence[int] | np.ndarray) -> 
     damping = model.dof_damping[model.jnt_dofadr[ids]]
     ok = np.isfinite(limit) & (limit > 0)
     return np.where(ok, damping / np.where(ok, limit, 1.0), 0.0)
+
+
+def damped_speed_limits(share: np.ndarray) -> np.ndarray:
+    """(J,) the speed (rad/s) at which each joint's damping alone takes its whole motor, from
+    ``share`` (J,) (:func:`damping_share`: damping over torque limit); inf without either."""
+    share = np.asarray(share, dtype=np.float64)
+    return np.where(share > 0, 1.0 / np.where(share > 0, share, 1.0), np.inf)

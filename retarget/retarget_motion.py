@@ -6,8 +6,9 @@ motion's rate (:mod:`retarget.solver`), resample to the requested rate
 (:mod:`retarget.resample`) with pinned feet held between the solver's frames, lift frames
 whose feet would touch below the floor, check the arms' self-clearance on the real geoms and
 solve again with safe margins where they touch (:mod:`retarget.selfcheck`), solve again where
-a joint turns faster than its speed limit (:mod:`retarget.speed_rungs`), and measure the
-result with MuJoCo (:mod:`retarget.metrics`).
+a joint turns faster than its speed limit (:mod:`retarget.speed_rungs`), solve again with the
+body moved where the stance ankles' motors cannot hold the zero-moment point
+(:mod:`retarget.balance`), and measure the result with MuJoCo (:mod:`retarget.metrics`).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from controlmm.frames import HumanToWorld
 from controlmm.motion import load_motion
 from controlmm.motion.container import Motion, resample
 from controlmm.motion.skeleton import FPS, NUM_JOINTS, check_metre_scale
-from retarget.actuators import joint_speed_limits
+from retarget.actuators import damped_speed_limits, joint_speed_limits
 from retarget.balance import (
     FIT_GIVE as BALANCE_FIT_GIVE,
     GOAL as BALANCE_GOAL,
@@ -644,6 +645,14 @@ def _solve_checked(
     return out, solves
 
 
+def _speed_limits(rm: RobotModel) -> np.ndarray:
+    """(nj,) each joint's speed limit (rad/s): its published one
+    (:func:`retarget.actuators.joint_speed_limits`, which ``controlmm validate`` checks), or the
+    speed at which its damping alone takes its whole motor where that is lower (Apollo's torso
+    yaw: 0.6 rad/s; past it ``validate`` fails the torque the motion needs)."""
+    return np.minimum(joint_speed_limits(rm.tree.joint_names), damped_speed_limits(rm.damping_share))
+
+
 def _speed_rungs(
     rm: RobotModel,
     targets: Targets,
@@ -662,7 +671,7 @@ def _speed_rungs(
     limits at its worst, has no more output frames with two geoms overlapping deeper than
     OUTPUT_FAR_DEPTH and slides no planted foot further than ``kept`` and OUTPUT_SLIP.
     ``targets``: the motion's, at its rate. Returns (the solve kept, solves made)."""
-    limits = joint_speed_limits(rm.tree.joint_names)
+    limits = _speed_limits(rm)
     ratios = speed_ratios(kept.qpos, fps, limits)
     if ratios.max(initial=0.0) <= 1.0:
         return kept, 0
@@ -711,7 +720,7 @@ def _balanced(
     if shift is None:
         return kept, 0
     worst = float(load.sustained.max(initial=0.0))
-    limits = joint_speed_limits(rm.tree.joint_names)
+    limits = _speed_limits(rm)
     speed = max(1.0, float(speed_ratios(kept.qpos, fps, limits).max(initial=0.0)))
     frames = overlap_frames(rm.model, kept.qpos)
     slip = _stance_slip(rm, kept.rep, kept.targets, fps)
