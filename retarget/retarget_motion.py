@@ -706,14 +706,14 @@ def _balanced(
     motors (:mod:`retarget.balance`, over TRIGGER): the human's joints (``joints``, at
     ``src_fps``) but the feet moved by the accumulated shift, through the self-clearance and
     speed checks, up to ``config.balance_iterations`` times, each shift from the last solve's
-    load while it is over GOAL. A solve
-    is kept if its sustained load is lower, it has no more output frames with two geoms
-    overlapping deeper than OUTPUT_FAR_DEPTH, slides no planted foot further than ``kept``
-    and OUTPUT_SLIP, slides no foot on the floor faster than ``kept`` and BALANCE_SLIDE_SPEED
-    (:func:`retarget.balance.floor_slide`: the check's stance is the robot's own), turns no
-    joint further past its speed limit and keeps its keypoints within BALANCE_FIT_GIVE of as
-    close to the unmoved targets as ``kept``; the first solve stays where the one kept still
-    loads the ankles over HELD_BY_MODEL. Returns (the solve kept, solves made)."""
+    load while it is over GOAL. A solve is kept if its sustained load is lower, it has no more
+    output frames with two geoms overlapping deeper than OUTPUT_FAR_DEPTH, slides no planted
+    foot further than ``kept`` and OUTPUT_SLIP, slides no foot on the floor faster than
+    ``kept`` and BALANCE_SLIDE_SPEED (:func:`retarget.balance.floor_slide`: the check's stance
+    is the robot's own), turns no joint further past its speed limit (unless
+    ``config.speed_limits`` is off) and keeps its keypoints within BALANCE_FIT_GIVE of as close
+    to the unmoved targets as ``kept``; the first solve stays where the one kept still loads
+    the ankles over HELD_BY_MODEL. Returns (the solve kept, solves made)."""
     ankles = ankle_hinges(rm)
     load = ankle_load(rm, ankles, kept.rep, fps)
     shift = balance_shift(rm, load, fps)
@@ -750,7 +750,7 @@ def _balanced(
             worst2 >= worst
             or frames2 > frames
             or slip2 > max(slip, OUTPUT_SLIP)
-            or speed2 > speed
+            or (config.speed_limits and speed2 > speed)
             or floor_slide(rm, out.rep) > slide
             or _keypoint_error(rm, out.rep, reference) > most_error
         ):
