@@ -149,6 +149,7 @@ class Load:
             hinge at ``MARGIN`` of its motor at most.
         supported: (T,) a foot on the floor.
         height: mean height (m) of the centre of mass.
+        foot_low: side -> (T,) the lowest point (m) of that foot's geoms.
     """
 
     ratio: np.ndarray
@@ -156,6 +157,7 @@ class Load:
     excess: np.ndarray
     supported: np.ndarray
     height: float
+    foot_low: dict[str, np.ndarray]
 
 
 def ankle_load(robot: RobotModel, ankles: Ankles, rep: Replay, fps: float) -> Load:
@@ -168,22 +170,25 @@ def ankle_load(robot: RobotModel, ankles: Ankles, rep: Replay, fps: float) -> Lo
         acc[1:-1] = (com[2:] - 2 * com[1:-1] + com[:-2]) * fps**2
     height = float(com[:, 2].mean())
     zmp = com[:, :2] - (com[:, 2:3] / G) * acc[:, :2]
+    feet = set(robot.feet["left"].geoms) | set(robot.feet["right"].geoms)
+    root = model.body_rootid[robot.tree.node_body[0]]
     others = [
         g
         for g in range(model.ngeom)
         if model.geom_contype[g] | model.geom_conaffinity[g]
-        and model.body_rootid[model.geom_bodyid[g]] == model.body_rootid[robot.tree.node_body[0]]
-        and g not in set(robot.feet["left"].geoms) | set(robot.feet["right"].geoms)
+        and model.body_rootid[model.geom_bodyid[g]] == root
+        and g not in feet
     ]
     # A knee, a hand or the seat on the floor takes weight the model does not place.
     body_down = (
         geom_lowest_z(model, rep, others).min(axis=1) < SUPPORT_HEIGHT if others else np.zeros(t_len, bool)
     )
-    down, anchor, axis, sole = {}, {}, {}, {}
+    down, anchor, axis, sole, foot_low = {}, {}, {}, {}, {}
     for side in ("left", "right"):
         foot = robot.feet[side]
         geoms = list(foot.geoms)
         low = geom_lowest_z(model, rep, geoms).min(axis=1) if geoms else np.full(t_len, np.inf)
+        foot_low[side] = low
         down[side] = low < SUPPORT_HEIGHT
         j = ankles.joints[side]
         b = model.jnt_bodyid[j]
@@ -225,19 +230,16 @@ def ankle_load(robot: RobotModel, ankles: Ankles, rep: Replay, fps: float) -> Lo
     frames = max(1, int(round(WINDOW_S * fps)) | 1)
     sustained = uniform_filter1d(ratio, size=frames, mode="constant") if t_len > 1 else ratio.copy()
     supported = down["left"] | down["right"]
-    return Load(ratio, sustained, excess, supported, height)
+    return Load(ratio, sustained, excess, supported, height, foot_low)
 
 
-def floor_slide(robot: RobotModel, rep: Replay) -> float:
+def floor_slide(robot: RobotModel, rep: Replay, load: Load) -> float:
     """Largest horizontal step (m) between two replayed frames of a foot's slowest sole point
-    while the foot is within ``STANCE_HEIGHT`` of the floor in both, whatever the human's
-    foot does."""
+    while the foot is within ``STANCE_HEIGHT`` of the floor in both (``load``: those frames'
+    :func:`ankle_load`, with the feet's lowest points), whatever the human's foot does."""
     worst = 0.0
     for side in ("left", "right"):
-        geoms = list(robot.feet[side].geoms)
-        if not geoms or len(rep.xpos) < 2:
-            continue
-        down = geom_lowest_z(robot.model, rep, geoms).min(axis=1) < STANCE_HEIGHT
+        down = load.foot_low[side] < STANCE_HEIGHT
         both = down[1:] & down[:-1]
         if both.any():
             worst = max(worst, float(foot_steps(robot, rep, side)[both].max()))

@@ -724,7 +724,7 @@ def _balanced(
     speed = max(1.0, float(speed_ratios(kept.qpos, fps, limits).max(initial=0.0)))
     frames = overlap_frames(rm.model, kept.qpos)
     slip = _stance_slip(rm, kept.rep, kept.targets, fps)
-    slide = max(floor_slide(rm, kept.rep), BALANCE_SLIDE_SPEED / fps)
+    slide = max(floor_slide(rm, kept.rep, load), BALANCE_SLIDE_SPEED / fps)
     reference = build_targets(rm, resample(joints, src_fps, fps), fps, transform, config).kp_pos
     most_error = _keypoint_error(rm, kept.rep, reference) + BALANCE_FIT_GIVE
     total = np.zeros((len(kept.qpos), 2))
@@ -751,7 +751,7 @@ def _balanced(
             or frames2 > frames
             or slip2 > max(slip, OUTPUT_SLIP)
             or (config.speed_limits and speed2 > speed)
-            or floor_slide(rm, out.rep) > slide
+            or floor_slide(rm, out.rep, load) > slide
             or _keypoint_error(rm, out.rep, reference) > most_error
         ):
             continue

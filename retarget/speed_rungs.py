@@ -3,18 +3,18 @@ frames, the motion is solved again with that joint's velocity term stiffer aroun
 
 ``controlmm validate`` fails a joint turning faster than its speed limit
 (:func:`retarget.actuators.joint_speed_limits`: the G1's and H1's published ones, 3 pi rad/s,
-GMR's IK velocity limit, for the others), and a joint turning faster than its damping lets
-its motor (:func:`retarget.actuators.damped_speed_limits`: the Apollo's torso yaw at 0.6
-rad/s) fails ``validate`` on the torque it needs; the rungs keep each joint under the lower
-of the two. The solver tracks the human, whose arm may swing
-near that speed (corpus clip 000019: the upper arms at 9.3 rad/s), and a robot's joints may
-have to turn faster than the human's limb to follow it (JVRC-1's shoulder pitch at 10.0 rad/s
-there, at 30 fps). The speed rungs (:func:`retarget.retarget_motion.retarget_motion`) multiply
-the velocity weight (``Targets.speed_gain``) of each joint past its limit by SPEED_STEP on the
-solver's frames within SPEED_SPREAD of the output steps too fast, up to SPEED_SOLVES times (a
-joint still or newly too fast in the solve kept gets another step there: stiffening one joint
-alone by 100 at once makes its neighbours turn faster instead), and keep a solve only if it
-turns no joint faster relative to its limit than the one kept.
+GMR's IK velocity limit, for the others), and a joint turning faster than its damping lets its
+motor (:func:`retarget.actuators.damped_speed_limits`: the Apollo's torso yaw at 0.6 rad/s)
+fails ``validate`` on the torque it needs; the rungs keep each joint under the lower of the
+two. The solver tracks the human, whose arm may swing near that speed (corpus clip 000019: the
+upper arms at 9.3 rad/s), and a robot's joints may have to turn faster than the human's limb to
+follow it (JVRC-1's shoulder pitch at 10.0 rad/s there, at 30 fps). The speed rungs
+(:func:`retarget.retarget_motion.retarget_motion`) multiply the velocity weight
+(``Targets.speed_gain``) of each joint past its limit by SPEED_STEP on the solver's frames
+within SPEED_SPREAD of the output steps too fast, up to SPEED_SOLVES times (a joint still or
+newly too fast in the solve kept gets another step there: stiffening one joint alone by 100 at
+once makes its neighbours turn faster instead), and keep a solve only if it turns no joint
+faster relative to its limit than the one kept.
 """
 
 from __future__ import annotations
