@@ -48,7 +48,10 @@ Peers run in their own virtual environments, never imported here:
   earlier session (docs/BENCHMARKS.md) are listed, labelled recorded.
 
 ``--solver FIELD=VALUE`` (repeatable) sets a :class:`retarget.SolverConfig` field for our runs
-over each robot's mapping, e.g. ``--solver foot_roll=0`` (flat contact feet).
+over each robot's mapping, e.g. ``--solver foot_roll=0`` (flat contact feet). ``--checked`` runs
+ours through :func:`controlmm.pipeline.retarget_checked` (what ``controlmm retarget`` does by
+default): each output checked on the ``empty`` scene and, where it fails, the fallback settings
+tried; the JSON names the fallback kept per motion.
 
 A peer that cannot run is reported, never faked.
 """
@@ -81,6 +84,7 @@ from controlmm.motion import Motion, load_motion  # noqa: E402
 from controlmm.motion.formats.arrays import position_array, read_arrays  # noqa: E402
 from controlmm.motion.formats.smpl import INTERMIMIC_FPS, smpl_body_joints  # noqa: E402
 from controlmm.motion.skeleton import JOINT_INDEX  # noqa: E402
+from controlmm.pipeline import retarget_checked  # noqa: E402
 from retarget import SolverConfig, load_robot, retarget_motion  # noqa: E402
 from retarget.compare import (  # noqa: E402
     joint_jerk_rms,
@@ -92,7 +96,7 @@ from retarget.compare import (  # noqa: E402
 from retarget.metrics import geom_lowest_z, replay  # noqa: E402
 from retarget.robots import PACKAGED_ROBOTS  # noqa: E402
 from scenes import load_scene  # noqa: E402
-from sim import check_trajectory  # noqa: E402
+from sim import check_trajectory, make_world  # noqa: E402
 
 FPS = 30.0
 """Output rate of every retargeter (holosoma and GMR label their output 30 fps)."""
@@ -189,6 +193,20 @@ def ours(robot: str, motion: Motion, repeats: int, solver: dict | None = None) -
     return qpos, best
 
 
+def ours_checked(
+    robot: str, motion: Motion, solver: dict | None = None
+) -> tuple[np.ndarray, float, str | None]:
+    """Our qpos at FPS through :func:`controlmm.pipeline.retarget_checked` (checked on the
+    ``empty`` scene, the fallback settings tried where the check fails), the wall time of one
+    run (checks and fallbacks included, the robot and its check world loaded before) and the
+    fallback kept (None: the mapping's settings)."""
+    config = SolverConfig(**{**load_robot(robot).mapping.solver, **(solver or {})})
+    world = make_world(load_scene("empty", robot=robot))
+    start = time.perf_counter()
+    out = retarget_checked(motion, robot, fps=FPS, config=config, scene=world, metrics=False)
+    return out.trajectory.qpos, time.perf_counter() - start, out.fallback
+
+
 def holosoma(python: Path, motions: dict[str, tuple[Motion, np.ndarray]]) -> tuple[dict, dict, str]:
     """Run holosoma on ``motions`` and export its demo clips; (qpos and seconds per motion, demo
     motions (SMPL-22, Y up) with holosoma's own qpos and seconds, a note)."""
@@ -256,16 +274,35 @@ def package_omomo() -> dict[str, np.ndarray]:
     return out
 
 
-def ours_on_mocap(clips: dict[str, np.ndarray], repeats: int, solver: dict) -> dict[str, dict]:
+def ours_on_mocap(
+    clips: dict[str, np.ndarray], repeats: int, solver: dict, checked: bool = False
+) -> dict[str, dict]:
     """Our G1 figures on recorded clips (name -> HumanML3D joints (T, 22, 3), Y up, at FPS),
-    each put on the floor first (:func:`on_floor`) and measured against the joints as given."""
+    each put on the floor first (:func:`on_floor`) and measured against the joints as given
+    (``checked``: through :func:`ours_checked`)."""
     out = {}
     for name, joints in clips.items():
-        qpos, seconds = ours(
-            "g1", Motion(joints=on_floor(joints).astype(np.float32), fps=FPS), repeats, solver
+        out[name] = ours_measured(
+            "g1",
+            Motion(joints=on_floor(joints).astype(np.float32), fps=FPS),
+            joints,
+            repeats,
+            solver,
+            checked,
         )
-        out[name] = measure("g1", qpos, joints, seconds, len(joints))
     return out
+
+
+def ours_measured(
+    robot: str, motion: Motion, joints: np.ndarray, repeats: int, solver: dict, checked: bool
+) -> dict:
+    """The figures of our output for one motion (``joints``: the human's at FPS), plain
+    (:func:`ours`) or ``checked`` (:func:`ours_checked`, with the fallback kept)."""
+    if not checked:
+        qpos, seconds = ours(robot, motion, repeats, solver)
+        return measure(robot, qpos, joints, seconds, len(joints))
+    qpos, seconds, fallback = ours_checked(robot, motion, solver)
+    return measure(robot, qpos, joints, seconds, len(joints)) | {"fallback": fallback}
 
 
 def on_floor(joints: np.ndarray) -> np.ndarray:
@@ -428,6 +465,12 @@ def main() -> int:
         metavar="FIELD=VALUE",
         help="a SolverConfig field for our runs over each robot's mapping (e.g. foot_roll=0; repeatable)",
     )
+    p.add_argument(
+        "--checked",
+        action="store_true",
+        help="ours through controlmm.pipeline.retarget_checked: each output checked on the empty scene "
+        "and the fallback settings tried where it fails (frames/s then counts the checks, one run)",
+    )
     args = p.parse_args()
     solver = solver_overrides(args.solver)
     robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
@@ -445,8 +488,9 @@ def main() -> int:
             continue
         per[f"ours/{robot}"] = {}
         for name, (motion, joints) in motions.items():
-            qpos, seconds = ours(robot, motion, args.repeats, solver)
-            per[f"ours/{robot}"][name] = measure(robot, qpos, joints, seconds, len(joints))
+            per[f"ours/{robot}"][name] = ours_measured(
+                robot, motion, joints, args.repeats, solver, args.checked
+            )
         runs = per[f"ours/{robot}"]
         rows.append(
             summarise(
@@ -457,6 +501,9 @@ def main() -> int:
             )
         )
         print(f"  {robot}: fit {rows[-1]['fit_cm']:.2f} cm, {rows[-1]['fps']:.0f} frames/s", flush=True)
+        if args.checked:
+            kept = {k: v["fallback"] for k, v in runs.items() if v["fallback"]}
+            print(f"  {robot}: fallbacks kept in {len(kept)} of {len(runs)}: {kept}", flush=True)
         if args.families:
             rows.append(
                 summarise(
@@ -478,7 +525,9 @@ def main() -> int:
                 per["holosoma/g1"] = {
                     k: measure("g1", q, motions[k][1], s, len(motions[k][1])) for k, (q, s) in results.items()
                 }
-                per["ours/g1 omomo"] = ours_on_mocap({k: v[0] for k, v in demo.items()}, args.repeats, solver)
+                per["ours/g1 omomo"] = ours_on_mocap(
+                    {k: v[0] for k, v in demo.items()}, args.repeats, solver, args.checked
+                )
                 per["holosoma/g1 omomo"] = {
                     name: measure("g1", q_peer, joints, s_peer, len(joints))
                     for name, (joints, q_peer, s_peer) in demo.items()
@@ -489,7 +538,7 @@ def main() -> int:
             notes["holosoma"] = f"unavailable: no Python at {args.holosoma_python} (see the module docstring)"
             # Its package's OMOMO clips for ours alone, where the package is installed here.
             omomo = package_omomo()
-            per["ours/g1 omomo"] = ours_on_mocap(omomo, args.repeats, solver)
+            per["ours/g1 omomo"] = ours_on_mocap(omomo, args.repeats, solver, args.checked)
             groups["controlmm"]["omomo"] = per["ours/g1 omomo"]
             if omomo:
                 notes["holosoma"] += "; OMOMO clips read from its package installed here (ours only)"

@@ -120,6 +120,15 @@ def foot_pivots(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     return f.points[back].mean(axis=0), f.points[front].mean(axis=0)
 
 
+def _roll_rise(rest_rot: np.ndarray, theta: np.ndarray, c_heel: np.ndarray, c_toe: np.ndarray) -> np.ndarray:
+    """(T,) how high (m) a foot pitched by ``theta`` (T,) rad (> 0: toe down) about the pivot
+    on the floor (toe or heel, node frame (3,)) lifts its node above the flat foot's."""
+    pivot = np.where((theta > 0)[:, None], c_toe, c_heel)
+    flat = pivot @ rest_rot.T
+    rolled = np.einsum("tij,tj->ti", rot_y(theta) @ rest_rot, pivot)
+    return flat[:, 2] - rolled[:, 2]
+
+
 def footprint(robot: RobotModel, side: str) -> np.ndarray:
     """(x_min, x_max, y_min, y_max) of a flat foot's collision geometry around its ankle keypoint (m;
     x forward, y left)."""
@@ -304,6 +313,7 @@ def feet_targets(
     ori_w: np.ndarray,
     roll: float = 1.0,
     roll_gain: float = 1.0,
+    lift_share: float = 0.0,
 ) -> np.ndarray:
     """Lift swing-foot targets to the robot's stance height; in contact, a rigid rolling foot.
 
@@ -312,11 +322,13 @@ def feet_targets(
     heel strike) or its toe pivot (heel up: a toe-off, tiptoes), the pivot fixed on the floor
     (:func:`foot_pivots`): the robot rolls over its sole instead of hovering or sliding.
     ``roll`` (``SolverConfig.foot_roll``) scales that pitch (0: the foot stays flat while the
-    human's is down). The lock weight is LOCK_GAIN times the foot targets' own, and
-    ``roll_gain`` (``SolverConfig.roll_lock_gain``) times more where the human's foot is down
-    but not flat: a rolling foot keeps its pivot where it is. A leg of fewer than six joints
-    of its own (H1's, without an ankle roll) cannot hold a foot's place and turn at once, and
-    gets no such gain: a harder lock took the solve's room to keep H1-with-hands' links apart
+    human's is down), and ``lift_share`` (``SolverConfig.foot_lift``) raises such a foot straight up
+    by that share of the height the rest of the pitch would have raised its node. The lock
+    weight is LOCK_GAIN times the foot targets' own, and ``roll_gain``
+    (``SolverConfig.roll_lock_gain``) times more where the human's foot is down but not flat:
+    a rolling foot keeps its pivot where it is. A leg of fewer than six joints of its own
+    (H1's, without an ankle roll) cannot hold a foot's place and turn at once, and gets no
+    such gain: a harder lock took the solve's room to keep H1-with-hands' links apart
     (38 self-collision frames on the real clip). Returns (T,) the contact run each frame's
     lock belongs to (-1 where the foot is not locked).
     """
@@ -367,6 +379,12 @@ def feet_targets(
         theta = roll * held + np.where(contact, roll, 1.0) * swing
         c_heel, c_toe = foot_pivots(robot, side)
         pivot = np.where((theta > 0)[:, None], c_toe, c_heel)  # (T, 3) node frame
+        # A foot rolling less than the human's (``roll`` < 1) rises by ``lift_share`` times what the
+        # rest of the roll would have lifted its node, straight up (0 where ``roll`` is 1).
+        rise = np.zeros(len(world))
+        if lift_share > 0 and roll < 1:
+            full = _roll_rise(rest_rot, held + swing, c_heel, c_toe)
+            rise = lift_share * (full - _roll_rise(rest_rot, theta, c_heel, c_toe))
         height = flat_height + STANCE_CLEARANCE
         for i, (s, e) in enumerate(runs):
             sel = (owner == i) & (alpha_xy > 0)
@@ -385,6 +403,7 @@ def feet_targets(
             origin[2] = height
             lock_rot[sel] = r_roll[sel]
             lock_node[sel] = origin - shift[sel]
+            lock_node[sel, 2] += rise[sel]
     a = np.stack([alpha_xy, alpha_xy, alpha], axis=1)
     roll_gain = roll_gain if len(leg_joints(robot, side)) >= FULL_LEG_JOINTS else 1.0
     gain = LOCK_GAIN * np.where(contact & ~(heel & toe), roll_gain, 1.0)  # (T,)

@@ -279,7 +279,7 @@ def parse_mapping(data: dict, source: str = "<mapping>", base_dir: Path | None =
     )
 
 
-SHARES = ("human_leg_share", "human_arm_share", "foot_roll")
+SHARES = ("human_leg_share", "human_arm_share", "foot_roll", "foot_lift")
 """Solver settings that are shares, from 0 to 1."""
 
 

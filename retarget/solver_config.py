@@ -106,3 +106,10 @@ class SolverConfig:
     """Solves at most with the body moved so that the stance ankles' motors can hold the
     zero-moment point (:mod:`retarget.balance`; 0: off): H1's and T1's ankles are weak for
     their mass, and the human's push-off loads them past their motors."""
+    foot_lift: float = 0.0
+    """Share (0-1) of the height a contact foot rolling with the human's whole pitch would raise
+    its ankle by that a foot rolling less (``foot_roll`` < 1) rises straight up instead
+    (:func:`retarget.foot_targets.feet_targets`): it leaves and meets the floor flat while the
+    human's heel or toe is still down, without sliding and without the late jump of a foot held
+    down to the contact's last frame. No effect at ``foot_roll`` 1. One of the fallbacks of
+    :func:`controlmm.pipeline.retarget_checked`."""

@@ -295,6 +295,7 @@ def build_targets(
             ori_w_a,
             config.foot_roll,
             config.roll_lock_gain,
+            config.foot_lift,
         )
     separate_locks(robot, kp_pos, world, frames["pelvis"], runs, lock_xy)
 

@@ -24,7 +24,7 @@ from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
 from controlmm.generate import MotionModel, load_model
 from controlmm.motion import Motion, load_motion
-from controlmm.pipeline import PlanConfig, plan, write_plan
+from controlmm.pipeline import PlanConfig, plan, retarget_checked, write_plan
 from retarget import DEFAULT_ROBOT, load_robot, retarget_motion, robot_scale
 from scenes import Scene, load_scene
 from sim import CheckWorld, Report, check_trajectory, make_world
@@ -157,14 +157,21 @@ def run_retarget(args: dict[str, Any], out: Path, warm: Warm) -> dict[str, Any]:
         )
     else:
         transform = scene.human_to_world(robot_scale(robot))
-    traj = retarget_motion(motion, robot=robot, fps=float(args.get("fps", 50.0)), transform=transform)
+    fps = float(args.get("fps", 50.0))
+    check_report: Report | None = None
+    fallback = None
+    if args.get("validate", True):  # checked, with the fallback settings where the check fails
+        result = retarget_checked(motion, robot, fps, transform, scene=world)
+        traj, check_report, fallback = result.trajectory, result.report, result.fallback
+        traj.metrics["check"] = {"scene": scene.name, **result.to_dict()}
+    else:
+        traj = retarget_motion(motion, robot=robot, fps=fps, transform=transform)
     traj.source["path"] = str(args["motion"]["name"])
     traj.save(out / "robot")
     figures: dict[str, Any] = {"passed": None, "frames": traj.num_frames, "fps": traj.fps}
-    if args.get("validate", True):
-        report = check_trajectory(world, traj)
-        report.save(out / "report.json")
-        figures = {**figures, **report_figures(report)}
+    if check_report is not None:
+        check_report.save(out / "report.json")
+        figures = {**figures, **report_figures(check_report), "fallback": fallback}
     return figures
 
 

@@ -27,6 +27,13 @@ The motion may be recorded motion of another skeleton (BVH with LAFAN1/CMU/Mixam
 SMPL/SMPL-H/SMPL-X joint arrays in .npy/.npz/.pt; see --up, --source-fps, --skeleton-map and
 docs/motion-formats.md): it is imported into the HumanML3D motion first (20 fps).
 
+The output is checked as `controlmm validate` checks it (on the empty scene, or --check-scene):
+where the check fails (a weak ankle's torque, a slide), the motion is retargeted again with
+fallback settings (flat or half-rolling contact feet, legs halfway to the robot's
+proportions) and the passing output closest to the human is kept (within 25 % of the first
+one's fit); one line says which, and OUT.json's metrics.check holds every attempt. The exit
+status is 0 either way; --no-check retargets once, unchecked.
+
 Writes OUT.npz (fps, qpos with wxyz quaternion, qvel, joint_names, body_names, body_pos_w,
 body_quat_w) and OUT.json (robot, source, scale, fps, metrics), and the formats of --format
 (default lafan1), then prints the metrics:
@@ -98,6 +105,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="auto: MuJoCo, else the stick figure (default); mujoco; stick",
     )
+    p.add_argument(
+        "--check-scene",
+        default="empty",
+        metavar="SCENE",
+        help="scene (name or MJCF file) in which the output is checked as by `controlmm validate` "
+        "(default: empty)",
+    )
+    p.add_argument(
+        "--no-check",
+        action="store_true",
+        help="skip the check and its fallbacks (faster: retargeting alone)",
+    )
     add_motion_input(p)
     add_force(p, "OUT.csv/.npz/.json, the --format files and the video")
     p.set_defaults(func=run)
@@ -132,6 +151,23 @@ def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
     return "\n".join(f"  {k:<{width}}  {v}" for k, v in rows)
 
 
+def _format_check(checked, scene: str) -> str:
+    """One line: the check's verdict on the kept output and the fallbacks tried."""
+    first = checked.attempts[0]
+    if checked.report.passed and checked.fallback is None:
+        return f"check ({scene} scene, as controlmm validate): PASSED"
+    if checked.report.passed:
+        return (
+            f"check ({scene} scene, as controlmm validate): PASSED with the fallback '{checked.fallback}' "
+            f"(the robot's own settings failed: {', '.join(first.errors)})"
+        )
+    tried = ", ".join(a.name for a in checked.attempts[1:]) or "none"
+    return (
+        f"check ({scene} scene, as controlmm validate): FAILED: {', '.join(first.errors)} "
+        f"(fallbacks tried: {tried}); the output is written as retargeted"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() in (".csv", ".npz", ".json"):
@@ -144,6 +180,9 @@ def run(args: argparse.Namespace) -> int:
     # heavy (torch, MuJoCo): imported when the command runs, so that --help stays fast
     import retarget.render  # (the package imports retarget.exports too)
     from controlmm import motion as motions
+    from controlmm.pipeline import retarget_checked
+    from scenes import load_scene
+    from sim import make_world
 
     formats = retarget.exports.parse_formats(args.format)
     for path in retarget.exports.output_paths(out, formats):
@@ -155,9 +194,18 @@ def run(args: argparse.Namespace) -> int:
     motion = motions.load_motion(args.motion, **motion_options(args))
     scale = retarget.robot_scale(args.robot)
     transform = HumanToWorld(scale=scale, yaw=math.radians(args.yaw), translation=(args.x, args.y, 0.0))
-    traj = retarget.retarget_motion(
-        motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver
-    )
+    if args.no_check:
+        traj = retarget.retarget_motion(
+            motion, robot=args.robot, fps=args.fps, transform=transform, solver=args.solver
+        )
+        checked = None
+    else:
+        scene = load_scene(args.check_scene, robot=args.robot)  # a bad scene fails before the work
+        checked = retarget_checked(
+            motion, args.robot, args.fps, transform, scene=make_world(scene), solver=args.solver
+        )
+        traj = checked.trajectory
+        traj.metrics["check"] = {"scene": scene.name, **checked.to_dict()}
     traj.source["path"] = str(args.motion)
     paths = retarget.exports.save_trajectory(traj, out, formats)
     print(
@@ -165,6 +213,8 @@ def run(args: argparse.Namespace) -> int:
         f"{traj.num_frames} frames @ {traj.fps:g} Hz"
     )
     print(_format_metrics(traj.metrics, traj.solver, traj.scale))
+    if checked is not None:
+        print(_format_check(checked, args.check_scene))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     if args.render:
         backend = args.render_backend

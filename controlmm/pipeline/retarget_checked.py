@@ -1,0 +1,146 @@
+"""Retargeting checked in MuJoCo, with fallback solver settings where the check fails.
+
+The retargeter (:func:`retarget.retarget_motion`) keeps a planted foot still, the joints in
+their ranges and the links apart by construction, but whether the robot's motors can carry
+the motion and its stance feet hold under the check's own contact model is only known once
+the output is replayed (:func:`sim.check_trajectory`, what ``controlmm validate`` runs).
+Where that check fails, another way of placing the feet or the legs often passes (on the
+packaged robots: H1's and T1's weak ankles overloaded by a foot rolling over its toes, Apollo's
+heavily damped hips and torso in a turn). :func:`retarget_checked` retargets with the given
+settings, checks the output, and where it fails retargets again with each of
+:data:`FALLBACKS` in turn; of the outputs that pass, the one closest to the human
+(:func:`retarget.compare.similarity_fit`) is kept, if it is within ``fit_give`` of the first
+output's fit. Otherwise the first output stays, with its failing report. A failure that only
+the motion can clear (an obstacle in the way, :data:`MOTION_KINDS`) is not retried.
+
+Only the settings change, never the motion: the plan's feedback rounds
+(:mod:`controlmm.pipeline.feedback`) edit the motion itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from controlmm.errors import ControlMMError
+from controlmm.frames import HumanToWorld
+from controlmm.motion.container import Motion
+from retarget import RobotTrajectory, SolverConfig, load_robot, retarget_motion
+from retarget.compare import similarity_fit
+from scenes import load_scene
+from sim import CheckConfig, CheckWorld, Report, check_trajectory, make_world
+
+
+@dataclass(frozen=True)
+class Fallback:
+    """A named set of :class:`retarget.SolverConfig` fields tried where the check fails."""
+
+    name: str
+    solver: dict[str, Any]
+
+
+FALLBACKS = (
+    Fallback("flat contact feet", {"foot_roll": 0.0}),
+    Fallback("flat contact feet, lifted", {"foot_roll": 0.0, "foot_lift": 1.0}),
+    Fallback("half-rolling feet", {"foot_roll": 0.5}),
+    Fallback("half-rolling feet, lifted", {"foot_roll": 0.5, "foot_lift": 1.0}),
+    Fallback("legs halfway to the robot's proportions", {"human_leg_share": 0.5}),
+)
+"""The fallbacks, in the order they are tried. On the six packaged robots and the 21 motions of
+``benchmarks/retarget_peers.py --clips 20`` they turn 7 of the 14 outputs that failed the check
+into passes (docs/BENCHMARKS.md, 2026-12-05)."""
+
+MOTION_KINDS = ("obstacle_penetration",)
+"""Failure kinds that no fallback clears (the retargeter does not see the scene's obstacles:
+the motion itself must change, as the plan's feedback rounds do); where the first output has
+one, no fallback is tried."""
+
+FIT_GIVE = 0.25
+"""How much (a share of the first output's similarity fit) a passing fallback may fit the
+human worse than the first output and still be kept."""
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One retargeting and its check: ``name`` ("default" or a fallback's), whether it
+    ``passed``, its blocking failure kinds and its similarity fit (m) to the human."""
+
+    name: str
+    passed: bool
+    errors: tuple[str, ...]
+    fit_m: float
+
+    def to_dict(self) -> dict[str, object]:
+        return {"name": self.name, "passed": self.passed, "errors": list(self.errors), "fit_m": self.fit_m}
+
+
+@dataclass
+class CheckedTrajectory:
+    """What :func:`retarget_checked` kept: the ``trajectory``, its check ``report``, the
+    ``fallback`` it came from (None: the given settings) and every ``attempts`` made."""
+
+    trajectory: RobotTrajectory
+    report: Report
+    fallback: str | None
+    attempts: list[Attempt] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "passed": self.report.passed,
+            "errors": sorted({f.kind for f in self.report.errors}),
+            "fallback": self.fallback,
+            "attempts": [a.to_dict() for a in self.attempts],
+        }
+
+
+def retarget_checked(
+    motion: Motion,
+    robot: str = "g1",
+    fps: float = 50.0,
+    transform: HumanToWorld | None = None,
+    config: SolverConfig | None = None,
+    scene: str | CheckWorld = "empty",
+    check: CheckConfig | None = None,
+    fallbacks: tuple[Fallback, ...] = FALLBACKS,
+    fit_give: float = FIT_GIVE,
+    solver: str = "batched",
+    metrics: bool = True,
+) -> CheckedTrajectory:
+    """Retarget ``motion`` to ``robot`` (as :func:`retarget.retarget_motion`, which raises on
+    bad input), check it in ``scene`` (a scene name or file, or a :class:`sim.CheckWorld` of
+    that robot) with ``check`` (default :class:`sim.CheckConfig`), and where it fails try
+    each of ``fallbacks`` over ``config`` (default: the robot's mapping's settings); see the
+    module. ``solver``, ``metrics``: as :func:`retarget.retarget_motion`'s. ``fit_give`` < 0
+    is refused (one line)."""
+    if not fit_give >= 0:
+        raise ControlMMError(f"fit_give must be 0 or more; got {fit_give}")
+    rm = load_robot(robot)
+    base = config if config is not None else SolverConfig(**rm.mapping.solver)
+    world = scene if isinstance(scene, CheckWorld) else make_world(load_scene(scene, robot=robot))
+
+    def attempt(name: str, settings: SolverConfig) -> tuple[RobotTrajectory, Report, Attempt]:
+        traj = retarget_motion(
+            motion, robot=robot, fps=fps, transform=transform, config=settings, solver=solver, metrics=metrics
+        )
+        report = check_trajectory(world, traj, config=check)
+        fit = similarity_fit(rm, traj.qpos, traj.fps, motion.joints, motion.fps).mean
+        kinds = tuple(sorted({f.kind for f in report.errors}))
+        return traj, report, Attempt(name, report.passed, kinds, fit)
+
+    traj, report, first = attempt("default", base)
+    attempts = [first]
+    if report.passed or set(first.errors) & set(MOTION_KINDS):
+        return CheckedTrajectory(traj, report, None, attempts)
+    best: tuple[RobotTrajectory, Report, Attempt] | None = None
+    for fallback in fallbacks:
+        settings = replace(base, **fallback.solver)
+        if settings == base:
+            continue
+        out = attempt(fallback.name, settings)
+        attempts.append(out[2])
+        if out[2].passed and out[2].fit_m <= first.fit_m * (1 + fit_give):
+            if best is None or out[2].fit_m < best[2].fit_m:
+                best = out
+    if best is None:
+        return CheckedTrajectory(traj, report, None, attempts)
+    return CheckedTrajectory(best[0], best[1], best[2].name, attempts)
