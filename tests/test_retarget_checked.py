@@ -17,8 +17,7 @@ import pytest
 from controlmm.corpus import CorpusConfig, make_clip, plan_clips
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
-from controlmm.motion import Motion
-from controlmm.motion import save_motion
+from controlmm.motion import Motion, save_motion
 from controlmm.pipeline import retarget_checked
 from controlmm.pipeline.retarget_checked import FALLBACKS, FIT_GIVE
 from retarget import SolverConfig, load_robot
@@ -56,7 +55,11 @@ def test_a_failing_output_is_replaced_by_a_fallback_that_passes(t1_checked):
     assert all(kept.fit_m <= a.fit_m for a in out.attempts[1:] if a.passed)  # the closest pass
     assert len(out.attempts) == 1 + len(FALLBACKS)
     record = out.to_dict()
-    assert record["passed"] and record["fallback"] == out.fallback and len(record["attempts"]) == len(out.attempts)
+    assert (
+        record["passed"]
+        and record["fallback"] == out.fallback
+        and len(record["attempts"]) == len(out.attempts)
+    )
 
 
 def test_a_passing_output_is_checked_once():
@@ -105,7 +108,9 @@ def test_the_retarget_command_reports_the_check(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "check (empty scene, as controlmm validate): PASSED with the fallback" in done.stdout
     check = json.loads((tmp_path / "a.json").read_text())["metrics"]["check"]
-    assert check["passed"] and check["scene"] == "empty" and check["attempts"][0]["errors"] == ["torque_limit"]
+    assert (
+        check["passed"] and check["scene"] == "empty" and check["attempts"][0]["errors"] == ["torque_limit"]
+    )
     done = subprocess.run([*cmd, "--no-check", "--out", str(tmp_path / "b")], capture_output=True, text=True)
     assert done.returncode == 0 and "check (" not in done.stdout
     assert "check" not in json.loads((tmp_path / "b.json").read_text())["metrics"]
