@@ -6,6 +6,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from controlmm.atomic import check_output_file
 from controlmm.cli.args import (
@@ -20,6 +21,9 @@ from controlmm.cli.args import (
 from controlmm.cli.gl import import_mujoco
 from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
+
+if TYPE_CHECKING:  # the pipeline imports torch: loaded when the command runs (see run)
+    from controlmm.pipeline import CheckedTrajectory
 
 HELP = """Retarget a human motion (HumanML3D 22 joints, Y up) to a humanoid robot.
 
@@ -151,7 +155,7 @@ def _format_metrics(metrics: dict, solver: dict, scale: float) -> str:
     return "\n".join(f"  {k:<{width}}  {v}" for k, v in rows)
 
 
-def _format_check(checked, scene: str) -> str:
+def _format_check(checked: CheckedTrajectory, scene: str) -> str:
     """One line: the check's verdict on the kept output and the fallbacks tried."""
     first = checked.attempts[0]
     if checked.report.passed and checked.fallback is None:
