@@ -19,7 +19,7 @@ from controlmm.errors import ControlMMError
 from controlmm.frames import HumanToWorld
 from controlmm.motion import Motion, save_motion
 from controlmm.pipeline import retarget_checked
-from controlmm.pipeline.retarget_checked import FALLBACKS, FIT_GIVE
+from controlmm.pipeline.retarget_checked import FALLBACKS, FIT_GIVE, RETRIED_KINDS
 from retarget import SolverConfig, load_robot
 from retarget.targets import build_targets
 from scenes import load_scene
@@ -47,6 +47,7 @@ def test_a_failing_output_is_replaced_by_a_fallback_that_passes(t1_checked):
     out = t1_checked
     first = out.attempts[0]
     assert first.name == "default" and not first.passed and "torque_limit" in first.errors
+    assert set(first.errors) <= set(RETRIED_KINDS)
     assert out.fallback in {f.name for f in FALLBACKS}
     assert out.report.passed
     assert check_trajectory(load_scene("empty", robot="t1"), out.trajectory).passed
@@ -67,6 +68,14 @@ def test_a_passing_output_is_checked_once():
     out = retarget_checked(corpus_clip(11, "crouch_walk"), "g1", fps=FPS, metrics=False)
     assert out.report.passed and out.fallback is None
     assert [a.name for a in out.attempts] == ["default"]
+
+
+def test_a_failure_no_setting_clears_is_not_retried():
+    """G1 stepping up onto a platform that the empty scene does not have floats: no foot
+    setting changes that, so none is tried (RETRIED_KINDS)."""
+    out = retarget_checked(corpus_clip(40, "platform"), "g1", fps=FPS, metrics=False)
+    assert not out.report.passed and "floating" in out.attempts[0].errors
+    assert [a.name for a in out.attempts] == ["default"] and out.fallback is None
 
 
 def test_bad_fit_give_is_one_line():
