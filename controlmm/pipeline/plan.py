@@ -24,6 +24,7 @@ and every round reports how far the joints moved from the clip.
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -44,6 +45,7 @@ from controlmm.pipeline.config import PlanConfig
 from controlmm.pipeline.feedback import feedback_terms
 from controlmm.pipeline.inputs import constraint_warnings, plan_seconds, start_pose_error
 from controlmm.pipeline.refine import edit_motion
+from controlmm.pipeline.retarget_checked import with_fallbacks
 from controlmm.pipeline.timing import StageTimes
 from controlmm.timeline import as_timeline, generate_timeline
 from retarget import RobotTrajectory, load_robot, retarget_motion, robot_scale
@@ -69,6 +71,7 @@ class PlanRound:
     constraint_errors_m: list[float]
     editing: dict[str, Any]
     seconds: dict[str, float]  # generate, retarget, check, and generate's stages (text, decoding, ...)
+    fallback: str | None = None  # the retargeting fallback kept (controlmm.pipeline.retarget_checked)
 
     @property
     def passed(self) -> bool:
@@ -97,6 +100,7 @@ class PlanRound:
             "self_collision_frames": int(r.self_collision_frames),
             "foot_sliding_m": round(float(r.foot_sliding_m), 6),
             "constraint_errors_m": [round(e, 5) for e in self.constraint_errors_m],
+            "retarget_fallback": self.fallback,
             "physics": _physics_figures(r.stats.get("physics")),
             "loss_terms": list(self.terms),
             "editing": self.editing,
@@ -310,8 +314,23 @@ def plan(
         timer["retarget"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         report = _check(world, traj, config, index, say, progress)
-        timer["check"] = time.perf_counter() - t0
-        rounds.append(PlanRound(index, motion, traj, report, [t.name for t in terms], errors, record, timer))
+        # a torque or sliding failure: the retargeter's fallback settings first (the same motion)
+        checked = with_fallbacks(
+            motion,
+            config.robot,
+            traj,
+            report,
+            functools.partial(_check, world, config=config, index=index, say=_quiet, progress=progress),
+            transform,
+            check_scale=False,
+        )
+        traj, report = checked.trajectory, checked.report
+        timer["check"] = time.perf_counter() - t0  # the fallbacks' retargeting and checks included
+        rounds.append(
+            PlanRound(
+                index, motion, traj, report, [t.name for t in terms], errors, record, timer, checked.fallback
+            )
+        )
         if index == 0:
             timing.add_all(phases)
             timing.add("retarget", timer["retarget"])
@@ -323,10 +342,11 @@ def plan(
         if clip is not None:
             moved = displacement(motion.joints, clip.joints)
             worst += f", joints {moved.mean_m * 100:.1f} cm from the clip (max {moved.max_m * 100:.1f})"
-        say(
-            f"round {index}: {'PASSED' if report.passed else f'FAILED ({len(blocking)} failures)'}{worst} "
-            f"in {timer['generate'] + timer['retarget'] + timer['check']:.1f} s"
-        )
+        verdict = "PASSED" if report.passed else f"FAILED ({len(blocking)} failures)"
+        if checked.fallback is not None:
+            verdict += f" with the retargeting fallback '{checked.fallback}'"
+        took = timer["generate"] + timer["retarget"] + timer["check"]
+        say(f"round {index}: {verdict}{worst} in {took:.1f} s")
         # Stop when it passes with every constraint met; a pass that misses a constraint gets one more
         # editing round (more codebook steps toward the targets), not more.
         settled = rounds[-1].constraints_met or (index > 0 and rounds[-2].passed)
@@ -466,6 +486,10 @@ def _physics_figures(physics: dict[str, Any] | None) -> dict[str, Any] | None:
         return None
     keys = ("passed", "fell", "time_up_s", "mean_root_error_m", "max_root_error_m", "max_torque_ratio")
     return {k: physics[k] for k in keys}
+
+
+def _quiet(message: str) -> None:
+    """The stage lines of a fallback's check, left unsaid."""
 
 
 def _logger(progress: bool, log: TextIO | None) -> Callable[[str], None]:

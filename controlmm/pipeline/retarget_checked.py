@@ -19,6 +19,7 @@ Only the settings change, never the motion: the plan's feedback rounds
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -114,37 +115,91 @@ def retarget_checked(
     bad input), check it in ``scene`` (a scene name or file, or a :class:`sim.CheckWorld` of
     that robot) with ``check`` (default :class:`sim.CheckConfig`), and where it fails try
     each of ``fallbacks`` over ``config`` (default: the robot's mapping's settings); see the
-    module. ``solver``, ``metrics``: as :func:`retarget.retarget_motion`'s. ``fit_give`` < 0
-    is refused (one line)."""
-    if not fit_give >= 0:
-        raise ControlMMError(f"fit_give must be 0 or more; got {fit_give}")
+    module and :func:`with_fallbacks`. ``solver``, ``metrics``: as
+    :func:`retarget.retarget_motion`'s."""
+    _check_fit_give(fit_give)
+    world = scene if isinstance(scene, CheckWorld) else make_world(load_scene(scene, robot=robot))
+    base = config if config is not None else SolverConfig(**load_robot(robot).mapping.solver)
+    traj = retarget_motion(
+        motion, robot=robot, fps=fps, transform=transform, config=base, solver=solver, metrics=metrics
+    )
+
+    def check_output(out: RobotTrajectory) -> Report:
+        return check_trajectory(world, out, config=check)
+
+    return with_fallbacks(
+        motion,
+        robot,
+        traj,
+        check_output(traj),
+        check_output,
+        transform,
+        base,
+        fallbacks,
+        fit_give,
+        solver,
+        metrics,
+    )
+
+
+def with_fallbacks(
+    motion: Motion,
+    robot: str,
+    trajectory: RobotTrajectory,
+    report: Report,
+    check: Callable[[RobotTrajectory], Report],
+    transform: HumanToWorld | None = None,
+    config: SolverConfig | None = None,
+    fallbacks: tuple[Fallback, ...] = FALLBACKS,
+    fit_give: float = FIT_GIVE,
+    solver: str = "batched",
+    metrics: bool = True,
+    check_scale: bool = True,
+) -> CheckedTrajectory:
+    """``trajectory`` (``motion`` retargeted to ``robot`` with ``config``, default the mapping's
+    settings, and ``transform``) and its ``report``; where that fails on RETRIED_KINDS alone,
+    ``motion`` retargeted again with each of ``fallbacks`` (at the trajectory's rate, ``solver``,
+    ``metrics`` and ``check_scale`` as :func:`retarget.retarget_motion`'s), each output checked
+    by ``check``; the passing one closest to the human within ``fit_give`` (a share of the
+    first fit, >= 0, else one line) is kept, else the first. ``controlmm plan`` calls it on
+    each round's output."""
+    _check_fit_give(fit_give)
     rm = load_robot(robot)
     base = config if config is not None else SolverConfig(**rm.mapping.solver)
-    world = scene if isinstance(scene, CheckWorld) else make_world(load_scene(scene, robot=robot))
 
-    def attempt(name: str, settings: SolverConfig) -> tuple[RobotTrajectory, Report, Attempt]:
-        traj = retarget_motion(
-            motion, robot=robot, fps=fps, transform=transform, config=settings, solver=solver, metrics=metrics
-        )
-        report = check_trajectory(world, traj, config=check)
-        fit = similarity_fit(rm, traj.qpos, traj.fps, motion.joints, motion.fps).mean
-        kinds = tuple(sorted({f.kind for f in report.errors}))
-        return traj, report, Attempt(name, report.passed, kinds, fit)
+    def attempt(name: str, out: RobotTrajectory, verdict: Report) -> Attempt:
+        fit = similarity_fit(rm, out.qpos, out.fps, motion.joints, motion.fps).mean
+        return Attempt(name, verdict.passed, tuple(sorted({f.kind for f in verdict.errors})), fit)
 
-    traj, report, first = attempt("default", base)
+    first = attempt("default", trajectory, report)
     attempts = [first]
     if report.passed or not set(first.errors) <= set(RETRIED_KINDS):
-        return CheckedTrajectory(traj, report, None, attempts)
+        return CheckedTrajectory(trajectory, report, None, attempts)
     best: tuple[RobotTrajectory, Report, Attempt] | None = None
     for fallback in fallbacks:
         settings = replace(base, **fallback.solver)
         if settings == base:
             continue
-        out = attempt(fallback.name, settings)
-        attempts.append(out[2])
-        if out[2].passed and out[2].fit_m <= first.fit_m * (1 + fit_give):
-            if best is None or out[2].fit_m < best[2].fit_m:
-                best = out
+        out = retarget_motion(
+            motion,
+            robot=robot,
+            fps=trajectory.fps,
+            transform=transform,
+            config=settings,
+            solver=solver,
+            metrics=metrics,
+            check_scale=check_scale,
+        )
+        verdict = check(out)
+        attempts.append(attempt(fallback.name, out, verdict))
+        if verdict.passed and attempts[-1].fit_m <= first.fit_m * (1 + fit_give):
+            if best is None or attempts[-1].fit_m < best[2].fit_m:
+                best = (out, verdict, attempts[-1])
     if best is None:
-        return CheckedTrajectory(traj, report, None, attempts)
+        return CheckedTrajectory(trajectory, report, None, attempts)
     return CheckedTrajectory(best[0], best[1], best[2].name, attempts)
+
+
+def _check_fit_give(fit_give: float) -> None:
+    if not fit_give >= 0:
+        raise ControlMMError(f"fit_give must be 0 or more; got {fit_give}")
