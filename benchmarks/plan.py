@@ -5,10 +5,12 @@
 
 Prints, per scene and overall: pass rate before feedback (round 0) and after at most --rounds
 feedback rounds, rounds used, the worst obstacle and floor penetration of the chosen rounds, the
-worst constraint error, and the wall time of a plan (generate + retarget + check per round, no
-files or video). Each run is also verified independently: the exported qpos is replayed with a
-fresh MuJoCo model of the scene, and every reported pass must have obstacle and floor penetration
-<= 1 cm and no joint outside its range (column ``verified``).
+worst constraint error, the wall time of a plan (generate + retarget + check per round, no
+files or video) and how many rounds kept a retargeting fallback (the retargeter's fallback
+settings, tried where a round fails on torque or a slide alone). Each run is also verified
+independently: the exported qpos is replayed with a fresh MuJoCo model of the scene, and every
+reported pass must have obstacle and floor penetration <= 1 cm and no joint outside its range
+(column ``verified``).
 """
 
 from __future__ import annotations
@@ -96,6 +98,7 @@ def _run(args: tuple[str, int, int, str | None, str, str]) -> dict:
         "seconds": seconds,
         "cpu_s": cpu,
         "gen_s": [r.seconds["generate"] for r in result.rounds],
+        "fallbacks": [r.fallback for r in result.rounds],
         "constraints": list(result.final.constraint_errors_m),
         "verified": (not result.passed) or (obstacle <= 0.01 and floor <= 0.01 and limits == 0),
         "indep_obstacle": obstacle,
@@ -174,6 +177,11 @@ def main() -> None:
             f"plan time mean {np.mean([r['seconds'] for r in one]):.1f} s, "
             f"max {max(r['seconds'] for r in one):.1f} s"
         )
+    kept = [f for r in rows for f in r["fallbacks"] if f]
+    print(
+        f"rounds that kept a retargeting fallback (controlmm.pipeline.retarget_checked): {len(kept)} "
+        f"in {sum(any(r['fallbacks']) for r in rows)} runs"
+    )
     gen0 = [r["gen_s"][0] for r in rows]
     fb = [g for r in rows for g in r["gen_s"][1:]]
     print(
