@@ -476,6 +476,7 @@ def main() -> int:
     robots = list(PACKAGED_ROBOTS) if args.robots == "all" else args.robots.split(",")
     motions = human_motions(args.corpus, args.clips, args.families)
     per: dict[str, dict[str, dict]] = {}
+    skipped: dict[str, str] = {}
     rows = []
     print(
         f"{platform.node()} {platform.processor() or platform.machine()}: {len(motions)} motions", flush=True
@@ -485,6 +486,7 @@ def main() -> int:
             load_robot(robot)
         except ControlMMError as exc:  # a file that does not load: said in one line, the others go on
             print(f"  {robot}: skipped: {exc}", flush=True)
+            skipped[robot] = str(exc)
             continue
         per[f"ours/{robot}"] = {}
         for name, (motion, joints) in motions.items():
@@ -579,9 +581,15 @@ def main() -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(
-            json.dumps({"robots": rows, "g1_peers": peer_rows, "notes": notes, "runs": per}, indent=1)
+            json.dumps(
+                {"robots": rows, "g1_peers": peer_rows, "notes": notes, "runs": per, "skipped": skipped},
+                indent=1,
+            )
         )
         print(f"wrote {args.json}")
+    if skipped:  # the others' figures are written; the exit status says some robot is missing
+        print(f"{len(skipped)} of {len(robots)} robots skipped: {', '.join(skipped)}")
+        return 1
     return 0
 
 

@@ -429,10 +429,17 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
         if side_geoms:
             g = min(side_geoms, key=lambda g: low[g][0])
             feet[side], feet_z[side] = int(model.geom_bodyid[g]), low[g][0]
-    if len(feet) < 2 or abs(feet_z["left"] - feet_z["right"]) > FEET_LEVEL * height:
+    if len(feet) < 2:
         raise ControlMMError(
             f"{name} has no two legs: no pair of feet (collision geoms at the bottom of the robot, one "
             "on each side of its midline, +Y left)"
+        )
+    if abs(feet_z["left"] - feet_z["right"]) > FEET_LEVEL * height:
+        raise ControlMMError(
+            f"{name} has no two legs standing level: the lowest collision geoms left and right of its "
+            f"midline (on {model.body(feet['left']).name} and {model.body(feet['right']).name}) are "
+            f"{100 * abs(feet_z['left'] - feet_z['right']):.1f} cm apart in height; at most "
+            f"{100 * FEET_LEVEL * height:.1f} cm ({FEET_LEVEL:.0%} of its height) is allowed"
         )
     for side in feet:  # a toe link below the foot: the foot is the link its sole is on
         link = jointed_link(model, feet[side])  # the foot, not a cleat welded below it

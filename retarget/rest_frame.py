@@ -12,7 +12,8 @@ degrees to face +X, all read from the geometry, never from names:
 1. **Up**: among the six world axes, those along which the lowest collision geoms lie on two
    separate chains, level with each other, whose common ancestor is well above them (two feet:
    along an arm, one hand is the extreme; upside down, the head); of those, the one along
-   which the root stands highest above them. +Z for a standing robot.
+   which the robot's centre of mass stands highest above them, if at least ``STAND_SHARE``
+   of the robot's largest extent. +Z for a standing robot.
 2. **Facing**: across the line between the two feet, towards where the soles reach beyond
    the ankles (toes are longer than heels). Where the toes do not say (less than
    ``MIN_TOE_REACH``), the file's facing is kept.
@@ -39,6 +40,11 @@ ANKLE_BAND = 0.15
 less) above the floor."""
 SOLE_BAND = 0.02
 """Collision geoms whose lowest point is this close (m) to the robot's lowest are its soles."""
+STAND_SHARE = 0.25
+"""The robot's centre of mass stands at least this fraction of its largest extent above the two
+feet along an axis for that axis to be its up (a humanoid's: about half its height); lower,
+the "feet" are something else at the end of a short axis (the two hips of a robot lying on its
+back), and the file's own orientation is kept."""
 MIN_TOE_REACH = 0.01
 """Below this (m) the feet's geometry does not say which way they point: the MJCF's facing
 is kept."""
@@ -69,16 +75,51 @@ def _lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int, up: np.ndarray) 
     return float(centre @ up - half @ np.abs(up)), centre
 
 
+def _mass_centre(model: mujoco.MjModel, data: mujoco.MjData, root: int) -> np.ndarray:
+    """(3,) the centre of mass of the robot rooted at body ``root`` (its root body's origin if
+    it has no mass). The robot's height is read from it, not from the root's origin: a file
+    may put its floating base's origin anywhere (Berkeley Humanoid Lite's is on the floor,
+    below its soles)."""
+    bodies = np.flatnonzero(model.body_rootid == root)
+    mass = model.body_mass[bodies]
+    if mass.sum() <= 0:
+        return np.array(data.xpos[root])
+    return np.asarray(mass @ data.xipos[bodies] / mass.sum())
+
+
+def _extent(model: mujoco.MjModel, data: mujoco.MjData, root: int, axis: np.ndarray) -> float:
+    """Length (m) of the robot's collision geometry along ``axis``."""
+    geoms = _collision_geoms(model, root)
+    if not geoms:
+        return 0.0
+    low = min(_lowest(model, data, g, axis)[0] for g in geoms)
+    return -min(_lowest(model, data, g, -axis)[0] for g in geoms) - low
+
+
+def _split_height(
+    model: mujoco.MjModel, data: mujoco.MjData, common: int, feet: tuple[int, int], up: np.ndarray
+) -> float:
+    """Height along ``up`` at which the chains of two ``feet`` bodies part below their common
+    ancestor ``common``: its origin, or where both of its children on those chains start if
+    higher (a floating base whose origin is on the floor, Berkeley Humanoid Lite's, parts its
+    legs at the hips above it)."""
+    starts = []
+    for foot in feet:
+        chain = ancestors(model, foot)
+        starts.append(float(data.xpos[chain[chain.index(common) - 1]] @ up))
+    return max(float(data.xpos[common] @ up), min(starts))
+
+
 def _two_feet(
     model: mujoco.MjModel, data: mujoco.MjData, root: int, up: np.ndarray
 ) -> tuple[int, int, float] | None:
-    """(the bodies of the lowest collision geoms along ``up`` on two separate legs, the root's
-    height above them), or None."""
+    """(the bodies of the lowest collision geoms along ``up`` on two separate legs, the
+    robot's centre of mass's height above them), or None."""
     low = sorted((_lowest(model, data, g, up)[0], g) for g in _collision_geoms(model, root))
     if len(low) < 2:
         return None
     floor = low[0][0]
-    height = float(data.xpos[root] @ up) - floor
+    height = float(_mass_centre(model, data, root) @ up) - floor
     if height <= 0:
         return None
     first = int(model.geom_bodyid[low[0][1]])
@@ -91,7 +132,7 @@ def _two_feet(
         if other in above or first in chain:
             continue  # one chain (a toe below its foot)
         common = next(b for b in chain if b in above)
-        if float(data.xpos[common] @ up) - floor > LEG_SPLIT * height:
+        if _split_height(model, data, common, (first, other), up) - floor > LEG_SPLIT * height:
             return first, other, height
     return None
 
@@ -141,7 +182,12 @@ def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
-    stands = [(f[2], i) for i, u in enumerate(_AXES) if (f := _two_feet(model, data, root, u))]
+    size = max(_extent(model, data, root, u) for u in np.eye(3))
+    stands = [
+        (f[2], i)
+        for i, u in enumerate(_AXES)
+        if (f := _two_feet(model, data, root, u)) and f[2] >= STAND_SHARE * size
+    ]
     if not stands:
         return quat
     up = _AXES[max(stands)[1]]
@@ -160,7 +206,7 @@ def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     if np.linalg.norm(across) < 1e-6:
         return quat
     forward = np.cross(across / np.linalg.norm(across), _UP)
-    floor = float(data.xpos[root][2]) - feet[2]
+    floor = float(_mass_centre(model, data, root)[2]) - feet[2]
     reach = sum(_toe_reach(model, data, f, floor, feet[2], forward) for f in feet[:2]) / 2
     if abs(reach) < MIN_TOE_REACH:
         return quat

@@ -12,8 +12,10 @@ declare none and collide through explicit ``<pair>`` elements of their scene fil
 (Menagerie's Apptronik Apollo). For those, :func:`declare_collisions` turns the geoms of
 Menagerie's collision group (3) into colliders that touch the floor and obstacles but not
 each other (``contype`` 1, ``conaffinity`` 0), and adds the robot-robot pairs that the
-packaged robot's own scene declares (thighs, shins, arms against the pelvis). A scene file
-given as the robot keeps its robot-robot pairs but not those naming its own floor
+packaged robot's own scene declares (thighs, shins, arms against the pelvis). Geoms that a
+file leaves at ``contype`` and ``conaffinity`` 0 but names in its own ``<pair>`` elements
+(PNDbotics' Adam SP: its feet meet the floor through pairs alone) are colliders the same way.
+A scene file given as the robot keeps its robot-robot pairs but not those naming its own floor
 (:func:`drop_floor_pairs`).
 
 Bodies whose collision geoms already overlap in the robot's rest pose (``qpos0``; for example
@@ -202,34 +204,49 @@ def drop_floor_pairs(spec: mujoco.MjSpec) -> int:
 
 
 def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
-    """Give an MJCF without colliders its collision group's geoms as colliders (in place).
+    """Give an MJCF's colliders that it leaves to explicit ``<pair>`` elements their
+    ``contype`` (in place).
 
-    Only when no geom of the robot (the world body's own, a scene's floor, do not count) has
-    ``contype``/``conaffinity`` set: the geoms of group ``COLLISION_GROUP`` get ``contype`` 1
+    Where no geom of the robot (the world body's own, a scene's floor, do not count) has
+    ``contype``/``conaffinity`` set, the geoms of group ``COLLISION_GROUP`` get ``contype`` 1
     and ``conaffinity`` 0 (they touch the floor and the obstacles, whose ``conaffinity`` is
     set, but not each other), and the robot-robot ``<pair>`` elements of ``scene`` (the robot's
-    own scene MJCF) are added. Returns whether anything changed.
+    own scene MJCF) are added. Then any geom that the file's own ``<pair>`` elements name but
+    whose ``contype`` and ``conaffinity`` are 0 gets the same (PNDbotics' Adam SP sets both to 0
+    for every geom but its pelvis, its feet colliding with the floor through pairs alone).
+    Returns whether anything changed.
     """
     geoms = [g for g in spec.geoms if g.parent != spec.worldbody]
-    if any(g.contype or g.conaffinity for g in geoms) or not geoms:
+    if not geoms:
         return False
-    group = [g for g in geoms if g.group == COLLISION_GROUP]
-    if not group:
-        return False
-    for g in group:
-        g.contype, g.conaffinity = 1, 0
-    if scene is not None and scene.is_file():
-        names = {g.name for g in group if g.name}
-        have = {(p.geomname1, p.geomname2) for p in spec.pairs}
-        try:
-            scene_spec = mujoco.MjSpec.from_file(str(scene))
-        except ValueError:  # the scene is optional: without its pairs the robot has no self-collision
-            return True
-        for pair in scene_spec.pairs:
-            key = (pair.geomname1, pair.geomname2)
-            if key[0] in names and key[1] in names and key not in have:
-                spec.add_pair(geomname1=key[0], geomname2=key[1], condim=pair.condim)
-    return True
+    changed = False
+    if not any(g.contype or g.conaffinity for g in geoms):
+        group = [g for g in geoms if g.group == COLLISION_GROUP]
+        for g in group:
+            g.contype, g.conaffinity = 1, 0
+        changed = bool(group)
+        if group and scene is not None and scene.is_file():
+            _add_scene_pairs(spec, scene, {g.name for g in group if g.name})
+    paired = {name for p in spec.pairs for name in (p.geomname1, p.geomname2)}
+    for g in geoms:
+        if g.name and g.name in paired and not (g.contype or g.conaffinity):
+            g.contype, g.conaffinity = 1, 0
+            changed = True
+    return changed
+
+
+def _add_scene_pairs(spec: mujoco.MjSpec, scene: Path, names: set[str]) -> None:
+    """Add the robot-robot ``<pair>`` elements of the robot's own ``scene`` MJCF between geoms
+    ``names`` (the scene is optional: without its pairs the robot has no self-collision)."""
+    have = {(p.geomname1, p.geomname2) for p in spec.pairs}
+    try:
+        scene_spec = mujoco.MjSpec.from_file(str(scene))
+    except ValueError:
+        return
+    for pair in scene_spec.pairs:
+        key = (pair.geomname1, pair.geomname2)
+        if key[0] in names and key[1] in names and key not in have:
+            spec.add_pair(geomname1=key[0], geomname2=key[1], condim=pair.condim)
 
 
 def compile_robot(robot: str | Path) -> mujoco.MjModel:

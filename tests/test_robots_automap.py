@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from capsule_humanoid import capsule_humanoid_xml
 from cli_helpers import console, in_process as cli
+from g1_variants import g1_spec, saved_without_controls
 from robot_checks import independent_check
 
 from controlmm.corpus.dataset import ClipSpec, make_clip
@@ -133,29 +134,11 @@ def test_inferred_mapping_reads_geometry_not_names(tmp_path):
     np.testing.assert_allclose(knee[:2], data.xanchor[g1.joint("left_knee_joint").id][:2], atol=1e-6)
 
 
-def _g1_spec() -> mujoco.MjSpec:
-    """The packaged G1's MjSpec, its meshes found wherever the edited copy is written."""
-    src = robot_mjcf("g1")
-    spec = mujoco.MjSpec.from_file(str(src))
-    spec.meshdir = str(src.parent / "assets")
-    return spec
-
-
-def _saved_without_controls(spec: mujoco.MjSpec, path: Path) -> Path:
-    """``spec`` written to ``path`` without its actuators, sensors and keyframes (an edited
-    tree no longer matches them)."""
-    for kind in (spec.actuators, spec.sensors, spec.keys):
-        for element in list(kind):
-            spec.delete(element)
-    path.write_text(spec.to_xml())
-    return path
-
-
 def _g1_on_plates(tmp_path: Path) -> Path:
     """The G1 with each foot's collision spheres moved, unmoved in the world, into a body welded
     below the foot (no joint) whose origin sits 20 cm ahead of the ankle and 15 cm above it, as
     files put a foot's cleats or sole plate in bodies of their own at any origin."""
-    spec = _g1_spec()
+    spec = g1_spec()
     offset = np.array([0.2, 0.0, 0.15])
     for side in ("left", "right"):
         foot = spec.body(f"{side}_ankle_roll_link")
@@ -171,7 +154,7 @@ def _g1_on_plates(tmp_path: Path) -> Path:
                 friction=geom.friction,
             )
             spec.delete(geom)
-    return _saved_without_controls(spec, tmp_path / "plates.xml")
+    return saved_without_controls(spec, tmp_path / "plates.xml")
 
 
 def test_feet_standing_on_welded_plates_are_the_feet_above_them(tmp_path):
@@ -192,14 +175,14 @@ def test_feet_standing_on_welded_plates_are_the_feet_above_them(tmp_path):
 def _g1_with_cranks(tmp_path: Path) -> Path:
     """The G1 with a short crank on each side of its torso (one hinge, a 4 cm capsule, 9 cm from
     the torso's origin), as files write the levers of a parallel waist (LimX's HU_D03)."""
-    spec = _g1_spec()
+    spec = g1_spec()
     for side, sign in (("left", 1.0), ("right", -1.0)):
         crank = spec.body("torso_link").add_body(name=f"{side}_crank", pos=[0.0, sign * 0.08, 0.05])
         crank.add_joint(name=f"{side}_crank_joint", axis=[0.0, 1.0, 0.0], range=[-1.0, 1.0])
         crank.add_geom(
             type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.04, 0, 0], size=[0.01, 0, 0], mass=0.05
         )
-    return _saved_without_controls(spec, tmp_path / "cranks.xml")
+    return saved_without_controls(spec, tmp_path / "cranks.xml")
 
 
 def test_short_links_beside_the_torso_are_not_the_hands(tmp_path):

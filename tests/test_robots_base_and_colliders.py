@@ -1,0 +1,149 @@
+"""Robot files written in ways seen outside the asset package: a floating base whose origin is
+on the floor (Berkeley Humanoid Lite's), feet that collide through ``<pair>`` elements alone
+(PNDbotics' Adam SP), and feet that do not stand level (K-Scale's Z-Bot). Each is the packaged
+G1 edited that way, unmoved in the world."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from cli_helpers import in_process as cli
+from g1_variants import g1_spec, saved_without_controls
+from robot_checks import independent_check
+
+from controlmm.errors import ControlMMError
+from controlmm.motion import Motion
+from retarget import infer_mapping, load_robot, load_robot_spec, retarget_motion, robot_mjcf
+from retarget.compare import similarity_fit
+from retarget.rest_frame import rest_root_quat
+from retarget.robot_files import compile_robot, free_root
+from scenes import load_scene
+from sim import check_trajectory
+
+SIDES = ("left", "right")
+
+
+@pytest.fixture(scope="module")
+def walk(sample_joints) -> Motion:
+    """The first 3 s of the real clip (a walk)."""
+    return Motion(joints=sample_joints[:60].astype(np.float64), fps=20.0)
+
+
+def _base_on_the_floor(tmp_path: Path) -> Path:
+    """The G1 with its floating base (the pelvis) written with its origin on the floor, 0.79 m
+    below where the G1 file has it, and everything in it that much higher in its frame."""
+    spec = g1_spec()
+    base = spec.body("pelvis")
+    lift = np.array([0.0, 0.0, base.pos[2]])
+    base.pos = np.asarray(base.pos) - lift
+    for kind in (base.bodies, base.geoms, base.sites, base.cameras, base.lights):
+        for element in kind:
+            element.pos = np.asarray(element.pos) + lift
+    base.ipos = np.asarray(base.ipos) + lift
+    return saved_without_controls(spec, tmp_path / "base_on_floor.xml")
+
+
+def test_a_floating_base_whose_origin_is_on_the_floor_stands_as_written(tmp_path, walk):
+    """The robot is read standing up as written (its centre of mass, not its base's origin, is
+    what stands above the feet; the legs part at the hips, above the base's origin), so its
+    left leg is its +Y one, as in the G1 file: it was laid on its back and read with its sides
+    swapped (Berkeley Humanoid Lite: a fit of 13.7 cm, 4.9 once read standing). It retargets
+    the walk within 10 % of the G1 file's fit, with no limit, floor or self-collision fault."""
+    path = _base_on_the_floor(tmp_path)
+    model = compile_robot(path)
+    assert model.body("pelvis").pos[2] == 0.0
+    np.testing.assert_allclose(rest_root_quat(model, free_root(model)), [1.0, 0.0, 0.0, 0.0])
+    mapping = infer_mapping(path)["keypoints"]
+    plain_mapping = infer_mapping(robot_mjcf("g1"))["keypoints"]
+    assert {k: v["body"] for k, v in mapping.items()} == {k: v["body"] for k, v in plain_mapping.items()}
+    robot, plain = load_robot(path), load_robot(robot_mjcf("g1"))
+    np.testing.assert_allclose(
+        robot.rest_keypoints - [0, 0, robot.floor_z], plain.rest_keypoints - [0, 0, plain.floor_z], atol=1e-9
+    )
+    assert robot.rest_keypoints[robot.keypoint_index("left_hip"), 1] > 0.05
+    qpos = retarget_motion(walk, str(path), fps=30.0, metrics=False).qpos
+    plain_qpos = retarget_motion(walk, str(robot_mjcf("g1")), fps=30.0, metrics=False).qpos
+    assert independent_check(path, qpos)[::2] == (0, 0)
+    assert independent_check(path, qpos)[1] <= 0.005
+    fit = similarity_fit(robot, qpos, 30.0, walk.joints, walk.fps).mean
+    plain_fit = similarity_fit(plain, plain_qpos, 30.0, walk.joints, walk.fps).mean
+    assert fit < 1.1 * plain_fit, (fit, plain_fit)
+
+
+def _feet_in_pairs_alone(tmp_path: Path) -> Path:
+    """The G1 with every geom's contype and conaffinity 0 but its pelvis's collision geom
+    (contype 1), a floor, and ``<pair>`` elements for each foot's sole spheres with the floor and
+    for the two feet with each other: its feet collide through those pairs alone."""
+    spec = g1_spec()
+    feet = {side: spec.body(f"{side}_ankle_roll_link") for side in SIDES}
+    for geom in spec.geoms:
+        geom.contype, geom.conaffinity = 0, 0
+    pelvis = [g for g in spec.body("pelvis").geoms if g.group == 3]
+    assert pelvis
+    for geom in pelvis:
+        geom.contype = 1
+    floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
+    soles = {side: [g for g in feet[side].geoms if g.group == 3] for side in SIDES}
+    for side in SIDES:
+        assert len(soles[side]) == 4
+        for i, geom in enumerate(soles[side]):
+            geom.name = f"{side}_sole_{i}"
+            spec.add_pair(geomname1=geom.name, geomname2=floor.name)
+    spec.add_pair(geomname1="left_sole_0", geomname2="right_sole_0")
+    return saved_without_controls(spec, tmp_path / "pairs.xml")
+
+
+def test_geoms_that_collide_through_pairs_alone_are_colliders(tmp_path, walk):
+    """Geoms the file names in ``<pair>`` elements but leaves at contype and conaffinity 0 are
+    colliders (they touch the floor and the obstacles), as group-3 geoms are in a file that
+    sets no contype at all: the robot has two feet on its sole spheres (it had "no two legs"),
+    the pair with the file's own floor is dropped and the feet's pair kept, and the walk
+    retargeted to it stands on the empty scene's floor in ``controlmm validate``'s check."""
+    path = _feet_in_pairs_alone(tmp_path)
+    spec = load_robot_spec(str(path))
+    names = {p.geomname1 for p in spec.pairs} | {p.geomname2 for p in spec.pairs}
+    assert "floor" not in names and {"left_sole_0", "right_sole_0"} <= names
+    robot = load_robot(path)
+    for side in SIDES:
+        sole = {robot.model.geom(f"{side}_sole_{i}").id for i in range(4)}
+        assert sole <= set(robot.feet[side].geoms), side
+        assert all(robot.model.geom_contype[g] == 1 for g in sole)
+    mapping = infer_mapping(path)["keypoints"]
+    assert [mapping[f"{side}_ankle"]["body"] for side in SIDES] == [
+        "left_ankle_roll_link",
+        "right_ankle_roll_link",
+    ]
+    traj = retarget_motion(walk, str(path), fps=30.0, metrics=False)
+    report = check_trajectory(load_scene("empty", robot=str(path)), traj.qpos, traj.fps)
+    assert "floating" not in report.stats["error_kinds"], report.stats["error_kinds"]
+    assert report.stats["self_collision_frames"] == 0
+
+
+def _right_sole_lowered(tmp_path: Path, drop: float) -> Path:
+    """The G1 with its right foot's sole spheres ``drop`` m lower in the foot (a file whose
+    collision geom sits away from its foot's sole, K-Scale's Z-Bot)."""
+    spec = g1_spec()
+    for geom in spec.body("right_ankle_roll_link").geoms:
+        if geom.group == 3:
+            geom.pos = np.asarray(geom.pos) - [0.0, 0.0, drop]
+    return saved_without_controls(spec, tmp_path / "uneven.xml")
+
+
+def test_feet_that_do_not_stand_level_are_a_one_line_error(tmp_path):
+    """A robot whose feet are not level (10 cm apart, more than 5 % of the G1's height) keeps
+    its file's orientation (it was laid on its side, the hips read as its feet) and is refused
+    in one line that names the two feet and how far apart they are; ``controlmm robots map``
+    exits 2 and writes nothing."""
+    path = _right_sole_lowered(tmp_path, 0.1)
+    model = compile_robot(path)
+    np.testing.assert_allclose(rest_root_quat(model, free_root(model)), [1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ControlMMError, match=r"standing level.*left_ankle_roll_link.*cm apart"):
+        infer_mapping(path)
+    out = tmp_path / "m.json"
+    done = cli("robots", "map", path, "--out", out)
+    assert done.returncode == 2 and not out.exists()
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "right_ankle_roll_link" in lines[0] and "cm apart" in lines[0], lines
