@@ -160,6 +160,7 @@ def _rest_contacts(path: str, mtime_ns: int, size: int) -> tuple[tuple[str, str]
     """The rest-contact body pairs of a robot MJCF file, once per file version and process."""
     spec = read_robot_mjcf(path)
     declare_collisions(spec)
+    drop_floor_pairs(spec)
     return tuple(exclude_rest_contacts(spec))
 
 
@@ -191,13 +192,16 @@ def exclude_rest_contacts(spec: mujoco.MjSpec) -> list[tuple[str, str]]:
 
 def drop_floor_pairs(spec: mujoco.MjSpec) -> int:
     """Delete the ``<pair>`` elements that name a geom of the world body (a scene file's floor,
-    passed as the robot: Menagerie's ``scene.xml`` of the Apollo, the G1's ``scene_mjx.xml``).
-    Only the robot's body tree is attached to a scene, whose floor the retargeter and the
-    checks find themselves; an explicit pair (no margin) would hide the feet's contacts with
-    it from the checks' near-contact sensing (``controlmm validate`` then reads a standing
-    robot as floating). Returns how many were deleted."""
+    passed as the robot: Menagerie's ``scene.xml`` of the Apollo, the G1's ``scene_mjx.xml``)
+    or a geom the file does not have (the floor of the scene file that includes it: PNDbotics'
+    ``adam_sp.xml``, which does not compile alone). Only the robot's body tree is attached to a
+    scene, whose floor the retargeter and the checks find themselves; an explicit pair (no
+    margin) would hide the feet's contacts with it from the checks' near-contact sensing
+    (``controlmm validate`` then reads a standing robot as floating). Returns how many were
+    deleted."""
     world = {g.name for g in spec.worldbody.geoms if g.name}
-    floor = [p for p in spec.pairs if p.geomname1 in world or p.geomname2 in world]
+    robot = {g.name for g in spec.geoms if g.name} - world
+    floor = [p for p in spec.pairs if not {p.geomname1, p.geomname2} <= robot]
     for pair in floor:
         spec.delete(pair)
     return len(floor)

@@ -122,6 +122,25 @@ def test_geoms_that_collide_through_pairs_alone_are_colliders(tmp_path, walk):
     assert report.stats["self_collision_frames"] == 0
 
 
+def test_a_robot_file_whose_pairs_name_its_scenes_floor_loads_alone(tmp_path, walk):
+    """The same robot written without the floor its pairs name (the file a scene includes,
+    PNDbotics' ``adam_sp.xml``: MuJoCo does not compile it alone): the pairs naming the
+    missing geom are dropped, the feet stay colliders, and the walk retargeted to it stands."""
+    with_floor = _feet_in_pairs_alone(tmp_path)
+    text = with_floor.read_text()
+    floor_line = next(line for line in text.splitlines() if 'name="floor"' in line)
+    path = tmp_path / "pairs_no_floor.xml"
+    path.write_text(text.replace(floor_line + "\n", ""))
+    with pytest.raises(ValueError, match="floor"):
+        mujoco.MjModel.from_xml_path(str(path))
+    robot = load_robot(path)
+    assert {robot.model.geom(f"left_sole_{i}").id for i in range(4)} <= set(robot.feet["left"].geoms)
+    assert robot.model.npair == 1  # the feet's pair with each other
+    traj = retarget_motion(walk, str(path), fps=30.0, metrics=False)
+    report = check_trajectory(load_scene("empty", robot=str(path)), traj.qpos, traj.fps)
+    assert "floating" not in report.stats["error_kinds"], report.stats["error_kinds"]
+
+
 def _right_sole_lowered(tmp_path: Path, drop: float) -> Path:
     """The G1 with its right foot's sole spheres ``drop`` m lower in the foot (a file whose
     collision geom sits away from its foot's sole, K-Scale's Z-Bot)."""
