@@ -15,7 +15,8 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
    (a hand with fingers has several ends). **Torso**: the hands' common ancestor. Robots whose
    only chains are the legs have no arms (a legs-only robot retargets pelvis and legs). Arms
    whose geometry reaches the floor in the rest pose are a quadruped's: refused.
-3. **Head**: the highest other jointed end near the midline (else the head is part of the torso).
+3. **Head**: the highest other jointed end near the midline, or the common ancestor of those
+   as high (two eyes on joints of their own); else the head is part of the torso.
 4. **Joints of a limb** (:func:`limb_anatomy`): the middle joint (knee / elbow) is the hinge
    past the first quarter of the limb whose axis crosses the limb; the joints before it form the
    hip / shoulder, the joints after it the ankle / wrist. Each group's centre is the point
@@ -35,6 +36,7 @@ import numpy as np
 from controlmm.errors import ControlMMError
 from retarget.geoms import aabb_corners, geom_points
 from retarget.human import HUMAN_FOREARM, HUMAN_HALF_HAND, HUMAN_UPPER_ARM
+from retarget.kinematics import axes_centre
 from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import ancestors, free_root, jointed_link, welded_below
 
@@ -45,6 +47,9 @@ ACROSS = 0.6
 ALONG = 0.1
 """A twist hinge's axis runs along the limb: |cos| to the limb's direction (first joint to tip)
 above 1 - this."""
+HEAD_LEVEL = 0.02
+"""Ends near the midline above the shoulders within this fraction of the robot's height of the
+highest one are one head's (two eyes): the head is their common ancestor."""
 SIDE_FRACTION = 0.3
 """A chain end belongs to an arm when it lies further from the midline than this fraction of
 the furthest such end; nearer ends are the head's (or other midline parts)."""
@@ -150,20 +155,6 @@ class Anatomy:
     def local(self, body: int, point: np.ndarray) -> np.ndarray:
         """A rest-pose world point (3,) in the frame of ``body``."""
         return self.xmat[body].T @ (np.asarray(point, dtype=float) - self.xpos[body])
-
-
-def axes_centre(anchors: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """The point (3,) nearest (least squares) to the lines through ``anchors`` (J, 3) along ``axes``.
-
-    Among equally near points (parallel axes, one axis) the one nearest the anchors' mean.
-    """
-    anchors, axes = np.atleast_2d(anchors), np.atleast_2d(axes)
-    mean = anchors.mean(axis=0)
-    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]  # (J, 3, 3) onto the normal planes
-    a = proj.sum(axis=0)
-    b = np.einsum("jab,jb->a", proj, anchors - mean)
-    delta = np.linalg.lstsq(a, b, rcond=1e-6)[0]
-    return mean + delta
 
 
 def _rest_data(model: mujoco.MjModel, root: int) -> mujoco.MjData:
@@ -507,6 +498,11 @@ def find_anatomy(model: mujoco.MjModel, name: str = "the robot") -> Anatomy:
         if data.xpos[e][2] > shoulder_z and abs(lateral[e]) <= SIDE_FRACTION * max(reach, 1e-3)
     ]
     head = max(heads, key=lambda e: data.xpos[e][2]) if heads and arms else None
+    if head is not None:  # two eyes on their own joints (Romeo's): the head is the link they hang from
+        level = [e for e in heads if data.xpos[head][2] - data.xpos[e][2] <= HEAD_LEVEL * height]
+        common = common_ancestor(model, level)
+        if len(level) > 1 and common != torso and torso in ancestors(model, common):
+            head = common
     return Anatomy(
         model=model,
         root=root,

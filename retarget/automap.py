@@ -33,7 +33,8 @@ from retarget.clear_ranges import clear_ranges
 from retarget.geoms import collision_geoms, geom_points
 from retarget.human import HUMAN_HIP_HEIGHT, HUMAN_OFFSETS
 from retarget.mapping import DEFAULT_WEIGHTS, MAPPING_FORMAT, Mapping, parse_mapping
-from retarget.robot_files import ancestors, compile_robot, robot_mjcf_path, welded_below
+from retarget.rest_frame import rest_turn_note
+from retarget.robot_files import ancestors, compile_robot, free_root, robot_mjcf_path, welded_below
 
 SOLE_MARGIN = 0.005
 """The toe point stays this far (m) inside the sole's front edge and above its bottom."""
@@ -213,6 +214,11 @@ def _json(value: object) -> str:
 def describe_mapping(mapping: dict) -> str:
     """A few lines saying which robot point each human joint follows (for review)."""
     lines = [f"{Path(mapping['robot']).name}: scale {mapping.get('scale', 'auto')}"]
+    model = compile_robot(mapping["robot"])
+    root = free_root(model)
+    note = rest_turn_note(model, root) if root is not None else None
+    if note:
+        lines.append(f"  {note}")
     width = max(len(j) for j in mapping["keypoints"])
     for joint, spec in mapping["keypoints"].items():
         where = spec.get("body") or spec.get("site")

@@ -374,3 +374,17 @@ class KinematicTree:
     def is_hinge_joint(self) -> np.ndarray:
         """(nj,) True for hinge joints."""
         return ~self.is_slide_joint
+
+
+def axes_centre(anchors: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The point (3,) nearest (least squares) to the lines through ``anchors`` (J, 3) along ``axes``.
+
+    Among equally near points (parallel axes, one axis) the one nearest the anchors' mean.
+    """
+    anchors, axes = np.atleast_2d(anchors), np.atleast_2d(axes)
+    mean = anchors.mean(axis=0)
+    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]  # (J, 3, 3) onto the normal planes
+    a = proj.sum(axis=0)
+    b = np.einsum("jab,jb->a", proj, anchors - mean)
+    delta = np.linalg.lstsq(a, b, rcond=1e-6)[0]
+    return mean + delta

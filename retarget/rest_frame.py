@@ -24,7 +24,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from retarget.geoms import collision_geoms
+from retarget.geoms import aabb_corners, collision_geoms
+from retarget.kinematics import axes_centre
 from retarget.robot_files import ancestors, jointed_link
 
 QUARTER_TURN = np.pi / 2
@@ -40,6 +41,9 @@ ANKLE_BAND = 0.15
 less) above the floor."""
 SOLE_BAND = 0.02
 """Collision geoms whose lowest point is this close (m) to the robot's lowest are its soles."""
+ANKLE_AXES_BAND = 0.225
+"""An ankle's parent link's hinge counts towards where the ankle turns when its anchor is this
+fraction of the robot's height (or less) above the floor (a knee is about half)."""
 STAND_SHARE = 0.25
 """The robot's centre of mass stands at least this fraction of its largest extent above the two
 feet along an axis for that axis to be its up (a humanoid's: about half its height); lower,
@@ -52,6 +56,7 @@ HALF_TURN_REACH = 0.02
 """Turning a robot written with its feet side by side along Y round (facing -X) needs its
 toes to say so by this much (m)."""
 _UP = np.array([0.0, 0.0, 1.0])
+_HINGE = mujoco.mjtJoint.mjJNT_HINGE
 _AXES = np.concatenate([np.eye(3), -np.eye(3)])
 """The six world axes a file may stand its robot along."""
 
@@ -137,13 +142,37 @@ def _two_feet(
     return None
 
 
+def _ankle_centre(
+    model: mujoco.MjModel, data: mujoco.MjData, ankle: int, floor: float, height: float
+) -> np.ndarray:
+    """(3,) where a leg's ankle turns: the point nearest the axes of the ankle link's hinges and
+    of its parent link's that cross them and lie within ANKLE_AXES_BAND of the robot's height
+    above the floor (an ankle's pitch and roll; a URDF may put the roll link's origin anywhere
+    along the roll axis: THORMANG3's 5.7 cm ahead of the ankle); the link's origin without one."""
+    parent = jointed_link(model, int(model.body_parentid[ankle]))
+    own = [j for j in range(model.njnt) if model.jnt_bodyid[j] == ankle and model.jnt_type[j] == _HINGE]
+    if not own:
+        return np.array(data.xpos[ankle])
+    joints = list(own)
+    for j in range(model.njnt):
+        if model.jnt_bodyid[j] != parent or model.jnt_type[j] != _HINGE:
+            continue
+        low = data.xanchor[j][2] - floor <= ANKLE_AXES_BAND * height
+        if low and all(abs(float(data.xaxis[j] @ data.xaxis[k])) < 1.0 - 1e-3 for k in own):
+            joints.append(j)
+    return axes_centre(data.xanchor[joints], data.xaxis[joints])
+
+
 def _toe_reach(
     model: mujoco.MjModel, data: mujoco.MjData, foot: int, floor: float, height: float, direction: np.ndarray
 ) -> float:
-    """How far (m) along ``direction`` the sole of ``foot``'s leg (its collision geoms within
-    SOLE_BAND of the floor) reaches beyond the ankle (the highest body of the leg whose origin
-    is within ANKLE_BAND of the robot's height above the floor; at least the foot's own link,
-    so that collision geoms in bodies welded below it, a foot's cleats, count together)."""
+    """How far (m) along ``direction`` the middle of the sole of ``foot``'s leg (the extent of
+    its collision geoms within SOLE_BAND of the floor) lies beyond the ankle
+    (:func:`_ankle_centre` of the leg's highest body whose origin is within ANKLE_BAND of the
+    robot's height above the floor; at least the foot's own link, so that collision geoms in
+    bodies welded below it, a foot's cleats, count together). The middle of the sole's extent,
+    not the mean of its geoms' centres: a shell around the ankle that comes near the floor too
+    (iCub's) does not pull the sole back under the ankle."""
     ankle = jointed_link(model, foot)
     for b in ancestors(model, ankle):
         if data.xpos[b][2] - floor > ANKLE_BAND * height:
@@ -151,15 +180,17 @@ def _toe_reach(
         ankle = b
     below = [b for b in range(1, model.nbody) if ankle in ancestors(model, b)]
     sole = [
-        centre
+        data.xpos[b] + aabb_corners(model, g) @ data.xmat[b].reshape(3, 3).T
         for b in below
         for g in collision_geoms(model, b)
-        for low, centre in [_lowest(model, data, g, _UP)]
-        if low - floor < SOLE_BAND
+        if _lowest(model, data, g, _UP)[0] - floor < SOLE_BAND
     ]
     if not sole:
         return 0.0
-    return float(np.mean((np.array(sole) - data.xpos[ankle]) @ direction))
+    along = np.concatenate(sole) @ direction
+    return float(
+        (along.min() + along.max()) / 2 - _ankle_centre(model, data, ankle, floor, height) @ direction
+    )
 
 
 def _turn(quat: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
@@ -216,3 +247,28 @@ def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     if quarters == 0 or (abs(quarters) == 2 and abs(reach) < HALF_TURN_REACH):
         return quat
     return _turn(quat, _UP, -QUARTER_TURN * quarters)
+
+
+def _axis_name(v: np.ndarray) -> str:
+    i = int(np.argmax(np.abs(v)))
+    return ("+" if v[i] > 0 else "-") + "XYZ"[i]
+
+
+def rest_turn_note(model: mujoco.MjModel, root: int) -> str | None:
+    """One line saying how the rest frame turns the file's robot (None where it stands as
+    written: up +Z, facing +X): along which of the file's world axes it stands and which way it
+    faces, as read from its feet (for a user reviewing an inferred mapping)."""
+    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
+    adr = int(model.jnt_qposadr[free])
+    written, rest = np.zeros(9), np.zeros(9)
+    quat = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
+    mujoco.mju_quat2Mat(written, quat / max(float(np.linalg.norm(quat)), 1e-12))
+    mujoco.mju_quat2Mat(rest, rest_root_quat(model, root))
+    turn = rest.reshape(3, 3) @ written.reshape(3, 3).T  # world turn from the file to the rest
+    if np.allclose(turn, np.eye(3), atol=1e-6):
+        return None
+    up, forward = turn.T @ _UP, turn.T @ np.array([1.0, 0.0, 0.0])
+    return (
+        f"rest frame: the file's robot stands along its world {_axis_name(up)} axis and faces "
+        f"{_axis_name(forward)} (read from its feet); it is turned to stand up along +Z facing +X"
+    )

@@ -120,6 +120,20 @@ def test_the_rest_frame_stands_every_style_up_facing_plus_x(humanoids):
         assert mapping["posture_weights"][joint] == RIGID_POSTURE
 
 
+def test_robots_map_says_how_it_turns_a_file_it_reads_otherwise(tmp_path, humanoids):
+    """``controlmm robots map`` says along which of the file's axes the robot stands and which
+    way it faces where it turns it (the lying one: +Y up, facing +Z), and nothing where the
+    file stands at +Z facing +X (so that a robot read the wrong way shows in the review)."""
+    said = {}
+    for style in ("plain", "turned", "lying"):
+        done = cli("robots", "map", humanoids[style], "--out", tmp_path / f"{style}.json")
+        assert done.returncode == 0, done.stderr
+        said[style] = [line for line in done.stdout.splitlines() if "rest frame" in line]
+    assert said["plain"] == []
+    assert len(said["lying"]) == 1 and "stands along its world +Y axis and faces +Z" in said["lying"][0]
+    assert len(said["turned"]) == 1 and "faces -Y" in said["turned"][0]
+
+
 def test_the_spine_and_the_clavicles_are_kept_clear_on_a_capsule_humanoid(humanoids):
     """Capsule links that MuJoCo collides and the arm pairs leave out: the pelvis against the
     chest over the lower back, the chest against the upper arms (a lifted clavicle)."""

@@ -1,7 +1,9 @@
-"""Robot files written in ways seen outside the asset package: a floating base whose origin is
-on the floor (Berkeley Humanoid Lite's), feet that collide through ``<pair>`` elements alone
-(PNDbotics' Adam SP), and feet that do not stand level (K-Scale's Z-Bot). Each is the packaged
-G1 edited that way, unmoved in the world."""
+"""Robot files written in ways seen outside the asset package, each the packaged G1 edited that
+way (unmoved in the world unless said): a floating base whose origin is on the floor (Berkeley
+Humanoid Lite's), feet that collide through ``<pair>`` elements alone (PNDbotics' Adam SP), feet
+that do not stand level (K-Scale's Z-Bot), an ankle link whose origin lies ahead of the ankle
+on its roll axis (ROBOTIS' THORMANG3), a heel cap near the floor on a robot written facing -X
+(iCub), and a head with two eyes on joints of their own (Aldebaran's Romeo)."""
 
 from __future__ import annotations
 
@@ -166,3 +168,97 @@ def test_feet_that_do_not_stand_level_are_a_one_line_error(tmp_path):
     assert done.returncode == 2 and not out.exists()
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "right_ankle_roll_link" in lines[0] and "cm apart" in lines[0], lines
+
+
+def _ankle_origin_ahead(tmp_path: Path, ahead: float) -> Path:
+    """The G1 on 7 cm thicker soles (its ankles 12 cm up, as THORMANG3's) with each ankle roll
+    link's origin ``ahead`` m forward along its roll axis (+X), its joint, geoms, sites and
+    inertia moved back by as much (THORMANG3's URDF puts its ankle roll link 5.7 cm ahead of the
+    ankle)."""
+    spec = g1_spec()
+    for side in SIDES:
+        link = spec.body(f"{side}_ankle_roll_link")
+        shift = np.array([ahead, 0.0, 0.0])
+        link.pos = np.asarray(link.pos) + shift
+        for kind in (link.joints, link.geoms, link.sites):
+            for element in kind:
+                element.pos = np.asarray(element.pos) - shift
+        link.ipos = np.asarray(link.ipos) - shift
+        for geom in link.geoms:
+            if geom.group == 3:
+                geom.pos = np.asarray(geom.pos) - [0.0, 0.0, 0.07]
+    return saved_without_controls(spec, tmp_path / "ankle_ahead.xml")
+
+
+def test_the_toes_are_measured_from_where_the_ankle_turns(tmp_path):
+    """With the ankles high above thick soles and the ankle roll links' origins 6 cm ahead of
+    the ankle, the soles reach 3.5 cm ahead of where the ankle's pitch and roll axes cross: the
+    robot faces +X as written, its left leg the +Y one, its toes ahead of its ankles. Measured
+    from the roll links' origins (the highest bodies near the floor) the soles reached back
+    (-2.5 cm) and the robot was turned round, its sides swapped."""
+    path = _ankle_origin_ahead(tmp_path, 0.06)
+    model = compile_robot(path)
+    np.testing.assert_allclose(rest_root_quat(model, free_root(model)), [1.0, 0.0, 0.0, 0.0])
+    mapping = infer_mapping(path)["keypoints"]
+    assert [mapping[f"{side}_hip"]["body"] for side in SIDES] == ["left_hip_yaw_link", "right_hip_yaw_link"]
+    robot = load_robot(path)
+    kp = robot.rest_keypoints
+    assert kp[robot.keypoint_index("left_hip"), 1] > 0.05
+    assert kp[robot.keypoint_index("left_foot"), 0] > kp[robot.keypoint_index("left_ankle"), 0] + 0.05
+
+
+def _facing_back_with_heel_caps(tmp_path: Path) -> Path:
+    """The G1 written facing -X (its root turned half round about +Z) with a collision box on
+    each ankle roll link over the heel, 1 cm above the sole (iCub's ankle shells reach as near
+    the floor and are written facing -X)."""
+    spec = g1_spec()
+    spec.body("pelvis").quat = [0.0, 0.0, 0.0, 1.0]
+    for side in SIDES:
+        spec.body(f"{side}_ankle_roll_link").add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.02, 0.03, 0.01], pos=[-0.045, 0.0, -0.015], group=3
+        )
+    return saved_without_controls(spec, tmp_path / "heel_caps.xml")
+
+
+def test_a_heel_cap_near_the_floor_does_not_hide_where_the_toes_point(tmp_path):
+    """The toes' reach is the middle of the sole's extent beyond the ankle: a heel cap near the
+    floor leaves it at 3 cm, and the robot written facing -X is turned to face +X, its left leg
+    the +Y one (its root's rest orientation the identity). With the mean of the sole geoms'
+    centres the cap pulled the reach to 1.9 cm, under the 2 cm a half turn needs, and the robot
+    was read facing back, sides swapped."""
+    path = _facing_back_with_heel_caps(tmp_path)
+    model = compile_robot(path)
+    np.testing.assert_allclose(
+        np.abs(rest_root_quat(model, free_root(model))), [1.0, 0.0, 0.0, 0.0], atol=1e-9
+    )
+    mapping = infer_mapping(path)["keypoints"]
+    assert [mapping[f"{side}_knee"]["body"] for side in SIDES] == ["left_knee_link", "right_knee_link"]
+    robot = load_robot(path)
+    assert robot.rest_keypoints[robot.keypoint_index("left_hip"), 1] > 0.05
+    assert (
+        robot.rest_keypoints[robot.keypoint_index("left_foot"), 0]
+        > robot.rest_keypoints[robot.keypoint_index("left_ankle"), 0]
+    )
+
+
+def _with_eyes(tmp_path: Path) -> Path:
+    """The G1 with a head on a yaw joint above its torso and two eyes on pitch joints of their
+    own, 3 cm either side of its midline (Romeo's)."""
+    spec = g1_spec()
+    head = spec.body("torso_link").add_body(name="head", pos=[0.0, 0.0, 0.45])
+    head.add_joint(name="head_yaw", axis=[0.0, 0.0, 1.0], range=[-1.0, 1.0])
+    head.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.06, 0, 0], mass=0.5)
+    for side, y in (("left", 0.03), ("right", -0.03)):
+        eye = head.add_body(name=f"{side}_eye", pos=[0.05, y, 0.02])
+        eye.add_joint(name=f"{side}_eye_pitch", axis=[0.0, 1.0, 0.0], range=[-0.5, 0.5])
+        eye.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.01, 0, 0], mass=0.01, contype=0, conaffinity=0
+        )
+    return saved_without_controls(spec, tmp_path / "eyes.xml")
+
+
+def test_two_eyes_on_joints_of_their_own_are_the_heads(tmp_path):
+    """The head follows the link the two eyes hang from, not one eye (the highest end near the
+    midline was Romeo's left eye, and its eye joints took the head's posture weight)."""
+    mapping = infer_mapping(_with_eyes(tmp_path))
+    assert mapping["keypoints"]["head"]["body"] == "head"
