@@ -42,6 +42,10 @@ from retarget.robot_files import ancestors, free_root, jointed_link, welded_belo
 
 MIDDLE_RANGE = (0.25, 0.85)
 """Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
+MIDDLE_OFF_LINE = 0.05
+"""A knee / elbow anchor further than this (m) along its own axis from the limb's line (hip to
+ankle, shoulder to wrist) is moved onto the point of the axis nearest that line: a URDF may put
+the joint's link origin anywhere on its axis (THORMANG3's knees 9.3 cm outboard of its legs)."""
 ACROSS = 0.6
 """A middle joint's axis crosses the limb: |cos| to the limb's direction below this."""
 ALONG = 0.1
@@ -266,6 +270,10 @@ def limb_anatomy(
         centre = axes_centre(anchors[end_idx], axes[end_idx])
     else:
         centre = data.xpos[end_body].copy()
+    if best is not None:  # a knee / elbow anchor far out along its own axis (a URDF link origin)
+        on_line = _nearest_on_axis(middle, axes[best], root, centre)
+        if np.linalg.norm(on_line - middle) > MIDDLE_OFF_LINE:
+            middle = on_line
     return Limb(
         side,
         bodies,
@@ -281,6 +289,17 @@ def limb_anatomy(
         tuple(joints[i] for i in beyond),
         tuple(joints[i] for i in before),
     )
+
+
+def _nearest_on_axis(anchor: np.ndarray, axis: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(3,) the point of the line through ``anchor`` along ``axis`` nearest the line from
+    ``start`` to ``end`` (``anchor`` itself where the two are parallel)."""
+    d, w = end - start, anchor - start
+    a, b, c = float(axis @ axis), float(axis @ d), float(d @ d)
+    den = a * c - b * b
+    if den <= 1e-9 * a * c:
+        return anchor.copy()
+    return anchor + (b * float(d @ w) - c * float(axis @ w)) / den * axis
 
 
 def _after_upper_twist(

@@ -262,3 +262,30 @@ def test_two_eyes_on_joints_of_their_own_are_the_heads(tmp_path):
     midline was Romeo's left eye, and its eye joints took the head's posture weight)."""
     mapping = infer_mapping(_with_eyes(tmp_path))
     assert mapping["keypoints"]["head"]["body"] == "head"
+
+
+def _knee_anchors_outboard(tmp_path: Path, out: float) -> Path:
+    """The G1 with each knee hinge's anchor written ``out`` m outboard along its own axis (the
+    same kinematics: THORMANG3's URDF puts its knee links' origins, and so its knee joints, 9.3
+    cm outboard of its legs)."""
+    spec = g1_spec()
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        joint = spec.joint(f"{side}_knee_joint")
+        joint.pos = np.asarray(joint.pos) + sign * out * np.asarray(joint.axis) / np.linalg.norm(joint.axis)
+    return saved_without_controls(spec, tmp_path / "knees_out.xml")
+
+
+def test_a_knee_anchor_far_out_on_its_axis_is_read_on_the_leg(tmp_path):
+    """A knee hinge anchored 8 cm outboard on its axis is the same knee: its keypoint is the
+    point of the axis nearest the hip-ankle line, where the G1 file's is (within 1 cm; it was
+    8 cm outboard, and the solve turned the legs to bring that point onto the human's knee)."""
+    robot = load_robot(_knee_anchors_outboard(tmp_path, 0.08))
+    plain = load_robot(robot_mjcf("g1"))
+    for side in SIDES:
+        k = robot.keypoint_index(f"{side}_knee")
+        assert (
+            np.linalg.norm(
+                robot.rest_keypoints[k] - plain.rest_keypoints[plain.keypoint_index(f"{side}_knee")]
+            )
+            < 0.01
+        )
