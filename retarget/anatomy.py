@@ -252,6 +252,18 @@ def limb_anatomy(
         apart = [i for i in range(len(joints)) if np.linalg.norm(anchors[i] - middle) > SAME_ANCHOR]
         root_idx = [i for i in apart if i < best]
         end_idx = [i for i in apart if i > best]
+        # A rolling knee written as two parallel hinges (Draco3's): a hinge right after the
+        # middle one, parallel to it and nearer to it than to the limb's last joint, is the
+        # knee's too, and the knee's point is halfway between them.
+        rolling = [
+            i
+            for i in end_idx[:1]
+            if abs(float(axes[i] @ axes[best])) > 1.0 - 1e-3
+            and np.linalg.norm(anchors[i] - middle) < np.linalg.norm(anchors[i] - anchors[end_idx[-1]])
+        ]
+        if rolling:
+            middle = (middle + anchors[rolling[0]]) / 2
+            end_idx = end_idx[1:]
     root_body = int(model.jnt_bodyid[joints[root_idx[-1]]]) if root_idx else bodies[0]
     if best is not None and root_body == middle_body:  # hip and knee on one body: keep the thigh's
         root_body = int(model.body_parentid[middle_body])

@@ -8,6 +8,7 @@ on its roll axis (ROBOTIS' THORMANG3), a heel cap near the floor on a robot writ
 from __future__ import annotations
 
 from pathlib import Path
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -289,3 +290,44 @@ def test_a_knee_anchor_far_out_on_its_axis_is_read_on_the_leg(tmp_path):
             )
             < 0.01
         )
+
+
+def _rolling_knees(tmp_path: Path) -> Path:
+    """The G1 with a rolling knee written as two parallel hinges (Draco3's): a second knee
+    hinge 10 cm below the first, the shank below it 10 cm shorter."""
+    spec = g1_spec()
+    for kind in (spec.actuators, spec.sensors, spec.keys):
+        for element in list(kind):
+            spec.delete(element)
+    root = ElementTree.fromstring(spec.to_xml())
+    for side in SIDES:
+        knee = root.find(f".//body[@name='{side}_knee_link']")
+        ankle = knee.find(f"body[@name='{side}_ankle_pitch_link']")
+        joint = knee.find("joint")
+        below = ElementTree.SubElement(knee, "body", name=f"{side}_knee_lower", pos="0 0 -0.1")
+        ElementTree.SubElement(below, "inertial", pos="0 0 0", mass="0.1", diaginertia="0.0001 0.0001 0.0001")
+        ElementTree.SubElement(
+            below, "joint", name=f"{side}_knee_lower_joint", axis=joint.get("axis", "0 1 0"), range="0 1"
+        )
+        knee.remove(ankle)
+        x, y, z = (float(v) for v in ankle.get("pos").split())
+        ankle.set("pos", f"{x} {y} {z + 0.1}")
+        below.append(ankle)
+    path = tmp_path / "rolling_knees.xml"
+    path.write_text(ElementTree.tostring(root, encoding="unicode"))
+    return path
+
+
+def test_a_rolling_knee_of_two_parallel_hinges_is_one_knee(tmp_path):
+    """The second hinge of a rolling knee, parallel to the first and nearer to it than to the
+    ankle, is the knee's: the knee keypoint lies halfway between the two hinges and the ankle
+    keypoint where the ankle's own axes cross, as in the G1 file (it was the point nearest all
+    three axes after the knee, 8.3 cm above Draco3's ankle)."""
+    path = _rolling_knees(tmp_path)
+    robot, plain = load_robot(path), load_robot(robot_mjcf("g1"))
+    for side in SIDES:
+        ankle = robot.rest_keypoints[robot.keypoint_index(f"{side}_ankle")]
+        assert np.linalg.norm(ankle - plain.rest_keypoints[plain.keypoint_index(f"{side}_ankle")]) < 1e-6
+        knee = robot.rest_keypoints[robot.keypoint_index(f"{side}_knee")]
+        plain_knee = plain.rest_keypoints[plain.keypoint_index(f"{side}_knee")]
+        assert np.linalg.norm(knee - plain_knee) == pytest.approx(0.05, abs=1e-6)  # halfway down
