@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from retarget.geoms import aabb_corners, collision_geoms
-from retarget.kinematics import axes_centre
+from retarget.kinematics import axes_centre, quat_to_mat
 from retarget.robot_files import ancestors, jointed_link
 
 QUARTER_TURN = np.pi / 2
@@ -201,15 +201,21 @@ def _turn(quat: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
     return out
 
 
+def _written_quat(model: mujoco.MjModel, root: int) -> tuple[int, np.ndarray]:
+    """(qpos address of the free joint of body ``root``, (4,) wxyz its ``qpos0`` orientation,
+    normalised)."""
+    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
+    adr = int(model.jnt_qposadr[free])
+    quat = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
+    return adr, quat / max(float(np.linalg.norm(quat)), 1e-12)
+
+
 def rest_root_quat(model: mujoco.MjModel, root: int) -> np.ndarray:
     """(4,) wxyz: the floating base ``root``'s rest orientation (see the module docstring).
 
     The MJCF's own ``qpos0`` orientation where its feet do not say how it stands or faces.
     """
-    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
-    adr = int(model.jnt_qposadr[free])
-    quat = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
-    quat /= max(float(np.linalg.norm(quat)), 1e-12)
+    adr, quat = _written_quat(model, root)
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
@@ -258,13 +264,8 @@ def rest_turn_note(model: mujoco.MjModel, root: int) -> str | None:
     """One line saying how the rest frame turns the file's robot (None where it stands as
     written: up +Z, facing +X): along which of the file's world axes it stands and which way it
     faces, as read from its feet (for a user reviewing an inferred mapping)."""
-    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == root)
-    adr = int(model.jnt_qposadr[free])
-    written, rest = np.zeros(9), np.zeros(9)
-    quat = np.array(model.qpos0[adr + 3 : adr + 7], dtype=float)
-    mujoco.mju_quat2Mat(written, quat / max(float(np.linalg.norm(quat)), 1e-12))
-    mujoco.mju_quat2Mat(rest, rest_root_quat(model, root))
-    turn = rest.reshape(3, 3) @ written.reshape(3, 3).T  # world turn from the file to the rest
+    written = quat_to_mat(_written_quat(model, root)[1])
+    turn = quat_to_mat(rest_root_quat(model, root)) @ written.T  # world turn from the file to the rest
     if np.allclose(turn, np.eye(3), atol=1e-6):
         return None
     up, forward = turn.T @ _UP, turn.T @ np.array([1.0, 0.0, 0.0])
