@@ -23,7 +23,10 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
    nearest to its joint axes (a hip's three axes meet near one point). Ball joints written as
    hinges at one point (SMPL humanoids): hinges at the knee's point are the knee's, the hip /
    shoulder is the last ball before the knee (a clavicle before it: ``Limb.before``) and the
-   ankle / wrist the first after it (a hand past it: ``Limb.beyond``).
+   ankle / wrist the first after it (a hand past it: ``Limb.beyond``). A hinge right after
+   the knee and parallel to it, nearer to it than to the ankle, is the rest of a rolling knee
+   (Draco3's); a knee / elbow anchored far out along its own axis is read on the limb's line
+   (``MIDDLE_OFF_LINE``).
 """
 
 from __future__ import annotations
