@@ -147,7 +147,6 @@ def load_robot_spec(robot: str | Path) -> mujoco.MjSpec:
     path, packaged = _resolve(robot)
     spec = read_robot_mjcf(path)
     declare_collisions(spec, robot_scene(packaged) if packaged else None)
-    drop_floor_pairs(spec)
     if packaged is None:  # the packaged robots have none (tests/test_robots_automap.py checks it)
         stat = path.stat()
         for name1, name2 in _rest_contacts(str(path), stat.st_mtime_ns, stat.st_size):
@@ -160,7 +159,6 @@ def _rest_contacts(path: str, mtime_ns: int, size: int) -> tuple[tuple[str, str]
     """The rest-contact body pairs of a robot MJCF file, once per file version and process."""
     spec = read_robot_mjcf(path)
     declare_collisions(spec)
-    drop_floor_pairs(spec)
     return tuple(exclude_rest_contacts(spec))
 
 
@@ -218,11 +216,12 @@ def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
     own scene MJCF) are added. Then any geom that the file's own ``<pair>`` elements name but
     whose ``contype`` and ``conaffinity`` are 0 gets the same (PNDbotics' Adam SP sets both to 0
     for every geom but its pelvis, its feet colliding with the floor through pairs alone).
-    Returns whether anything changed.
+    Last, the pairs naming a geom that is not the robot's go (:func:`drop_floor_pairs`: read
+    first, they named colliders). Returns whether anything changed.
     """
     geoms = [g for g in spec.geoms if g.parent != spec.worldbody]
     if not geoms:
-        return False
+        return drop_floor_pairs(spec) > 0
     changed = False
     if not any(g.contype or g.conaffinity for g in geoms):
         group = [g for g in geoms if g.group == COLLISION_GROUP]
@@ -236,7 +235,7 @@ def declare_collisions(spec: mujoco.MjSpec, scene: Path | None = None) -> bool:
         if g.name and g.name in paired and not (g.contype or g.conaffinity):
             g.contype, g.conaffinity = 1, 0
             changed = True
-    return changed
+    return drop_floor_pairs(spec) > 0 or changed
 
 
 def _add_scene_pairs(spec: mujoco.MjSpec, scene: Path, names: set[str]) -> None:
