@@ -43,7 +43,12 @@ SOLE_BAND = 0.02
 """Collision geoms whose lowest point is this close (m) to the robot's lowest are its soles."""
 ANKLE_AXES_BAND = 0.225
 """An ankle's parent link's hinge counts towards where the ankle turns when its anchor is this
-fraction of the robot's height (or less) above the floor (a knee is about half)."""
+fraction of the robot's height (or less) above the floor (a knee is about half)..."""
+ANKLE_AXES_CROSS = 0.05
+"""...or when its axis passes within this fraction of the robot's height of one of the ankle
+link's own hinge axes (an ankle's pitch and roll cross; a knee's axis passes a shin's length
+from the ankle's roll axis): HighTorque's Pi+ turns its ankle 8.5 cm above its soles, past
+the band of its 35 cm."""
 STAND_SHARE = 0.25
 """The robot's centre of mass stands at least this fraction of its largest extent above the two
 feet along an axis for that axis to be its up (a humanoid's: about half its height); lower,
@@ -142,13 +147,23 @@ def _two_feet(
     return None
 
 
+def _axes_gap(data: mujoco.MjData, j: int, k: int) -> float:
+    """The distance (m) between the axis lines of hinges ``j`` and ``k`` (inf where parallel)."""
+    normal = np.cross(data.xaxis[j], data.xaxis[k])
+    size = float(np.linalg.norm(normal))
+    if size < 1e-3:
+        return float("inf")
+    return abs(float((data.xanchor[k] - data.xanchor[j]) @ normal)) / size
+
+
 def _ankle_centre(
     model: mujoco.MjModel, data: mujoco.MjData, ankle: int, floor: float, height: float
 ) -> np.ndarray:
     """(3,) where a leg's ankle turns: the point nearest the axes of the ankle link's hinges and
-    of its parent link's that cross them and lie within ANKLE_AXES_BAND of the robot's height
-    above the floor (an ankle's pitch and roll; a URDF may put the roll link's origin anywhere
-    along the roll axis: THORMANG3's 5.7 cm ahead of the ankle); the link's origin without one."""
+    of its parent link's that cross them (ANKLE_AXES_CROSS) or lie within ANKLE_AXES_BAND of
+    the robot's height above the floor (an ankle's pitch and roll; a URDF may put the roll
+    link's origin anywhere along the roll axis: THORMANG3's 5.7 cm ahead of the ankle); the
+    link's origin without one."""
     parent = jointed_link(model, int(model.body_parentid[ankle]))
     own = [j for j in range(model.njnt) if model.jnt_bodyid[j] == ankle and model.jnt_type[j] == _HINGE]
     if not own:
@@ -158,7 +173,8 @@ def _ankle_centre(
         if model.jnt_bodyid[j] != parent or model.jnt_type[j] != _HINGE:
             continue
         low = data.xanchor[j][2] - floor <= ANKLE_AXES_BAND * height
-        if low and all(abs(float(data.xaxis[j] @ data.xaxis[k])) < 1.0 - 1e-3 for k in own):
+        crossing = any(_axes_gap(data, j, k) <= ANKLE_AXES_CROSS * height for k in own)
+        if (low or crossing) and all(abs(float(data.xaxis[j] @ data.xaxis[k])) < 1.0 - 1e-3 for k in own):
             joints.append(j)
     return axes_centre(data.xanchor[joints], data.xaxis[joints])
 

@@ -171,23 +171,26 @@ def test_feet_that_do_not_stand_level_are_a_one_line_error(tmp_path):
     assert len(lines) == 1 and "right_ankle_roll_link" in lines[0] and "cm apart" in lines[0], lines
 
 
-def _ankle_origin_ahead(tmp_path: Path, ahead: float) -> Path:
-    """The G1 on 7 cm thicker soles (its ankles 12 cm up, as THORMANG3's) with each ankle roll
-    link's origin ``ahead`` m forward along its roll axis (+X), its joint, geoms, sites and
-    inertia moved back by as much (THORMANG3's URDF puts its ankle roll link 5.7 cm ahead of the
-    ankle)."""
+def _ankle_origin_ahead(
+    tmp_path: Path, ahead: float, thicker: float = 0.07, anchor_ahead: bool = False
+) -> Path:
+    """The G1 on ``thicker`` m thicker soles (7 cm: its ankles 12 cm up, as THORMANG3's) with
+    each ankle roll link's origin ``ahead`` m forward along its roll axis (+X), its geoms,
+    sites, inertia and (unless ``anchor_ahead``: the same axis, anchored at the origin, as
+    HighTorque's Pi+) joint moved back by as much (THORMANG3's URDF puts its ankle roll link
+    5.7 cm ahead of the ankle)."""
     spec = g1_spec()
     for side in SIDES:
         link = spec.body(f"{side}_ankle_roll_link")
         shift = np.array([ahead, 0.0, 0.0])
         link.pos = np.asarray(link.pos) + shift
-        for kind in (link.joints, link.geoms, link.sites):
+        for kind in (link.geoms, link.sites) if anchor_ahead else (link.joints, link.geoms, link.sites):
             for element in kind:
                 element.pos = np.asarray(element.pos) - shift
         link.ipos = np.asarray(link.ipos) - shift
         for geom in link.geoms:
             if geom.group == 3:
-                geom.pos = np.asarray(geom.pos) - [0.0, 0.0, 0.07]
+                geom.pos = np.asarray(geom.pos) - [0.0, 0.0, thicker]
     return saved_without_controls(spec, tmp_path / "ankle_ahead.xml")
 
 
@@ -202,6 +205,22 @@ def test_the_toes_are_measured_from_where_the_ankle_turns(tmp_path):
     np.testing.assert_allclose(rest_root_quat(model, free_root(model)), [1.0, 0.0, 0.0, 0.0])
     mapping = infer_mapping(path)["keypoints"]
     assert [mapping[f"{side}_hip"]["body"] for side in SIDES] == ["left_hip_yaw_link", "right_hip_yaw_link"]
+    robot = load_robot(path)
+    kp = robot.rest_keypoints
+    assert kp[robot.keypoint_index("left_hip"), 1] > 0.05
+    assert kp[robot.keypoint_index("left_foot"), 0] > kp[robot.keypoint_index("left_ankle"), 0] + 0.05
+
+
+def test_an_ankle_high_above_its_soles_turns_where_its_axes_cross(tmp_path):
+    """On soles 25 cm thicker the ankle's pitch hinge is further above the floor than an ankle's
+    band (ANKLE_AXES_BAND of the robot's height), but its axis crosses the roll axis, so it
+    still says where the ankle turns: the robot faces +X as written, its toes ahead of its
+    ankles. Without it the ankle was the roll hinge's anchor, the roll link's origin 6 cm ahead,
+    and the robot was turned round, its sides swapped (HighTorque's Pi+, its ankle 8.5 cm above
+    its soles)."""
+    path = _ankle_origin_ahead(tmp_path, 0.06, thicker=0.25, anchor_ahead=True)
+    model = compile_robot(path)
+    np.testing.assert_allclose(rest_root_quat(model, free_root(model)), [1.0, 0.0, 0.0, 0.0])
     robot = load_robot(path)
     kp = robot.rest_keypoints
     assert kp[robot.keypoint_index("left_hip"), 1] > 0.05
