@@ -26,7 +26,9 @@ model in its rest pose (``qpos0`` with the floating base in its rest orientation
    ankle / wrist the first after it (a hand past it: ``Limb.beyond``). A hinge right after
    the knee and parallel to it, nearer to it than to the ankle, is the rest of a rolling knee
    (Draco3's); a knee / elbow anchored far out along its own axis is read on the limb's line
-   (``MIDDLE_OFF_LINE``).
+   (``MIDDLE_OFF_LINE``), and the limb is measured from where its first two axes pass nearest
+   each other where its first joint is anchored far from there (:func:`_limb_start`). A leg
+   with nothing jointed past its knee ends in a point foot: its ankle is the leg's tip.
 """
 
 from __future__ import annotations
@@ -44,7 +46,8 @@ from retarget.rest_frame import rest_root_quat
 from retarget.robot_files import ancestors, free_root, jointed_link, welded_below
 
 MIDDLE_RANGE = (0.25, 0.85)
-"""Fraction of a limb's length (from its first joint to its tip) where its knee / elbow may sit."""
+"""Fraction of a limb's length (from its start, :func:`_limb_start`, to its tip) where its knee /
+elbow may sit."""
 MIDDLE_OFF_LINE = 0.05
 """A knee / elbow anchor further than this (m) along its own axis from the limb's line (hip to
 ankle, shoulder to wrist) is moved onto the point of the axis nearest that line: a URDF may put
@@ -215,12 +218,14 @@ def limb_anatomy(
 ) -> Limb:
     """Hip / knee / ankle (or shoulder / elbow / wrist) of the chain ``bodies`` reaching ``tip`` (3,).
 
-    Without a joint after the middle one the ankle / wrist centre is the end body's origin.
+    Without a joint after the middle one the ankle / wrist centre is the end body's origin, or
+    ``tip`` where that body is the middle joint's own (a point foot at the end of the shank:
+    ODRI's Bolt had its ankle at its knee).
     """
     joints = _chain_joints(model, bodies)
     anchors = np.array([data.xanchor[j] for j in joints]).reshape(-1, 3)
     axes = np.array([data.xaxis[j] for j in joints]).reshape(-1, 3)
-    start = anchors[0]
+    start = _limb_start(anchors, axes)
     length = max(float(np.linalg.norm(tip - start)), 1e-6)
     # The first hinge past the hip / shoulder whose axis crosses the limb (a twist joint's
     # axis runs along it), or the next one past the upper arm's twist (_after_upper_twist);
@@ -283,6 +288,8 @@ def limb_anatomy(
     root = axes_centre(anchors[root_idx], axes[root_idx]) if root_idx else data.xpos[bodies[0]].copy()
     if end_idx:
         centre = axes_centre(anchors[end_idx], axes[end_idx])
+    elif best is not None and end_body == middle_body:  # nothing past the knee: a point foot
+        centre = np.asarray(tip, dtype=float).copy()
     else:
         centre = data.xpos[end_body].copy()
     if best is not None:  # a knee / elbow anchor far out along its own axis (a URDF link origin)
@@ -304,6 +311,18 @@ def limb_anatomy(
         tuple(joints[i] for i in beyond),
         tuple(joints[i] for i in before),
     )
+
+
+def _limb_start(anchors: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(3,) where a limb's length is measured from: its first joint's anchor, or, where that lies
+    further than MIDDLE_OFF_LINE along its axis from the point nearest the second joint's axis,
+    that point (REEM-C's tilted shoulder joints anchored on the torso's midline, 21.7 cm in from
+    the shoulder: its shoulder roll was taken for the elbow)."""
+    start = anchors[0]
+    if len(anchors) < 2 or abs(float(axes[0] @ axes[1])) > 1.0 - 1e-3:
+        return start
+    crossing = _nearest_on_axis(start, axes[0], anchors[1], anchors[1] + axes[1])
+    return crossing if np.linalg.norm(crossing - start) > MIDDLE_OFF_LINE else start
 
 
 def _nearest_on_axis(anchor: np.ndarray, axis: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
