@@ -506,9 +506,14 @@ def build_self_clearance(
 
     trunk_bodies = (trunk or set()) | shared
 
-    def against_trunk(links: set[int], exact: bool = False) -> list[int]:
+    def colliding_pair(i: int, j: int) -> bool:
+        """Capsules ``i`` and ``j`` enclose geoms that MuJoCo collides."""
+        return _collides(m, int(geom[i]), int(geom[j]))
+
+    def against_trunk(links: set[int], exact: bool = False, colliding: bool = False) -> list[int]:
         """Appends the pairs of the trunk's capsules with those on ``links`` (bodies), only
-        :func:`exact_pair` ones if ``exact``; their indices."""
+        :func:`exact_pair` ones if ``exact``, only :func:`colliding_pair` ones if
+        ``colliding``; their indices."""
         added: list[int] = []
         for i, bi in enumerate(body_of):
             if bi not in trunk_bodies:
@@ -519,6 +524,7 @@ def build_self_clearance(
                     and int(parent[bj]) != bi
                     and frozenset((bi, bj)) not in excluded
                     and (not exact or exact_pair(i, j))
+                    and (not colliding or colliding_pair(i, j))
                 ):
                     added.append(len(first))
                     first.append(i)
@@ -543,13 +549,15 @@ def build_self_clearance(
         for shoulder_chain in shoulders.values():
             shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies)
     else:
-        # Capsule robots (the CMU humanoid): the upper arm rolls into the chest as the
-        # clavicle lifts, and a jointed spine bends the pelvis onto the upper back. Kept apart
-        # in every solve where both geoms are capsules or spheres (their enclosures exact)
-        # that MuJoCo collides: trunk links that are not parent and child, and the trunk
-        # against the shoulder links.
+        # Robots of primitive geoms: the upper arm rolls into the chest as the clavicle lifts
+        # (the CMU humanoid's capsules; the MIT humanoid's cylinder upper arm into its box
+        # torso: 254 frames, 33 mm deep), and a jointed spine bends the pelvis onto the upper
+        # back. Kept apart in every solve: the trunk against the shoulder links where MuJoCo
+        # collides their geoms (boxes' and cylinders' enclosures calibrated like the thighs'),
+        # trunk links that are not parent and child where both geoms are capsules or spheres
+        # (their enclosures exact).
         for shoulder_chain in shoulders.values():
-            shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies, exact=True)
+            shoulder_pairs += against_trunk(shoulder_chain - trunk_bodies, colliding=True)
         on_trunk = [i for i, b in enumerate(body_of) if b in trunk_bodies]
         for i in on_trunk:
             for j in on_trunk:

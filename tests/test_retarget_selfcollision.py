@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 import pytest
 from capsule_humanoid import capsule_humanoid_xml
+from g1_variants import g1_spec, saved_without_controls
 from robot_checks import independent_check
 
 from controlmm.motion import Motion
@@ -216,3 +217,40 @@ def test_a_pair_in_side_by_side_branches_is_swept_through_both():
         "left_knee_joint",
     }
     assert names("left_knee_link", "left_knee_link") == set()
+
+
+def _g1_of_boxes(tmp_path) -> str:
+    """The G1 with each collision mesh replaced by its bounding box (a robot of boxes and
+    cylinders, as the MIT humanoid is: its shoulder links' geoms are the G1's cylinders)."""
+    spec = g1_spec()
+    model = spec.compile()
+    for body in spec.bodies:
+        first = int(model.body(body.name).geomadr[0])
+        for i, geom in enumerate(body.geoms):
+            if geom.type != mujoco.mjtGeom.mjGEOM_MESH or geom.group != 3:
+                continue
+            centre, half = model.geom_aabb[first + i, :3], model.geom_aabb[first + i, 3:]
+            turn = np.zeros(9)
+            mujoco.mju_quat2Mat(turn, np.asarray(geom.quat, dtype=float))
+            geom.type, geom.meshname = mujoco.mjtGeom.mjGEOM_BOX, ""
+            geom.size, geom.pos = half, np.asarray(geom.pos) + turn.reshape(3, 3) @ centre
+    return str(saved_without_controls(spec, tmp_path / "g1_boxes.xml"))
+
+
+def test_a_robot_of_boxes_and_cylinders_keeps_its_shoulders_off_its_trunk(tmp_path):
+    """Without a mesh among its arm pairs the trunk is kept from the shoulder links where MuJoCo
+    collides their geoms, boxes and cylinders too, not only capsules and spheres (the MIT
+    humanoid's cylinder upper arm went 33 mm into its box torso in 254 frames of six clips;
+    none once kept apart)."""
+    robot = load_robot(_g1_of_boxes(tmp_path))
+    model, sc = robot.model, robot.self_clearance
+    assert sc is not None and sc.relaxed_pairs is None  # no mesh: every pair in every solve
+    assert not any(model.geom_type[int(g)] == mujoco.mjtGeom.mjGEOM_MESH for g in sc.geom)
+    body = robot.capsules.body
+    torso = model.body("torso_link").id
+    for side in ("left", "right"):
+        shoulder = model.body(f"{side}_shoulder_roll_link").id
+        assert any(
+            {int(body[sc.first[k]]), int(body[sc.second[k]])} == {torso, shoulder}
+            for k in range(sc.num_pairs)
+        ), side
