@@ -325,7 +325,7 @@ def _rung_kept(
     lift2: float | None = None,
 ) -> bool:
     """Whether the output check keeps a new solve (its pairs' deepest overlaps ``depth2`` (P2,)
-    m, P2 >= P, its largest planted-foot step ``slip2`` m and its joints' top speeds ``speed2``
+    m, its largest planted-foot step ``slip2`` m and its joints' top speeds ``speed2``
     (nj,) rad/s) over the one it has (``depth`` (P,), ``slip``, ``speed``): it overlaps less
     deep, slides no foot further than that one and than ``OUTPUT_SLIP`` and turns no joint
     faster than that one and than ``OUTPUT_SPEED``, and has no more output frames in which
@@ -334,7 +334,9 @@ def _rung_kept(
     Kuavo's thighs on the real clip, 3 frames -> 57), and is lifted off the floor no more
     than that one (``lift2`` against ``lift``, m) and than ``OUTPUT_LIFT``; the midpoint
     solve, which is to remove sweeps between frames, also brings no pair deeper than before
-    and than ``OTHER_DEPTH`` (pairs added since count from 0)."""
+    and than ``OTHER_DEPTH`` (the pairs of both in the same order, those beyond either's last
+    counted from 0: each solve's check adds the geoms it finds overlapping unpaired, so the
+    new one may have fewer: DRC-Hubo's real clip had ``controlmm retarget`` fail)."""
     kept = depth2.max(initial=0.0) < depth.max(initial=0.0) and slip2 <= max(slip, OUTPUT_SLIP)
     if speed is not None and speed2 is not None:
         kept = kept and bool(np.all((speed2 <= speed) | (speed2 <= OUTPUT_SPEED)))
@@ -343,7 +345,9 @@ def _rung_kept(
     if lift is not None and lift2 is not None:
         kept = kept and lift2 <= max(lift, OUTPUT_LIFT)
     if midpoint:
-        before = np.pad(depth, (0, len(depth2) - len(depth)))
+        before = np.zeros(len(depth2))
+        common = min(len(depth), len(depth2))
+        before[:common] = depth[:common]
         kept = kept and bool(np.all(depth2 <= np.maximum(before, OTHER_DEPTH)))
     return kept
 

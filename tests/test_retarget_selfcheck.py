@@ -415,6 +415,9 @@ def test_the_output_check_keeps_a_solve_only_if_it_overlaps_less_and_slides_no_m
     assert not _rung_kept(depth, slip, trade, slip, midpoint=True)
     assert _rung_kept(depth, slip, np.array([0.010, 0.006, OTHER_DEPTH, OTHER_DEPTH]), slip, midpoint=True)
     assert not _rung_kept(depth, slip, np.array([0.010, 0.0, 0.0, 0.005]), slip, midpoint=True)
+    # a new solve whose check found fewer unpaired geoms has fewer pairs (DRC-Hubo's: it raised)
+    assert _rung_kept(depth, slip, np.array([0.010, 0.006]), slip, midpoint=True)
+    assert not _rung_kept(depth, slip, np.array([0.010, 0.008]), slip, midpoint=True)
     # No joint turning faster than before and than OUTPUT_SPEED.
     speed = np.array([1.0, 9.0])
     less = np.array([0.010, 0.0, 0.0])
