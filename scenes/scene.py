@@ -34,7 +34,7 @@ import numpy as np
 
 from controlmm.errors import ControlMMError, InputFileError
 from controlmm.frames import HumanToWorld
-from retarget.robot_files import load_robot_spec
+from retarget.robot_files import compile_robot, load_robot_spec
 from scenes.registry import list_scenes, scene_path
 from scenes.sdf.scene_sdf import SceneSDF
 from scenes.tracks import TRACK_PREFIX, MocapTrack
@@ -284,8 +284,13 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
     _drop_shared_assets(robot_spec, spec)
     root = robot_spec.worldbody.first_body()
     frame = spec.worldbody.add_frame()
-    with _quiet_mujoco():
-        frame.attach_body(root, prefix="", suffix="")
+    try:
+        with _quiet_mujoco():
+            frame.attach_body(root, prefix="", suffix="")
+    except ValueError as exc:
+        compile_robot(robot)  # a file that does not compile alone: its own one-line error
+        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputFileError(f"robot '{robot}' cannot be placed in the scene: {first_line}") from None
     return root.name
 
 

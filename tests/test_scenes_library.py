@@ -168,3 +168,14 @@ def test_bad_input_messages(tmp_path):
     )
     assert "strictly increasing times" in _error(lambda: load_scene(str(track), robot=None))
     assert "unknown robot 'r2d2'" in _error(lambda: load_scene("empty", robot="r2d2"))
+    # a robot file that does not compile, its keyframe longer than its joints (Menagerie's
+    # Shadow hand scene with its forearm commented out, as humanoid-bench ships it): one line,
+    # not MuJoCo's error from placing the robot in the scene
+    keyed = tmp_path / "keyed.xml"
+    qpos = " ".join(["0"] * 31)
+    keyed.write_text(
+        f'<mujoco><worldbody><body name="ball"><freejoint/><geom size=".1"/></body></worldbody>'
+        f'<keyframe><key qpos="{qpos}"/></keyframe></mujoco>'
+    )
+    msg = _error(lambda: load_scene("empty", robot=str(keyed)))
+    assert "keyed.xml' does not compile" in msg and "qpos size" in msg, msg
