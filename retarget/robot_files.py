@@ -125,16 +125,20 @@ def read_robot_mjcf(path: str | Path) -> mujoco.MjSpec:
     (:mod:`retarget.spec_edits`).
 
     Raises:
-        InputFileError: the file does not parse.
+        InputFileError: the file does not parse, or does not compile where an edit compiles it
+            (MuJoCo raises a failed compile's error again at the spec's next use).
     """
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
         raise InputFileError(f"robot MJCF '{path}' does not load: {_one_line(exc)}") from None
-    free_floating_base(spec)
-    drop_placeholder_bodies(spec)
-    drop_closed_chain_rods(spec)
-    servo_ranges(spec)
+    try:
+        free_floating_base(spec)
+        drop_placeholder_bodies(spec)
+        drop_closed_chain_rods(spec)
+        servo_ranges(spec)
+    except ValueError as exc:
+        raise InputFileError(f"robot MJCF '{path}' does not compile: {_one_line(exc)}") from None
     return spec
 
 

@@ -350,3 +350,29 @@ def test_a_rolling_knee_of_two_parallel_hinges_is_one_knee(tmp_path):
         knee = robot.rest_keypoints[robot.keypoint_index(f"{side}_knee")]
         plain_knee = plain.rest_keypoints[plain.keypoint_index(f"{side}_knee")]
         assert np.linalg.norm(knee - plain_knee) == pytest.approx(0.05, abs=1e-6)  # halfway down
+
+
+def test_a_file_that_does_not_compile_is_one_line_even_where_an_edit_compiles_it(tmp_path):
+    """The G1 with a massless body holding a joint beside it, tied to a hip joint (MuJoCo does not
+    compile it): the edits that compile the file to read it (bodies beside the robot dropped)
+    fail, and MuJoCo raises that failure again at the spec's next use; it is one line naming
+    the file and the body, exit 2 from ``controlmm robots map`` (``controlmm retarget`` failed
+    with an internal error)."""
+    path = saved_without_controls(g1_spec(), tmp_path / "spare.xml")
+    text = path.read_text()
+    assert text.count("</worldbody>") == 1
+    path.write_text(
+        text.replace(
+            "</worldbody>",
+            '<body name="spare" pos="0 0 20"><joint name="spare_joint"/></body></worldbody>'
+            '<equality><joint joint1="left_hip_yaw_joint" joint2="spare_joint"/></equality>',
+        )
+    )
+    with pytest.raises(ValueError, match="mass and inertia"):
+        mujoco.MjModel.from_xml_path(str(path))
+    with pytest.raises(ControlMMError, match=r"spare.xml' does not compile: .*'spare'"):
+        load_robot(path)
+    out = tmp_path / "m.json"
+    done = cli("robots", "map", path, "--out", out)
+    assert done.returncode == 2 and not out.exists()
+    assert len(done.stderr.strip().splitlines()) == 1 and "does not compile" in done.stderr, done.stderr
