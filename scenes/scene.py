@@ -167,7 +167,12 @@ def load_scene(
     robot_root = _attach_robot(spec, robot) if robot is not None else None
     if edit_spec is not None:
         edit_spec(spec)
-    model = _compile(spec, path)
+    try:
+        model = _compile(spec, path)
+    except InputFileError:
+        if robot is not None:
+            compile_robot(robot)  # the robot's own file at fault (a mesh missing): its own line
+        raise
     robot_ids, floor_ids, obstacle_ids = _classify_geoms(model, robot_root)
     return Scene(
         name=path.stem,

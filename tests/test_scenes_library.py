@@ -179,3 +179,13 @@ def test_bad_input_messages(tmp_path):
     )
     msg = _error(lambda: load_scene("empty", robot=str(keyed)))
     assert "keyed.xml' does not compile" in msg and "qpos size" in msg, msg
+    # a robot whose mesh file is missing: the robot's file is named, not the scene's
+    g1 = robot_mjcf("g1")
+    meshless = tmp_path / "meshless.xml"
+    text = g1.read_text().replace('meshdir="assets"', f'meshdir="{g1.parent / "assets"}"')
+    meshless.write_text(
+        text.replace('<mesh file="pelvis.STL"/>', '<mesh name="pelvis" file="no_such_pelvis.STL"/>')
+    )
+    msg = _error(lambda: load_scene("empty", robot=str(meshless)))
+    assert "meshless.xml' does not compile" in msg and "no_such_pelvis.STL" in msg, msg
+    assert "empty.xml" not in msg, msg
