@@ -510,10 +510,9 @@ def build_self_clearance(
         """Capsules ``i`` and ``j`` enclose geoms that MuJoCo collides."""
         return _collides(m, int(geom[i]), int(geom[j]))
 
-    def against_trunk(links: set[int], exact: bool = False, colliding: bool = False) -> list[int]:
+    def against_trunk(links: set[int], colliding: bool = False) -> list[int]:
         """Appends the pairs of the trunk's capsules with those on ``links`` (bodies), only
-        :func:`exact_pair` ones if ``exact``, only :func:`colliding_pair` ones if
-        ``colliding``; their indices."""
+        :func:`colliding_pair` ones if ``colliding``; their indices."""
         added: list[int] = []
         for i, bi in enumerate(body_of):
             if bi not in trunk_bodies:
@@ -523,7 +522,6 @@ def build_self_clearance(
                     bj in links
                     and int(parent[bj]) != bi
                     and frozenset((bi, bj)) not in excluded
-                    and (not exact or exact_pair(i, j))
                     and (not colliding or colliding_pair(i, j))
                 ):
                     added.append(len(first))

@@ -294,8 +294,9 @@ def _attach_robot(spec: mujoco.MjSpec, robot: str) -> str:
             frame.attach_body(root, prefix="", suffix="")
     except ValueError as exc:
         compile_robot(robot)  # a file that does not compile alone: its own one-line error
-        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputFileError(f"robot '{robot}' cannot be placed in the scene: {first_line}") from None
+        raise InputFileError(
+            f"robot '{robot}' cannot be placed in the scene: {_one_line(str(exc))}"
+        ) from None
     return root.name
 
 
