@@ -41,6 +41,7 @@ from retarget.balance import (
     floor_slide,
     shift_human,
 )
+from retarget.calibrated_margins import CALIBRATED_SOLVES, calibrated_margins
 from retarget.feet import hold_feet_between_frames
 from retarget.human import size_ratio
 from retarget.mapping import Mapping
@@ -183,11 +184,13 @@ def _solve_and_resample(
     solver: str,
     src_fps: float,
     fps: float,
+    init: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Solution, np.ndarray, np.ndarray, Replay, float, float]:
-    """Solve at the motion's rate, resample to ``fps`` with pinned feet held, lift swing feet
-    and anything below the floor: (solution, its qpos, output qpos, its replay, floor lift,
-    swing lift)."""
-    sol = solve_mink(rm, targets) if solver == "mink" else solve(rm, targets, config)
+    """Solve at the motion's rate (from ``init``, (root_pos, root_rot, q) at that rate, where
+    given: :func:`retarget.solver.solve`), resample to ``fps`` with pinned feet held, lift swing
+    feet and anything below the floor: (solution, its qpos, output qpos, its replay, floor
+    lift, swing lift)."""
+    sol = solve_mink(rm, targets) if solver == "mink" else solve(rm, targets, config, init)
     quat = Rotation.from_matrix(sol.root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos_in = np.concatenate([sol.root_pos, quat, sol.q], axis=1)
     qpos = resample_qpos(qpos_in, src_fps, fps, rm.lower, rm.upper)
@@ -213,9 +216,11 @@ def _solve_clear_of_self(
     scratch: one from the last poses can jump where a pair's margin changed); still
     overlapping after RELAXED_SOLVES solves, or deeper than RETRY_DEPTH anywhere, the safe
     margins everywhere (a solve from scratch), checked in turn: pairs still overlapping more
-    than OTHER_DEPTH get that much more room for a last solve. A robot without loose
-    enclosures starts from the safe margins (selfcheck.EXACT_TIGHTENINGS), and pairs of geoms
-    found overlapping that it does not keep apart are added (selfcheck.unpaired_overlaps).
+    than OTHER_DEPTH get that much more room for a last solve (:func:`_solve_relaxed`); the
+    solve kept is solved again from where it is with its loose pairs' margins calibrated on its
+    real geoms (:func:`_calibrated_solve`). A robot without loose enclosures starts from the
+    safe margins (selfcheck.EXACT_TIGHTENINGS), and pairs of geoms found overlapping that it
+    does not keep apart are added (selfcheck.unpaired_overlaps).
     Returns (solution, output qpos, its replay, floor lift, swing lift, solves, the
     self-clearance in use with any pairs added, None without one, and with exact enclosures
     the clearance the kept solve was tightened to, else None: the room the output check's
@@ -255,6 +260,27 @@ def _solve_clear_of_self(
                 return (*best, solves, clearance, best_tight)
             tight, solves = tight.tightened(depth, OTHER_DEPTH), solves + 1
             cfg = replace(config, w_self=config.w_self * EXACT_SELF)
+    sol, qpos_in, qpos, rep, lift, swing_lift, solves, used = _solve_relaxed(
+        rm, clearance, targets, config, solver, src_fps, fps
+    )
+    calibrated, tries = _calibrated_solve(rm, used, sol, qpos_in, targets, config, solver, src_fps, fps)
+    if calibrated is not None:
+        sol, _, qpos, rep, lift, swing_lift = calibrated
+    return sol, qpos, rep, lift, swing_lift, solves + tries, clearance, None
+
+
+def _solve_relaxed(
+    rm: RobotModel,
+    clearance: SelfClearance,
+    targets: Targets,
+    config: SolverConfig,
+    solver: str,
+    src_fps: float,
+    fps: float,
+) -> tuple[Solution, np.ndarray, np.ndarray, Replay, float, float, int, SelfClearance]:
+    """The solves of :func:`_solve_clear_of_self` for a robot with loose enclosures, from the
+    relaxed margins to the safe ones (see there). Returns (solution, its qpos, output qpos,
+    its replay, floor lift, swing lift, solves, the self-clearance of the solve kept)."""
     first = clearance.relaxed(RELAX_FRACTION, RELAX_MOST)
     # Pairs brought closer may overlap CHECK_DEPTH; the others as much as with the safe margins.
     assert first.safe_margin is not None
@@ -266,7 +292,7 @@ def _solve_clear_of_self(
         # Checked at the solver's frames (the output's in-between frames move a few mrad).
         depth = penetration_depths(rm.model, rm.tree, qpos_in, first)
         if not np.any(depth > tolerance):
-            return sol, qpos, rep, lift, swing_lift, solves, clearance, None
+            return sol, qpos_in, qpos, rep, lift, swing_lift, solves, first
         if depth.max() > RETRY_DEPTH:
             break  # arms pressed into the body (hands on the knees): the safe margins at once
         first = first.tightened(depth, tolerance)
@@ -274,11 +300,47 @@ def _solve_clear_of_self(
     # The safe margins are soft too: pairs whose geoms still overlap get that much more room.
     depth = penetration_depths(rm.model, rm.tree, qpos_in, clearance)
     if not np.any(depth > OTHER_DEPTH):
-        return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1, clearance, None
-    sol, _, qpos, rep, lift, swing_lift = _solve_and_resample(
-        rm.with_self_clearance(clearance.tightened(depth, OTHER_DEPTH)), targets, config, solver, src_fps, fps
+        return sol, qpos_in, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 1, clearance
+    last = clearance.tightened(depth, OTHER_DEPTH)
+    sol, qpos_in, qpos, rep, lift, swing_lift = _solve_and_resample(
+        rm.with_self_clearance(last), targets, config, solver, src_fps, fps
     )
-    return sol, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2, clearance, None
+    return sol, qpos_in, qpos, rep, lift, swing_lift, RELAXED_SOLVES + 2, last
+
+
+def _calibrated_solve(
+    rm: RobotModel,
+    used: SelfClearance,
+    sol: Solution,
+    qpos_in: np.ndarray,
+    targets: Targets,
+    config: SolverConfig,
+    solver: str,
+    src_fps: float,
+    fps: float,
+) -> tuple[tuple[Solution, np.ndarray, np.ndarray, Replay, float, float] | None, int]:
+    """``sol`` (its qpos ``qpos_in`` at the motion's rate, solved with ``used``) solved again
+    from where it is with the margins calibrated on its real geoms
+    (:mod:`retarget.calibrated_margins`), ``config.calibrated_iterations`` iterations; where
+    its geoms overlap deeper than the check allows, once more with those pairs' safe margins
+    back. Returns (what :func:`_solve_and_resample` returns for the solve kept, or None where
+    none is kept: none calibrated, overlapping or no lower cost; the solves made)."""
+    closer = (
+        calibrated_margins(rm.model, rm.tree, qpos_in, used) if config.calibrated_iterations > 0 else None
+    )
+    if closer is None:
+        return None, 0
+    assert closer.safe_margin is not None
+    cfg = replace(config, max_iterations=config.calibrated_iterations)
+    init = (sol.root_pos, sol.root_rot, sol.q)
+    for solves in range(1, CALIBRATED_SOLVES + 1):
+        out = _solve_and_resample(rm.with_self_clearance(closer), targets, cfg, solver, src_fps, fps, init)
+        depth = penetration_depths(rm.model, rm.tree, out[1], closer)
+        tolerance = np.where(closer.margin < closer.safe_margin, CHECK_DEPTH, OTHER_DEPTH)
+        if not np.any(depth > tolerance):
+            return (out if out[0].cost < sol.cost else None), solves
+        closer = closer.tightened(depth, tolerance)
+    return None, CALIBRATED_SOLVES
 
 
 def _stance_slip(rm: RobotModel, rep: Replay, targets: Targets, fps: float) -> float:

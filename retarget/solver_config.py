@@ -113,3 +113,10 @@ class SolverConfig:
     human's heel or toe is still down, without sliding and without the late jump of a foot held
     down to the contact's last frame. No effect at ``foot_roll`` 1. One of the fallbacks of
     :func:`controlmm.pipeline.retarget_checked`."""
+    calibrated_iterations: int = 6
+    """Iterations of the solve again from a solve whose arms' self-clearance passed its check,
+    with margins calibrated on the real geoms of that solve's poses
+    (:mod:`retarget.calibrated_margins`; robots with loose enclosures only; 0: off). On G1 and
+    the 21 motions of ``benchmarks/retarget_peers.py --clips 20`` the keypoints came 3.25 ->
+    3.10 cm from the human's (the squat 000014 4.83 -> 3.5) with no self-collision, for a
+    third more time (docs/BENCHMARKS.md, 2026-12-05)."""
