@@ -38,6 +38,11 @@ TURN_SMOOTH_SECONDS = 0.1
 KNEE_BEND_FULL = 0.16
 """Distance of the human's knee from its hip-ankle line, as a fraction of the leg's length,
 from which the knee's direction counts fully (less bent: proportionally less)."""
+HELD_PITCH_SECONDS = 0.5
+"""A human foot down but not flat for longer than this (s) holds its pitch (kneeling on the
+toes, a tiptoe stand), and a flat contact foot (``roll`` 0) rolls with all of it
+(:func:`roll_share`); heel strikes and toe-offs are shorter (at most 0.25 s in the corpus's
+walks and runs)."""
 
 
 def leg_joints(robot: RobotModel, side: str) -> np.ndarray:
@@ -295,6 +300,22 @@ def _run_turn(turn: np.ndarray, runs: list[tuple[int, int]], owner: np.ndarray, 
     return turn
 
 
+def roll_share(contact: np.ndarray, flat: np.ndarray, fps: float, roll: float) -> np.ndarray:
+    """(T,) share of the human foot's pitch with which the robot's contact foot rolls: ``roll``
+    (``SolverConfig.foot_roll``) over the frames of a heel strike or toe-off (``contact`` but not
+    ``flat``, both (T,) bool); with ``roll`` 0 (flat contact feet), 1 over a pitch held longer
+    than HELD_PITCH_SECONDS: a foot kept flat under a kneeling human's toes held the knee off
+    the floor (G1 on corpus 000018: 8.23 cm from the human, 2.57 with the rule). A half-rolling
+    foot keeps its share there too: rolling fully took H1's kneel out of its ankle motors'
+    range (a fallback of ``controlmm retarget`` that passed before)."""
+    share = np.full(len(contact), float(roll))
+    if roll == 0:
+        for s, e in true_runs(contact & ~flat):
+            if e - s > HELD_PITCH_SECONDS * fps:
+                share[s:e] = 1.0
+    return share
+
+
 def feet_targets(
     robot: RobotModel,
     side: str,
@@ -373,16 +394,19 @@ def feet_targets(
         # like the contact's own, so that ``roll`` 0 keeps the foot flat for the whole contact.
         held = np.where(contact, theta, 0.0)
         swing = np.where(contact, 0.0, pitch)
+        share = roll_share(contact, heel & toe, fps, roll)
         if len(theta) > 2:
             held = gaussian_filter1d(held, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
             swing = gaussian_filter1d(swing, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
-        theta = roll * held + np.where(contact, roll, 1.0) * swing
+            if roll == 0:
+                share = gaussian_filter1d(share, PITCH_SMOOTH_SECONDS * fps, mode="nearest")
+        theta = share * held + np.where(contact, share, 1.0) * swing
         c_heel, c_toe = foot_pivots(robot, side)
         pivot = np.where((theta > 0)[:, None], c_toe, c_heel)  # (T, 3) node frame
         # A foot rolling less than the human's (``roll`` < 1) rises by ``lift_share`` times what the
         # rest of the roll would have lifted its node, straight up (0 where ``roll`` is 1).
         rise = np.zeros(len(world))
-        if lift_share > 0 and roll < 1:
+        if lift_share > 0 and roll < 1:  # (0 where the share is 1: a held pitch)
             full = _roll_rise(rest_rot, held + swing, c_heel, c_toe)
             rise = lift_share * (full - _roll_rise(rest_rot, theta, c_heel, c_toe))
         height = flat_height + STANCE_CLEARANCE

@@ -94,7 +94,9 @@ class SolverConfig:
     """The same for the elbow and wrist targets (from the robot's own shoulders)."""
     foot_roll: float = 1.0
     """Share (0-1) of the human foot's pitch with which a contact foot rolls over its heel or
-    toe (:func:`retarget.foot_targets.feet_targets`; 0: flat while the human's foot is down)."""
+    toe (:func:`retarget.foot_targets.feet_targets`; 0: flat while the human's foot is down,
+    but for a pitch held longer than :data:`retarget.foot_targets.HELD_PITCH_SECONDS`, which
+    rolls fully). G1's mapping sets 0, with ``foot_lift`` 0.5."""
     roll_lock_gain: float = 5.0
     """Further multiplier of a contact foot's lock weight over the frames in which the human's
     foot is down but not flat (heel strikes, toe-offs), where the robot's foot rolls over its
