@@ -1,4 +1,8 @@
-"""The side-by-side figures of retarget.compare on real trajectories (G1, the real clip)."""
+"""The side-by-side figures of retarget.compare on real trajectories (G1, the real clip).
+
+The fixture's feet roll with the human's (``SolverConfig``'s own default); G1's mapping keeps
+its contact feet flat, lifted halfway (``foot_roll`` 0, ``foot_lift`` 0.5), measured below.
+"""
 
 from __future__ import annotations
 
@@ -16,13 +20,15 @@ from retarget.compare import (
     stance_foot_speed,
     stance_sole_speed,
 )
+from retarget.foot_targets import HELD_PITCH_SECONDS
+from retarget.stance import detect_contacts, true_runs
 from retarget.targets import build_targets
 
 
 @pytest.fixture(scope="module")
 def clip(sample_joints):
     motion = Motion(joints=sample_joints.astype(np.float64), fps=20.0)
-    return motion, retarget_motion(motion, "g1", fps=30.0, metrics=False).qpos
+    return motion, retarget_motion(motion, "g1", fps=30.0, metrics=False, config=SolverConfig()).qpos
 
 
 def test_a_sliding_robot_slides_at_its_speed_by_both_measures(clip):
@@ -85,6 +91,62 @@ def test_flat_contact_feet_move_their_bodies_less_than_rolling_ones(clip):
         k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("flat", flat))
     }
     assert fit["flat"] < fit["roll"] + 0.005, fit
+
+
+def test_g1s_own_settings_keep_its_stance_feet_still(clip):
+    """G1's mapping (flat contact feet lifted halfway): over the human's contact frames of the
+    real clip its foot bodies move less than half as fast as rolling ones (0.50 against 1.17
+    cm/s when written) and the fit stays within 1 mm of rolling feet's. The soles move a little
+    more (0.37 against 0.30 cm/s): the lifted foot leaves the floor flat, its toe up, while the
+    human's toe is still down."""
+    motion, rolling = clip
+    robot = load_robot("g1")
+    assert robot.mapping.solver == {"foot_roll": 0.0, "foot_lift": 0.5}
+    own = retarget_motion(motion, "g1", fps=30.0, metrics=False).qpos
+    body = {
+        k: stance_foot_speed(robot, q, 30.0, motion.joints, 20.0)
+        for k, q in (("roll", rolling), ("own", own))
+    }
+    sole = {
+        k: stance_sole_speed(robot, q, 30.0, motion.joints, 20.0)
+        for k, q in (("roll", rolling), ("own", own))
+    }
+    assert body["own"] < 0.5 * body["roll"], body
+    assert sole["own"] < 1.5 * sole["roll"], sole
+    human = resample_human(motion.joints, 20.0, len(own), 30.0)
+    fit = {k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("own", own))}
+    assert fit["own"] < fit["roll"] + 0.001, fit
+
+
+def test_a_held_pitch_rolls_a_flat_contact_foot_fully():
+    """The corpus's kneel 000018: the human kneels on its toes, a foot pitch held for seconds.
+    Flat contact feet (``foot_roll`` 0) roll with all of it there, as rolling feet do, and stay
+    flat over the heel strikes and toe-offs; held flat, G1's knee was held off the floor
+    (8.2 cm from the human against 2.6)."""
+    spec = plan_clips(CorpusConfig(clips=9800, seed=0))[18]
+    assert spec.family == "kneel"
+    joints = make_clip(spec)[1].astype(np.float64)
+    robot = load_robot("g1")
+    transform = HumanToWorld(scale=robot.scale)
+    targets = {
+        roll: build_targets(robot, joints, 20.0, transform, SolverConfig(foot_roll=roll))
+        for roll in (0.0, 1.0)
+    }
+    trim = 8  # frames: four sigmas of the pitch's smoothing (0.1 s) inside the run's ends
+    held_frames = 0
+    for side in ("left", "right"):
+        contact, heel, toe = detect_contacts(joints, 20.0, side)
+        o = int(np.flatnonzero(targets[0.0].ori_kp == robot.keypoint_index(f"{side}_ankle"))[0])
+        for s, e in true_runs(contact & ~(heel & toe)):
+            if e - s > HELD_PITCH_SECONDS * 20.0 and e - s > 2 * trim:
+                inside = slice(s + trim, e - trim)
+                flat_rot, rolled_rot = targets[0.0].ori_rot[inside, o], targets[1.0].ori_rot[inside, o]
+                assert np.allclose(flat_rot, rolled_rot, atol=1e-3), side
+                held_frames += e - s - 2 * trim
+    assert held_frames > 20, held_frames
+    q_flat = retarget_motion(Motion(joints=joints, fps=20.0), "g1", fps=30.0, metrics=False).qpos
+    fit = similarity_fit(robot, q_flat, 30.0, resample_human(joints, 20.0, len(q_flat), 30.0), 30.0)
+    assert fit.mean < 0.04, fit.per_joint
 
 
 def test_flat_contact_feet_are_flat_to_the_contacts_last_frame(sample_joints):
