@@ -119,6 +119,7 @@ class SolverConfig:
     """Iterations of the solve again from a solve whose arms' self-clearance passed its check,
     with margins calibrated on the real geoms of that solve's poses
     (:mod:`retarget.calibrated_margins`; robots with loose enclosures only; 0: off). On G1 and
-    the 21 motions of ``benchmarks/retarget_peers.py --clips 20`` the keypoints came 3.25 ->
-    3.10 cm from the human's (the squat 000014 4.83 -> 3.5) with no self-collision, for a
-    third more time (docs/BENCHMARKS.md, 2026-12-05)."""
+    the first 20 corpus clips of ``benchmarks/retarget_peers.py`` (rolling feet) the keypoints
+    came 3.25 -> 3.09 cm from the human's (about half of it from the iterations alone: 3.18
+    with the margins unchanged; 3 iterations: 3.36 with flat feet against 3.28) with no
+    self-collision, for about a third of G1's speed (docs/BENCHMARKS.md, 2026-12-05)."""
