@@ -2,16 +2,17 @@
 
 The relaxed margins (:mod:`retarget.selfcheck`: ``RELAX_FRACTION`` of a pair's looseness, at
 most ``RELAX_MOST``) hold for any pose, so in a given motion the real geoms of a pair pressed
-to its margin are often still far apart: G1's hands by its hips in a squat (corpus clip
+to its margin are often still far apart: G1's hands by its hips as it sits down (corpus clip
 000014), their capsules at the margin in 164 frames, were 1.2 cm from the hip links at the
 closest and 2-3 cm in most frames; the human's hands rest there, and the keypoints were
 4.8 cm from the human's against 3.2 cm with no self-clearance at all.
 
-:func:`calibrated_margins` measures, in every frame of the solve where a loose pair's capsules
-come within ``CALIBRATION_NEAR`` of its margin, how much further apart its real geoms are than
-its capsules (``mj_geomDistance``: convex hulls for meshes, as MuJoCo collides them), and
-lowers the pair's margin by the smallest such excess, less ``CALIBRATED_GAP``: where the
-capsules come to the new margin in those poses, the geoms are still that far apart. The
+:func:`calibrated_margins` measures, in the frames of the solve where a loose pair's capsules
+are inside its margin (the ``CALIBRATION_FRAMES`` deepest), how much further apart its real
+geoms are than its capsules (``mj_geomDistance``: convex hulls for meshes, as MuJoCo collides
+them), and lowers the pair's margin by the smallest such excess, less ``CALIBRATED_GAP``:
+where the capsules come to the new margin in those poses, the geoms are still that far apart.
+The
 retargeter solves again from the passing solve (:func:`retarget.retarget_motion`, a few
 iterations at the motion's full rate: ``SolverConfig.calibrated_iterations``) and keeps the
 new solve only where its real geoms overlap no deeper than the check allows.
@@ -25,10 +26,11 @@ import mujoco
 import numpy as np
 
 from retarget.kinematics import KinematicTree, quat_to_mat
-from retarget.selfcollision import SelfClearance, capsule_distances
+from retarget.selfcollision import SelfClearance, close_pairs
 
-CALIBRATION_NEAR = 0.02
-"""A pair's capsules within this (m) of its margin in a frame calibrate its margin there."""
+CALIBRATION_FRAMES = 8
+"""Frames in which each pair is measured at most: those where its capsules are deepest inside
+its margin (a robot split into convex pieces has tens of thousands of pairs inside theirs)."""
 
 CALIBRATED_GAP = 0.004
 """Metres the real geoms keep apart where the capsules come to a calibrated margin, in the
@@ -60,19 +62,27 @@ def calibrated_margins(
         return None
     qpos = np.asarray(qpos, dtype=np.float64)
     poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
-    dist = capsule_distances(poses, clearance)[0]  # (T, P)
-    near = (dist < clearance.margin[None] + CALIBRATION_NEAR) & loose[None]
-    if not near.any():
+    inside = close_pairs(poses, clearance)  # sparse: a robot split into convex pieces has 367,000 pairs
+    keep = loose[inside.pair]
+    frame, pair, dist = inside.frame[keep], inside.pair[keep], inside.dist[keep]
+    if not pair.size:
         return None
-    geom1, geom2 = clearance.geom[clearance.first], clearance.geom[clearance.second]
+    # Each pair's deepest CALIBRATION_FRAMES entries (furthest inside its margin).
+    order = np.lexsort((dist, pair))
+    frame, pair, dist = frame[order], pair[order], dist[order]
+    starts = np.flatnonzero(np.r_[True, pair[1:] != pair[:-1]])
+    rank = np.arange(len(pair)) - np.repeat(starts, np.diff(np.r_[starts, len(pair)]))
+    take = rank < CALIBRATION_FRAMES
+    frame, pair, dist = frame[take], pair[take], dist[take]
+    geom1, geom2 = clearance.geom[clearance.first[pair]], clearance.geom[clearance.second[pair]]
     excess = np.full(clearance.num_pairs, np.inf)  # (P,) real distance less the capsules'
     data = mujoco.MjData(model)
-    for frame in np.flatnonzero(near.any(axis=1)):
-        data.qpos[:] = qpos[frame]
+    for f in np.unique(frame):
+        data.qpos[:] = qpos[f]
         mujoco.mj_kinematics(model, data)
-        for p in np.flatnonzero(near[frame]):
-            real = mujoco.mj_geomDistance(model, data, int(geom1[p]), int(geom2[p]), MEASURED_UP_TO, None)
-            excess[p] = min(excess[p], real - dist[frame, p])
+        for e in np.flatnonzero(frame == f):
+            real = mujoco.mj_geomDistance(model, data, int(geom1[e]), int(geom2[e]), MEASURED_UP_TO, None)
+            excess[pair[e]] = min(excess[pair[e]], real - dist[e])
     margin = np.minimum(clearance.margin, np.where(np.isfinite(excess), CALIBRATED_GAP - excess, np.inf))
     if not np.any(margin < clearance.margin - 1e-3):
         return None

@@ -19,7 +19,7 @@ from controlmm.corpus import CorpusConfig, make_clip
 from controlmm.corpus.dataset import plan_clips
 from controlmm.motion import Motion
 from retarget import load_robot, retarget_motion
-from retarget.calibrated_margins import CALIBRATED_GAP, CALIBRATION_NEAR, calibrated_margins
+from retarget.calibrated_margins import CALIBRATED_GAP, CALIBRATION_FRAMES, calibrated_margins
 from retarget.compare import similarity_fit
 from retarget.kinematics import quat_to_mat
 from retarget.selfcheck import OTHER_DEPTH, RELAX_FRACTION, RELAX_MOST
@@ -69,8 +69,9 @@ def test_calibrated_solve_brings_the_hands_closer_and_keeps_them_clear(sit_down)
 
 
 def test_margins_come_down_by_what_the_real_geoms_leave(sit_down):
-    """Each lowered margin leaves the real geoms ``CALIBRATED_GAP`` apart in every pose that
-    calibrated it, measured here on its own; no margin rises, and exact enclosures keep theirs."""
+    """Each lowered margin leaves the real geoms ``CALIBRATED_GAP`` apart in the poses that
+    calibrated it (the frames where its capsules are deepest inside the margin kept), measured
+    here on their own; no margin rises, and exact enclosures keep theirs."""
     rm = load_robot("g1")
     own = SolverConfig(**rm.mapping.solver)
     solve = retarget_motion(
@@ -92,12 +93,14 @@ def test_margins_come_down_by_what_the_real_geoms_leave(sit_down):
     checked = 0
     for p in lowered:
         g1, g2 = int(used.geom[used.first[p]]), int(used.geom[used.second[p]])
-        for frame in np.flatnonzero(dist[:, p] < used.margin[p] + CALIBRATION_NEAR):
+        inside = np.flatnonzero(dist[:, p] < used.margin[p])
+        assert inside.size > 0
+        for frame in inside[np.argsort(dist[inside, p])][:CALIBRATION_FRAMES]:
             data.qpos[:] = q[frame]
             mujoco.mj_kinematics(rm.model, data)
             real = mujoco.mj_geomDistance(rm.model, data, g1, g2, 0.2, None)
             # the capsules brought from where they are to the new margin: the geoms that far closer
-            assert real - (dist[frame, p] - closer.margin[p]) >= CALIBRATED_GAP - 1e-9
+            assert real - (dist[frame, p] - closer.margin[p]) >= CALIBRATED_GAP - 1e-6
             checked += 1
     assert checked > 0
     assert calibrated_margins(rm.model, rm.tree, q, replace(used, looseness=None)) is None
