@@ -120,6 +120,6 @@ class SolverConfig:
     with margins calibrated on the real geoms of that solve's poses
     (:mod:`retarget.calibrated_margins`; robots with loose enclosures only; 0: off). On G1 and
     the first 20 corpus clips of ``benchmarks/retarget_peers.py`` (rolling feet) the keypoints
-    came 3.25 -> 3.09 cm from the human's (about half of it from the iterations alone: 3.18
-    with the margins unchanged; 3 iterations: 3.36 with flat feet against 3.28) with no
-    self-collision, for about a third of G1's speed (docs/BENCHMARKS.md, 2026-12-05)."""
+    came 3.25 -> 3.11 cm from the human's (about half of it from the iterations alone: 3.18
+    with the margins unchanged) with no self-collision, for a fifth to a third of G1's speed
+    (docs/BENCHMARKS.md, 2026-12-05)."""
