@@ -69,27 +69,28 @@ def test_the_flat_stance_measure_leaves_out_the_heel_strikes_and_toe_offs(clip):
     assert 0 < planted < 0.7 * every, (planted, every)
 
 
+def _stance_and_fit(motion: Motion, runs: dict[str, np.ndarray]) -> tuple[dict, dict, dict]:
+    """G1's stance-foot body speed, sole speed (m/s) and similarity fit (m) of each named qpos
+    (T, nq) at 30 fps against ``motion`` (20 fps)."""
+    robot = load_robot("g1")
+    body = {k: stance_foot_speed(robot, q, 30.0, motion.joints, 20.0) for k, q in runs.items()}
+    sole = {k: stance_sole_speed(robot, q, 30.0, motion.joints, 20.0) for k, q in runs.items()}
+    fit = {
+        k: similarity_fit(robot, q, 30.0, resample_human(motion.joints, 20.0, len(q), 30.0), 30.0).mean
+        for k, q in runs.items()
+    }
+    return body, sole, fit
+
+
 def test_flat_contact_feet_move_their_bodies_less_than_rolling_ones(clip):
     """``SolverConfig.foot_roll`` 0: the contact feet stay flat while the human's foot is down
     instead of rolling over the heel or toe with it, so their bodies (the ankles) move less
     over the planted soles; the soles stay as still and the fit stays close."""
     motion, rolling = clip
-    robot = load_robot("g1")
     flat = retarget_motion(motion, "g1", fps=30.0, metrics=False, config=SolverConfig(foot_roll=0.0)).qpos
-    body = {
-        k: stance_foot_speed(robot, q, 30.0, motion.joints, 20.0)
-        for k, q in (("roll", rolling), ("flat", flat))
-    }
-    sole = {
-        k: stance_sole_speed(robot, q, 30.0, motion.joints, 20.0)
-        for k, q in (("roll", rolling), ("flat", flat))
-    }
+    body, sole, fit = _stance_and_fit(motion, {"roll": rolling, "flat": flat})
     assert body["flat"] < 0.8 * body["roll"], body
     assert sole["flat"] < 1.2 * sole["roll"], sole
-    human = resample_human(motion.joints, 20.0, len(flat), 30.0)
-    fit = {
-        k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("flat", flat))
-    }
     assert fit["flat"] < fit["roll"] + 0.005, fit
 
 
@@ -100,21 +101,11 @@ def test_g1s_own_settings_keep_its_stance_feet_still(clip):
     more (0.37 against 0.30 cm/s): the lifted foot leaves the floor flat, its toe up, while the
     human's toe is still down."""
     motion, rolling = clip
-    robot = load_robot("g1")
-    assert robot.mapping.solver == {"foot_roll": 0.0, "foot_lift": 0.5}
+    assert load_robot("g1").mapping.solver == {"foot_roll": 0.0, "foot_lift": 0.5}
     own = retarget_motion(motion, "g1", fps=30.0, metrics=False).qpos
-    body = {
-        k: stance_foot_speed(robot, q, 30.0, motion.joints, 20.0)
-        for k, q in (("roll", rolling), ("own", own))
-    }
-    sole = {
-        k: stance_sole_speed(robot, q, 30.0, motion.joints, 20.0)
-        for k, q in (("roll", rolling), ("own", own))
-    }
+    body, sole, fit = _stance_and_fit(motion, {"roll": rolling, "own": own})
     assert body["own"] < 0.5 * body["roll"], body
     assert sole["own"] < 1.5 * sole["roll"], sole
-    human = resample_human(motion.joints, 20.0, len(own), 30.0)
-    fit = {k: similarity_fit(robot, q, 30.0, human, 30.0).mean for k, q in (("roll", rolling), ("own", own))}
     assert fit["own"] < fit["roll"] + 0.001, fit
 
 
