@@ -121,5 +121,5 @@ class SolverConfig:
     (:mod:`retarget.calibrated_margins`; robots with loose enclosures only; 0: off). On G1 and
     the first 20 corpus clips of ``benchmarks/retarget_peers.py`` (rolling feet) the keypoints
     came 3.25 -> 3.11 cm from the human's (about half of it from the iterations alone: 3.18
-    with the margins unchanged) with no self-collision, for a fifth to a third of G1's speed
+    with the margins unchanged) with no self-collision; G1 retargets 21-40 % slower
     (docs/BENCHMARKS.md, 2026-12-05)."""
