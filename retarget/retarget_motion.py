@@ -330,12 +330,18 @@ def _calibrated_solve(
     )
     if closer is None:
         return None, 0
-    assert closer.safe_margin is not None
     cfg = replace(config, max_iterations=config.calibrated_iterations)
     init = (sol.root_pos, sol.root_rot, sol.q)
     for solves in range(1, CALIBRATED_SOLVES + 1):
         out = _solve_and_resample(rm.with_self_clearance(closer), targets, cfg, solver, src_fps, fps, init)
-        depth = penetration_depths(rm.model, rm.tree, out[1], closer)
+        # Checked at the output frames, with the trunk against the shoulder links where those
+        # press together (the safe margins leave those pairs out: G1 with hands sitting down,
+        # the shoulder in the torso in 24 output frames, was then solved again by the output
+        # check into a motion its wrist motors could not carry).
+        closer = _with_relaxed_pairs(rm, out[2], closer)
+        if closer.safe_margin is None:  # the robot's own relaxed pairs, at their safe margins
+            closer = replace(closer, safe_margin=closer.margin)
+        depth = penetration_depths(rm.model, rm.tree, out[2], closer)
         tolerance = np.where(closer.margin < closer.safe_margin, CHECK_DEPTH, OTHER_DEPTH)
         if not np.any(depth > tolerance):
             return (out if out[0].cost < sol.cost else None), solves
