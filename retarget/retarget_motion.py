@@ -322,8 +322,9 @@ def _calibrated_solve(
     """``sol`` (its qpos ``qpos_in`` at the motion's rate, solved with ``used``) solved again
     from where it is with the margins calibrated on its real geoms
     (:mod:`retarget.calibrated_margins`), ``config.calibrated_iterations`` iterations; where
-    its geoms overlap deeper than the check allows, once more with those pairs' safe margins
-    back. Returns (what :func:`_solve_and_resample` returns for the solve kept, or None where
+    its geoms overlap deeper than the check allows (at its output frames, the trunk-shoulder
+    pairs added where they overlap there), once more with those pairs' safe margins back.
+    Returns (what :func:`_solve_and_resample` returns for the solve kept, or None where
     none is kept: none calibrated, overlapping or no lower cost; the solves made)."""
     closer = (
         calibrated_margins(rm.model, rm.tree, qpos_in, used) if config.calibrated_iterations > 0 else None
