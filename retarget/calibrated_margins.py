@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 
 from retarget.kinematics import KinematicTree, quat_to_mat
+from retarget.selfcheck import geom_distances
 from retarget.selfcollision import SelfClearance, close_pairs
 
 CALIBRATION_FRAMES = 8
@@ -75,14 +76,9 @@ def calibrated_margins(
     take = rank < CALIBRATION_FRAMES
     frame, pair, dist = frame[take], pair[take], dist[take]
     geom1, geom2 = clearance.geom[clearance.first[pair]], clearance.geom[clearance.second[pair]]
+    real = geom_distances(model, qpos, frame, geom1, geom2, MEASURED_UP_TO)
     excess = np.full(clearance.num_pairs, np.inf)  # (P,) real distance less the capsules'
-    data = mujoco.MjData(model)
-    for f in np.unique(frame):
-        data.qpos[:] = qpos[f]
-        mujoco.mj_kinematics(model, data)
-        for e in np.flatnonzero(frame == f):
-            real = mujoco.mj_geomDistance(model, data, int(geom1[e]), int(geom2[e]), MEASURED_UP_TO, None)
-            excess[pair[e]] = min(excess[pair[e]], real - dist[e])
+    np.minimum.at(excess, pair, real - dist)
     margin = np.minimum(clearance.margin, np.where(np.isfinite(excess), CALIBRATED_GAP - excess, np.inf))
     if not np.any(margin < clearance.margin - 1e-3):
         return None

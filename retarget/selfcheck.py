@@ -221,18 +221,35 @@ def unpaired_overlaps(
         return none, none, np.zeros(0)
     poses = tree.forward(qpos[:, :3], quat_to_mat(qpos[:, 3:7]), qpos[:, 7:])
     near = close_pairs(poses, replace(cand, margin=np.zeros(cand.num_pairs)))
+    gap = geom_distances(
+        model, qpos, near.frame, cand.geom[cand.first[near.pair]], cand.geom[cand.second[near.pair]], 0.01
+    )
     found = np.zeros(cand.num_pairs, dtype=bool)
-    data = mujoco.MjData(model)
-    for frame in np.unique(near.frame):
-        data.qpos[:] = qpos[frame]
-        mujoco.mj_kinematics(model, data)
-        for k in near.pair[near.frame == frame]:
-            if not found[k]:
-                gap = mujoco.mj_geomDistance(
-                    model, data, int(cand.geom[cand.first[k]]), int(cand.geom[cand.second[k]]), 0.01, None
-                )
-                found[k] = gap < -depth
+    found[near.pair[gap < -depth]] = True
     return first[found], second[found], np.minimum(SELF_MARGIN, at_rest[found] - REST_SLACK)
+
+
+def geom_distances(
+    model: mujoco.MjModel,
+    qpos: np.ndarray,
+    frame: np.ndarray,
+    geom1: np.ndarray,
+    geom2: np.ndarray,
+    cutoff: float,
+) -> np.ndarray:
+    """(E,) MuJoCo's distance (m; negative: their overlap) between geoms ``geom1[e]`` and
+    ``geom2[e]`` in frame ``frame[e]`` of ``qpos`` (T, nq) (``mj_geomDistance``: convex hulls
+    for meshes; ``cutoff`` where they are further apart), each frame placed once."""
+    out = np.full(len(frame), float(cutoff))
+    data = mujoco.MjData(model)
+    order = np.argsort(frame, kind="stable")
+    bounds = np.flatnonzero(np.diff(frame[order])) + 1
+    for group in np.split(order, bounds) if len(order) else []:
+        data.qpos[:] = qpos[frame[group[0]]]
+        mujoco.mj_kinematics(model, data)
+        for e in group:
+            out[e] = mujoco.mj_geomDistance(model, data, int(geom1[e]), int(geom2[e]), cutoff, None)
+    return out
 
 
 BALL_RADIUS = 0.01
